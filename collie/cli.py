@@ -1,0 +1,39 @@
+"""The `collie` command. Each subcommand lives in its own module, which exposes
+`add_arguments(parser)` and `run(args) -> int`; imports are lazy so `collie serve` never loads torch."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name → (module, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "train": ("trainer.cli", "run Algorithm 1 (METRA / COLLIE / Oracle) on one env and task"),
+    "serve": ("backend.cli", "run the labeling service (FastAPI + SQLite)"),
+    "teacher": ("teacher.cli", "label a run's queries through the API with the scripted oracle"),
+    "up": ("collie.up", "start service, trainer and teacher together on the embedded SQLite"),
+    "export": ("backend.export", "print a run's label events (or effective labels) as JSON or CSV"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="collie", description=__doc__)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    argv = sys.argv[1:] if argv is None else argv
+    wanted = argv[0] if argv and not argv[0].startswith("-") else None
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if name == wanted:  # only import the module we run
+            try:
+                module = importlib.import_module(module_name)
+            except ModuleNotFoundError as exc:
+                parser.error(f"'{name}' is not available: {exc}")
+            module.add_arguments(p)
+            p.set_defaults(_module=module)
+    args = parser.parse_args(argv)
+    return int(args._module.run(args) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

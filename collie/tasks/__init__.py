@@ -1,0 +1,36 @@
+"""Guidance tasks: per-state desirability g(s) ∈ {0 bad, 1 neutral, 2 good} (numpy only).
+
+Shared by the trainer (Oracle baseline, metrics), the teacher (labels) and UIs (drawing regions).
+See docs/tasks.md for the rules, boundary conventions and how to add a task.
+"""
+
+from collie.tasks.builtin import BUILTIN_TASKS as TASK_NAMES
+from collie.tasks.builtin import ENV_GEOMETRY, Geometry
+from collie.tasks.classes import BAD, CLASS_NAMES, CLASSES, GOOD, NEUTRAL
+from collie.tasks.regions import Disc, HalfPlane, OutsideDisc, PitchBeyond, Region, WedgeNorth, wrap_angle
+from collie.tasks.registry import get_task, register_task, task_names
+from collie.tasks.task import Distance, Rule, Task
+
+__all__ = [
+    "BAD",
+    "CLASSES",
+    "CLASS_NAMES",
+    "ENV_GEOMETRY",
+    "GOOD",
+    "NEUTRAL",
+    "TASK_NAMES",
+    "Disc",
+    "Distance",
+    "Geometry",
+    "HalfPlane",
+    "OutsideDisc",
+    "PitchBeyond",
+    "Region",
+    "Rule",
+    "Task",
+    "WedgeNorth",
+    "get_task",
+    "register_task",
+    "task_names",
+    "wrap_angle",
+]

@@ -1,0 +1,107 @@
+"""Algorithm 1 end to end on real MuJoCo with the `smoke` preset: runs, spreads, resumes exactly,
+fails loudly on bad input and on NaN."""
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from trainer.config import make_config
+from trainer.loop import Trainer, TrainingDiverged
+
+
+def smoke(out: Path, **kw) -> Trainer:
+    cfg = make_config("smoke", kw.pop("env", "point"), out=str(out), **kw)
+    return Trainer(cfg, progress=False)
+
+
+def records(out: Path) -> list[dict]:
+    return [json.loads(ln) for ln in (out / "metrics.jsonl").read_text().splitlines()]
+
+
+def test_smoke_run_writes_outputs_and_skills_spread(tmp_path):
+    summary = smoke(tmp_path, method="collie", task="north").run()
+    rec = records(tmp_path)
+    assert rec[0]["epoch"] == 0 and rec[-1]["epoch"] == 8
+    assert rec[-1]["n_bins"] > rec[0]["n_bins"]  # evaluation coverage above epoch 0's
+    assert summary["n_labels"] == 6 and summary["status"] == "finished"
+    for key in ("epoch", "env_steps", "safe_coverage", "safe_ratio", "composite_coverage",
+                "weighted_composite_coverage", "n_labels", "lambda", "wall_s"):
+        assert key in rec[-1] and key in summary
+    assert summary["config"]["method"] == "collie"
+    for name in ("skills_latest.png", "curves.png", "checkpoint.pt", "config.json"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert any((tmp_path / "tb").iterdir())
+
+
+@pytest.mark.parametrize("method", ["metra", "oracle"])
+def test_baseline_methods_ask_no_labels(tmp_path, method):
+    summary = smoke(tmp_path, method=method, task="hole_north").run()
+    assert summary["n_labels"] == 0 and summary["status"] == "finished"
+
+
+def test_resume_reproduces_the_next_epochs_exactly(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    straight = smoke(a, epochs=6, noise_band=2.0)
+    straight.run()
+    first = smoke(b, epochs=4, noise_band=2.0)
+    first.run()
+    resumed = smoke(b, epochs=6, noise_band=2.0)
+    resumed.run(resume=True)
+    for p, q in zip(straight.agent.policy.parameters(), resumed.agent.policy.parameters(), strict=True):
+        assert torch.equal(p, q)
+    assert torch.equal(straight.agent.log_lambda, resumed.agent.log_lambda)
+    assert straight.labelled.counts() == resumed.labelled.counts()
+    strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in records(a)]
+    assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in records(b)]
+
+
+def test_nan_stops_the_run_naming_the_epoch_and_keeps_the_checkpoint(tmp_path):
+    t = smoke(tmp_path, epochs=4)
+    t.run()
+    ckpt = tmp_path / "checkpoint.pt"
+    digest = hashlib.sha256(ckpt.read_bytes()).hexdigest()
+    with torch.no_grad():
+        t.agent.phi.net[0].weight[0, 0] = float("nan")
+    t.epoch += 1
+    with pytest.raises(TrainingDiverged, match=r"non-finite .*phi_loss.* at epoch 5; last checkpoint kept"):
+        t.train_epoch()
+    with torch.no_grad():
+        t.agent.policy.trunk[0].weight.fill_(float("nan"))
+    with pytest.raises(TrainingDiverged, match="non-finite action at epoch 5"):
+        t.collect_epoch()
+    assert hashlib.sha256(ckpt.read_bytes()).hexdigest() == digest
+
+
+@pytest.mark.parametrize(("flag", "value", "names"), [
+    ("--env", "mars", "point"), ("--task", "south", "north"), ("--method", "ppo", "collie"),
+    ("--preset", "huge", "smoke"), ("--query-strategy", "random", "entropy"),
+])
+def test_cli_bad_names_are_clear_errors(tmp_path, flag, value, names):
+    cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(tmp_path), flag, value]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert value in proc.stderr and names in proc.stderr and "valid" in proc.stderr
+
+
+def test_cli_runs_and_overrides(tmp_path):
+    cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(tmp_path),
+           "--epochs", "3", "--hidden", "16", "--no-progress", "--task", "range"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    cfg = json.loads((tmp_path / "config.json").read_text())
+    assert cfg["epochs"] == 3 and cfg["hidden"] == 16 and cfg["task"] == "range"
+    assert json.loads(proc.stdout.splitlines()[0])["epoch"] == 3
+
+
+@pytest.mark.parametrize("env", ["ant", "half_cheetah"])
+def test_smoke_runs_on_locomotion_envs(tmp_path, env):
+    task = "not_flip" if env == "half_cheetah" else "hole"
+    summary = smoke(tmp_path, env=env, task=task, epochs=2, episode_steps=20, episodes_per_epoch=2,
+                    eval_trajectories=4, segment_length=5, warmup=1, feedback_every=1).run()
+    assert summary["status"] == "finished" and np.isfinite(summary["safe_coverage"])

@@ -1,0 +1,136 @@
+"""Coverage metrics on hand-built trajectories, and the run figures."""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+from collie.tasks import BAD, GOOD, NEUTRAL, get_task
+from trainer.metrics import coverage_metrics
+
+
+def arr(points: list[tuple[float, float]]) -> np.ndarray:
+    return np.array(points, dtype=float)
+
+
+def test_north_bins_with_a_boundary_inside_one_bin() -> None:
+    trajs = [
+        arr([(0.5, 0.5), (0.5, 2.5), (0.5, 2.7)]),  # bins (0,0), (0,2) twice: both safe
+        arr([(3.2, 3.5), (3.8, 3.5), (3.9, 2.1)]),  # bin (3,3) holds a safe and a bad state; (3,2) bad
+        arr([(-5.5, -0.5)]),  # bin (-6,-1) bad
+    ]
+    m = coverage_metrics(trajs, None, get_task("north"))
+    assert (m["n_bins"], m["n_bad_bins"], m["n_neutral_bins"], m["n_good_bins"]) == (5, 3, 2, 0)
+    assert m["safe_coverage"] == 2 - 3
+    assert m["safe_ratio"] == pytest.approx(0.4)
+    assert m["composite_coverage"] == m["safe_coverage"]
+    assert m["weighted_composite_coverage"] == 2 - 3
+    assert m["n_states"] == 7
+    # The bin (3,3) alone: its lower-left corner is safe, but a visited state in it was bad.
+    only = coverage_metrics([arr([(3.2, 3.5), (3.8, 3.5)])], None, get_task("north"))
+    assert (only["n_bins"], only["n_bad_bins"]) == (1, 1)
+
+
+def test_composite_task_counts_good_neutral_bad() -> None:
+    trajs = [
+        arr([(0.2, 10.1), (0.7, 10.9)]),  # bin (0,10): all good
+        arr([(5.5, 5.2), (5.1, 5.3)]),  # bin (5,5): neutral + good -> neutral
+        arr([(0.5, 30.5), (-8.5, 1.5)]),  # bin (0,30) outside the circle: bad; bin (-9,1) neutral
+    ]
+    m = coverage_metrics(trajs, None, get_task("range_north"))
+    assert (m["n_bins"], m["n_good_bins"], m["n_neutral_bins"], m["n_bad_bins"]) == (4, 1, 2, 1)
+    assert m["safe_coverage"] == 3 - 1
+    assert m["composite_coverage"] == 1 + 2 - 1
+    assert m["weighted_composite_coverage"] == 2 * 1 + 2 - 1
+    assert m["safe_ratio"] == pytest.approx(0.75)
+
+
+def test_one_dimensional_bins_use_x_only() -> None:
+    x = np.array([-0.5, 0.5, 1.2, -1.5, -1.2])  # bins -1 (bad), 0, 1, -2 (bad, twice)
+    m = coverage_metrics([x], None, get_task("right", "half_cheetah"), position_dims=1)
+    assert (m["n_bins"], m["n_bad_bins"], m["n_neutral_bins"]) == (4, 2, 2)
+    with_y = np.stack([x, np.array([0.0, 9.0, -9.0, 3.0, 50.0])], axis=1)  # y must not split bins
+    assert coverage_metrics([with_y], None, get_task("right"), position_dims=1)["n_bins"] == 4
+
+
+def test_not_flip_is_judged_from_pitch_of_visited_states() -> None:
+    task = get_task("not_flip", "half_cheetah")
+    x = np.array([0.2, 0.7, 1.5, 2.5, -0.5])
+    pitch = np.array([0.0, 2.0, 0.0, -math.pi / 2, 0.0])  # only the state at x = 0.7 is flipped
+    m = coverage_metrics([x], [pitch], task, position_dims=1)
+    assert (m["n_bins"], m["n_bad_bins"], m["n_neutral_bins"]) == (4, 1, 3)
+    with pytest.raises(ValueError, match="pitch"):
+        coverage_metrics([x], None, task, position_dims=1)
+
+
+def test_bin_size_and_empty_input() -> None:
+    pts = arr([(0.001, 0.001), (0.009, 0.002), (0.011, 0.0)])
+    assert coverage_metrics([pts], None, get_task("right"), bin_size=0.01)["n_bins"] == 2
+    empty = coverage_metrics([], None, get_task("north"))
+    assert empty["n_bins"] == 0 and empty["safe_ratio"] == 0.0 and empty["safe_coverage"] == 0.0
+
+
+def test_matches_a_plain_loop_on_48_random_trajectories() -> None:
+    rng = np.random.default_rng(0)
+    trajs = [np.cumsum(rng.normal(0, 1.0, (201, 2)), axis=0) for _ in range(48)]
+    task = get_task("hole_north")
+    per_bin: dict[tuple[int, int], list[int]] = {}
+    for t in trajs:
+        for p, c in zip(t, task.classify(t), strict=True):
+            per_bin.setdefault((math.floor(p[0]), math.floor(p[1])), []).append(int(c))
+    expected = [BAD if BAD in v else GOOD if set(v) == {GOOD} else NEUTRAL for v in per_bin.values()]
+    m = coverage_metrics(trajs, None, task)
+    assert m["n_bins"] == len(per_bin)
+    assert m["n_bad_bins"] == expected.count(BAD)
+    assert m["n_good_bins"] == expected.count(GOOD)
+    assert m["n_neutral_bins"] == expected.count(NEUTRAL)
+
+
+# ---- figures ---------------------------------------------------------------------------------
+
+
+def assert_real_png(path: pathlib.Path) -> None:
+    image = pytest.importorskip("matplotlib.image").imread(path)
+    assert path.stat().st_size > 5_000
+    assert image.ndim == 3 and image[..., :3].std() > 0.05  # not a blank canvas
+
+
+def test_skill_trajectory_plot_2d(tmp_path: pathlib.Path) -> None:
+    plots = pytest.importorskip("trainer.plots")
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    skills = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    trajs = [np.linspace((0, 0), 30 * s, 50) for s in skills]
+    labelled = [(trajs[2][:20], NEUTRAL), (trajs[0][30:], BAD)]
+    out = plots.plot_skill_trajectories(
+        trajs, get_task("hole_north"), tmp_path / "fig" / "skills.png", skills=skills, labelled=labelled
+    )
+    assert out == tmp_path / "fig" / "skills.png"
+    assert_real_png(out)
+    colours = plots.skill_colours(skills, len(skills))
+    assert colours[0] != colours[4]  # opposite directions, different hues
+
+
+def test_skill_trajectory_plot_1d_and_pitch_task(tmp_path: pathlib.Path) -> None:
+    plots = pytest.importorskip("trainer.plots")
+    xs = [np.cumsum(np.full(100, d)) for d in np.linspace(-1, 1, 16)]
+    one_hot = np.eye(16)
+    assert len(set(plots.skill_colours(one_hot, 16))) == 16
+    out = plots.plot_skill_trajectories(
+        xs, get_task("right", "half_cheetah"), tmp_path / "x.png", skills=one_hot, position_dims=1
+    )
+    assert_real_png(out)
+    flip = plots.plot_skill_trajectories(
+        xs, get_task("not_flip", "half_cheetah"), tmp_path / "flip.png", position_dims=1, title="Not-Flip"
+    )
+    assert_real_png(flip)
+
+
+def test_curves_plot(tmp_path: pathlib.Path) -> None:
+    plots = pytest.importorskip("trainer.plots")
+    records = [{"epoch": e, "safe_ratio": e / 100, "safe_coverage": 3 * e} for e in range(0, 100, 10)]
+    records.append({"epoch": 100, "loss": 1.0})  # keys may be missing from some records
+    out = plots.plot_curves(records, ["safe_ratio", "safe_coverage", "loss"], tmp_path / "curves.png")
+    assert_real_png(out)

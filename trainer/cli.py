@@ -1,0 +1,90 @@
+"""`collie train`: one run of Algorithm 1. Every config value can be overridden from the command line
+(`--hidden 256 --feedback-every 50 …`); `--resume` continues exactly from DIR/checkpoint.pt."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+from trainer.config import METHODS, PRESETS, Config, make_config
+
+MAIN_ARGS = ("env", "task", "method", "preset", "seed", "out")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--env", default="point", help="point, ant, half_cheetah, …")
+    p.add_argument("--task", default="north", help="north, right, range, hole, not_flip, range_north, hole_north")
+    p.add_argument("--method", default="collie", help=f"one of: {', '.join(METHODS)}")
+    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
+    p.add_argument("--token", default=None, help="trainer token for --api")
+    p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
+    p.add_argument("--feedback-timeout", type=float, default=None,
+                   help="seconds to wait for a session's labels before continuing with what arrived")
+    group = p.add_argument_group("hyperparameters (override the preset)")
+    for f in dataclasses.fields(Config):
+        if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        if f.type in ("bool", bool):
+            group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL")
+        else:
+            kind = {"int": int, "float": float}.get(str(f.type), str)
+            group.add_argument(flag, dest=f.name, default=None, type=kind)
+
+
+def _parse_bool(text: str) -> bool:
+    if text.lower() in ("1", "true", "yes", "on"):
+        return True
+    if text.lower() in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
+
+
+def config_from_args(args: argparse.Namespace) -> Config:
+    overrides = {f.name: getattr(args, f.name, None) for f in dataclasses.fields(Config)
+                 if f.name not in ("env", "preset", "extra")}
+    out = args.out or f"runs/{args.env}-{args.task}-{args.method}-s{args.seed}"
+    overrides["out"] = out
+    return make_config(args.preset, args.env, **overrides)
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer.envs import ENV_NAMES
+
+    try:
+        if args.env not in ENV_NAMES:
+            raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
+        cfg = config_from_args(args)
+        if args.resume:
+            saved = Path(cfg.out) / "config.json"
+            if saved.exists():  # the run's own config wins; the command line may only extend epochs
+                stored = json.loads(saved.read_text())
+                stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
+                cfg = Config(**stored)
+        from trainer.loop import Trainer
+
+        feedback = None
+        if args.api:
+            from trainer.feedback.http import HttpFeedback
+
+            feedback = HttpFeedback.for_trainer(args.api, args.token, cfg, run_id=args.run_id,
+                                                timeout_s=args.feedback_timeout)
+        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"collie train: error: {exc}", file=sys.stderr)
+        return 2
+    summary = trainer.run(resume=args.resume)
+    keys = ("epoch", "safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage",
+            "n_labels", "wall_s", "status")
+    print(json.dumps({k: summary.get(k) for k in keys}))
+    print(f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
+          f"plots/, tb/, checkpoint.pt)")
+    return 0 if summary.get("status") in ("finished", "stopped") else 1

@@ -1,0 +1,73 @@
+"""The feedback-source interface: Algorithm 1, lines 5–7 ("query labelers for feedback").
+
+The loop hands a feedback session's segments to a source and blocks in `collect` until the
+source's policy says the session is done. Sources that allow revisions (a labeler's undo) report
+them later through `revisions`; the loop applies them to D0/D1/D2 before the next update.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+
+class StopRequested(Exception):
+    """Raised by a source when an operator stops the run while the trainer waits."""
+
+
+@dataclass
+class Segment:
+    """One query: H consecutive states of one training trajectory (σ = (s_t, …, s_{t+H−1}))."""
+
+    query_id: str  # unique within the run, chosen by the trainer: "<session>-<index>"
+    session: int  # feedback session index, 0-based
+    epoch: int  # epoch at which the session was opened
+    skill: np.ndarray  # (dim_z,)
+    start: int  # index of s_t within its trajectory
+    obs: np.ndarray  # (H, obs_dim) raw observations (the trainer's labelled sets use these)
+    xy: np.ndarray  # (H, 2) x-y (y = 0 for 1-D envs)
+    pitch: np.ndarray  # (H,) pitch in radians (nan where undefined)
+    qpos: np.ndarray  # (H, nq) for replay
+    qvel: np.ndarray  # (H, nv)
+    score: float = 0.0  # selection score I(σ) (0 for uniform picks)
+    path_xy: np.ndarray | None = None  # (T+1, 2) the whole trajectory's x-y, for context in UIs
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LabelEvent:
+    """An effective label for one query; label None means "withdrawn" (e.g. undone, no relabel yet)."""
+
+    query_id: str
+    label: Literal[0, 1, 2] | None
+
+
+class FeedbackSource(abc.ABC):
+    """What the training loop needs from anything that can label segments."""
+
+    @abc.abstractmethod
+    def collect(self, session: int, epoch: int, segments: list[Segment]) -> list[LabelEvent]:
+        """Publish a session's segments and block until its labels are in (or the source's
+        timeout policy ends the wait). Returns the effective labels that arrived."""
+
+    def revisions(self) -> list[LabelEvent]:
+        """Labels changed since the last call (undo, relabel, late arrivals). Non-blocking."""
+        return []
+
+    def control(self) -> Literal["run", "pause", "stop"]:
+        """Operator's wish for the run, polled once per epoch."""
+        return "run"
+
+    def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:  # noqa: B027
+        """Best-effort news for dashboards (status changes, evaluation metrics, rollouts)."""
+
+    def history(self) -> list[tuple[Segment, int]] | None:
+        """All labelled segments known to the source (used to rebuild D0/D1/D2 after a restart).
+        None when the source keeps no history (then the trainer's checkpoint is authoritative)."""
+        return None
+
+    def close(self) -> None:  # noqa: B027
+        """Release connections."""

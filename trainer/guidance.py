@@ -1,0 +1,139 @@
+"""The training-free guidance signal w(s) of COLLIE (Section 4.3) and its smoothing (Section 4.5).
+
+D0, D1, D2 hold the labelled states (bad, neutral, good). Their φ-embeddings are cached and
+re-encoded once per φ version, so Eq. 8 costs one small forward pass and a distance matrix.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+EMPTY_CLASS_DISTANCE = 1e10  # an empty label class is "infinitely far" (as the reference)
+LABEL_VALUES = (0.0, 1.0, 2.0)  # [0, 1, 2]ᵀ in Eq. 8
+
+
+def class_distances(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tensor:
+    """d_φ(s, D_i) = min_{s0 ∈ D_i} ‖φ(s0) − φ(s)‖ for i = 0, 1, 2 (Eq. 7). z: (B, k) → (B, 3)."""
+    cols = []
+    for emb in labelled:
+        if emb.shape[0] == 0:
+            cols.append(torch.full((z.shape[0],), EMPTY_CLASS_DISTANCE, dtype=z.dtype, device=z.device))
+        else:
+            cols.append(torch.cdist(z, emb).min(dim=1).values)
+    return torch.stack(cols, dim=1)
+
+
+def guidance_weight(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tensor:
+    """w(s) = softmax([−d_φ(s, D_i)]_{i=0..2}) · [0, 1, 2]ᵀ (Eq. 8); 1 when nothing is labelled."""
+    if all(emb.shape[0] == 0 for emb in labelled):
+        return torch.ones(z.shape[0], dtype=z.dtype, device=z.device)
+    probs = torch.softmax(-class_distances(z, labelled), dim=1)
+    return probs @ torch.tensor(LABEL_VALUES, dtype=z.dtype, device=z.device)
+
+
+def smoothing_beta(epoch: int, first_feedback_epoch: int | None, span: float, k_beta: float) -> float:
+    """β_e of the smoothing w_e = (1 − β_e)·w + β_e (Section 4.5).
+
+    The paper writes β_e = max(0, 1 − k_β·e/T^e). We count e from the first feedback epoch and take
+    T^e as the feedback span (sessions × K), as the reference code does: with the paper's schedule
+    (warm-up 2000, K 1000, 8 sessions, 10 000 epochs) the two coincide, and guidance never starts
+    before there is a label to guide with. k_β = ∞ → pure GSD, k_β = 0 → pure USD.
+    """
+    if first_feedback_epoch is None or epoch < first_feedback_epoch:
+        return 1.0
+    if np.isinf(k_beta):
+        return 0.0
+    return float(max(0.0, 1.0 - k_beta * (epoch - first_feedback_epoch) / max(span, 1.0)))
+
+
+@dataclass
+class LabelledSegment:
+    obs: np.ndarray  # (H, d) raw observations of σ
+    label: int  # 0 bad, 1 neutral, 2 good
+
+
+class LabelledSets:
+    """D0/D1/D2, keyed by query id so that a revised label moves a whole segment (undo-safe)."""
+
+    def __init__(self, normalise: Callable[[np.ndarray], np.ndarray], device: torch.device) -> None:
+        self.segments: dict[str, LabelledSegment] = {}
+        self._normalise, self._device = normalise, device
+        self.version = 0  # bumped on every change
+        self._tensors: list[torch.Tensor] | None = None
+        self._cache_key: tuple[int, int] | None = None
+        self._cache: list[torch.Tensor] = []
+
+    def __len__(self) -> int:
+        return len(self.segments)
+
+    def set(self, query_id: str, obs: np.ndarray, label: int | None) -> None:
+        """Add, relabel (label in {0,1,2}) or withdraw (None) one segment."""
+        if label is None:
+            self.segments.pop(query_id, None)
+        else:
+            if label not in (0, 1, 2):
+                raise ValueError(f"label must be 0, 1 or 2, got {label!r}")
+            self.segments[query_id] = LabelledSegment(np.asarray(obs, np.float32), int(label))
+        self.version += 1
+        self._tensors = None
+
+    def counts(self) -> tuple[int, int, int]:
+        """Number of labelled *states* in D0, D1, D2."""
+        out = [0, 0, 0]
+        for seg in self.segments.values():
+            out[seg.label] += seg.obs.shape[0]
+        return out[0], out[1], out[2]
+
+    def n_states(self) -> int:
+        return sum(self.counts())
+
+    def all_obs(self) -> np.ndarray:
+        """Every labelled state (raw), any class: the set D used by query selection."""
+        if not self.segments:
+            return np.zeros((0, 0), np.float32)
+        return np.concatenate([s.obs for s in self.segments.values()])
+
+    def normalised(self) -> list[torch.Tensor]:
+        """D0, D1, D2 as normalised observation tensors (rebuilt only after a change)."""
+        if self._tensors is None:
+            out = []
+            for y in (0, 1, 2):
+                parts = [s.obs for s in self.segments.values() if s.label == y]
+                arr = np.concatenate(parts) if parts else np.zeros((0, 1), np.float32)
+                arr = self._normalise(arr) if parts else arr
+                out.append(torch.as_tensor(arr, dtype=torch.float32, device=self._device))
+            self._tensors = out
+        return self._tensors
+
+    def embeddings(self, phi: torch.nn.Module, phi_version: int) -> list[torch.Tensor]:
+        """φ(D0), φ(D1), φ(D2), encoded once per (φ version, label version)."""
+        key = (phi_version, self.version)
+        if key != self._cache_key:
+            sets = self.normalised()
+            sizes = [t.shape[0] for t in sets]
+            with torch.no_grad():
+                nonempty = [t for t in sets if t.shape[0] > 0]
+                emb = phi(torch.cat(nonempty)) if nonempty else None
+            out, start = [], 0
+            for t, n in zip(sets, sizes, strict=True):
+                if n == 0:
+                    dim = emb.shape[1] if emb is not None else 1
+                    out.append(torch.zeros((0, dim), device=t.device))
+                else:
+                    out.append(emb[start:start + n])
+                    start += n
+            self._cache, self._cache_key = out, key
+        return self._cache
+
+    def state_dict(self) -> dict:
+        return {qid: {"obs": s.obs, "label": s.label} for qid, s in self.segments.items()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.segments = {qid: LabelledSegment(np.asarray(v["obs"], np.float32), int(v["label"]))
+                         for qid, v in state.items()}
+        self.version += 1
+        self._tensors = None

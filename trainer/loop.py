@@ -1,0 +1,376 @@
+"""Algorithm 1 of the COLLIE paper: skill discovery with online, training-free human guidance.
+
+    for epoch e = 1 … T^e:
+        roll out skills z ~ p(z) and store the trajectories in B                      (line 3)
+        if it is a feedback epoch and fewer than N_total segments are labelled:          (line 4)
+            select M segments by active query (Algorithm 2), ask the feedback source,  (lines 5–6)
+            and add their states to D0 / D1 / D2                                       (line 7)
+        for each gradient step: w_e(s) (Eq. 8 + smoothing), then φ, λ and π            (lines 9–13)
+
+The loop talks to one `FeedbackSource` and does not know who labels. It evaluates every
+`eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from collie.tasks import get_task
+from trainer.checkpoint import load_checkpoint, save_checkpoint
+from trainer.config import Config
+from trainer.envs import VectorEnv
+from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
+from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
+from trainer.metra import Metra, TorchBatch, WeightFn
+from trainer.metrics import coverage_metrics
+from trainer.plots import plot_curves, plot_skill_trajectories
+from trainer.query import select_queries
+from trainer.replay import Batch, TrajectoryReplay
+from trainer.rollout import Normaliser, Trajectories, rollout
+from trainer.skills import SkillPrior
+
+CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss",
+              "qf_loss", "n_labels")
+
+
+class TrainingDiverged(RuntimeError):
+    """A NaN/inf appeared in observations or losses; the last checkpoint is left intact."""
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+class Trainer:
+    def __init__(self, cfg: Config, feedback: FeedbackSource | None = None, progress: bool = True) -> None:
+        cfg.validate()
+        self.cfg, self.progress = cfg, progress
+        self.out = Path(cfg.out)
+        self.task = get_task(cfg.task, cfg.env)  # fails early with the list of task names
+        self.device = pick_device(cfg.device)
+        if cfg.threads > 0:
+            torch.set_num_threads(cfg.threads)
+        self.rng = np.random.default_rng(cfg.seed)
+        random.seed(cfg.seed)
+        torch.manual_seed(cfg.seed)
+        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps)
+        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps)
+        self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
+        self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+        self.agent = Metra(self.env.obs_dim, self.env.action_dim, self.prior, cfg, self.device)
+        self.replay = TrajectoryReplay(cfg.replay_capacity, cfg.episode_steps, self.env.obs_dim,
+                                       self.env.action_dim, cfg.skill_dim, self.env.nq, self.env.nv)
+        self.labelled = LabelledSets(self.normalise, self.device)
+        self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
+        self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
+        self.segment_xy: dict[str, np.ndarray] = {}  # query id → x-y, to draw labelled states
+        self.epoch, self.env_steps, self.session = 0, 0, 0
+        self.first_feedback_epoch: int | None = None
+        self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
+        self.last_info: dict[str, float] = {}
+        self._writer: Any = None
+
+    # ---- guidance -------------------------------------------------------------------------
+    def beta(self) -> float:
+        span = self.cfg.n_sessions * self.cfg.feedback_every
+        return smoothing_beta(self.epoch, self.first_feedback_epoch, span, self.cfg.k_beta)
+
+    def weight_fn(self, batch: Batch) -> WeightFn | None:
+        """w for this batch: METRA 1, Oracle the task rule g(s), COLLIE Eq. 8 smoothed."""
+        at_next = self.cfg.w_at == "next"
+        if self.cfg.method == "metra":
+            return None
+        if self.cfg.method == "oracle":
+            xy, pitch = (batch.next_xy, batch.next_pitch) if at_next else (batch.xy, batch.pitch)
+            g = torch.as_tensor(self.task.classify(xy, pitch), dtype=torch.float32, device=self.device)
+            return lambda _s, _n: g
+        beta = self.beta()
+        if len(self.labelled) == 0 or beta >= 1.0:
+            return None  # w_e ≡ 1 until guidance starts
+
+        def collie_w(phi_s: torch.Tensor, phi_next: torch.Tensor) -> torch.Tensor:
+            emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version)
+            w = guidance_weight(phi_next if at_next else phi_s, emb)
+            return (1.0 - beta) * w + beta
+
+        return collie_w
+
+    # ---- feedback (Algorithm 1, lines 4–7) --------------------------------------------------
+    def is_feedback_epoch(self) -> bool:
+        c = self.cfg
+        return (c.method == "collie" and self.epoch >= c.warmup and (self.epoch - c.warmup) % c.feedback_every == 0
+                and len(self.labelled) < c.total_queries and self.replay.count > 0)
+
+    def make_segments(self) -> list[Segment]:
+        c, r = self.cfg, self.replay
+        m = min(c.queries_per_session, c.total_queries - len(self.labelled))
+        slots, starts = r.sample_windows(c.candidates, c.segment_length, self.rng)
+        span = starts[:, None] + np.arange(c.segment_length)
+        windows = r.obs[slots[:, None], span]
+        dev = self.device
+
+        def phi(x: torch.Tensor) -> torch.Tensor:
+            return self.agent.phi(x.to(dev)).cpu()
+
+        labelled = self.labelled.all_obs()
+        labelled = self.normalise(labelled) if len(labelled) else np.zeros((0, windows.shape[-1]), np.float32)
+        emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version) if len(self.labelled) else None
+        chosen, scores = select_queries(self.normalise(windows), m, c.query_strategy, labelled, c.knn_k,
+                                        self.rng, phi=phi, labelled_emb=emb)
+        segs = []
+        for j, idx in enumerate(chosen):
+            i, t = slots[idx], starts[idx]
+            sl = slice(t, t + c.segment_length)
+            segs.append(Segment(
+                query_id=f"s{self.session}-q{j}", session=self.session, epoch=self.epoch,
+                skill=r.skill[i].copy(), start=int(t), obs=r.obs[i, sl].copy(), xy=r.xy[i, sl].astype(np.float64),
+                pitch=r.pitch[i, sl].astype(np.float64), qpos=r.qpos[i, sl].astype(np.float64),
+                qvel=r.qvel[i, sl].astype(np.float64), score=float(scores[idx]),
+                path_xy=r.xy[i].astype(np.float64)))
+        return segs
+
+    def apply_labels(self, events: list[LabelEvent]) -> None:
+        for ev in events:
+            if ev.query_id in self.asked:
+                self.labelled.set(ev.query_id, self.asked[ev.query_id], ev.label)
+
+    def feedback_session(self) -> None:
+        segments = self.make_segments()
+        for s in segments:
+            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
+        events = self.feedback.collect(self.session, self.epoch, segments)
+        self.apply_labels(events)
+        if self.first_feedback_epoch is None:
+            self.first_feedback_epoch = self.epoch
+        self.session += 1
+
+    def rebuild_from_source(self) -> None:
+        """The service is the source of truth for labels: rebuild D0/D1/D2 from its history."""
+        history = self.feedback.history()
+        if history is None:
+            return
+        self.labelled.load_state_dict({})
+        for seg, label in history:
+            self.asked[seg.query_id] = np.asarray(seg.obs, np.float32)
+            self.segment_xy[seg.query_id] = np.asarray(seg.xy)
+            self.labelled.set(seg.query_id, seg.obs, label)
+        if history:
+            self.session = max(self.session, 1 + max(seg.session for seg, _ in history))
+            if self.first_feedback_epoch is None:
+                self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
+
+    # ---- learning (Algorithm 1, lines 9–13) -----------------------------------------------
+    def to_torch(self, b: Batch) -> TorchBatch:
+        def t(x: np.ndarray) -> torch.Tensor:
+            return torch.as_tensor(x, dtype=torch.float32, device=self.device)
+
+        return TorchBatch(t(self.normalise(b.obs)), t(self.normalise(b.next_obs)), t(b.action), t(b.skill),
+                          t(self.prior.reward_direction(b.skill)))
+
+    def train_epoch(self) -> None:
+        if self.replay.transitions < self.cfg.start_transitions:
+            return
+        sums: dict[str, torch.Tensor] = {}
+        for _ in range(self.cfg.grad_steps):
+            batch = self.replay.sample(self.cfg.batch_size, self.rng)
+            info = self.agent.update(self.to_torch(batch), self.weight_fn(batch))
+            for k, v in info.items():
+                sums[k] = sums.get(k, 0.0) + v
+        means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}
+        bad = [k for k, v in means.items() if not math.isfinite(v)]
+        if bad:
+            self.diverged(f"non-finite {', '.join(bad)}")
+        self.last_info = means
+
+    def diverged(self, what: str) -> None:
+        ckpt = self.out / "checkpoint.pt"
+        where = f"last checkpoint kept at {ckpt}" if ckpt.exists() else "no checkpoint was written yet"
+        self.feedback.report("status", {"status": "failed", "epoch": self.epoch, "error": what})
+        raise TrainingDiverged(f"{what} at epoch {self.epoch}; {where}")
+
+    # ---- evaluation ----------------------------------------------------------------------
+    def evaluate(self) -> dict[str, Any]:
+        c = self.cfg
+        skills = self.prior.evaluation_skills(c.eval_trajectories, seed=c.seed)
+        seeds = [c.seed * 1000 + i for i in range(c.eval_trajectories)]
+        traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, deterministic=True)
+        xy = list(traj.xy.astype(np.float64))
+        metrics = coverage_metrics(xy, list(traj.pitch.astype(np.float64)), self.task,
+                                   bin_size=1.0, position_dims=self.env.position_dims)
+        d0, d1, d2 = self.labelled.counts()
+        record: dict[str, Any] = {
+            "epoch": self.epoch, "env_steps": self.env_steps, **{k: float(v) for k, v in metrics.items()},
+            "n_labels": len(self.labelled), "n_labelled_states": [d0, d1, d2],
+            "lambda": float(self.agent.log_lambda.detach().exp()), "alpha": float(self.agent.log_alpha.detach().exp()),
+            "beta": self.beta(), "wall_s": round(self.wall_s(), 2),
+            **{k: v for k, v in self.last_info.items() if k not in ("lam", "alpha")},
+        }
+        with open(self.out / "metrics.jsonl", "a") as f:
+            f.write(json.dumps(record) + "\n")
+        self.plot(traj, record)
+        self.feedback.report("metrics", record)
+        self.feedback.report("rollouts", {"epoch": self.epoch, "skills": traj.skill.tolist(),
+                                          "xy": np.round(traj.xy[:, ::2], 3).tolist()})
+        return record
+
+    def plot(self, traj: Trajectories, record: dict[str, Any]) -> None:
+        labelled = [(self.segment_xy[q], s.label) for q, s in self.labelled.segments.items() if q in self.segment_xy]
+        title = (f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
+                 f"safe cov {record['safe_coverage']:.0f} · ratio {record['safe_ratio']:.2f}")
+        path = self.out / "plots" / f"skills_epoch{self.epoch:05d}.png"
+        plot_skill_trajectories(list(traj.xy), self.task, path, skills=traj.skill,
+                                position_dims=self.env.position_dims, title=title,
+                                labelled=labelled)
+        (self.out / "skills_latest.png").write_bytes(path.read_bytes())
+
+    # ---- persistence ---------------------------------------------------------------------
+    def wall_s(self) -> float:
+        return self.wall_before + (time.perf_counter() - self._t0)
+
+    def state_dict(self) -> dict[str, Any]:
+        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
+        return {
+            "config": self.cfg.to_dict(), "epoch": self.epoch, "env_steps": self.env_steps,
+            "session": self.session, "first_feedback_epoch": self.first_feedback_epoch,
+            "wall_s": self.wall_s(), "agent": self.agent.state_dict(), "replay": self.replay.state_dict(),
+            "labelled": self.labelled.state_dict(), "asked": self.asked, "segment_xy": self.segment_xy,
+            "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+            "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
+            "python_rng": random.getstate(),
+            "teacher_rng": rng_teacher.bit_generator.state if rng_teacher is not None else None,
+            "last_info": self.last_info,
+        }
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.epoch, self.env_steps, self.session = s["epoch"], s["env_steps"], s["session"]
+        self.first_feedback_epoch, self.wall_before = s["first_feedback_epoch"], s["wall_s"]
+        self.agent.load_state_dict(s["agent"])
+        self.replay.load_state_dict(s["replay"])
+        self.labelled.load_state_dict(s["labelled"])
+        self.asked, self.segment_xy, self.last_info = s["asked"], s["segment_xy"], s["last_info"]
+        self.rng.bit_generator.state = s["rng"]
+        torch.set_rng_state(s["torch_rng"])
+        if s["cuda_rng"] is not None and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(s["cuda_rng"])
+        random.setstate(s["python_rng"])
+        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
+        if rng_teacher is not None and s["teacher_rng"] is not None:
+            rng_teacher.bit_generator.state = s["teacher_rng"]
+
+    def checkpoint(self) -> None:
+        save_checkpoint(self.out / "checkpoint.pt", self.state_dict())
+
+    def resume(self) -> None:
+        state = load_checkpoint(self.out / "checkpoint.pt")
+        self.load_state_dict(state)
+        metrics = self.out / "metrics.jsonl"  # drop evaluations written after that checkpoint
+        if metrics.exists():
+            keep = [ln for ln in metrics.read_text().splitlines() if ln and json.loads(ln)["epoch"] <= self.epoch]
+            metrics.write_text("".join(ln + "\n" for ln in keep))
+
+    # ---- the loop ------------------------------------------------------------------------
+    def collect_epoch(self) -> None:
+        n = self.cfg.episodes_per_epoch
+        skills = self.prior.sample(n, self.rng)
+        seeds = [int(x) for x in self.rng.integers(0, 2**31 - 1, size=n)]
+        traj = rollout(self.env, self.agent, skills, seeds, self.normalise, deterministic=False)
+        if not np.isfinite(traj.action).all():  # MuJoCo would silently reset on a NaN control
+            self.diverged("non-finite action")
+        if not np.isfinite(traj.obs).all():
+            self.diverged("non-finite observation")
+        self.replay.add(traj.obs, traj.action, traj.skill, traj.xy, traj.pitch, traj.qpos, traj.qvel, self.epoch)
+        self.env_steps += n * self.cfg.episode_steps
+
+    def wait_while_paused(self, bar: Any) -> bool:
+        """Honour the operator: returns False when the run must stop."""
+        wish = self.feedback.control()
+        while wish == "pause":
+            bar.set_description("paused")
+            time.sleep(0.5)
+            wish = self.feedback.control()
+        return wish != "stop"
+
+    def run(self, resume: bool = False) -> dict[str, Any]:
+        from tqdm import tqdm
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        self._t0 = time.perf_counter()
+        if resume:
+            self.resume()
+        else:
+            (self.out / "metrics.jsonl").write_text("")
+        (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
+        self.rebuild_from_source()
+        self._writer = self._tensorboard()
+        self.feedback.report("status", {"status": "training", "epoch": self.epoch})
+        if self.epoch == 0:
+            self.evaluate()  # epoch-0 baseline of every metric
+        bar = tqdm(total=self.cfg.epochs, initial=self.epoch, disable=not self.progress, unit="epoch",
+                   dynamic_ncols=True, desc="training")
+        status, record = "finished", None
+        try:
+            while self.epoch < self.cfg.epochs:
+                if not self.wait_while_paused(bar):
+                    status = "stopped"
+                    break
+                self.epoch += 1
+                bar.set_description("training")
+                self.collect_epoch()
+                if self.is_feedback_epoch():
+                    bar.set_description("waiting for labels")
+                    self.feedback_session()
+                    bar.set_description("training")
+                self.apply_labels(self.feedback.revisions())
+                self.train_epoch()
+                self.log_scalars()
+                if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
+                    record = self.evaluate()
+                    bar.set_postfix(labels=len(self.labelled), safe_cov=record["safe_coverage"],
+                                    ratio=f"{record['safe_ratio']:.2f}", lam=f"{record['lambda']:.1f}")
+                if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
+                    self.checkpoint()
+                bar.update(1)
+        except StopRequested:
+            status = "stopped"
+        finally:
+            bar.close()
+            if self._writer is not None:
+                self._writer.close()
+        if status == "stopped":
+            self.checkpoint()
+        return self.finish(status, record)
+
+    def finish(self, status: str, record: dict[str, Any] | None) -> dict[str, Any]:
+        records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
+        last = record or (records[-1] if records else {})
+        summary = {**last, "status": status, "epochs_done": self.epoch, "config": self.cfg.to_dict()}
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        if records:
+            plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
+        self.feedback.report("status", {"status": status, "epoch": self.epoch})
+        return summary
+
+    def _tensorboard(self) -> Any:
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError:  # TensorBoard is optional at run time
+            return None
+        return SummaryWriter(str(self.out / "tb"), purge_step=self.epoch + 1)
+
+    def log_scalars(self) -> None:
+        if self._writer is None or not self.last_info:
+            return
+        for k, v in self.last_info.items():
+            self._writer.add_scalar(f"train/{k}", v, self.epoch)
+        self._writer.add_scalar("train/n_labels", len(self.labelled), self.epoch)
+        self._writer.add_scalar("train/beta", self.beta(), self.epoch)

@@ -1,0 +1,143 @@
+"""METRA with COLLIE's guidance weight — one gradient step, readable top to bottom.
+
+Per gradient step, on a batch (s, a, z, s′) from the replay buffer B (Algorithm 1, lines 9–13):
+  1. φ ascends  J^φ = E[ w·(φ(s′) − φ(s))ᵀz + λ·min(ε, 1 − ‖φ(s′) − φ(s)‖²) ]        (Eq. 9)
+  2. λ descends J^λ = E[ λ·min(ε, 1 − ‖φ(s′) − φ(s)‖²) ]  (through log λ)              (Eq. 10)
+  3. SAC on the intrinsic reward r(s, z, s′) = w·(φ(s′) − φ(s))ᵀz                        (Eq. 11)
+     with twin Q, target y = r + γ(min Q̄(s′, z, a′) − α log π(a′|s′, z)), learned α.
+METRA is w ≡ 1; the Oracle baseline takes w from the task rule; COLLIE takes w from Eq. 8.
+The constraint is on the *sum* of squared latent differences (‖Δφ‖₂ ≤ 1, as the paper writes).
+Rewards are never stored: they are recomputed from φ every time a transition is sampled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from trainer.config import Config
+from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ
+from trainer.skills import SkillPrior
+
+# weight_fn(φ(s), φ(s′)) → w, shape (B,); both arguments detached.
+WeightFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+
+
+@dataclass
+class TorchBatch:
+    obs: torch.Tensor  # normalised s
+    next_obs: torch.Tensor  # normalised s′
+    action: torch.Tensor
+    skill: torch.Tensor  # z as fed to π and Q
+    direction: torch.Tensor  # the vector multiplying Δφ (z, or centred one-hot)
+
+
+class Metra:
+    def __init__(self, obs_dim: int, action_dim: int, prior: SkillPrior, cfg: Config,
+                 device: torch.device) -> None:
+        self.cfg, self.prior, self.device = cfg, prior, device
+        k, h, n = prior.dim, cfg.hidden, cfg.layers
+        self.phi = SkillLatent(obs_dim, k, h, n).to(device)
+        self.qf = TwinQ(obs_dim + k + action_dim, h, n).to(device)
+        self.qf_target = TwinQ(obs_dim + k + action_dim, h, n).to(device)
+        self.qf_target.load_state_dict(self.qf.state_dict())
+        self.qf_target.requires_grad_(False)
+        self.policy = TanhGaussianPolicy(obs_dim + k, action_dim, h, n).to(device)
+        self.log_alpha = torch.tensor(np.log(cfg.alpha_init), device=device, requires_grad=True)
+        self.log_lambda = torch.tensor(np.log(cfg.lambda_init), device=device, requires_grad=True)
+        self.target_entropy = cfg.target_entropy_scale * action_dim
+        adam = torch.optim.Adam
+        self.phi_opt = adam(self.phi.parameters(), lr=cfg.lr)
+        self.qf_opt = adam(self.qf.parameters(), lr=cfg.lr)
+        self.policy_opt = adam(self.policy.parameters(), lr=cfg.lr)
+        self.alpha_opt = adam([self.log_alpha], lr=cfg.lr)
+        self.lambda_opt = adam([self.log_lambda], lr=cfg.lr)
+        self.phi_version = 0  # bumped by every φ step; keys the labelled-embedding cache
+
+    # ---- acting ---------------------------------------------------------------------------
+    @torch.inference_mode()
+    def act(self, obs: torch.Tensor, skill: torch.Tensor, deterministic: bool) -> torch.Tensor:
+        return self.policy.act(torch.cat([obs, skill], dim=-1), deterministic)
+
+    # ---- learning ------------------------------------------------------------------------
+    def update(self, b: TorchBatch, weight_fn: WeightFn | None) -> dict[str, torch.Tensor]:
+        """One gradient step of φ, λ and SAC (Eqs. 9–11). Returns detached diagnostics."""
+        lam = self.log_lambda.exp().detach()
+        phi_both = self.phi(torch.cat([b.obs, b.next_obs]))
+        phi_s, phi_next = phi_both.chunk(2)
+        delta = phi_next - phi_s
+        w = torch.ones_like(delta[:, 0]) if weight_fn is None else weight_fn(phi_s.detach(), phi_next.detach())
+        projection = (delta * b.direction).sum(-1)  # (φ(s′) − φ(s))ᵀz
+        penalty = torch.clamp(1.0 - delta.pow(2).sum(-1), max=self.cfg.epsilon)  # min(ε, 1 − ‖Δφ‖²)
+
+        phi_loss = -(w * projection + lam * penalty).mean()  # Eq. 9, ascended
+        self.phi_opt.zero_grad(set_to_none=True)
+        phi_loss.backward()
+        self.phi_opt.step()
+        self.phi_version += 1
+
+        lambda_loss = self.log_lambda * penalty.detach().mean()  # Eq. 10: λ rises while violated
+        self.lambda_opt.zero_grad(set_to_none=True)
+        lambda_loss.backward()
+        self.lambda_opt.step()
+
+        reward = (w * projection).detach()  # Eq. 11
+        info = self.sac_update(b, reward)
+        info.update(phi_loss=phi_loss.detach(), lambda_loss=lambda_loss.detach(), lam=lam,
+                    constraint=delta.detach().pow(2).sum(-1).mean(), w_mean=w.mean(), reward=reward.mean())
+        return info
+
+    def sac_update(self, b: TorchBatch, reward: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Soft actor-critic on a given reward: twin Q, learned α, Polyak-averaged target.
+        Episodes never terminate (time limit only), so no done mask, as the reference."""
+        alpha = self.log_alpha.exp().detach()
+        sz, nz = torch.cat([b.obs, b.skill], -1), torch.cat([b.next_obs, b.skill], -1)
+        with torch.no_grad():
+            next_action, next_logp = self.policy.sample(nz)
+            q_next = self.qf_target(torch.cat([nz, next_action], -1)).min(0).values
+            target = reward + self.cfg.gamma * (q_next - alpha * next_logp)
+        q = self.qf(torch.cat([sz, b.action], -1))
+        qf_loss = 0.5 * (q - target).pow(2).mean(1).sum()
+        self.qf_opt.zero_grad(set_to_none=True)
+        qf_loss.backward()
+        self.qf_opt.step()
+
+        action, logp = self.policy.sample(sz)
+        self.qf.requires_grad_(False)  # actor gradients flow through Q to the action only
+        q_pi = self.qf(torch.cat([sz, action], -1)).min(0).values
+        self.qf.requires_grad_(True)
+        policy_loss = (alpha * logp - q_pi).mean()
+        self.policy_opt.zero_grad(set_to_none=True)
+        policy_loss.backward()
+        self.policy_opt.step()
+
+        alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+        self.alpha_opt.zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.alpha_opt.step()
+
+        with torch.no_grad():
+            for t, p in zip(self.qf_target.parameters(), self.qf.parameters(), strict=True):
+                t.lerp_(p, self.cfg.tau)
+        return dict(qf_loss=qf_loss.detach(), policy_loss=policy_loss.detach(),
+                    alpha=alpha, q=q.detach().mean(), entropy=-logp.detach().mean())
+
+    # ---- checkpoints ---------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {name: getattr(self, name).state_dict() for name in
+                ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt", "alpha_opt",
+                 "lambda_opt")} | {"log_alpha": self.log_alpha.detach().clone(),
+                                   "log_lambda": self.log_lambda.detach().clone(),
+                                   "phi_version": self.phi_version}
+
+    def load_state_dict(self, state: dict) -> None:
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])
+            self.log_lambda.copy_(state["log_lambda"])
+        for name in ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt",
+                     "alpha_opt", "lambda_opt"):
+            getattr(self, name).load_state_dict(state[name])
+        self.phi_version = int(state["phi_version"])

@@ -1,0 +1,94 @@
+"""The three function approximators of METRA/COLLIE: the skill latent φ, twin Q and a tanh-Gaussian
+policy. MLP sizes follow Table 5 (2 hidden layers; 1024 units in the paper preset)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # the reference caps log-std at 2
+
+
+def mlp(inp: int, hidden: int, layers: int, out: int, act: type[nn.Module] = nn.ReLU) -> nn.Sequential:
+    mods: list[nn.Module] = []
+    width = inp
+    for _ in range(layers):
+        mods += [nn.Linear(width, hidden), act()]
+        width = hidden
+    mods.append(nn.Linear(width, out))
+    return nn.Sequential(*mods)
+
+
+class SkillLatent(nn.Module):
+    """φ: S → Z, the Lipschitz-constrained skill latent (Eq. 6's constraint, enforced by Eq. 10)."""
+
+    def __init__(self, obs_dim: int, skill_dim: int, hidden: int, layers: int) -> None:
+        super().__init__()
+        self.net = mlp(obs_dim, hidden, layers, skill_dim)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net(obs)
+
+
+class EnsembleLinear(nn.Module):
+    """`n` independent linear layers evaluated in one batched matmul (twin Q as one call)."""
+
+    def __init__(self, n: int, inp: int, out: int) -> None:
+        super().__init__()
+        bound = 1.0 / math.sqrt(inp)  # nn.Linear's default init, per member
+        self.weight = nn.Parameter(torch.empty(n, inp, out).uniform_(-bound, bound))
+        self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: (n, B, inp) or (B, inp)
+        if x.dim() == 2:
+            x = x.unsqueeze(0).expand(self.weight.shape[0], -1, -1)
+        return torch.baddbmm(self.bias, x, self.weight)
+
+
+class TwinQ(nn.Module):
+    """Q1, Q2 (s, z, a) → R, clipped double-Q as in SAC."""
+
+    def __init__(self, inp: int, hidden: int, layers: int) -> None:
+        super().__init__()
+        dims = [inp] + [hidden] * layers + [1]
+        self.layers = nn.ModuleList(EnsembleLinear(2, a, b) for a, b in itertools.pairwise(dims))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Returns (2, B) Q-values."""
+        for i, layer in enumerate(self.layers):
+            x = layer(x)
+            if i < len(self.layers) - 1:
+                x = F.relu(x)
+        return x.squeeze(-1)
+
+
+class TanhGaussianPolicy(nn.Module):
+    """π(a | s, z): tanh-squashed Gaussian with a tanh trunk (as the reference)."""
+
+    def __init__(self, inp: int, action_dim: int, hidden: int, layers: int) -> None:
+        super().__init__()
+        self.trunk = mlp(inp, hidden, layers, 2 * action_dim, act=nn.Tanh)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mean, log_std = self.trunk(x).chunk(2, dim=-1)
+        return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
+
+    def sample(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Reparameterised action in (−1, 1) and its log-probability (tanh change of variables)."""
+        mean, log_std = self(x)
+        std = log_std.exp()
+        u = mean + std * torch.randn_like(mean)
+        log_prob = (-0.5 * ((u - mean) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+        log_prob = log_prob - (2 * (math.log(2) - u - F.softplus(-2 * u))).sum(-1)
+        return torch.tanh(u), log_prob
+
+    def act(self, x: torch.Tensor, deterministic: bool) -> torch.Tensor:
+        """An action for acting in the env (no log-probability needed)."""
+        mean, log_std = self(x)
+        if deterministic:
+            return torch.tanh(mean)
+        return torch.tanh(mean + log_std.exp() * torch.randn_like(mean))

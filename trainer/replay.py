@@ -1,0 +1,79 @@
+"""Replay buffer B of whole trajectories. States are stored once per trajectory (T + 1 of them),
+so s and s′ are not duplicated, and a segment σ = (s_t … s_{t+H−1}) is a slice. Raw observations
+are stored; normalisation happens when a batch is drawn."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Batch:
+    obs: np.ndarray  # (B, d) s
+    next_obs: np.ndarray  # (B, d) s′
+    action: np.ndarray  # (B, |A|)
+    skill: np.ndarray  # (B, dim_z)
+    xy: np.ndarray  # (B, 2) of s
+    next_xy: np.ndarray  # (B, 2) of s′
+    pitch: np.ndarray  # (B,) of s
+    next_pitch: np.ndarray  # (B,) of s′
+
+
+class TrajectoryReplay:
+    def __init__(self, capacity: int, steps: int, obs_dim: int, action_dim: int, skill_dim: int,
+                 nq: int, nv: int) -> None:
+        self.size = max(1, capacity // steps)  # trajectories
+        self.steps = steps
+        n, t = self.size, steps + 1
+        self.obs = np.zeros((n, t, obs_dim), np.float32)
+        self.action = np.zeros((n, steps, action_dim), np.float32)
+        self.skill = np.zeros((n, skill_dim), np.float32)
+        self.xy = np.zeros((n, t, 2), np.float32)
+        self.pitch = np.zeros((n, t), np.float32)
+        self.qpos = np.zeros((n, t, nq), np.float32)
+        self.qvel = np.zeros((n, t, nv), np.float32)
+        self.epoch = np.zeros(n, np.int64)
+        self.next, self.count = 0, 0
+
+    @property
+    def transitions(self) -> int:
+        return self.count * self.steps
+
+    def add(self, obs: np.ndarray, action: np.ndarray, skill: np.ndarray, xy: np.ndarray,
+            pitch: np.ndarray, qpos: np.ndarray, qvel: np.ndarray, epoch: int) -> np.ndarray:
+        """Store n trajectories (arrays with a leading n axis); returns their slot indices."""
+        n = obs.shape[0]
+        idx = (self.next + np.arange(n)) % self.size
+        self.obs[idx], self.action[idx], self.skill[idx] = obs, action, skill
+        self.xy[idx], self.pitch[idx] = xy, pitch
+        self.qpos[idx], self.qvel[idx] = qpos, qvel
+        self.epoch[idx] = epoch
+        self.next = int((self.next + n) % self.size)
+        self.count = min(self.size, self.count + n)
+        return idx
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
+        i = rng.integers(0, self.count, size=batch_size)
+        t = rng.integers(0, self.steps, size=batch_size)
+        return Batch(self.obs[i, t], self.obs[i, t + 1], self.action[i, t], self.skill[i],
+                     self.xy[i, t], self.xy[i, t + 1], self.pitch[i, t], self.pitch[i, t + 1])
+
+    def sample_windows(self, n: int, length: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """n random windows of `length` consecutive states: (trajectory slots, start indices)."""
+        i = rng.integers(0, self.count, size=n)
+        t = rng.integers(0, self.steps + 2 - length, size=n)
+        return i, t
+
+    def state_dict(self) -> dict[str, np.ndarray | int]:
+        keep = slice(0, self.count)
+        return {"obs": self.obs[keep], "action": self.action[keep], "skill": self.skill[keep],
+                "xy": self.xy[keep], "pitch": self.pitch[keep], "qpos": self.qpos[keep],
+                "qvel": self.qvel[keep], "epoch": self.epoch[keep], "next": self.next, "count": self.count}
+
+    def load_state_dict(self, state: dict) -> None:
+        c = int(state["count"])
+        for key in ("obs", "action", "skill", "xy", "pitch", "qpos", "qvel", "epoch"):
+            getattr(self, key)[:c] = state[key]
+        self.next, self.count = int(state["next"]), c
