@@ -14,6 +14,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "teacher": ("teacher.cli", "label a run's queries through the API with the scripted oracle"),
     "up": ("collie.up", "start service, trainer and teacher together on the embedded SQLite"),
     "export": ("backend.export", "print a run's label events (or effective labels) as JSON or CSV"),
+    "sweep": ("trainer.sweep", "run methods × tasks × seeds of `collie train` (resumable; local pool or Ray)"),
+    "report": ("trainer.report", "turn run folders into the paper's tables (markdown, CSV) and skill figures"),
 }
 
 

@@ -12,14 +12,16 @@ import pytest
 from trainer.envs import ENV_NAMES, StepBatch, VectorEnv, load_model, make_env, model_path, raw_step_rate
 from trainer.envs.ant import quat_pitch
 
-DIMS = {"point": (4, 2, 2), "ant": (29, 8, 15), "half_cheetah": (18, 6, 9)}  # obs_dim, action_dim, nq
+# State envs: obs_dim, action_dim, nq. The pixel envs have their own tests (tests/test_pixel_envs.py).
+DIMS = {"point": (4, 2, 2), "ant": (29, 8, 15), "half_cheetah": (18, 6, 9), "car": (25, 2, 9)}
+PIXEL_ENVS = {"quadruped", "humanoid"}
 
 
 def test_env_names() -> None:
-    assert set(ENV_NAMES) == set(DIMS)
+    assert set(ENV_NAMES) == set(DIMS) | PIXEL_ENVS
 
 
-@pytest.mark.parametrize("name", ENV_NAMES)
+@pytest.mark.parametrize("name", DIMS)
 def test_reset_and_step_shapes(name: str) -> None:
     obs_dim, action_dim, nq = DIMS[name]
     env = make_env(name, seed=0)
@@ -36,7 +38,7 @@ def test_reset_and_step_shapes(name: str) -> None:
     assert not np.any(env.data.qpos == 1e6)
 
 
-@pytest.mark.parametrize("name", ENV_NAMES)
+@pytest.mark.parametrize("name", DIMS)
 def test_normaliser_stats_finite_and_positive(name: str) -> None:
     env = make_env(name)
     assert env.obs_mean.shape == env.obs_std.shape == (env.obs_dim,)
@@ -44,7 +46,7 @@ def test_normaliser_stats_finite_and_positive(name: str) -> None:
     assert np.all(env.obs_std >= 1e-3)
 
 
-@pytest.mark.parametrize("name", ENV_NAMES)
+@pytest.mark.parametrize("name", DIMS)
 def test_model_path_rebuilds_the_same_model(name: str, tmp_path: Path,
                                             monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)

@@ -8,8 +8,12 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from trainer.config import METHODS, PRESETS, Config, make_config
+from trainer.config import LABEL_METHODS, METHODS, PRESETS, Config, make_config
+
+if TYPE_CHECKING:
+    from trainer.feedback.http import HttpFeedback
 
 MAIN_ARGS = ("env", "task", "method", "preset", "seed", "out")
 
@@ -56,6 +60,35 @@ def config_from_args(args: argparse.Namespace) -> Config:
     return make_config(args.preset, args.env, **overrides)
 
 
+def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
+    """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
+    (a restarted trainer rebuilds D0/D1/D2 from it), else create a run and remember it."""
+    from collie.schemas import EnvDims, RunCreate
+    from trainer.envs import make_env
+    from trainer.feedback.http import HttpFeedback
+
+    if not args.token:
+        raise ValueError("--api needs --token (a trainer token)")
+    memo = Path(cfg.out) / "service_run.json"
+    run_id = args.run_id
+    if run_id is None and memo.exists() and args.resume:
+        run_id = json.loads(memo.read_text())["run_id"]
+    kwargs = {"timeout_s": args.feedback_timeout}
+    if run_id is not None:
+        source = HttpFeedback(args.api, args.token, int(run_id), **kwargs)
+    else:
+        env = make_env(cfg.env, episode_steps=cfg.episode_steps)
+        dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length,
+                       skill_dim=cfg.skill_dim)
+        env.close()
+        spec = RunCreate(env=cfg.env, task=cfg.task, method=cfg.method, config=cfg.to_dict(), dims=dims,
+                         n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0, epochs_total=cfg.epochs)
+        source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
+    memo.parent.mkdir(parents=True, exist_ok=True)
+    memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
+    return source
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
@@ -71,12 +104,7 @@ def run(args: argparse.Namespace) -> int:
                 cfg = Config(**stored)
         from trainer.loop import Trainer
 
-        feedback = None
-        if args.api:
-            from trainer.feedback.http import HttpFeedback
-
-            feedback = HttpFeedback.for_trainer(args.api, args.token, cfg, run_id=args.run_id,
-                                                timeout_s=args.feedback_timeout)
+        feedback = http_feedback(args, cfg) if args.api else None
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress)
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)

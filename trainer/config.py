@@ -10,7 +10,11 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-METHODS = ("collie", "metra", "oracle")
+METHODS = ("collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn")
+LABEL_METHODS = ("collie", "dodont", "ddg")  # methods that ask the feedback source for labels
+DISTANCES = ("temporal", "l2")
+REWARD_FORMS = ("multiplicative", "additive")
+ENCODERS = ("separate", "shared")
 QUERY_STRATEGIES = ("entropy", "uniform", "uncertainty", "latent")
 PRESETS = ("paper", "cpu", "smoke")
 
@@ -20,7 +24,7 @@ class Config:
     # what to run
     env: str = "point"
     task: str = "north"
-    method: Literal["collie", "metra", "oracle"] = "collie"
+    method: Literal["collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn"] = "collie"
     preset: str = "cpu"
     seed: int = 0
     device: str = "auto"  # auto → cuda when available
@@ -28,6 +32,7 @@ class Config:
     # networks and optimisation (Table 5)
     hidden: int = 1024
     layers: int = 2
+    encoder: Literal["separate", "shared"] = "separate"  # pixel envs: a CNN per network, or one for all
     lr: float = 1e-4
     batch_size: int = 256
     gamma: float = 0.99
@@ -59,6 +64,12 @@ class Config:
     query_strategy: Literal["entropy", "uniform", "uncertainty", "latent"] = "entropy"
     w_at: Literal["next", "current"] = "next"  # evaluate w at s′ (reference, issue) or s (paper's notation)
     noise_band: float = 0.0  # oracle teacher's R_error
+    # baselines and ablations (Section 5.1, Appendix E–F; trainer/methods.py)
+    distance: Literal["temporal", "l2"] = "temporal"  # DSD constraint: METRA's, or Euclidean (LSD, COLLIE-L2)
+    reward_form: Literal["multiplicative", "additive"] = "multiplicative"  # Eq. 11, or Δφᵀz + w (ablation)
+    obs_noise: float = 0.0  # std of x in the observed ŝ = (1 + x)·s; the paper's ablation is 0.1 (x ~ N(0, 0.01))
+    classifier_steps: int = 500  # DoDont*/DDG*: Adam steps fine-tuning ψ each time the labels change
+    projection_dim: int = 8  # DDG*: output width of ψ's encoder, the state projection φ reads
     # evaluation, logging, checkpoints
     eval_every: int = 500
     eval_trajectories: int = 48
@@ -82,6 +93,12 @@ class Config:
         need(self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
              "replay_capacity must hold at least one epoch of transitions")
         need(self.w_at in ("next", "current"), "w_at must be 'next' or 'current'")
+        need(self.distance in DISTANCES, f"unknown distance {self.distance!r}; valid: {', '.join(DISTANCES)}")
+        need(self.reward_form in REWARD_FORMS,
+             f"unknown reward form {self.reward_form!r}; valid: {', '.join(REWARD_FORMS)}")
+        need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
+        need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
+        need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -94,7 +111,7 @@ class Config:
 PRESET_VALUES: dict[str, dict[str, Any]] = {
     "paper": {},  # the dataclass defaults are the paper's values
     "cpu": dict(
-        hidden=256, lr=1e-3, batch_size=256, epochs=300, episodes_per_epoch=8, episode_steps=200,
+        hidden=256, lr=1e-3, batch_size=256, epochs=400, episodes_per_epoch=8, episode_steps=200,
         grad_steps=32, start_transitions=3200, replay_capacity=200_000, warmup=40, feedback_every=25,
         queries_per_session=5, total_queries=40, segment_length=20, candidates=50, knn_k=5,
         eval_every=25, checkpoint_every=25,
@@ -110,16 +127,38 @@ PRESET_VALUES: dict[str, dict[str, Any]] = {
 # Per-env choices of the reference (skills) that every preset shares unless overridden.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "half_cheetah": dict(discrete_skills=True, skill_dim=16),
+    "quadruped": dict(skill_dim=4),  # METRA's pixel Quadruped; Humanoid keeps 2
+}
+
+# The pixel robots (Quadruped, Humanoid) per preset. `paper`: Tables 5–6 and the reference
+# (5000 epochs, 200 gradient steps, N_total 100, evaluation every 125 epochs, replay 300k as
+# uint8). The paper keeps K = 1000 and warm-up 2000, which leave room for 15 of the 100 labels
+# in 5000 epochs; we keep M = 5 and the warm-up and ask every 150 epochs, so the 20 sessions end
+# at epoch 4850. `cpu` only tries the loop out (a CNN update costs ≈ 1 s on 2 cores);
+# `smoke` finishes in seconds.
+PIXEL_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(epochs=5000, grad_steps=200, total_queries=100, feedback_every=150, eval_every=125,
+                  replay_capacity=300_000),
+    "cpu": dict(hidden=256, batch_size=32, epochs=40, grad_steps=4, start_transitions=1600, replay_capacity=20_000,
+                warmup=10, feedback_every=5, eval_every=10, eval_trajectories=8, checkpoint_every=10),
+    "smoke": dict(hidden=32, batch_size=8, epochs=3, episodes_per_epoch=2, episode_steps=20, grad_steps=2,
+                  start_transitions=20, replay_capacity=400, warmup=1, feedback_every=1, queries_per_session=2,
+                  total_queries=4, segment_length=5, candidates=4, eval_every=3, eval_trajectories=2),
+}
+PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
+    preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()
 }
 
 
 def make_config(preset: str = "cpu", env: str = "point", **overrides: Any) -> Config:
-    """Preset values, then per-env defaults, then explicit overrides (None values ignored)."""
+    """Preset values, then per-env defaults, then the preset's per-env values, then explicit
+    overrides (None values ignored)."""
     if preset not in PRESET_VALUES:
         raise ValueError(f"unknown preset {preset!r}; valid: {', '.join(PRESETS)}")
     values: dict[str, Any] = {"preset": preset, "env": env}
     values.update(PRESET_VALUES[preset])
     values.update(ENV_DEFAULTS.get(env, {}))
+    values.update(PRESET_ENV_VALUES[preset].get(env, {}))
     values.update({k: v for k, v in overrides.items() if v is not None})
     known = {f.name for f in dataclasses.fields(Config)}
     unknown = sorted(set(values) - known)

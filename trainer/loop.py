@@ -25,12 +25,15 @@ import torch
 
 from collie.tasks import get_task
 from trainer.checkpoint import load_checkpoint, save_checkpoint
-from trainer.config import Config
+from trainer.config import LABEL_METHODS, Config
+from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
-from trainer.metra import Metra, TorchBatch, WeightFn
+from trainer.methods import build_agent
+from trainer.metra import TorchBatch, WeightFn
 from trainer.metrics import coverage_metrics
+from trainer.obs_noise import NoisyObservations
 from trainer.plots import plot_curves, plot_skill_trajectories
 from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
@@ -56,20 +59,26 @@ class Trainer:
         cfg.validate()
         self.cfg, self.progress = cfg, progress
         self.out = Path(cfg.out)
-        self.task = get_task(cfg.task, cfg.env)  # fails early with the list of task names
+        # Fails early with the list of task names; the seed places random scenery (car hazards).
+        self.task = get_task(cfg.task, cfg.env, layout_seed=cfg.seed)
         self.device = pick_device(cfg.device)
         if cfg.threads > 0:
             torch.set_num_threads(cfg.threads)
         self.rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
-        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps)
-        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps)
+        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
+        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps,
+                                  layout_seed=cfg.seed)
+        if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
+            self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
         self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
         self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
-        self.agent = Metra(self.env.obs_dim, self.env.action_dim, self.prior, cfg, self.device)
-        self.replay = TrajectoryReplay(cfg.replay_capacity, cfg.episode_steps, self.env.obs_dim,
-                                       self.env.action_dim, cfg.skill_dim, self.env.nq, self.env.nv)
+        self.agent, self.instruction = build_agent(cfg, self.env.obs_shape, self.env.action_dim, self.prior,
+                                                   self.device)  # the method's learner (+ ψ for DoDont*/DDG*)
+        self.replay = TrajectoryReplay(cfg.replay_capacity, cfg.episode_steps, self.env.obs_shape,
+                                       self.env.action_dim, cfg.skill_dim, self.env.nq, self.env.nv,
+                                       self.env.obs_dtype)
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
@@ -86,10 +95,14 @@ class Trainer:
         return smoothing_beta(self.epoch, self.first_feedback_epoch, span, self.cfg.k_beta)
 
     def weight_fn(self, batch: Batch) -> WeightFn | None:
-        """w for this batch: METRA 1, Oracle the task rule g(s), COLLIE Eq. 8 smoothed."""
+        """w for this batch: METRA/LSD/DIAYN/DDG* 1, Oracle the task rule g(s), DoDont* 2ψ(s),
+        COLLIE Eq. 8 smoothed."""
         at_next = self.cfg.w_at == "next"
-        if self.cfg.method == "metra":
+        if self.cfg.method in ("metra", "lsd", "diayn", "ddg"):
             return None
+        if self.cfg.method == "dodont":
+            obs = self.normalise(batch.next_obs if at_next else batch.obs)
+            return dodont_weight(self.instruction, obs, self.device)
         if self.cfg.method == "oracle":
             xy, pitch = (batch.next_xy, batch.next_pitch) if at_next else (batch.xy, batch.pitch)
             g = torch.as_tensor(self.task.classify(xy, pitch), dtype=torch.float32, device=self.device)
@@ -108,7 +121,7 @@ class Trainer:
     # ---- feedback (Algorithm 1, lines 4–7) --------------------------------------------------
     def is_feedback_epoch(self) -> bool:
         c = self.cfg
-        return (c.method == "collie" and self.epoch >= c.warmup and (self.epoch - c.warmup) % c.feedback_every == 0
+        return (c.method in LABEL_METHODS and self.epoch >= c.warmup and (self.epoch - c.warmup) % c.feedback_every == 0
                 and len(self.labelled) < c.total_queries and self.replay.count > 0)
 
     def make_segments(self) -> list[Segment]:
@@ -119,11 +132,13 @@ class Trainer:
         windows = r.obs[slots[:, None], span]
         dev = self.device
 
-        def phi(x: torch.Tensor) -> torch.Tensor:
-            return self.agent.phi(x.to(dev)).cpu()
+        def phi(x: torch.Tensor) -> torch.Tensor:  # query scoring works on flat states: unflatten images
+            return self.agent.phi(x.reshape(-1, *self.env.obs_shape).to(dev)).cpu()
 
         labelled = self.labelled.all_obs()
-        labelled = self.normalise(labelled) if len(labelled) else np.zeros((0, windows.shape[-1]), np.float32)
+        d = self.env.obs_dim
+        labelled = self.normalise(labelled).reshape(-1, d) if len(labelled) else np.zeros((0, d), np.float32)
+        windows = windows.reshape(len(windows), c.segment_length, d)
         emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version) if len(self.labelled) else None
         chosen, scores = select_queries(self.normalise(windows), m, c.query_strategy, labelled, c.knn_k,
                                         self.rng, phi=phi, labelled_emb=emb)
@@ -180,6 +195,8 @@ class Trainer:
     def train_epoch(self) -> None:
         if self.replay.transitions < self.cfg.start_transitions:
             return
+        if self.instruction is not None:  # DoDont*/DDG*: fine-tune ψ when the labelled set changed
+            self.instruction.refresh(self.labelled)
         sums: dict[str, torch.Tensor] = {}
         for _ in range(self.cfg.grad_steps):
             batch = self.replay.sample(self.cfg.batch_size, self.rng)
@@ -206,7 +223,7 @@ class Trainer:
         traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, deterministic=True)
         xy = list(traj.xy.astype(np.float64))
         metrics = coverage_metrics(xy, list(traj.pitch.astype(np.float64)), self.task,
-                                   bin_size=1.0, position_dims=self.env.position_dims)
+                                   bin_size=self.env.metric_bin_size, position_dims=self.env.position_dims)
         d0, d1, d2 = self.labelled.counts()
         record: dict[str, Any] = {
             "epoch": self.epoch, "env_steps": self.env_steps, **{k: float(v) for k, v in metrics.items()},
@@ -218,6 +235,8 @@ class Trainer:
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         self.plot(traj, record)
+        np.savez_compressed(self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch,
+                            skill=traj.skill)  # the final skills' paths, for `collie report` figures
         self.feedback.report("metrics", record)
         self.feedback.report("rollouts", {"epoch": self.epoch, "skills": traj.skill.tolist(),
                                           "xy": np.round(traj.xy[:, ::2], 3).tolist()})
@@ -249,6 +268,7 @@ class Trainer:
             "python_rng": random.getstate(),
             "teacher_rng": rng_teacher.bit_generator.state if rng_teacher is not None else None,
             "last_info": self.last_info,
+            "instruction": self.instruction.state_dict() if self.instruction is not None else None,
         }
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
@@ -258,6 +278,8 @@ class Trainer:
         self.replay.load_state_dict(s["replay"])
         self.labelled.load_state_dict(s["labelled"])
         self.asked, self.segment_xy, self.last_info = s["asked"], s["segment_xy"], s["last_info"]
+        if self.instruction is not None and s.get("instruction") is not None:
+            self.instruction.load_state_dict(s["instruction"])
         self.rng.bit_generator.state = s["rng"]
         torch.set_rng_state(s["torch_rng"])
         if s["cuda_rng"] is not None and torch.cuda.is_available():

@@ -19,11 +19,17 @@ import numpy as np
 import torch
 
 from trainer.config import Config
+from trainer.encoders import PixelEncoder, feature_dim, is_pixels
 from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ
 from trainer.skills import SkillPrior
 
 # weight_fn(φ(s), φ(s′)) → w, shape (B,); both arguments detached.
 WeightFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+
+
+def guided_reward(projection: torch.Tensor, w: torch.Tensor, form: str = "multiplicative") -> torch.Tensor:
+    """r = w·(φ(s′) − φ(s))ᵀz (Eq. 11); the additive ablation (Appendix F) r = (φ(s′) − φ(s))ᵀz + w."""
+    return projection + w if form == "additive" else w * projection
 
 
 @dataclass
@@ -36,16 +42,20 @@ class TorchBatch:
 
 
 class Metra:
-    def __init__(self, obs_dim: int, action_dim: int, prior: SkillPrior, cfg: Config,
+    def __init__(self, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, cfg: Config,
                  device: torch.device) -> None:
+        """`obs_shape`: the state dimension, or (C, H, W) for pixels (then CNN encoders, per cfg.encoder)."""
         self.cfg, self.prior, self.device = cfg, prior, device
         k, h, n = prior.dim, cfg.hidden, cfg.layers
-        self.phi = SkillLatent(obs_dim, k, h, n).to(device)
-        self.qf = TwinQ(obs_dim + k + action_dim, h, n).to(device)
-        self.qf_target = TwinQ(obs_dim + k + action_dim, h, n).to(device)
+        f = feature_dim(obs_shape)
+        enc = self._encoders(obs_shape, cfg.encoder)
+        self.phi = SkillLatent(f, k, h, n, enc["phi"]).to(device)
+        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"]).to(device)
+        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"]).to(device)
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.qf_target.requires_grad_(False)
-        self.policy = TanhGaussianPolicy(obs_dim + k, action_dim, h, n).to(device)
+        self.policy = TanhGaussianPolicy(f + k, action_dim, h, n, enc["policy"],
+                                         detach_encoder=cfg.encoder == "shared").to(device)
         self.log_alpha = torch.tensor(np.log(cfg.alpha_init), device=device, requires_grad=True)
         self.log_lambda = torch.tensor(np.log(cfg.lambda_init), device=device, requires_grad=True)
         self.target_entropy = cfg.target_entropy_scale * action_dim
@@ -57,10 +67,23 @@ class Metra:
         self.lambda_opt = adam([self.log_lambda], lr=cfg.lr)
         self.phi_version = 0  # bumped by every φ step; keys the labelled-embedding cache
 
+    @staticmethod
+    def _encoders(obs_shape: int | tuple[int, ...], kind: str) -> dict[str, torch.nn.Module | None]:
+        """Each network's encoder: none for states; for pixels one CNN per network (twin critics: a
+        grouped pair), or one CNN shared by φ, Q and π with the target critic's own copy."""
+        if not is_pixels(obs_shape):
+            return dict.fromkeys(("phi", "qf", "qf_target", "policy"))
+        shape = tuple(obs_shape)  # type: ignore[arg-type]
+        if kind == "shared":
+            shared = PixelEncoder(shape)
+            return {"phi": shared, "qf": shared, "qf_target": PixelEncoder(shape), "policy": shared}
+        return {"phi": PixelEncoder(shape), "qf": PixelEncoder(shape, copies=2),
+                "qf_target": PixelEncoder(shape, copies=2), "policy": PixelEncoder(shape)}
+
     # ---- acting ---------------------------------------------------------------------------
     @torch.inference_mode()
     def act(self, obs: torch.Tensor, skill: torch.Tensor, deterministic: bool) -> torch.Tensor:
-        return self.policy.act(torch.cat([obs, skill], dim=-1), deterministic)
+        return self.policy.act(obs, skill, deterministic)
 
     # ---- learning ------------------------------------------------------------------------
     def update(self, b: TorchBatch, weight_fn: WeightFn | None) -> dict[str, torch.Tensor]:
@@ -73,7 +96,8 @@ class Metra:
         projection = (delta * b.direction).sum(-1)  # (φ(s′) − φ(s))ᵀz
         penalty = torch.clamp(1.0 - delta.pow(2).sum(-1), max=self.cfg.epsilon)  # min(ε, 1 − ‖Δφ‖²)
 
-        phi_loss = -(w * projection + lam * penalty).mean()  # Eq. 9, ascended
+        guided = guided_reward(projection, w, self.cfg.reward_form)
+        phi_loss = -(guided + lam * penalty).mean()  # Eq. 9, ascended
         self.phi_opt.zero_grad(set_to_none=True)
         phi_loss.backward()
         self.phi_opt.step()
@@ -84,7 +108,7 @@ class Metra:
         lambda_loss.backward()
         self.lambda_opt.step()
 
-        reward = (w * projection).detach()  # Eq. 11
+        reward = guided.detach()  # Eq. 11
         info = self.sac_update(b, reward)
         info.update(phi_loss=phi_loss.detach(), lambda_loss=lambda_loss.detach(), lam=lam,
                     constraint=delta.detach().pow(2).sum(-1).mean(), w_mean=w.mean(), reward=reward.mean())
@@ -94,20 +118,19 @@ class Metra:
         """Soft actor-critic on a given reward: twin Q, learned α, Polyak-averaged target.
         Episodes never terminate (time limit only), so no done mask, as the reference."""
         alpha = self.log_alpha.exp().detach()
-        sz, nz = torch.cat([b.obs, b.skill], -1), torch.cat([b.next_obs, b.skill], -1)
         with torch.no_grad():
-            next_action, next_logp = self.policy.sample(nz)
-            q_next = self.qf_target(torch.cat([nz, next_action], -1)).min(0).values
+            next_action, next_logp = self.policy.sample(b.next_obs, b.skill)
+            q_next = self.qf_target(b.next_obs, b.skill, next_action).min(0).values
             target = reward + self.cfg.gamma * (q_next - alpha * next_logp)
-        q = self.qf(torch.cat([sz, b.action], -1))
+        q = self.qf(b.obs, b.skill, b.action)
         qf_loss = 0.5 * (q - target).pow(2).mean(1).sum()
         self.qf_opt.zero_grad(set_to_none=True)
         qf_loss.backward()
         self.qf_opt.step()
 
-        action, logp = self.policy.sample(sz)
+        action, logp = self.policy.sample(b.obs, b.skill)
         self.qf.requires_grad_(False)  # actor gradients flow through Q to the action only
-        q_pi = self.qf(torch.cat([sz, action], -1)).min(0).values
+        q_pi = self.qf(b.obs, b.skill, action).min(0).values
         self.qf.requires_grad_(True)
         policy_loss = (alpha * logp - q_pi).mean()
         self.policy_opt.zero_grad(set_to_none=True)

@@ -1,5 +1,7 @@
 """The three function approximators of METRA/COLLIE: the skill latent φ, twin Q and a tanh-Gaussian
-policy. MLP sizes follow Table 5 (2 hidden layers; 1024 units in the paper preset)."""
+policy. MLP sizes follow Table 5 (2 hidden layers; 1024 units in the paper preset). Each reads the
+observation through an optional encoder (encoders.py: a CNN for pixels), so checkpoints, target
+copies and optimisers carry it along with the network that owns it."""
 
 from __future__ import annotations
 
@@ -9,6 +11,8 @@ import math
 import torch
 from torch import nn
 from torch.nn import functional as F
+
+from trainer.encoders import join
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # the reference caps log-std at 2
 
@@ -26,12 +30,14 @@ def mlp(inp: int, hidden: int, layers: int, out: int, act: type[nn.Module] = nn.
 class SkillLatent(nn.Module):
     """φ: S → Z, the Lipschitz-constrained skill latent (Eq. 6's constraint, enforced by Eq. 10)."""
 
-    def __init__(self, obs_dim: int, skill_dim: int, hidden: int, layers: int) -> None:
+    def __init__(self, obs_dim: int, skill_dim: int, hidden: int, layers: int,
+                 encoder: nn.Module | None = None) -> None:
         super().__init__()
+        self.encoder = encoder or nn.Identity()
         self.net = mlp(obs_dim, hidden, layers, skill_dim)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net(obs)
+        return self.net(self.encoder(obs))
 
 
 class EnsembleLinear(nn.Module):
@@ -50,15 +56,18 @@ class EnsembleLinear(nn.Module):
 
 
 class TwinQ(nn.Module):
-    """Q1, Q2 (s, z, a) → R, clipped double-Q as in SAC."""
+    """Q1, Q2 (s, z, a) → R, clipped double-Q as in SAC. `inp` counts encoder features + |z| + |A|;
+    the encoder returns (B, F) features (shared by both) or (2, B, F) (one CNN each)."""
 
-    def __init__(self, inp: int, hidden: int, layers: int) -> None:
+    def __init__(self, inp: int, hidden: int, layers: int, encoder: nn.Module | None = None) -> None:
         super().__init__()
+        self.encoder = encoder or nn.Identity()
         dims = [inp] + [hidden] * layers + [1]
         self.layers = nn.ModuleList(EnsembleLinear(2, a, b) for a, b in itertools.pairwise(dims))
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, obs: torch.Tensor, skill: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """Returns (2, B) Q-values."""
+        x = join(self.encoder(obs), skill, action)
         for i, layer in enumerate(self.layers):
             x = layer(x)
             if i < len(self.layers) - 1:
@@ -67,28 +76,34 @@ class TwinQ(nn.Module):
 
 
 class TanhGaussianPolicy(nn.Module):
-    """π(a | s, z): tanh-squashed Gaussian with a tanh trunk (as the reference)."""
+    """π(a | s, z): tanh-squashed Gaussian with a tanh trunk (as the reference). `inp` counts encoder
+    features + |z|. With `detach_encoder` the policy reads an encoder that others train."""
 
-    def __init__(self, inp: int, action_dim: int, hidden: int, layers: int) -> None:
+    def __init__(self, inp: int, action_dim: int, hidden: int, layers: int, encoder: nn.Module | None = None,
+                 detach_encoder: bool = False) -> None:
         super().__init__()
+        self.encoder = encoder or nn.Identity()
+        self.detach_encoder = detach_encoder
         self.trunk = mlp(inp, hidden, layers, 2 * action_dim, act=nn.Tanh)
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        mean, log_std = self.trunk(x).chunk(2, dim=-1)
+    def forward(self, obs: torch.Tensor, skill: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        with torch.set_grad_enabled(torch.is_grad_enabled() and not self.detach_encoder):
+            features = self.encoder(obs)
+        mean, log_std = self.trunk(join(features, skill)).chunk(2, dim=-1)
         return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
 
-    def sample(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def sample(self, obs: torch.Tensor, skill: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Reparameterised action in (−1, 1) and its log-probability (tanh change of variables)."""
-        mean, log_std = self(x)
+        mean, log_std = self(obs, skill)
         std = log_std.exp()
         u = mean + std * torch.randn_like(mean)
         log_prob = (-0.5 * ((u - mean) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
         log_prob = log_prob - (2 * (math.log(2) - u - F.softplus(-2 * u))).sum(-1)
         return torch.tanh(u), log_prob
 
-    def act(self, x: torch.Tensor, deterministic: bool) -> torch.Tensor:
+    def act(self, obs: torch.Tensor, skill: torch.Tensor, deterministic: bool) -> torch.Tensor:
         """An action for acting in the env (no log-probability needed)."""
-        mean, log_std = self(x)
+        mean, log_std = self(obs, skill)
         if deterministic:
             return torch.tanh(mean)
         return torch.tanh(mean + log_std.exp() * torch.randn_like(mean))

@@ -152,19 +152,35 @@ def plot_skill_trajectories(
 ) -> pathlib.Path:
     """x-y paths coloured by skill over the shaded task regions (x over time when
     position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small markers."""
+    fig = Figure(figsize=(6, 6) if position_dims == 2 else (7, 4.5))
+    draw_skill_panel(fig.add_subplot(), xy_trajs, task, skills=skills, position_dims=position_dims, title=title,
+                     labelled=labelled)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def draw_skill_panel(
+    ax: Axes,
+    xy_trajs: Sequence[np.ndarray],
+    task: Task,
+    *,
+    skills: np.ndarray | None = None,
+    position_dims: int = 2,
+    title: str = "",
+    labelled: Sequence[tuple[np.ndarray, int]] | None = None,
+    legend: bool = True,
+) -> None:
+    """One panel of `plot_skill_trajectories` on a given axes (for grids of runs, `collie report`)."""
     if position_dims not in (1, 2):
         raise ValueError(f"position_dims must be 1 or 2, got {position_dims}")
     trajs = [np.asarray(t, dtype=float).reshape(len(t), -1) for t in xy_trajs]
     colours = skill_colours(skills, len(trajs))
     labelled = list(labelled or [])
-    fig = Figure(figsize=(6, 6) if position_dims == 2 else (7, 4.5))
-    ax = fig.add_subplot()
     draw = _draw_xy if position_dims == 2 else _draw_x_over_time
     shaded = draw(ax, trajs, colours, task, labelled)
     ax.set_title(title or task.name, fontsize=10)
-    _legend(ax, shaded, {int(label) for _, label in labelled})
-    fig.tight_layout()
-    return _save(fig, path)
+    if legend:
+        _legend(ax, shaded, {int(label) for _, label in labelled})
 
 
 def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Path) -> pathlib.Path:

@@ -1,6 +1,7 @@
 """Replay buffer B of whole trajectories. States are stored once per trajectory (T + 1 of them),
 so s and s′ are not duplicated, and a segment σ = (s_t … s_{t+H−1}) is a slice. Raw observations
-are stored; normalisation happens when a batch is drawn."""
+are stored in the env's dtype (pixel frame stacks as uint8, 4× smaller than float32);
+normalisation happens when a batch is drawn."""
 
 from __future__ import annotations
 
@@ -11,8 +12,8 @@ import numpy as np
 
 @dataclass
 class Batch:
-    obs: np.ndarray  # (B, d) s
-    next_obs: np.ndarray  # (B, d) s′
+    obs: np.ndarray  # (B, *obs_shape) s
+    next_obs: np.ndarray  # (B, *obs_shape) s′
     action: np.ndarray  # (B, |A|)
     skill: np.ndarray  # (B, dim_z)
     xy: np.ndarray  # (B, 2) of s
@@ -22,12 +23,13 @@ class Batch:
 
 
 class TrajectoryReplay:
-    def __init__(self, capacity: int, steps: int, obs_dim: int, action_dim: int, skill_dim: int,
-                 nq: int, nv: int) -> None:
+    def __init__(self, capacity: int, steps: int, obs_shape: int | tuple[int, ...], action_dim: int, skill_dim: int,
+                 nq: int, nv: int, obs_dtype: np.dtype | type = np.float32) -> None:
         self.size = max(1, capacity // steps)  # trajectories
         self.steps = steps
         n, t = self.size, steps + 1
-        self.obs = np.zeros((n, t, obs_dim), np.float32)
+        shape = (obs_shape,) if isinstance(obs_shape, int) else tuple(obs_shape)
+        self.obs = np.zeros((n, t, *shape), obs_dtype)
         self.action = np.zeros((n, steps, action_dim), np.float32)
         self.skill = np.zeros((n, skill_dim), np.float32)
         self.xy = np.zeros((n, t, 2), np.float32)

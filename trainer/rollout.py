@@ -14,7 +14,7 @@ from trainer.metra import Metra
 
 @dataclass
 class Trajectories:
-    obs: np.ndarray  # (n, T+1, d) raw
+    obs: np.ndarray  # (n, T+1, *obs_shape) raw
     action: np.ndarray  # (n, T, |A|)
     skill: np.ndarray  # (n, k)
     xy: np.ndarray  # (n, T+1, 2)
@@ -24,7 +24,8 @@ class Trajectories:
 
 
 class Normaliser:
-    """Fixed per-dimension statistics of the env (as the reference METRA): (s − μ) / σ."""
+    """Fixed per-dimension statistics of the env (as the reference METRA): (s − μ) / σ. Pixel envs
+    give scalars (0, 255): images are only scaled to [0, 1]."""
 
     def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
         self.mean = np.asarray(mean, np.float32)
@@ -40,7 +41,7 @@ def rollout(env: VectorEnv, agent: Metra, skills: np.ndarray, seeds: list[int], 
     n, t_max = env.num_envs, env.episode_steps
     if skills.shape[0] != n:
         raise ValueError(f"need {n} skills, got {skills.shape[0]}")
-    obs = np.zeros((n, t_max + 1, env.obs_dim), np.float32)
+    obs = np.zeros((n, t_max + 1, *env.obs_shape), env.obs_dtype)
     action = np.zeros((n, t_max, env.action_dim), np.float32)
     xy = np.zeros((n, t_max + 1, 2), np.float32)
     pitch = np.zeros((n, t_max + 1), np.float32)

@@ -7,8 +7,9 @@ See docs/tasks.md for the rules, boundary conventions and how to add a task.
 from collie.tasks.builtin import BUILTIN_TASKS as TASK_NAMES
 from collie.tasks.builtin import ENV_GEOMETRY, Geometry
 from collie.tasks.classes import BAD, CLASS_NAMES, CLASSES, GOOD, NEUTRAL
+from collie.tasks.hazard import HAZARD_RADIUS, hazard_layout
 from collie.tasks.regions import Disc, HalfPlane, OutsideDisc, PitchBeyond, Region, WedgeNorth, wrap_angle
-from collie.tasks.registry import get_task, register_task, task_names
+from collie.tasks.registry import get_task, has_layout, register_task, task_names
 from collie.tasks.task import Distance, Rule, Task
 
 __all__ = [
@@ -17,6 +18,7 @@ __all__ = [
     "CLASS_NAMES",
     "ENV_GEOMETRY",
     "GOOD",
+    "HAZARD_RADIUS",
     "NEUTRAL",
     "TASK_NAMES",
     "Disc",
@@ -30,6 +32,8 @@ __all__ = [
     "Task",
     "WedgeNorth",
     "get_task",
+    "has_layout",
+    "hazard_layout",
     "register_task",
     "task_names",
     "wrap_angle",

@@ -1,7 +1,8 @@
 """The shape every collie environment shares: a MuJoCo model stepped with a fixed episode length.
 
 Episodes never terminate early (skill discovery ignores rewards and health), so every episode is
-exactly `episode_steps` long and only `truncated` ends it. Observations are float32; info carries
+exactly `episode_steps` long and only `truncated` ends it. Observations are float32 vectors, or
+uint8 images for pixel envs (`obs_shape`, `obs_dtype` say which); info carries
 what the rest of collie needs per state: `xy` (task rules, metrics), `pitch` (Not-Flip) and
 copies of `qpos`/`qvel` (exact 3-D replay in the labeling UI).
 """
@@ -11,10 +12,12 @@ from __future__ import annotations
 import abc
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
+
+from trainer.envs.quiet import quiet_compile
 
 
 class SkillEnv(abc.ABC):
@@ -22,8 +25,10 @@ class SkillEnv(abc.ABC):
 
     name: str
     position_dims: int  # 2 for planar robots, 1 for HalfCheetah (y is reported as 0)
-    obs_mean: np.ndarray
+    obs_mean: np.ndarray  # broadcastable to obs_shape (0-d for pixels)
     obs_std: np.ndarray
+    metric_bin_size: ClassVar[float] = 1.0  # side of the coverage metric's x-y bins
+    has_layout: ClassVar[bool] = False  # True: the constructor takes a `layout_seed` (random scenery)
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -42,7 +47,10 @@ class SkillEnv(abc.ABC):
         self.nq: int = model.nq
         self.nv: int = model.nv
         self.action_dim: int = model.nu
-        self.obs_dim: int = len(self.observe())
+        first = self.observe()
+        self.obs_shape: tuple[int, ...] = first.shape
+        self.obs_dtype: np.dtype = first.dtype
+        self.obs_dim: int = first.size
         self.t = -1  # -1 until the first reset
         self._first_seed = seed  # used by the first reset() that passes no seed (Gymnasium convention)
 
@@ -52,6 +60,17 @@ class SkillEnv(abc.ABC):
     @abc.abstractmethod
     def mjcf_path(cls) -> Path:
         """The MJCF file this environment's model is compiled from (for replay elsewhere)."""
+
+    @classmethod
+    def model_xml(cls) -> str:
+        """The MJCF text of the model, self-contained (what a replay viewer compiles)."""
+        return cls.mjcf_path().read_text()
+
+    @classmethod
+    def load_model(cls) -> mujoco.MjModel:
+        """The compiled model, exactly as the env simulates (and renders) it."""
+        with quiet_compile():
+            return mujoco.MjModel.from_xml_path(str(cls.mjcf_path()))
 
     @abc.abstractmethod
     def _reset_state(self, seed: int | None) -> None:

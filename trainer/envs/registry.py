@@ -12,7 +12,6 @@ from pathlib import Path
 import mujoco
 
 from trainer.envs.base import SkillEnv
-from trainer.envs.quiet import quiet_compile
 
 _REGISTRY: dict[str, str] = {}  # name -> "module:Class"
 
@@ -24,6 +23,9 @@ def _register(name: str, target: str) -> None:
 _register("point", "trainer.envs.point:PointEnv")
 _register("ant", "trainer.envs.ant:AntEnv")
 _register("half_cheetah", "trainer.envs.half_cheetah:HalfCheetahEnv")
+_register("quadruped", "trainer.envs.quadruped:QuadrupedEnv")
+_register("humanoid", "trainer.envs.humanoid:HumanoidEnv")
+_register("car", "trainer.envs.car:CarEnv")
 
 ENV_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
@@ -36,21 +38,35 @@ def env_class(name: str) -> type[SkillEnv]:
     return getattr(importlib.import_module(module), cls)
 
 
-def make_env(name: str, seed: int | None = None, episode_steps: int = 200) -> SkillEnv:
-    """Build one env; `seed` seeds its first reset() (later resets may pass their own)."""
-    return env_class(name)(episode_steps=episode_steps, seed=seed)
+def _layout(cls: type[SkillEnv], layout_seed: int | None) -> dict[str, int]:
+    """The layout argument for envs with random scenery (the car's hazards); ignored by the others,
+    so callers can always pass their experiment seed."""
+    return {"layout_seed": layout_seed} if cls.has_layout and layout_seed is not None else {}
+
+
+def make_env(name: str, seed: int | None = None, episode_steps: int = 200,
+             layout_seed: int | None = None) -> SkillEnv:
+    """Build one env; `seed` seeds its first reset() (later resets may pass their own);
+    `layout_seed` fixes random scenery for a whole experiment (envs with `has_layout`)."""
+    cls = env_class(name)
+    return cls(episode_steps=episode_steps, seed=seed, **_layout(cls, layout_seed))
 
 
 def model_path(name: str) -> Path:
-    """The MJCF file the env `name` is built from, so a viewer can rebuild the exact model."""
+    """The MJCF file the env `name` is built from, so a viewer can rebuild the exact model.
+    The DMC envs edit dm_control's files in memory and have none: use `model_xml`/`load_model`."""
     return env_class(name).mjcf_path()
 
 
-def model_xml(name: str) -> str:
-    return model_path(name).read_text()
+def model_xml(name: str, layout_seed: int | None = None) -> str:
+    """Self-contained MJCF text of env `name` (`mujoco.MjModel.from_xml_string` compiles it);
+    with `layout_seed`, random scenery (the car's hazards) is drawn in too."""
+    cls = env_class(name)
+    return cls.model_xml(**_layout(cls, layout_seed))
 
 
-def load_model(name: str) -> mujoco.MjModel:
-    """The compiled MuJoCo model of env `name` (what a replay viewer needs), compiled quietly."""
-    with quiet_compile():
-        return mujoco.MjModel.from_xml_path(str(model_path(name)))
+def load_model(name: str, layout_seed: int | None = None) -> mujoco.MjModel:
+    """The compiled MuJoCo model of env `name` (what a replay viewer needs), compiled quietly;
+    pixel envs come with their position-coloured floor painted in."""
+    cls = env_class(name)
+    return cls.load_model(**_layout(cls, layout_seed))

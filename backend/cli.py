@@ -1,0 +1,69 @@
+"""`collie serve`: run the labeling service with uvicorn on one address.
+
+Tokens for the three built-in principals (operator, trainer, labeler) come from COLLIE_*_TOKEN or
+are generated; they are printed, and written to --tokens-json when given. Port 0 picks a free port;
+the bound URL is printed either way (and written to the tokens file as "api")."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from pydantic import SecretStr
+
+from backend.services.auth import ROLES, new_token
+from backend.settings import Settings
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=8000, help="port; 0 picks a free one (default 8000)")
+    parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
+    parser.add_argument("--tokens-json", type=Path, help="write {api, tokens: {operator, trainer, labeler}} here")
+    parser.add_argument("--no-generate-tokens", action="store_true", help="only use tokens from the environment")
+    parser.add_argument("--log-level", default="warning")
+
+
+def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str]]:
+    """Settings from the environment, with --db and generated bootstrap tokens filled in."""
+    overrides: dict[str, object] = {}
+    if args.db is not None:
+        overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
+    tokens: dict[str, str] = {}
+    for role in ROLES:
+        given = os.environ.get(f"COLLIE_{role.upper()}_TOKEN")
+        if given is None and not args.no_generate_tokens:
+            given = new_token()
+            overrides[f"{role}_token"] = SecretStr(given)
+        if given is not None:
+            tokens[role] = given
+    return Settings(**overrides), tokens  # type: ignore[arg-type]
+
+
+def run(args: argparse.Namespace) -> int:
+    from backend.main import create_app
+    from backend.server import bind, uvicorn_server
+
+    settings, tokens = settings_from(args)
+    generated = {r for r in tokens if f"COLLIE_{r.upper()}_TOKEN" not in os.environ}
+    app = create_app(settings)
+    sock, url = bind(args.host, args.port)
+    if args.tokens_json is not None:
+        args.tokens_json.parent.mkdir(parents=True, exist_ok=True)
+        args.tokens_json.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
+        args.tokens_json.chmod(0o600)
+    print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
+    for role, token in tokens.items():  # secrets given through the environment stay out of logs
+        shown = token if getattr(settings, f"{role}_token") is not None and role in generated else "(from environment)"
+        print(f"  {role} token: {shown}", flush=True)
+    uvicorn_server(app, args.log_level).run(sockets=[sock])
+    return 0
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(prog="collie serve", description=__doc__)
+    add_arguments(parser)
+    sys.exit(run(parser.parse_args()))

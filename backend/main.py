@@ -1,0 +1,117 @@
+"""The app: `create_app(settings)` migrates the database, installs the bootstrap tokens and mounts
+the routes under /api (and the dashboard at / when web_dir holds one)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel
+from sqlalchemy.exc import IntegrityError
+
+from backend import __version__, migrate
+from backend.db import Database
+from backend.limits import BodyLimit
+from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry
+from backend.services import auth
+from backend.services.errors import ServiceError
+from backend.services.events import EventHub
+from backend.settings import Settings
+from collie.schemas import SessionPost
+
+
+def _plain_error(error: dict[str, Any]) -> dict[str, Any]:
+    """A validation error fit to send back: the offending input only when small and plain JSON
+    (it may hold NaN, or be a whole session)."""
+    plain = {"type": error.get("type"), "loc": list(error.get("loc", ())), "msg": error.get("msg")}
+    try:
+        text = json.dumps(error.get("input"), allow_nan=False)
+    except (TypeError, ValueError):
+        text = None
+    if text is not None and len(text) <= 200:
+        plain["input"] = error.get("input")
+    return plain
+
+
+def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> None:
+    """Bodies read with parse_body are not seen by FastAPI: add their schemas to the components."""
+    build = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = build()
+            components = schema.setdefault("components", {}).setdefault("schemas", {})
+            for model in models:
+                body = model.model_json_schema(ref_template="#/components/schemas/{model}")
+                for name, definition in body.pop("$defs", {}).items():
+                    components.setdefault(name, definition)
+                components.setdefault(model.__name__, body)
+        return app.openapi_schema  # build() stored it; the components were added in place
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    hub = EventHub()
+    db = Database(settings.database_url, publisher=hub.publish, background_checkpoints=True)
+    migrate.upgrade(db.engine)
+    with db.write() as conn:
+        for role in auth.ROLES:
+            token = getattr(settings, f"{role}_token")
+            if token is not None:
+                auth.bootstrap(conn, role, token.get_secret_value())
+
+    async def checkpoints() -> None:
+        while True:
+            await asyncio.sleep(1.0)
+            await asyncio.to_thread(db.checkpoint)
+
+    @asynccontextmanager
+    async def lifespan(_: FastAPI) -> AsyncIterator[None]:
+        hub.bind(asyncio.get_running_loop())
+        checkpointer = asyncio.create_task(checkpoints())
+        yield
+        checkpointer.cancel()
+        db.checkpoint()
+        db.dispose()
+
+    app = FastAPI(
+        title="collie labeling service",
+        version=__version__,
+        description="Queries, labels, the live label stream and run control for COLLIE runs.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.db = db
+    app.state.hub = hub
+    app.state.tokens = auth.TokenCache(settings.token_cache_s)
+    for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
+        app.include_router(module.router, prefix="/api")
+
+    @app.exception_handler(ServiceError)
+    async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
+        return JSONResponse({"detail": exc.detail}, status_code=exc.status)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return JSONResponse({"detail": [_plain_error(e) for e in exc.errors()[:20]]}, status_code=422)
+
+    @app.exception_handler(IntegrityError)
+    async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:
+        # A race lost against a concurrent writer (e.g. the same client_request_id twice at once).
+        return JSONResponse({"detail": f"conflicting write: {exc.orig}"}, status_code=409)
+
+    large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
+    _document_raw_bodies(app, (SessionPost,))
+    app.add_middleware(BodyLimit, default_bytes=settings.max_body_bytes, by_suffix=large)
+    if settings.web_dir is not None and (settings.web_dir / "index.html").is_file():
+        app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    return app

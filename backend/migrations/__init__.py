@@ -1,0 +1,1 @@
+"""Alembic migrations, applied programmatically at service start (see backend.migrate)."""

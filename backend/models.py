@@ -1,0 +1,135 @@
+"""Tables. Label events and stream events are append-only; a query row caches its current status,
+lease and effective label (the rule lives in services/labels.py and can always be replayed from the
+events). Times are UTC seconds since the epoch (REAL): cheap to compare for lease expiry."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import JSON, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Principal(Base):
+    """Anyone holding a token: operators, trainers and labelers (humans or the oracle teacher)."""
+
+    __tablename__ = "principals"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    role: Mapped[str] = mapped_column(String(16))
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[float] = mapped_column(Float)
+    revoked_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class Run(Base):
+    __tablename__ = "runs"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    env: Mapped[str] = mapped_column(String(64))
+    task: Mapped[str] = mapped_column(String(64))
+    method: Mapped[str] = mapped_column(String(64))
+    config: Mapped[dict[str, Any]] = mapped_column(JSON)
+    dims: Mapped[dict[str, Any]] = mapped_column(JSON)
+    status: Mapped[str] = mapped_column(String(32))
+    control: Mapped[str] = mapped_column(String(16))
+    epoch: Mapped[int] = mapped_column(Integer)
+    n_labels: Mapped[int] = mapped_column(Integer)
+    n_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    epochs_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    last_event_id: Mapped[int] = mapped_column(Integer)
+    created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
+    created_at: Mapped[float] = mapped_column(Float)
+    updated_at: Mapped[float] = mapped_column(Float)
+
+
+class Query(Base):
+    """One segment offered for labelling (its bulky frames live in QueryData, so the frequent small
+    updates of status and lease rewrite one short row)."""
+
+    __tablename__ = "queries"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"))
+    query_id: Mapped[str] = mapped_column(String(64))
+    session: Mapped[int] = mapped_column(Integer)
+    epoch: Mapped[int] = mapped_column(Integer)
+    start: Mapped[int] = mapped_column(Integer)
+    score: Mapped[float] = mapped_column(Float)
+    status: Mapped[str] = mapped_column(String(16))
+    lease_owner_id: Mapped[int | None] = mapped_column(ForeignKey("principals.id"), nullable=True)
+    lease_expires_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    label: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    label_event_id: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+    __table_args__ = (
+        UniqueConstraint("run_id", "query_id", name="uq_queries_run_query"),
+        Index("ix_queries_claim", "run_id", "status", "session", "id"),
+        Index("ix_queries_lease", "run_id", "status", "lease_expires_at"),
+    )
+
+
+class QueryData(Base):
+    """A query's frames: the JSON of collie.schemas.QueryFrames, written once, and its extra."""
+
+    __tablename__ = "query_data"
+    query_pk: Mapped[int] = mapped_column(ForeignKey("queries.id"), primary_key=True)
+    frames: Mapped[str] = mapped_column(Text)
+    extra: Mapped[dict[str, Any]] = mapped_column(JSON)
+
+
+class LabelEvent(Base):
+    """Append-only: label (value 0/1/2), skip (not a label) or undo (withdraws the effective label)."""
+
+    __tablename__ = "label_events"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"))
+    query_pk: Mapped[int] = mapped_column(ForeignKey("queries.id"))
+    labeler_id: Mapped[int] = mapped_column(ForeignKey("principals.id"))
+    kind: Mapped[str] = mapped_column(String(8))
+    value: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    seconds: Mapped[float | None] = mapped_column(Float, nullable=True)
+    client_request_id: Mapped[str] = mapped_column(String(128))
+    revises_event_id: Mapped[int | None] = mapped_column(ForeignKey("label_events.id"), nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+    __table_args__ = (
+        UniqueConstraint("labeler_id", "client_request_id", name="uq_label_events_request"),
+        Index("ix_label_events_query", "query_pk", "id"),
+        Index("ix_label_events_run", "run_id", "id"),
+    )
+
+
+class StreamEvent(Base):
+    """What a run's stream carries, in order; `seq` is the per-run id clients resume from."""
+
+    __tablename__ = "stream_events"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"))
+    seq: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(16))
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    created_at: Mapped[float] = mapped_column(Float)
+
+    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_stream_events_run_seq"),)
+
+
+class Metrics(Base):
+    __tablename__ = "metrics"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    epoch: Mapped[int] = mapped_column(Integer)
+    values: Mapped[dict[str, float]] = mapped_column(JSON)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
+class Rollouts(Base):
+    __tablename__ = "rollouts"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    epoch: Mapped[int] = mapped_column(Integer)
+    rollouts: Mapped[list[dict[str, Any]]] = mapped_column(JSON)
+    created_at: Mapped[float] = mapped_column(Float)

@@ -1,0 +1,89 @@
+"""What every route needs: the database, the settings, and the caller (token → role)."""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Annotated, Any, TypeVar
+
+from fastapi import Depends, HTTPException, Path, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from pydantic import BaseModel, ValidationError
+
+from backend.db import Database
+from backend.services.auth import Caller, TokenCache
+from backend.services.events import EventHub
+from backend.settings import Settings
+from collie.schemas import MAX_INT, Role
+
+bearer = HTTPBearer(auto_error=False, description="a role token: operator, trainer or labeler")
+
+ANY: tuple[Role, ...] = ("operator", "trainer", "labeler")
+TRAINER: tuple[Role, ...] = ("trainer",)
+LABELER: tuple[Role, ...] = ("labeler",)
+OPERATOR: tuple[Role, ...] = ()
+
+
+def json_body(model: type[BaseModel]) -> dict[str, Any]:
+    """OpenAPI for a route that reads its body itself (see parse_body); main.py adds the schema."""
+    schema = {"$ref": f"#/components/schemas/{model.__name__}"}
+    return {"requestBody": {"required": True, "content": {"application/json": {"schema": schema}}}}
+
+
+M = TypeVar("M", bound=BaseModel)
+
+
+async def parse_body(request: Request, model: type[M]) -> M:
+    """Validate raw JSON bytes in one pass (pydantic's parser): for large bodies (a session of a
+    thousand segments) about twice as fast as FastAPI's json.loads followed by validation."""
+    try:
+        return model.model_validate_json(await request.body())
+    except ValidationError as exc:
+        raise RequestValidationError([{**e, "loc": ("body", *e["loc"])} for e in exc.errors()]) from exc
+
+
+# Dependencies are coroutines on purpose: FastAPI runs plain functions in a worker thread.
+async def get_db(request: Request) -> Database:
+    return request.app.state.db
+
+
+async def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+async def get_hub(request: Request) -> EventHub:
+    return request.app.state.hub
+
+
+def authenticate(request: Request, token: str | None) -> Caller:
+    cache: TokenCache = request.app.state.tokens
+    caller = cache.resolve(request.app.state.db, token) if token else None
+    if caller is None:
+        detail = "missing bearer token" if not token else "unknown or revoked token"
+        raise HTTPException(401, detail, headers={"WWW-Authenticate": "Bearer"})
+    return caller
+
+
+def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
+    """Dependency: the caller, if their role is one of `roles` (operators may do everything)."""
+
+    async def dependency(
+        request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)]
+    ) -> Caller:
+        caller = authenticate(request, credentials.credentials if credentials else None)
+        if caller.role != "operator" and caller.role not in roles:
+            raise HTTPException(403, f"a {caller.role} token may not do this")
+        return caller
+
+    return dependency
+
+
+RunId = Annotated[int, Path(ge=1, le=MAX_INT)]
+PrincipalId = Annotated[int, Path(ge=1, le=MAX_INT)]
+DB = Annotated[Database, Depends(get_db)]
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+Hub = Annotated[EventHub, Depends(get_hub)]
+AnyCaller = Annotated[Caller, Depends(allow(*ANY))]
+TrainerCaller = Annotated[Caller, Depends(allow(*TRAINER))]
+LabelerCaller = Annotated[Caller, Depends(allow(*LABELER))]
+OperatorCaller = Annotated[Caller, Depends(allow(*OPERATOR))]

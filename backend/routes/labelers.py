@@ -1,0 +1,38 @@
+"""People and their tokens: an operator creates, lists and revokes principals of any role."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+
+from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId
+from backend.services import auth
+from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, Me
+
+router = APIRouter(tags=["labelers"])
+
+
+@router.get("/me")
+async def me(caller: AnyCaller) -> Me:
+    """Who a token belongs to (the labeling UI greets its labeler with it)."""
+    return Me(id=caller.id, name=caller.name, role=caller.role)
+
+
+@router.post("/labelers", status_code=201)
+async def create_labeler(body: LabelerCreate, _: OperatorCaller, db: DB) -> LabelerCreated:
+    with db.write() as conn:
+        read, token = auth.create_principal(conn, body.name, body.role)
+    return LabelerCreated(**read.model_dump(), token=token)
+
+
+@router.get("/labelers")
+def list_labelers(_: OperatorCaller, db: DB) -> list[LabelerRead]:
+    with db.read() as conn:
+        return auth.list_principals(conn)
+
+
+@router.delete("/labelers/{labeler_id}")
+async def revoke_labeler(labeler_id: PrincipalId, _: OperatorCaller, db: DB, request: Request) -> LabelerRead:
+    with db.write() as conn:
+        read = auth.revoke(conn, labeler_id)
+    request.app.state.tokens.clear()
+    return read

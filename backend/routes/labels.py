@@ -1,0 +1,87 @@
+"""Labels: submit (or skip), undo, and read them back as events, effective labels or an export."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Query, Response
+
+from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller
+from backend.services import export, labels, leases
+from backend.services.errors import ServiceError
+from collie.schemas import MAX_INT, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
+
+router = APIRouter(prefix="/runs/{run_id}", tags=["labels"])
+
+
+def _ack_response(ack: LabelAck, next_claim: bytes | None = None) -> Response:
+    # 201 for a new event, 200 for a repeated client_request_id. The next query is spliced in as
+    # the claim endpoint would send it (already JSON).
+    body = ack.model_dump_json(exclude={"next"}).encode()
+    if next_claim is not None:
+        body = body[:-1] + b',"next":' + next_claim + b"}"
+    return Response(body, status_code=200 if ack.duplicate else 201, media_type="application/json")
+
+
+_REPEAT = {200: {"description": "a repeat of an earlier client_request_id", "model": LabelAck}}
+
+
+@router.post("/labels", response_model=LabelAck, status_code=201, responses=_REPEAT)
+async def submit_label(
+    run_id: RunId,
+    body: LabelSubmit,
+    caller: LabelerCaller,
+    db: DB,
+    settings: SettingsDep,
+    next: Annotated[bool, Query(description="also claim the next query (one round trip per label)")] = False,
+) -> Response:
+    """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision)."""
+    with db.write() as conn:
+        ack = labels.submit(conn, run_id, caller, body)
+    if not next:
+        return _ack_response(ack)
+    try:  # the label is committed; the claim is a second, independent transaction
+        with db.write() as conn:
+            return _ack_response(ack, leases.claim(conn, run_id, caller, settings.lease_s))
+    except ServiceError:  # e.g. the run was stopped meanwhile: the label stands, there is no next
+        return _ack_response(ack)
+
+
+@router.post("/undo", response_model=LabelAck, status_code=201, responses=_REPEAT)
+async def undo(run_id: RunId, body: UndoRequest, caller: LabelerCaller, db: DB, settings: SettingsDep) -> Response:
+    """Withdraw the effective label; your own comes back to you under a fresh lease to relabel."""
+    with db.write() as conn:
+        return _ack_response(labels.undo(conn, run_id, caller, body, settings.lease_s))
+
+
+@router.get("/labels")
+def list_label_events(
+    run_id: RunId,
+    _: AnyCaller,
+    db: DB,
+    after: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
+) -> list[LabelEventRead]:
+    with db.read() as conn:
+        return labels.list_events(conn, run_id, after, limit)
+
+
+@router.get("/labels/effective")
+def effective_labels(run_id: RunId, _: AnyCaller, db: DB) -> list[EffectiveLabel]:
+    with db.read() as conn:
+        return labels.effective_labels(conn, run_id)
+
+
+@router.get(
+    "/export",
+    response_class=Response,
+    responses={200: {"content": {"application/json": {}, "text/csv": {}}, "description": "the run's labels"}},
+)
+def export_labels(
+    run_id: RunId, _: TrainerCaller, db: DB, format: Literal["json", "csv"] = "json", effective: bool = False
+) -> Response:
+    with db.read() as conn:
+        text = export.render(export.rows(conn, run_id, effective), format, effective)
+    media = "application/json" if format == "json" else "text/csv"
+    filename = f"run-{run_id}-{'effective' if effective else 'events'}.{format}"
+    return Response(text, media_type=media, headers={"Content-Disposition": f'attachment; filename="{filename}"'})

@@ -1,0 +1,90 @@
+"""Queries: a session posted by the trainer; claimed under a lease by labelers; read by UIs."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Request, Response
+
+from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller, json_body, parse_body
+from backend.services import leases, queries
+from collie.schemas import (
+    MAX_INT,
+    ClaimRead,
+    LabelledPage,
+    QueryId,
+    QueryRead,
+    QueryStatus,
+    QuerySummary,
+    Retired,
+    RetireRequest,
+    SessionPost,
+    SessionPosted,
+)
+
+router = APIRouter(prefix="/runs/{run_id}", tags=["queries"])
+
+
+@router.post("/sessions", status_code=201, openapi_extra=json_body(SessionPost))
+async def post_session(
+    run_id: RunId, request: Request, _: TrainerCaller, db: DB, settings: SettingsDep
+) -> SessionPosted:
+    """A feedback session's segments in one call; ids already stored are kept as they were."""
+    body = await parse_body(request, SessionPost)
+    with db.write() as conn:
+        return queries.post_session(conn, run_id, body, settings.max_queries_per_session)
+
+
+@router.post("/retire")
+async def retire(run_id: RunId, body: RetireRequest, _: TrainerCaller, db: DB) -> Retired:
+    """Close unlabelled queries the trainer will never use (a restarted trainer's leftovers)."""
+    with db.write() as conn:
+        return queries.retire(conn, run_id, body.query_ids)
+
+
+@router.get("/queries")
+def list_queries(
+    run_id: RunId,
+    _: AnyCaller,
+    db: DB,
+    session: Annotated[int | None, Query(ge=0, le=MAX_INT)] = None,
+    status: QueryStatus | None = None,
+    limit: Annotated[int, Query(ge=1, le=5000)] = 1000,
+    offset: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
+) -> list[QuerySummary]:
+    with db.read() as conn:
+        return queries.list_queries(conn, run_id, session, status, limit, offset)
+
+
+@router.get("/queries/{query_id}")
+async def get_query(run_id: RunId, query_id: QueryId, _: AnyCaller, db: DB) -> QueryRead:
+    with db.read() as conn:
+        return queries.get(conn, run_id, query_id)
+
+
+@router.post("/claim", response_model=ClaimRead, responses={204: {"description": "nothing to claim right now"}})
+async def claim(
+    run_id: RunId,
+    caller: LabelerCaller,
+    db: DB,
+    settings: SettingsDep,
+    lease_s: Annotated[float | None, Query(gt=0, le=3600, description="lease length; default from settings")] = None,
+) -> Response:
+    with db.write() as conn:
+        claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s)
+    if claimed is None:
+        return Response(status_code=204)
+    return Response(claimed, media_type="application/json")
+
+
+@router.get("/labelled")
+def labelled(
+    run_id: RunId,
+    _: TrainerCaller,
+    db: DB,
+    cursor: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 200,
+) -> LabelledPage:
+    """Every query with an effective label, with its frames: what a restarted trainer rebuilds from."""
+    with db.read() as conn:
+        return queries.labelled_page(conn, run_id, cursor, limit)

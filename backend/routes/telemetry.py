@@ -1,0 +1,45 @@
+"""Evaluation metrics and rollouts: posted by the trainer, read by the live views (bounded)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query
+
+from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller
+from backend.services import telemetry
+from collie.schemas import MAX_INT, MetricsIn, MetricsRead, RolloutsIn, RolloutsRead
+
+router = APIRouter(prefix="/runs/{run_id}", tags=["rollouts and metrics"])
+
+
+@router.post("/metrics", status_code=201)
+async def post_metrics(run_id: RunId, body: MetricsIn, _: TrainerCaller, db: DB) -> MetricsRead:
+    with db.write() as conn:
+        return telemetry.post_metrics(conn, run_id, body)
+
+
+@router.get("/metrics")
+def list_metrics(
+    run_id: RunId,
+    _: AnyCaller,
+    db: DB,
+    after_epoch: Annotated[int | None, Query(ge=0, le=MAX_INT)] = None,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
+) -> list[MetricsRead]:
+    with db.read() as conn:
+        return telemetry.list_metrics(conn, run_id, after_epoch, limit)
+
+
+@router.post("/rollouts", status_code=201)
+async def post_rollouts(run_id: RunId, body: RolloutsIn, _: TrainerCaller, db: DB) -> RolloutsRead:
+    with db.write() as conn:
+        return telemetry.post_rollouts(conn, run_id, body)
+
+
+@router.get("/rollouts")
+def list_rollouts(
+    run_id: RunId, _: AnyCaller, db: DB, limit: Annotated[int, Query(ge=1, le=50)] = 5
+) -> list[RolloutsRead]:
+    with db.read() as conn:
+        return telemetry.list_rollouts(conn, run_id, limit)

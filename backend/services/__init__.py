@@ -1,0 +1,1 @@
+"""Business rules, independent of HTTP: each function takes an open connection and the caller."""

@@ -1,0 +1,136 @@
+"""Runs: created by a trainer, status reported by the trainer, control (run / pause / stop) set by
+an operator. Both changes go on the run's stream."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from sqlalchemy import Connection, case, func, insert, select, update
+
+from backend.models import Query, Run
+from backend.services import events
+from backend.services.auth import Caller
+from backend.services.errors import Conflict, NotFound
+from collie.schemas import FINISHED, Control, QueueCounts, RunCreate, RunRead, StatusUpdate
+
+_CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "stop": "stop"}
+
+
+def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
+    now = time.time()
+    run_id = conn.execute(
+        insert(Run)
+        .values(
+            env=spec.env,
+            task=spec.task,
+            method=spec.method,
+            config=spec.config,
+            dims=spec.dims.model_dump(),
+            status="training",
+            control="run",
+            epoch=0,
+            n_labels=0,
+            n_total=spec.n_total,
+            epochs_total=spec.epochs_total,
+            last_event_id=0,
+            created_by=caller.id,
+            created_at=now,
+            updated_at=now,
+        )
+        .returning(Run.id)
+    ).scalar_one()
+    events.append(conn, run_id, "status", {"status": "training", "epoch": 0}, now)
+    return get(conn, run_id)
+
+
+def _counts(conn: Connection, run_ids: list[int] | None) -> dict[int, QueueCounts]:
+    """Queue sizes per run; a leased query whose lease ran out counts as pending."""
+    expired = (Query.status == "leased") & (Query.lease_expires_at < time.time())
+    stmt = select(
+        Query.run_id,
+        func.sum(case(((Query.status == "pending") | expired, 1), else_=0)),
+        func.sum(case(((Query.status == "leased") & ~expired, 1), else_=0)),
+        func.sum(case((Query.status == "labelled", 1), else_=0)),
+        func.sum(case((Query.status == "retired", 1), else_=0)),
+    ).group_by(Query.run_id)
+    if run_ids is not None:
+        stmt = stmt.where(Query.run_id.in_(run_ids))
+    return {
+        r[0]: QueueCounts(
+            pending=int(r[1] or 0), leased=int(r[2] or 0), labelled=int(r[3] or 0), retired=int(r[4] or 0)
+        )
+        for r in conn.execute(stmt)
+    }
+
+
+def _read(row: Any, counts: QueueCounts) -> RunRead:
+    return RunRead(
+        id=row.id,
+        env=row.env,
+        task=row.task,
+        method=row.method,
+        config=row.config,
+        dims=row.dims,
+        status=row.status,
+        control=row.control,
+        epoch=row.epoch,
+        n_labels=row.n_labels,
+        n_total=row.n_total,
+        epochs_total=row.epochs_total,
+        last_event_id=row.last_event_id,
+        queue=counts,
+        created_at=row.created_at,
+        updated_at=row.updated_at,
+    )
+
+
+def row(conn: Connection, run_id: int) -> Any:
+    found = conn.execute(select(Run).where(Run.id == run_id)).first()
+    if found is None:
+        raise NotFound(f"no run {run_id}")
+    return found
+
+
+def get(conn: Connection, run_id: int) -> RunRead:
+    found = row(conn, run_id)
+    return _read(found, _counts(conn, [run_id]).get(run_id, QueueCounts()))
+
+
+def list_runs(conn: Connection, status: str | None, limit: int, offset: int) -> list[RunRead]:
+    stmt = select(Run).order_by(Run.id.desc()).limit(limit).offset(offset)
+    if status is not None:
+        stmt = stmt.where(Run.status == status)
+    rows = conn.execute(stmt).all()
+    counts = _counts(conn, [r.id for r in rows])
+    return [_read(r, counts.get(r.id, QueueCounts())) for r in rows]
+
+
+def set_status(conn: Connection, run_id: int, change: StatusUpdate) -> RunRead:
+    current = row(conn, run_id)
+    if current.status in FINISHED and change.status != current.status:
+        raise Conflict(f"run {run_id} is {current.status}")
+    epoch = current.epoch if change.epoch is None else change.epoch
+    if (change.status, epoch) != (current.status, current.epoch) or change.message:
+        now = time.time()
+        conn.execute(update(Run).where(Run.id == run_id).values(status=change.status, epoch=epoch, updated_at=now))
+        data: dict[str, Any] = {"status": change.status, "epoch": epoch}
+        if change.message:
+            data["message"] = change.message
+        events.append(conn, run_id, "status", data, now)
+    return get(conn, run_id)
+
+
+def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
+    """pause / resume / stop. Stopping is final; the trainer acknowledges by reporting its status."""
+    current = row(conn, run_id)
+    if current.status in FINISHED:
+        raise Conflict(f"run {run_id} is {current.status}")
+    wanted = _CONTROL_OF_ACTION[action]
+    if current.control == "stop" and wanted != "stop":
+        raise Conflict(f"run {run_id} is being stopped")
+    if wanted != current.control:
+        now = time.time()
+        conn.execute(update(Run).where(Run.id == run_id).values(control=wanted, updated_at=now))
+        events.append(conn, run_id, "control", {"control": wanted}, now)
+    return get(conn, run_id)

@@ -1,0 +1,52 @@
+"""Evaluation metrics and rollouts the trainer posts for the live views. Reads are bounded (newest
+`limit`); each post is announced on the stream by id only, so the stream stays small."""
+
+from __future__ import annotations
+
+import time
+
+from sqlalchemy import Connection, insert, select
+
+from backend.models import Metrics, Rollouts
+from backend.services import events, runs
+from collie.schemas import MetricsIn, MetricsRead, RolloutsIn, RolloutsRead
+
+
+def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
+    runs.row(conn, run_id)
+    now = time.time()
+    row_id = conn.execute(
+        insert(Metrics)
+        .values(run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
+        .returning(Metrics.id)
+    ).scalar_one()
+    events.append(conn, run_id, "metrics", {"id": row_id, "epoch": body.epoch, "values": body.values}, now)
+    return MetricsRead(id=row_id, run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
+
+
+def list_metrics(conn: Connection, run_id: int, after_epoch: int | None, limit: int) -> list[MetricsRead]:
+    runs.row(conn, run_id)
+    stmt = select(Metrics).where(Metrics.run_id == run_id)
+    if after_epoch is not None:
+        stmt = stmt.where(Metrics.epoch > after_epoch)
+    rows = conn.execute(stmt.order_by(Metrics.id.desc()).limit(limit)).all()
+    return [MetricsRead.model_validate(r, from_attributes=True) for r in reversed(rows)]
+
+
+def post_rollouts(conn: Connection, run_id: int, body: RolloutsIn) -> RolloutsRead:
+    runs.row(conn, run_id)
+    now = time.time()
+    data = [r.model_dump() for r in body.rollouts]
+    row_id = conn.execute(
+        insert(Rollouts).values(run_id=run_id, epoch=body.epoch, rollouts=data, created_at=now).returning(Rollouts.id)
+    ).scalar_one()
+    events.append(conn, run_id, "rollouts", {"id": row_id, "epoch": body.epoch, "n": len(data)}, now)
+    return RolloutsRead(id=row_id, run_id=run_id, epoch=body.epoch, rollouts=body.rollouts, created_at=now)
+
+
+def list_rollouts(conn: Connection, run_id: int, limit: int) -> list[RolloutsRead]:
+    runs.row(conn, run_id)
+    rows = conn.execute(
+        select(Rollouts).where(Rollouts.run_id == run_id).order_by(Rollouts.id.desc()).limit(limit)
+    ).all()
+    return [RolloutsRead.model_validate(r, from_attributes=True) for r in reversed(rows)]

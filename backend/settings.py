@@ -1,0 +1,27 @@
+"""Service settings, read from the environment with the COLLIE_ prefix (e.g. COLLIE_DATABASE_URL)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="COLLIE_", extra="ignore")
+
+    database_url: str = "sqlite:///collie.db"
+    # Bootstrap tokens: when set, a principal of that role is created (or re-keyed) at start.
+    operator_token: SecretStr | None = None
+    trainer_token: SecretStr | None = None
+    labeler_token: SecretStr | None = None
+
+    lease_s: float = Field(default=120.0, gt=0, description="how long a claim holds a query")
+    max_session_bytes: int = Field(default=128 * 1024 * 1024, description="body limit for posting a session")
+    max_rollouts_bytes: int = Field(default=16 * 1024 * 1024, description="body limit for posting rollouts")
+    max_body_bytes: int = Field(default=1024 * 1024, description="body limit for every other request")
+    max_queries_per_session: int = 4096
+    token_cache_s: float = Field(default=5.0, description="how long a resolved token is trusted without a read")
+    stream_poll_s: float = Field(default=1.0, description="fallback re-read for events written by other processes")
+    web_dir: Path | None = Field(default=None, description="static dashboard to serve at / when present")

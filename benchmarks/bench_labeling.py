@@ -1,0 +1,166 @@
+"""make bench-labeling: the labeling UI against a real stack (service + UI + headless Chromium).
+
+Measures, in one run:
+- scene build: the server-side mjviser build of each env's robot (target ≤ 1 s);
+- next segment's first frame after the label key, in the page: from the keydown event to the DOM
+  showing the next segment id, which arrives in the same atomic message batch as that segment's
+  first pose (target ≤ 300 ms); also the server's share (key received → first frame flushed);
+- replay rate for ant: pose updates the server sends per second while a segment loops at 1× and
+  4× (target 30 fps), and the server's work per update against the 33 ms a 30 fps frame allows
+  (what holds on a busy machine); the browser's own frame rate is printed too, but on a machine
+  without a GPU it measures software WebGL, not the UI;
+- UI overhead per label: the median wait above, as a share of the ≈ 3.6 s per label the
+  literature reports: a labeler exceeds 1000 labels / h when their own time per label stays
+  under 3.6 s minus this wait.
+
+Needs Debian's chromium (`apt-get install -y chromium`) and `pip install playwright`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from playwright.sync_api import Page, sync_playwright
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from ui.page import open_labeler, wait_segment
+from ui.stack import Stack, real_stack
+
+HUMAN_S = 3.6  # seconds of human time per label (Christiano et al. 2017)
+
+TIMING_JS = """() => {
+  window.__lat = [];
+  const sid = () => {
+    const p = [...document.querySelectorAll("p")].find((e) => e.textContent.startsWith("Segment "));
+    return p ? p.querySelector("code")?.textContent ?? null : null;
+  };
+  let last = sid();
+  document.addEventListener("keydown", () => { window.__keyAt = performance.now(); }, true);
+  new MutationObserver(() => {
+    const id = sid();
+    if (id !== null && id !== last) { last = id; window.__lat.push(performance.now() - window.__keyAt); }
+  }).observe(document.body, {subtree: true, childList: true, characterData: true});
+}"""
+
+FPS_JS = """(ms) => new Promise((done) => {
+  let n = 0; const t0 = performance.now();
+  const tick = (t) => { n += 1; if (t - t0 < ms) requestAnimationFrame(tick); else done(n / ((t - t0) / 1000)); };
+  requestAnimationFrame(tick);
+})"""
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def row(name: str, value: float, unit: str, target: str, ratio: float | None = None) -> None:
+    ratio_text = f"{ratio:6.2f}×" if ratio is not None else "       "
+    print(f"  {name:<44} {value:9.1f} {unit:<8} {ratio_text}  target {target}")
+
+
+def scene_builds(stack: Stack, browser: object, envs: list[str]) -> dict[str, tuple[float, float]]:
+    """env → (server build seconds, page-open-to-segment seconds)."""
+    result = {}
+    for env in envs:
+        run = stack.post_run(env, 1)
+        app = stack.ui(run.id)
+        start = time.perf_counter()
+        page = open_labeler(browser, app.labeler_url(stack.new_labeler(f"build-{env}")))  # type: ignore[arg-type]
+        wait_segment(page, timeout_s=60)
+        shown = time.perf_counter() - start
+        session = next(iter(app.sessions.values()))
+        result[env] = (session.scene.build_s, shown)
+        page.context.close()
+    return result
+
+
+def label_latency(stack: Stack, browser: object, n: int, think_s: float) -> tuple[list[float], list[float]]:
+    """Label n ant segments by key: (in-page key → next segment ms, server key → first frame ms)."""
+    run = stack.post_run("ant", n + 1, seed=11)
+    app = stack.ui(run.id, min_dwell_s=0.05)
+    page: Page = open_labeler(browser, app.labeler_url(stack.new_labeler("latency")))  # type: ignore[arg-type]
+    current = wait_segment(page, timeout_s=60)
+    page.evaluate(TIMING_JS)
+    for i in range(n):
+        time.sleep(think_s)
+        page.keyboard.press("123"[i % 3])
+        current = wait_segment(page, current, timeout_s=30)
+    time.sleep(0.2)
+    in_page = [float(x) for x in page.evaluate("window.__lat")]
+    session = next(iter(app.sessions.values()))
+    server = [1000 * float(t["key_to_frame_s"]) for t in session.timings]
+    page.context.close()
+    return in_page, server
+
+
+def replay_rates(stack: Stack, browser: object, seconds: float) -> dict[str, float]:
+    run = stack.post_run("ant", 1, seed=12)
+    app = stack.ui(run.id)
+    page: Page = open_labeler(browser, app.labeler_url(stack.new_labeler("fps")))  # type: ignore[arg-type]
+    wait_segment(page, timeout_s=60)
+    session = next(iter(app.sessions.values()))
+    rates = {}
+    for speed in (1.0, 4.0):
+        session.set_speed(speed)
+        ticks, work, start = session.player.ticks, session.player.tick_work_s, time.perf_counter()
+        browser_fps = float(page.evaluate(FPS_JS, seconds * 1000))
+        n = session.player.ticks - ticks
+        rates[f"server {speed:g}x"] = n / (time.perf_counter() - start)
+        rates[f"server work per update {speed:g}x (ms)"] = 1000 * (session.player.tick_work_s - work) / max(n, 1)
+        rates[f"browser {speed:g}x"] = browser_fps
+    page.context.close()
+    return rates
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--labels", type=int, default=20, help="labels to time")
+    parser.add_argument("--think-s", type=float, default=0.6, help="pause before each key (a fast labeler)")
+    parser.add_argument("--fps-s", type=float, default=3.0, help="seconds to count replay frames")
+    parser.add_argument("--viewport", default="1280x800")
+    args = parser.parse_args()
+    import ui.page
+
+    width, height = (int(v) for v in args.viewport.split("x"))
+    ui.page.VIEWPORT = {"width": width, "height": height}
+
+    with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--enable-unsafe-swiftshader"])
+        builds = scene_builds(stack, browser, ["point", "ant", "half_cheetah"])
+        in_page, server = label_latency(stack, browser, args.labels, args.think_s)
+        rates = replay_rates(stack, browser, args.fps_s)
+        renderer = browser.version
+        browser.close()
+
+    print(f"\nbench-labeling · chromium {renderer} · viewport {args.viewport} · {args.labels} labels")
+    print("scene build (server, mjviser → viser), and page open → first segment shown:")
+    for env, (build_s, shown_s) in builds.items():
+        row(f"{env} scene build", 1000 * build_s, "ms", "≤ 1000 ms", build_s / 1.0)
+        row(f"{env} page open → segment on screen", 1000 * shown_s, "ms", "(info)")
+    print("next segment's first frame after the label key (ant):")
+    row("in page, median", pct(in_page, 50), "ms", "≤ 300 ms", pct(in_page, 50) / 300)
+    row("in page, p95", pct(in_page, 95), "ms", "≤ 300 ms", pct(in_page, 95) / 300)
+    row("server share (key → frame flushed), median", pct(server, 50), "ms", "(info)")
+    print("replay rate for ant (pose updates per second):")
+    for name, rate in rates.items():
+        if "work" in name:
+            row(name.removesuffix(" (ms)"), rate, "ms", "≤ 33 ms", rate / (1000 / 30))
+        elif name.startswith("server"):
+            row(name, rate, "fps", "30 fps", rate / 30)
+        else:
+            row(name, rate, "fps", "(software WebGL here)")
+    wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
+    print("UI overhead per label:")
+    row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
+    row("own time per label that still makes 1000 / h", HUMAN_S - wait_s, "s", "(info)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

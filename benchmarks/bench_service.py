@@ -1,0 +1,412 @@
+"""Labeling-service throughput and latency on loopback, beside a plain one-row-insert FastAPI
+endpoint measured in the same run (`make bench-service`).
+
+Measured, each in its own server process (uvicorn, SQLite file in WAL mode):
+- baseline: POST of one small JSON body → one INSERT with SQLAlchemy, paced like the labelers;
+- collie, 1000 queries posted: the time for one POST of a 1000-segment session (Ant-sized: H=20,
+  obs 29, qpos 15, qvel 14, a 201-point path) until all 1000 are claimable;
+- collie, label submissions from 50 concurrent labelers (each its own token and keep-alive
+  connection; claim, then label), paced at an offered total rate: achieved labels/s, p50/p99;
+- collie, label submitted → applied by a trainer-side reader of the run's stream (the long poll of
+  trainer/feedback/http.py, in its own process): p50/p99.
+Targets: ≥ 1000 labels/s with p99 ≤ 20 ms; stream p99 ≤ 50 ms; 1000 queries claimable ≤ 1 s.
+Bounded: fixed durations and counts; everything runs on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import multiprocessing as mp
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fastapi import FastAPI
+from pydantic import BaseModel
+from sqlalchemy import Float, Integer, String, create_engine, event
+from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
+
+from collie.client import CollieClient
+from collie.schemas import EnvDims, QueryIn, RunCreate, SessionPost
+
+LABELERS = 50
+ANT = EnvDims(obs_dim=29, nq=15, nv=14, horizon=20, skill_dim=2)
+
+
+# ---------------------------------------------------------------- a minimal HTTP/1.1 load client
+
+
+class Connection:
+    """One keep-alive HTTP/1.1 connection; far cheaper per request than a general client, so the
+    load generator does not starve the server of the machine's two cores."""
+
+    def __init__(self, host: str, port: int, token: str = "") -> None:
+        self.host, self.port, self.token = host, port, token
+
+    async def open(self) -> Connection:
+        self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
+        return self
+
+    async def request(self, method: str, path: str, body: bytes = b"") -> tuple[int, bytes]:
+        head = f"{method} {path} HTTP/1.1\r\nHost: {self.host}\r\nContent-Length: {len(body)}\r\n"
+        if self.token:
+            head += f"Authorization: Bearer {self.token}\r\n"
+        if body:
+            head += "Content-Type: application/json\r\n"
+        self.writer.write(head.encode() + b"\r\n" + body)
+        await self.writer.drain()
+        header = await self.reader.readuntil(b"\r\n\r\n")
+        status = int(header[9:12])
+        length = 0
+        for line in header.split(b"\r\n"):
+            if line[:15].lower() == b"content-length:":
+                length = int(line[15:])
+        return status, await self.reader.readexactly(length) if length else b""
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(values) * 1000.0, q)) if values else float("nan")
+
+
+# ---------------------------------------------------------------- servers
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_up(url: str, timeout_s: float = 20.0) -> None:
+    import httpx
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(url, timeout=1).status_code < 500:
+                return
+        except httpx.TransportError:
+            time.sleep(0.05)
+    raise RuntimeError(f"{url} did not come up")
+
+
+class BaselineBase(DeclarativeBase):
+    pass
+
+
+class BaselineRow(BaselineBase):
+    __tablename__ = "rows"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    query_id: Mapped[str] = mapped_column(String(64))
+    value: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
+class BaselineBody(BaseModel):
+    query_id: str
+    value: int
+
+
+def baseline_app(db: str) -> FastAPI:
+    """The plain one-row-insert endpoint the figures are compared with (sync handler, ORM session,
+    SQLite in WAL mode: the textbook FastAPI + SQLAlchemy setup)."""
+    engine = create_engine(f"sqlite:///{db}", connect_args={"check_same_thread": False})
+
+    @event.listens_for(engine, "connect")
+    def _wal(dbapi_connection: Any, _: Any) -> None:
+        cursor = dbapi_connection.cursor()
+        cursor.execute("PRAGMA journal_mode=WAL")
+        cursor.execute("PRAGMA synchronous=NORMAL")
+        cursor.close()
+
+    BaselineBase.metadata.create_all(engine)
+    app = FastAPI()
+
+    @app.post("/insert")
+    def insert(body: BaselineBody) -> dict[str, bool]:
+        with Session(engine) as session:
+            session.add(BaselineRow(query_id=body.query_id, value=body.value, created_at=time.time()))
+            session.commit()
+        return {"ok": True}
+
+    @app.get("/health")
+    def health() -> dict[str, bool]:
+        return {"ok": True}
+
+    return app
+
+
+def serve_baseline(port: int, db: str) -> None:
+    import uvicorn
+
+    uvicorn.run(baseline_app(db), host="127.0.0.1", port=port, log_level="warning", access_log=False)
+
+
+# ---------------------------------------------------------------- workloads
+
+
+async def paced(workers: list[object], rate: float, seconds: float) -> None:
+    """Run each worker's `step()` on an open-loop schedule: rate/len(workers) per second each."""
+    gap = len(workers) / rate
+    start = time.perf_counter() + 0.05
+
+    async def loop(i: int, worker: object) -> None:
+        t = start + gap * i / len(workers)
+        end = start + seconds
+        while t < end:
+            delay = t - time.perf_counter()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            await worker.step()  # type: ignore[attr-defined]
+            t += gap
+
+    await asyncio.gather(*(loop(i, w) for i, w in enumerate(workers)))
+
+
+class Inserter:
+    def __init__(self, conn: Connection, name: str) -> None:
+        self.conn, self.name, self.n = conn, name, 0
+        self.latency: list[float] = []
+
+    async def step(self) -> None:
+        body = json.dumps({"query_id": f"{self.name}-{self.n}", "value": 1}).encode()
+        t = time.perf_counter()
+        status, _ = await self.conn.request("POST", "/insert", body)
+        self.latency.append(time.perf_counter() - t)
+        assert status == 200, status
+        self.n += 1
+
+
+class Labeler:
+    """Label what is held and get the next query in the same round trip (?next=true), as the
+    labeling UI does; a claim only when nothing is held. The label round trip is what is timed."""
+
+    def __init__(self, conn: Connection, run_id: int) -> None:
+        self.conn, self.run_id, self.n = conn, run_id, 0
+        self.held: str | None = None
+        self.latency: list[float] = []
+        self.claim_latency: list[float] = []
+        self.sent: dict[str, float] = {}
+
+    async def step(self) -> None:
+        if self.held is None:
+            t = time.perf_counter()
+            status, body = await self.conn.request("POST", f"/api/runs/{self.run_id}/claim")
+            self.claim_latency.append(time.perf_counter() - t)
+            assert status in (200, 204), (status, body[:200])
+            self.held = json.loads(body)["query"]["query_id"] if status == 200 else None
+            return
+        label = {"query_id": self.held, "value": self.n % 3, "client_request_id": f"{id(self)}-{self.n}"}
+        self.n += 1
+        self.sent[self.held] = time.monotonic()
+        t = time.perf_counter()
+        path = f"/api/runs/{self.run_id}/labels?next=true"
+        status, body = await self.conn.request("POST", path, json.dumps(label).encode())
+        self.latency.append(time.perf_counter() - t)
+        assert status == 201, (status, body[:200])
+        following = json.loads(body).get("next")
+        self.held = following["query"]["query_id"] if following else None
+
+
+async def run_inserts(port: int, rate: float, seconds: float) -> dict[str, float]:
+    conns = [await Connection("127.0.0.1", port).open() for _ in range(LABELERS)]
+    workers = [Inserter(c, f"w{i}") for i, c in enumerate(conns)]
+    started = time.perf_counter()
+    await paced(workers, rate, seconds)
+    elapsed = time.perf_counter() - started
+    latency = [x for w in workers for x in w.latency]
+    for c in conns:
+        c.close()
+    return {"rps": len(latency) / elapsed, "p50": percentile(latency, 50), "p99": percentile(latency, 99)}
+
+
+async def run_labels(port: int, run_id: int, tokens: list[str], rate: float, seconds: float) -> tuple[dict, dict]:
+    conns = [await Connection("127.0.0.1", port, t).open() for t in tokens]
+    workers = [Labeler(c, run_id) for c in conns]
+    started = time.perf_counter()
+    await paced(workers, rate, seconds)
+    elapsed = time.perf_counter() - started
+    for c in conns:
+        c.close()
+    latency = [x for w in workers for x in w.latency]
+    claims = [x for w in workers for x in w.claim_latency]
+    figures = {
+        "rps": len(latency) / elapsed,
+        "p50": percentile(latency, 50),
+        "p99": percentile(latency, 99),
+        "claim_p99": percentile(claims, 99),
+    }
+    return figures, {q: t for w in workers for q, t in w.sent.items()}
+
+
+def stream_reader(api: str, token: str, run_id: int, after: int, expect: int, out: mp.Queue) -> None:
+    """The trainer's side, in its own process: the feedback source's long poll, timestamping when
+    each label is applied (time.monotonic is one clock for every process on Linux)."""
+    from trainer.feedback.http import HttpFeedback
+
+    seen: dict[str, float] = {}
+
+    class Timed(HttpFeedback):
+        def _apply(self, events: list) -> None:
+            super()._apply(events)
+            now = time.monotonic()
+            for e in events:
+                if e.kind == "label":
+                    seen.setdefault(e.data["query_id"], now)
+
+    source = Timed(api, token, run_id, wait_chunk_s=5.0)
+    source._after = after
+    out.put("ready")
+    deadline = time.monotonic() + 60
+    while len(seen) < expect and time.monotonic() < deadline:
+        source._pump(5.0)
+    source.close()
+    out.put(seen)
+
+
+def session(session_index: int, n: int, dims: EnvDims, rng: np.random.Generator) -> SessionPost:
+    h = dims.horizon
+    queries = [
+        QueryIn(
+            query_id=f"s{session_index}-q{j}",
+            start=j,
+            score=float(rng.random()),
+            skill=rng.normal(size=dims.skill_dim).tolist(),
+            obs=rng.normal(size=(h, dims.obs_dim)).tolist(),
+            xy=rng.normal(size=(h, 2)).tolist(),
+            pitch=rng.normal(size=h).tolist(),
+            qpos=rng.normal(size=(h, dims.nq)).tolist(),
+            qvel=rng.normal(size=(h, dims.nv)).tolist(),
+            path_xy=rng.normal(size=(201, 2)).tolist(),
+        )
+        for j in range(n)
+    ]
+    return SessionPost(session=session_index, epoch=session_index, queries=queries)
+
+
+# ---------------------------------------------------------------- main
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rate", type=float, default=1000.0, help="offered labels (and inserts) per second")
+    parser.add_argument("--seconds", type=float, default=4.0, help="length of each paced phase")
+    parser.add_argument("--baseline-server", nargs=2, metavar=("PORT", "DB"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.baseline_server:
+        serve_baseline(int(args.baseline_server[0]), args.baseline_server[1])
+        return 0
+
+    tmp = Path(tempfile.mkdtemp(prefix="collie-bench-"))
+    tokens_file = tmp / "tokens.json"
+    base_port = free_port()
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    baseline = subprocess.Popen(
+        [sys.executable, __file__, "--baseline-server", str(base_port), str(tmp / "base.db")], env=env
+    )
+    service = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "collie.cli",
+            "serve",
+            "--port",
+            "0",
+            "--db",
+            str(tmp / "collie.db"),
+            "--tokens-json",
+            str(tokens_file),
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while not tokens_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        info = json.loads(tokens_file.read_text())
+        api, tokens = info["api"], info["tokens"]
+        port = int(api.rsplit(":", 1)[1])
+        wait_up(f"{api}/api/health")
+        wait_up(f"http://127.0.0.1:{base_port}/health")
+        return measure(args, api, port, tokens, base_port)
+    finally:
+        for process in (service, baseline):
+            process.terminate()
+            process.wait(10)
+
+
+def measure(args: argparse.Namespace, api: str, port: int, tokens: dict[str, str], base_port: int) -> int:
+    rng = np.random.default_rng(0)
+    n_labels = int(args.rate * args.seconds * 1.2) + LABELERS
+    trainer = CollieClient(api, tokens["trainer"], timeout_s=120)
+    operator = CollieClient(api, tokens["operator"])
+    run = trainer.create_run(RunCreate(env="ant", task="north", method="collie", dims=ANT))
+    labelers = [operator.create_labeler(f"bench-{i}").token for i in range(LABELERS)]
+
+    post_s = []
+    for s in range((n_labels + 999) // 1000):
+        body = session(s, 1000, ANT, rng)
+        before = trainer.run(run.id).queue.pending
+        started = time.perf_counter()
+        trainer.post_session(run.id, body)
+        post_s.append(time.perf_counter() - started)
+        assert trainer.run(run.id).queue.pending == before + 1000
+
+    asyncio.run(run_inserts(base_port, args.rate, 1.0))  # warm-up
+    base = asyncio.run(run_inserts(base_port, args.rate, args.seconds))
+
+    queue: mp.Queue = mp.Queue()
+    after = trainer.run(run.id).last_event_id
+    expect = int(args.rate * args.seconds * 0.9)
+    reader = mp.Process(target=stream_reader, args=(api, tokens["trainer"], run.id, after, expect, queue))
+    reader.start()
+    assert queue.get(timeout=30) == "ready"
+    time.sleep(0.5)
+    labels, sent = asyncio.run(run_labels(port, run.id, labelers, args.rate, args.seconds))
+    applied: dict[str, float] = queue.get(timeout=90)
+    reader.join(10)
+    stream = [applied[q] - t for q, t in sent.items() if q in applied]
+    missing = len(sent) - len(stream)
+
+    rows = [
+        ("baseline one-row insert", f"{base['rps']:.0f}/s", f"{base['p50']:.1f} ms", f"{base['p99']:.1f} ms"),
+        ("collie label (+ next query)", f"{labels['rps']:.0f}/s", f"{labels['p50']:.1f} ms", f"{labels['p99']:.1f} ms"),
+        ("collie first claim per labeler", "", "", f"{labels['claim_p99']:.1f} ms"),
+        ("label → applied from the stream", "", f"{percentile(stream, 50):.1f} ms", f"{percentile(stream, 99):.1f} ms"),
+    ]
+    print(f"\nloopback, {LABELERS} concurrent clients, offered {args.rate:.0f}/s for {args.seconds:.0f} s each")
+    print(f"{'':36s}{'rate':>10s}{'p50':>12s}{'p99':>12s}")
+    for name, *cells in rows:
+        print(f"{name:36s}" + "".join(f"{c:>12s}" if i else f"{c:>10s}" for i, c in enumerate(cells)))
+    print(
+        f"\n1000 queries posted → all claimable: {max(post_s):.2f} s (worst of {len(post_s)}; median {np.median(post_s):.2f} s)"
+    )
+    print(f"labels not seen on the stream: {missing}")
+    print(f"ratios vs baseline: rate {labels['rps'] / base['rps']:.2f}×, p99 {labels['p99'] / base['p99']:.2f}×")
+    ok = (
+        labels["rps"] >= 0.95 * args.rate
+        and labels["p99"] <= 20
+        and percentile(stream, 99) <= 50
+        and max(post_s) <= 1.0
+        and missing == 0
+    )
+    print("targets (≥1000/s, p99 ≤ 20 ms, stream p99 ≤ 50 ms, post ≤ 1 s):", "met" if ok else "NOT met")
+    trainer.close()
+    operator.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,330 @@
+"""A small typed, synchronous client for the labeling service, and a resumable stream consumer.
+
+Used by the trainer's HTTP feedback source, the oracle teacher, the labeling UI and the tests. Every
+method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (status and detail);
+an unreachable service raises Unreachable, which callers may retry (submissions are idempotent by
+client_request_id, so a retry never labels twice).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import uuid
+from collections.abc import Iterator
+from typing import Any, TypeVar
+
+import httpx
+from pydantic import BaseModel, TypeAdapter
+
+from collie.schemas import (
+    ClaimRead,
+    EffectiveLabel,
+    EventPage,
+    Health,
+    LabelAck,
+    LabelerCreate,
+    LabelerCreated,
+    LabelerRead,
+    LabelEventRead,
+    LabelledPage,
+    LabelledQuery,
+    LabelSubmit,
+    Me,
+    MetricsIn,
+    MetricsRead,
+    QueryRead,
+    QuerySummary,
+    Retired,
+    RetireRequest,
+    Role,
+    RolloutsIn,
+    RolloutsRead,
+    RunCreate,
+    RunRead,
+    RunStatus,
+    SessionPost,
+    SessionPosted,
+    StatusUpdate,
+    StreamEvent,
+    Submission,
+    UndoRequest,
+)
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class ApiError(Exception):
+    """The service answered with an error status."""
+
+    def __init__(self, status: int, detail: Any) -> None:
+        super().__init__(f"{status}: {detail}")
+        self.status = status
+        self.detail = detail
+
+
+class Unreachable(Exception):
+    """No answer from the service (down, restarting, or the network dropped)."""
+
+
+@functools.cache
+def _list_of(model: type[M]) -> TypeAdapter[list[M]]:
+    return TypeAdapter(list[model])  # type: ignore[valid-type]
+
+
+def new_request_id() -> str:
+    return uuid.uuid4().hex
+
+
+class CollieClient:
+    def __init__(self, api: str, token: str, *, timeout_s: float = 30.0) -> None:
+        self.api = api.rstrip("/")
+        self.token = token
+        self._http = httpx.Client(
+            base_url=f"{self.api}/api",
+            headers={"Authorization": f"Bearer {token}"},
+            timeout=httpx.Timeout(timeout_s, connect=5.0),
+        )
+
+    # ---------------------------------------------------------------- plumbing
+
+    def _send(self, method: str, path: str, body: BaseModel | None = None, **kwargs: Any) -> httpx.Response:
+        if body is not None:
+            kwargs["content"] = body.model_dump_json()
+            kwargs["headers"] = {"Content-Type": "application/json"}
+        try:
+            response = self._http.request(method, path, **kwargs)
+        except httpx.TransportError as exc:
+            raise Unreachable(f"{method} {path}: {exc!r}") from exc
+        if response.status_code >= 400:
+            try:
+                detail = response.json().get("detail")
+            except ValueError:
+                detail = response.text
+            raise ApiError(response.status_code, detail)
+        return response
+
+    def _get(self, model: type[M], path: str, **params: Any) -> M:
+        clean = {k: v for k, v in params.items() if v is not None}
+        return model.model_validate_json(self._send("GET", path, params=clean).content)
+
+    def _list(self, model: type[M], path: str, **params: Any) -> list[M]:
+        clean = {k: v for k, v in params.items() if v is not None}
+        return _list_of(model).validate_json(self._send("GET", path, params=clean).content)
+
+    def _post(self, model: type[M], path: str, body: BaseModel | None = None, **params: Any) -> M:
+        clean = {k: v for k, v in params.items() if v is not None}
+        return model.model_validate_json(self._send("POST", path, body, params=clean).content)
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> CollieClient:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------------- who and health
+
+    def health(self) -> Health:
+        return self._get(Health, "/health")
+
+    def me(self) -> Me:
+        return self._get(Me, "/me")
+
+    def create_labeler(self, name: str, role: Role = "labeler") -> LabelerCreated:
+        return self._post(LabelerCreated, "/labelers", LabelerCreate(name=name, role=role))
+
+    def labelers(self) -> list[LabelerRead]:
+        return self._list(LabelerRead, "/labelers")
+
+    def revoke(self, labeler_id: int) -> LabelerRead:
+        return LabelerRead.model_validate_json(self._send("DELETE", f"/labelers/{labeler_id}").content)
+
+    # ---------------------------------------------------------------- runs and control
+
+    def create_run(self, spec: RunCreate) -> RunRead:
+        return self._post(RunRead, "/runs", spec)
+
+    def runs(self, status: RunStatus | None = None, limit: int = 100, offset: int = 0) -> list[RunRead]:
+        return self._list(RunRead, "/runs", status=status, limit=limit, offset=offset)
+
+    def run(self, run_id: int) -> RunRead:
+        return self._get(RunRead, f"/runs/{run_id}")
+
+    def set_status(
+        self, run_id: int, status: RunStatus, epoch: int | None = None, message: str | None = None
+    ) -> RunRead:
+        body = StatusUpdate(status=status, epoch=epoch, message=message)
+        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/status", body).content)
+
+    def pause(self, run_id: int) -> RunRead:
+        return self._post(RunRead, f"/runs/{run_id}/pause")
+
+    def resume(self, run_id: int) -> RunRead:
+        return self._post(RunRead, f"/runs/{run_id}/resume")
+
+    def stop(self, run_id: int) -> RunRead:
+        return self._post(RunRead, f"/runs/{run_id}/stop")
+
+    # ---------------------------------------------------------------- queries
+
+    def post_session(self, run_id: int, session: SessionPost) -> SessionPosted:
+        return self._post(SessionPosted, f"/runs/{run_id}/sessions", session)
+
+    def retire(self, run_id: int, query_ids: list[str]) -> Retired:
+        return self._post(Retired, f"/runs/{run_id}/retire", RetireRequest(query_ids=query_ids))
+
+    def queries(
+        self,
+        run_id: int,
+        session: int | None = None,
+        status: str | None = None,
+        limit: int = 1000,
+        offset: int = 0,
+    ) -> list[QuerySummary]:
+        return self._list(
+            QuerySummary,
+            f"/runs/{run_id}/queries",
+            session=session,
+            status=status,
+            limit=limit,
+            offset=offset,
+        )
+
+    def query(self, run_id: int, query_id: str) -> QueryRead:
+        return self._get(QueryRead, f"/runs/{run_id}/queries/{query_id}")
+
+    def claim(self, run_id: int, lease_s: float | None = None) -> ClaimRead | None:
+        """The next query under a lease, or None when nothing is claimable right now."""
+        params = {"lease_s": lease_s} if lease_s is not None else {}
+        response = self._send("POST", f"/runs/{run_id}/claim", params=params)
+        return None if response.status_code == 204 else ClaimRead.model_validate_json(response.content)
+
+    def labelled(self, run_id: int, page_size: int = 200) -> Iterator[LabelledQuery]:
+        """Every query with an effective label, with frames (paged)."""
+        cursor: int | None = 0
+        while cursor is not None:
+            page = self._get(LabelledPage, f"/runs/{run_id}/labelled", cursor=cursor, limit=page_size)
+            yield from page.items
+            cursor = page.next_cursor
+
+    # ---------------------------------------------------------------- labels
+
+    def submit(
+        self,
+        run_id: int,
+        query_id: str,
+        value: Submission,
+        seconds: float | None = None,
+        client_request_id: str | None = None,
+    ) -> LabelAck:
+        """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely."""
+        body = LabelSubmit(
+            query_id=query_id,
+            value=value,
+            seconds=seconds,
+            client_request_id=client_request_id or new_request_id(),
+        )
+        return self._post(LabelAck, f"/runs/{run_id}/labels", body)
+
+    def skip(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
+        return self.submit(run_id, query_id, "skip", client_request_id=client_request_id)
+
+    def undo(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
+        body = UndoRequest(query_id=query_id, client_request_id=client_request_id or new_request_id())
+        return self._post(LabelAck, f"/runs/{run_id}/undo", body)
+
+    def label_events(self, run_id: int, after: int = 0, limit: int = 1000) -> list[LabelEventRead]:
+        return self._list(LabelEventRead, f"/runs/{run_id}/labels", after=after, limit=limit)
+
+    def effective_labels(self, run_id: int) -> list[EffectiveLabel]:
+        return self._list(EffectiveLabel, f"/runs/{run_id}/labels/effective")
+
+    def export(self, run_id: int, fmt: str = "json", effective: bool = False) -> str:
+        params = {"format": fmt, "effective": str(effective).lower()}
+        return self._send("GET", f"/runs/{run_id}/export", params=params).text
+
+    # ---------------------------------------------------------------- rollouts and metrics
+
+    def post_metrics(self, run_id: int, metrics: MetricsIn) -> MetricsRead:
+        return self._post(MetricsRead, f"/runs/{run_id}/metrics", metrics)
+
+    def metrics(self, run_id: int, after_epoch: int | None = None, limit: int = 1000) -> list[MetricsRead]:
+        return self._list(MetricsRead, f"/runs/{run_id}/metrics", after_epoch=after_epoch, limit=limit)
+
+    def post_rollouts(self, run_id: int, rollouts: RolloutsIn) -> RolloutsRead:
+        return self._post(RolloutsRead, f"/runs/{run_id}/rollouts", rollouts)
+
+    def rollouts(self, run_id: int, limit: int = 5) -> list[RolloutsRead]:
+        return self._list(RolloutsRead, f"/runs/{run_id}/rollouts", limit=limit)
+
+    # ---------------------------------------------------------------- stream
+
+    def events(self, run_id: int, after: int = 0, wait_s: float = 0.0, limit: int = 1000) -> EventPage:
+        """Events after `after`; waits up to wait_s for the first one (long poll)."""
+        timeout = httpx.Timeout(wait_s + 30.0, connect=5.0)
+        response = self._send(
+            "GET",
+            f"/runs/{run_id}/events",
+            params={"after": after, "wait_s": wait_s, "limit": limit},
+            timeout=timeout,
+        )
+        return EventPage.model_validate_json(response.content)
+
+    def stream(self, run_id: int, after: int = 0, max_backoff_s: float = 5.0) -> EventStream:
+        return EventStream(self, run_id, after, max_backoff_s)
+
+
+class EventStream:
+    """A run's Server-Sent Events as an iterator of StreamEvent. A dropped connection (or a service
+    restart) is retried with exponential backoff (0.1 s doubling up to max_backoff_s) and resumed
+    from the last id seen, so nothing is missed and nothing is yielded twice. 4xx errors end it."""
+
+    def __init__(self, client: CollieClient, run_id: int, after: int = 0, max_backoff_s: float = 5.0) -> None:
+        self.client = client
+        self.run_id = run_id
+        self.last_id = after
+        self.max_backoff_s = max_backoff_s
+        self.reconnects = 0
+        self._closed = False
+
+    def close(self) -> None:
+        self._closed = True
+
+    def __iter__(self) -> Iterator[StreamEvent]:
+        backoff = 0.1
+        while not self._closed:
+            try:
+                yield from self._connection()
+                backoff = 0.1  # a clean end (server shutdown): reconnect promptly
+            except (httpx.TransportError, Unreachable):
+                time.sleep(backoff)
+                backoff = min(backoff * 2, self.max_backoff_s)
+            except ApiError as exc:
+                if exc.status < 500:
+                    raise
+                time.sleep(backoff)
+                backoff = min(backoff * 2, self.max_backoff_s)
+            self.reconnects += 1
+
+    def _connection(self) -> Iterator[StreamEvent]:
+        headers = {"Last-Event-ID": str(self.last_id), "Accept": "text/event-stream"}
+        timeout = httpx.Timeout(5.0, read=45.0)  # the server sends a heartbeat every 15 s
+        with self.client._http.stream("GET", f"/runs/{self.run_id}/stream", headers=headers, timeout=timeout) as r:
+            if r.status_code >= 400:
+                r.read()
+                raise ApiError(r.status_code, r.text)
+            data: list[str] = []
+            for line in r.iter_lines():
+                if self._closed:
+                    return
+                if line.startswith("data:"):
+                    data.append(line[5:].lstrip())
+                elif not line and data:
+                    event = StreamEvent.model_validate_json("\n".join(data))
+                    data = []
+                    if event.id > self.last_id:
+                        self.last_id = event.id
+                        yield event

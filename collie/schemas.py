@@ -1,0 +1,419 @@
+"""Wire schemas of the labeling service, written once: the server validates with them and every
+client (trainer feedback source, teacher, labeling UI, tests) builds and reads them.
+
+Arrays travel as (nested) lists of finite floats; shapes are checked here, and again against the
+run's env dims on the server. A label is 0 bad, 1 neutral, 2 good; "skip" is a submission that is
+not a label (it hands the query back to the pool).
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime
+from enum import IntEnum
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+
+
+class Label(IntEnum):
+    BAD = 0
+    NEUTRAL = 1
+    GOOD = 2
+
+
+LabelValue = Literal[0, 1, 2]
+Submission = Literal[0, 1, 2, "skip"]
+Role = Literal["operator", "trainer", "labeler"]
+RunStatus = Literal["training", "waiting_for_labels", "paused", "finished", "failed"]
+Control = Literal["run", "pause", "stop"]
+QueryStatus = Literal["pending", "leased", "labelled", "retired"]
+EventKind = Literal["label", "skip", "undo"]
+StreamKind = Literal["queries", "retired", "label", "withdrawn", "status", "control", "metrics", "rollouts"]
+
+FINISHED: frozenset[str] = frozenset({"finished", "failed"})
+
+Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
+QueryId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
+RequestId = Annotated[str, Field(min_length=1, max_length=128, pattern=r"^[\x21-\x7e]+$")]
+MAX_INT = 2**53  # ints stay exact in JSON numbers and fit every database's integer column
+Count = Annotated[int, Field(ge=0, le=MAX_INT)]
+Vector = list[FiniteFloat]
+Matrix = list[list[FiniteFloat]]
+
+MAX_CONFIG_BYTES = 64 * 1024
+MAX_EXTRA_BYTES = 16 * 1024
+MAX_ROLLOUTS = 64
+MAX_ROLLOUT_POINTS = 2001
+MAX_METRICS = 256
+
+
+class Wire(BaseModel):
+    """Strict: no silent coercion of strings to numbers; unknown fields are an error."""
+
+    model_config = ConfigDict(strict=True, extra="forbid")
+
+
+def _width(rows: list[list[float]], name: str) -> int:
+    """All rows of a matrix have one width; returns it (0 for no rows)."""
+    widths = {len(r) for r in rows}
+    if len(widths) > 1:
+        raise ValueError(f"{name}: rows of unequal length {sorted(widths)}")
+    return widths.pop() if widths else 0
+
+
+def _bounded_json(value: dict[str, Any], limit: int, name: str) -> dict[str, Any]:
+    try:
+        size = len(json.dumps(value, allow_nan=False))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: not plain finite JSON ({exc})") from exc
+    if size > limit:
+        raise ValueError(f"{name}: {size} bytes, at most {limit}")
+    return value
+
+
+# ---------------------------------------------------------------- runs
+
+
+class EnvDims(Wire):
+    """Shapes the server checks every posted segment against."""
+
+    obs_dim: int = Field(ge=1, le=100_000)
+    nq: int = Field(ge=1, le=10_000)
+    nv: int = Field(ge=0, le=10_000)
+    horizon: int = Field(ge=1, le=10_000, description="H, states per segment")
+    skill_dim: int = Field(ge=1, le=1_000)
+
+
+class RunCreate(Wire):
+    env: Name
+    task: Name
+    method: Name
+    config: dict[str, Any] = Field(default_factory=dict)
+    dims: EnvDims
+    n_total: int | None = Field(default=None, ge=0, le=MAX_INT, description="planned number of labels (budget)")
+    epochs_total: int | None = Field(default=None, ge=0, le=MAX_INT)
+
+    @field_validator("config")
+    @classmethod
+    def _config_small(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _bounded_json(v, MAX_CONFIG_BYTES, "config")
+
+
+class QueueCounts(Wire):
+    pending: int = 0
+    leased: int = 0
+    labelled: int = 0
+    retired: int = 0
+
+
+class RunRead(Wire):
+    model_config = ConfigDict(strict=False)
+    id: int
+    env: str
+    task: str
+    method: str
+    config: dict[str, Any]
+    dims: EnvDims
+    status: RunStatus
+    control: Control
+    epoch: int
+    n_labels: int = Field(description="queries with an effective label")
+    n_total: int | None
+    epochs_total: int | None
+    last_event_id: int
+    queue: QueueCounts
+    created_at: datetime
+    updated_at: datetime
+
+
+class StatusUpdate(Wire):
+    status: RunStatus
+    epoch: int | None = Field(default=None, ge=0, le=MAX_INT)
+    message: str | None = Field(default=None, max_length=1000)
+
+
+# ---------------------------------------------------------------- queries
+
+
+class QueryFrames(Wire):
+    """What a labeler replays and what the trainer rebuilds its labelled sets from (H frames)."""
+
+    skill: Vector
+    obs: Matrix
+    xy: Matrix
+    pitch: list[FiniteFloat | None] | None = Field(default=None, description="null where undefined")
+    qpos: Matrix
+    qvel: Matrix
+    path_xy: Matrix | None = Field(default=None, description="the whole trajectory's x-y, for context")
+
+    @model_validator(mode="after")
+    def _shapes(self) -> QueryFrames:
+        h = len(self.obs)
+        for name in ("xy", "qpos", "qvel") + (("pitch",) if self.pitch is not None else ()):
+            if len(getattr(self, name)) != h:
+                raise ValueError(f"{name} has {len(getattr(self, name))} frames, obs has {h}")
+        for name in ("obs", "qpos", "qvel"):
+            _width(getattr(self, name), name)
+        if h and _width(self.xy, "xy") != 2:
+            raise ValueError("xy rows must have 2 columns")
+        if self.path_xy and _width(self.path_xy, "path_xy") != 2:
+            raise ValueError("path_xy rows must have 2 columns")
+        return self
+
+    def shape_errors(self, dims: EnvDims) -> list[str]:
+        """Mismatches against the run's env dims (empty when the segment fits)."""
+        want = {"obs": dims.obs_dim, "qpos": dims.nq, "qvel": dims.nv}
+        errors = [f"{len(self.obs)} frames, run expects H={dims.horizon}"] if len(self.obs) != dims.horizon else []
+        errors += [
+            f"{name} width {len(getattr(self, name)[0])}, run expects {w}"
+            for name, w in want.items()
+            if getattr(self, name) and len(getattr(self, name)[0]) != w
+        ]
+        if len(self.skill) != dims.skill_dim:
+            errors.append(f"skill has {len(self.skill)} dims, run expects {dims.skill_dim}")
+        return errors
+
+
+class QueryIn(QueryFrames):
+    query_id: QueryId
+    start: Count
+    score: FiniteFloat = 0.0
+    extra: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("extra")
+    @classmethod
+    def _extra_small(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _bounded_json(v, MAX_EXTRA_BYTES, "extra")
+
+
+class SessionPost(Wire):
+    """One feedback session's M segments, posted in one call (idempotent by query_id)."""
+
+    session: Count
+    epoch: Count
+    queries: list[QueryIn] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_ids(self) -> SessionPost:
+        ids = [q.query_id for q in self.queries]
+        if len(set(ids)) != len(ids):
+            raise ValueError("query_id values repeat within the session")
+        return self
+
+
+class SessionPosted(Wire):
+    session: int
+    created: list[str]
+    existing: list[str] = Field(description="ids already stored; kept as they were (the service is the truth)")
+
+
+class RetireRequest(Wire):
+    """Unlabelled queries the trainer will never use (left over from before a restart)."""
+
+    query_ids: list[QueryId] = Field(min_length=1, max_length=10_000)
+
+
+class Retired(Wire):
+    retired: list[str]
+    not_retired: list[str] = Field(description="labelled (or unknown) ids, left as they were")
+
+
+class QuerySummary(Wire):
+    model_config = ConfigDict(strict=False)
+    run_id: int
+    query_id: str
+    session: int
+    epoch: int
+    start: int
+    score: float
+    status: QueryStatus
+    label: LabelValue | None
+    lease_owner: str | None
+    lease_expires_at: datetime | None
+    created_at: datetime
+
+
+class QueryRead(QuerySummary):
+    skill: list[float]
+    obs: list[list[float]]
+    xy: list[list[float]]
+    pitch: list[float | None] | None
+    qpos: list[list[float]]
+    qvel: list[list[float]]
+    path_xy: list[list[float]] | None
+    extra: dict[str, Any]
+
+
+class ClaimRead(Wire):
+    model_config = ConfigDict(strict=False)
+    query: QueryRead
+    lease_expires_at: datetime
+
+
+# ---------------------------------------------------------------- labels
+
+
+class LabelSubmit(Wire):
+    query_id: QueryId
+    value: Submission
+    seconds: FiniteFloat | None = Field(default=None, ge=0, le=86_400, description="time spent")
+    client_request_id: RequestId
+
+    @field_validator("value", mode="before")
+    @classmethod
+    def _no_bool(cls, v: object) -> object:
+        # Literal[1] would accept true and 1.0 (they equal 1 in Python)
+        if isinstance(v, bool | float):
+            raise ValueError("a label is the integer 0, 1 or 2, or the string 'skip'")
+        return v
+
+
+class UndoRequest(Wire):
+    query_id: QueryId
+    client_request_id: RequestId
+
+
+class LabelEventRead(Wire):
+    model_config = ConfigDict(strict=False)
+    id: int
+    run_id: int
+    query_id: str
+    session: int
+    labeler: str
+    kind: EventKind
+    value: LabelValue | None
+    seconds: float | None
+    client_request_id: str
+    revises_event_id: int | None
+    created_at: datetime
+
+
+class LabelAck(Wire):
+    model_config = ConfigDict(strict=False)
+    event: LabelEventRead
+    label: LabelValue | None = Field(description="the query's effective label after this event")
+    query_status: QueryStatus
+    duplicate: bool = Field(description="true when this client_request_id was seen before")
+    next: ClaimRead | None = Field(default=None, description="with ?next=true: the labeler's next query, if any")
+
+
+class EffectiveLabel(Wire):
+    model_config = ConfigDict(strict=False)
+    query_id: str
+    session: int
+    label: LabelValue
+    event_id: int
+    labeler: str
+    seconds: float | None
+    labelled_at: datetime
+
+
+class LabelledQuery(Wire):
+    """A query with its effective label and frames: what a restarted trainer rebuilds D0/D1/D2 from."""
+
+    model_config = ConfigDict(strict=False)
+    query: QueryRead
+    label: LabelValue
+    event_id: int
+
+
+class LabelledPage(Wire):
+    items: list[LabelledQuery]
+    next_cursor: int | None
+
+
+# ---------------------------------------------------------------- stream
+
+
+class StreamEvent(Wire):
+    model_config = ConfigDict(strict=False)
+    id: int = Field(description="per-run, strictly increasing; resume with ?after=id")
+    run_id: int
+    kind: StreamKind
+    data: dict[str, Any]
+    created_at: datetime
+
+
+class EventPage(Wire):
+    model_config = ConfigDict(strict=False)
+    events: list[StreamEvent]
+    last_id: int = Field(description="id to pass as ?after= next time")
+
+
+# ---------------------------------------------------------------- rollouts and metrics
+
+
+class MetricsIn(Wire):
+    epoch: Count
+    values: dict[Annotated[str, Field(min_length=1, max_length=64)], FiniteFloat] = Field(max_length=MAX_METRICS)
+
+
+class MetricsRead(MetricsIn):
+    model_config = ConfigDict(strict=False)
+    id: int
+    run_id: int
+    created_at: datetime
+
+
+class Rollout(Wire):
+    skill: Vector
+    xy: Matrix = Field(max_length=MAX_ROLLOUT_POINTS)
+    pitch: list[FiniteFloat | None] | None = Field(default=None, max_length=MAX_ROLLOUT_POINTS)
+    extra: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _shape(self) -> Rollout:
+        if self.xy and _width(self.xy, "xy") != 2:
+            raise ValueError("xy rows must have 2 columns")
+        _bounded_json(self.extra, MAX_EXTRA_BYTES, "extra")
+        return self
+
+
+class RolloutsIn(Wire):
+    epoch: Count
+    rollouts: list[Rollout] = Field(max_length=MAX_ROLLOUTS)
+
+
+class RolloutsRead(RolloutsIn):
+    model_config = ConfigDict(strict=False)
+    id: int
+    run_id: int
+    created_at: datetime
+
+
+# ---------------------------------------------------------------- people and health
+
+
+class LabelerCreate(Wire):
+    name: Name
+    role: Role = "labeler"
+
+
+class LabelerRead(Wire):
+    model_config = ConfigDict(strict=False)
+    id: int
+    name: str
+    role: Role
+    created_at: datetime
+    revoked: bool
+
+
+class Me(Wire):
+    id: int
+    name: str
+    role: Role
+
+
+class LabelerCreated(LabelerRead):
+    token: str = Field(description="shown once; the service keeps only its sha256")
+
+
+class Health(Wire):
+    status: Literal["ok"]
+    version: str
+    database: str
+
+
+class ErrorBody(Wire):
+    detail: Any

@@ -1,0 +1,75 @@
+"""The labeling UI server: one viser server, one LabelerSession per connected browser tab.
+
+viser runs its own websocket/HTTP server thread on its own port (it cannot be mounted inside
+FastAPI); with port 0 the OS picks a free port, which `port` reads back.
+"""
+
+from __future__ import annotations
+
+import threading
+from urllib.parse import quote
+
+import viser
+
+from labeling_ui.session import LabelerSession, UiConfig
+
+
+class LabelingApp:
+    def __init__(self, config: UiConfig, host: str = "127.0.0.1", port: int = 8090) -> None:
+        self.config = config
+        self.host = host
+        self.server = viser.ViserServer(host=host, port=port, label="collie labeling", verbose=False)
+        self.server.gui.set_panel_label("collie labeling")
+        # the replayed robot always sits at the origin (the world moves under it)
+        self.server.initial_camera.up = (0.0, 0.0, 1.0)
+        self.server.initial_camera.position = (-2.0, -6.0, 3.6)
+        self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        self.sessions: dict[int, LabelerSession] = {}
+        self._lock = threading.Lock()
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"http://{host}:{self.port}/"
+
+    def labeler_url(self, token: str) -> str:
+        """The link to hand a labeler: it signs them in with their token."""
+        return f"{self.url}?token={quote(token, safe='')}"
+
+    def _connect(self, client: viser.ClientHandle) -> None:
+        session = LabelerSession(client, self.config, self._held_elsewhere)
+        with self._lock:
+            self.sessions[client.client_id] = session
+        session.start()
+
+    def _held_elsewhere(self, closing: LabelerSession, run_id: int, query_id: str) -> bool:
+        """Whether another open tab of the same labeler shows this query (a reload picked it up:
+        the service keeps one claim per labeler, so that tab now holds the very same lease)."""
+        with self._lock:
+            others = [s for s in self.sessions.values() if s is not closing and s.token == closing.token]
+        return any(
+            s.shown is not None and (s.shown.run.id, s.shown.query.query_id) == (run_id, query_id) for s in others
+        )
+
+    def _disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            session.close()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Close every tab's session (each hands its claims back), then the server."""
+        with self._lock:
+            sessions = list(self.sessions.values())
+            self.sessions.clear()
+        for session in sessions:
+            session.close(grace=False)
+        for session in sessions:
+            session.join(timeout_s / max(len(sessions), 1))
+        self.server.stop()

@@ -1,0 +1,46 @@
+"""The labeler's token in the browser: from the labeler URL (`?token=…`) or the sign-in field, kept
+in the page's localStorage so a reload stays signed in.
+
+viser does not pass the page URL to the server, so a one-line script (viser's RunJavascript
+message, the channel viser itself uses to ship plotly.js) moves the token from the URL into
+localStorage and drops it from the address bar; the server then reads it back with viser's public
+localStorage API.
+"""
+
+from __future__ import annotations
+
+import json
+
+import viser
+from viser import _messages
+
+TOKEN_KEY = "collie-token"
+_STORAGE_PREFIX = "viser-user:"  # what viser's client puts before keys written via its API
+
+_TOKEN_FROM_URL = """
+const url = new URL(window.location.href);
+const token = url.searchParams.get("token");
+if (token !== null) {
+  localStorage.setItem(%s, token);
+  url.searchParams.delete("token");
+  window.history.replaceState(null, document.title, url.toString());
+}
+"""
+
+
+def read_token(client: viser.ClientHandle, timeout_s: float = 5.0) -> str | None:
+    """The token given in the URL, else the one remembered from before, else None."""
+    script = _TOKEN_FROM_URL % json.dumps(_STORAGE_PREFIX + TOKEN_KEY)
+    client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=script))
+    try:
+        token = client.local_storage.get_item(TOKEN_KEY, timeout=timeout_s)
+    except (RuntimeError, TimeoutError):
+        return None
+    return token or None
+
+
+def remember_token(client: viser.ClientHandle, token: str | None) -> None:
+    if token:
+        client.local_storage.set_item(TOKEN_KEY, token)
+    else:
+        client.local_storage.remove_item(TOKEN_KEY)

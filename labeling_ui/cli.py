@@ -1,0 +1,52 @@
+"""`collie label-ui --api URL`: serve the labeling UI for the service at URL."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import threading
+from pathlib import Path
+
+from labeling_ui.app import LabelingApp
+from labeling_ui.session import UiConfig
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--api", required=True, help="the labeling service, e.g. http://127.0.0.1:8000")
+    parser.add_argument("--port", type=int, default=8090, help="port to serve on (0: any free port)")
+    parser.add_argument("--host", default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
+    parser.add_argument("--run", type=int, default=None, help="label only this run (default: newest with work)")
+    parser.add_argument("--token", default=None, help="print a labeler URL that signs in with this token")
+    parser.add_argument("--lease-s", type=float, default=60.0, help="claim length, renewed while a tab is open")
+    parser.add_argument("--fps", type=float, default=20.0, help="segment frames per second at 1x")
+    parser.add_argument("--info-json", type=Path, default=None, help="write the URL and port here once serving")
+
+
+def run(args: argparse.Namespace) -> int:
+    config = UiConfig(api=args.api, run_id=args.run, lease_s=args.lease_s, fps=args.fps)
+    app = LabelingApp(config, host=args.host, port=args.port)
+    print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
+    if args.token:
+        print(f"labeler URL: {app.labeler_url(args.token)}", flush=True)
+    if args.info_json is not None:  # how `collie up` learns the port when it asked for any free one
+        tmp = args.info_json.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"url": app.url, "port": app.port}))
+        tmp.replace(args.info_json)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):  # either way, tabs hand their claims back first
+        signal.signal(sig, lambda *_: stop.set())
+    stop.wait()
+    app.stop()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m labeling_ui.cli` (the same as `collie label-ui`)."""
+    parser = argparse.ArgumentParser(prog="collie label-ui", description=__doc__)
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,112 @@
+"""The task's regions on the 3D floor: red edges where bad meets not bad, and a tint of the bad and
+good areas, both in world x-y (Task.to_dict() shapes; the tint from the task's own rule)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import numpy as np
+
+from collie.tasks import Task
+from labeling_ui.inset import class_map
+
+FLOOR_Z = 0.02  # lines sit this far above the floor so they do not z-fight with the grid
+REGION_EXTENT = 60.0  # how far unbounded edges (wedge rays, half-planes) are drawn
+CLASS_RGB = {0: (220, 50, 47), 1: (120, 130, 150), 2: (40, 170, 80)}
+TINT_Z = 0.005  # just above the floor grid, which would hide anything below it
+TINT_GRID_Z = 0.012  # our own grid lines over the tint keep the motion cue inside tinted areas
+TINT_RGB = {0: (255, 190, 185), 2: (185, 240, 200)}  # neutral stays untinted
+
+
+def on_floor(xy: np.ndarray, z: float = FLOOR_Z) -> np.ndarray:
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    return np.column_stack([xy, np.full(len(xy), z)])
+
+
+def densify(points: np.ndarray, step: float = 1.0) -> np.ndarray:
+    """The same polyline with a point at least every `step`: screen-thick lines whose segment
+    crosses behind the camera are dropped by the browser, so long edges are drawn in short pieces."""
+    pieces = [points[:1]]
+    for a, b in itertools.pairwise(points):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
+        pieces.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    return np.vstack(pieces)
+
+
+def region_outline(region: dict[str, Any]) -> np.ndarray | None:
+    """Floor points tracing one region's edge, or None if it has no x-y shape (pitch rules)."""
+    kind = region.get("kind")
+    if kind in ("disc", "outside_disc"):
+        (cx, cy), r = region["centre"], region["radius"]
+        t = np.linspace(0.0, 2 * math.pi, 97)
+        return on_floor(np.column_stack([cx + r * np.cos(t), cy + r * np.sin(t)]))
+    if kind == "wedge_north":
+        ax, ay = region.get("apex", (0.0, 0.0))
+        d = REGION_EXTENT
+        return densify(on_floor(np.array([[ax - d, ay + d], [ax, ay], [ax + d, ay + d]])))
+    if kind in ("halfplane_left", "halfplane_right"):
+        x0 = region.get("x0", 0.0)
+        return densify(on_floor(np.array([[x0, -REGION_EXTENT], [x0, REGION_EXTENT]])))
+    return None
+
+
+def edge_rgb(region: dict[str, Any], task: dict[str, Any] | None) -> tuple[int, int, int]:
+    """Red for a safety edge (bad on one side), else the colour of the region's class."""
+    borders_bad = region["desirability"] == 0 or (task is not None and task.get("background") == 0)
+    return CLASS_RGB[0] if borders_bad else CLASS_RGB.get(region["desirability"], (0, 0, 0))
+
+
+def tint_meshes(
+    task: Task | None, cx: float, cy: float, half: float, cells: int = 120
+) -> list[tuple[tuple[int, int, int], np.ndarray, np.ndarray]]:
+    """(colour, vertices, faces) of flat opaque meshes covering the bad and good cells of a square
+    around (cx, cy): one quad per run of equal cells in a row. Opaque, because a translucent tint is
+    depth-sorted against the translucent floor grid and vanishes under it from some viewpoints."""
+    classes = class_map(task, cx, cy, half, cells)
+    edges = np.linspace(-half, half, cells + 1)
+    meshes = []
+    for cls, rgb in TINT_RGB.items():
+        quads = []
+        for row in range(cells):  # row 0 is the north edge
+            inside = np.concatenate([[False], classes[row] == cls, [False]])
+            starts = np.flatnonzero(~inside[:-1] & inside[1:])
+            stops = np.flatnonzero(inside[:-1] & ~inside[1:])
+            y0, y1 = cy + edges[cells - row - 1], cy + edges[cells - row]
+            quads += [(cx + edges[a], cx + edges[b], y0, y1) for a, b in zip(starts, stops, strict=True)]
+        if not quads:
+            continue
+        q = np.array(quads)
+        corners = np.stack(
+            [np.column_stack([q[:, 0], q[:, 2]]), np.column_stack([q[:, 1], q[:, 2]]),
+             np.column_stack([q[:, 1], q[:, 3]]), np.column_stack([q[:, 0], q[:, 3]])], axis=1,
+        )  # fmt: skip
+        vertices = on_floor(corners.reshape(-1, 2), z=TINT_Z)
+        base = 4 * np.arange(len(q))[:, None]
+        faces = np.concatenate([base + np.array([0, 1, 2]), base + np.array([0, 2, 3])]).astype(np.uint32)
+        meshes.append((rgb, vertices, faces))
+    return meshes
+
+
+def tint_grid(cx: float, cy: float, half: float, spacing: float = 1.0, piece: float = 2.0) -> np.ndarray:
+    """(N, 2, 3) lines on whole multiples of `spacing` across the tinted square (the floor grid's
+    section lines, redrawn over the tint that hides them)."""
+    xs = np.arange(np.ceil((cx - half) / spacing), np.floor((cx + half) / spacing) + 1) * spacing
+    ys = np.arange(np.ceil((cy - half) / spacing), np.floor((cy + half) / spacing) + 1) * spacing
+    ticks = np.arange(-half, half + piece / 2, piece)  # short pieces, as `densify` explains
+    starts, stops = ticks[:-1], ticks[1:]
+    pieces = [
+        np.stack(
+            [
+                np.column_stack([np.full_like(starts, x), cy + starts]),
+                np.column_stack([np.full_like(stops, x), cy + stops]),
+            ],
+            axis=1,
+        )
+        for x in xs
+    ]
+    pieces += [np.stack([np.column_stack([cx + starts, np.full_like(starts, y)]),
+                         np.column_stack([cx + stops, np.full_like(stops, y)])], axis=1) for y in ys]  # fmt: skip
+    pairs = np.concatenate(pieces)
+    return on_floor(pairs.reshape(-1, 2), z=TINT_GRID_Z).reshape(-1, 2, 3)

@@ -1,0 +1,129 @@
+"""One labeler's link to the labeling service: which run to label, claims, labels, undo, progress.
+
+Everything goes through collie.client over HTTP. Errors are sorted into what the page must say:
+a refused token (AuthRefused), a service that does not answer (ServiceDown, retried by the
+caller), or a submission the service would not take (Rejected).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+from collie.client import ApiError, CollieClient, Unreachable
+from collie.schemas import FINISHED, ClaimRead, LabelAck, Me, RunRead, Submission
+
+T = TypeVar("T")
+
+
+class AuthRefused(Exception):
+    """The token is missing, unknown, revoked, or not allowed to label."""
+
+
+class ServiceDown(Exception):
+    """The service did not answer (down, restarting, network)."""
+
+
+class Rejected(Exception):
+    """The service answered but would not do it (conflict, gone, invalid)."""
+
+
+@dataclass(frozen=True)
+class Progress:
+    session: int
+    session_done: int  # k: queries of this feedback session with an effective label
+    session_size: int  # M
+    total_done: int  # n: labels in the run
+    total_planned: int | None  # N_total (the run's label budget), when the trainer gave one
+
+
+class ServiceLink:
+    """Calls for one labeler token. Submissions are retried with the same client_request_id, so a
+    retry after a dropped answer never labels twice."""
+
+    def __init__(self, api: str, token: str, run_id: int | None = None, lease_s: float = 60.0) -> None:
+        self.api = api
+        self.client = CollieClient(api, token, timeout_s=10.0)
+        self.pinned_run = run_id
+        self.lease_s = lease_s
+
+    def close(self) -> None:
+        self.client.close()
+
+    def _call(self, fn: Callable[[], T]) -> T:
+        try:
+            return fn()
+        except Unreachable as exc:
+            raise ServiceDown(f"the labeling service at {self.api} does not answer") from exc
+        except ApiError as exc:
+            if exc.status in (401, 403):
+                raise AuthRefused(str(exc.detail)) from exc
+            if exc.status >= 500:
+                raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
+            raise Rejected(str(exc.detail)) from exc
+
+    def login(self) -> Me:
+        me = self._call(self.client.me)
+        if me.role not in ("labeler", "operator"):
+            raise AuthRefused(f"this is a {me.role} token; labeling needs a labeler token")
+        return me
+
+    def pick_run(self) -> RunRead | None:
+        """The run to label: the pinned one, else the newest open run with pending queries, else the
+        newest open run (to wait on)."""
+        if self.pinned_run is not None:
+            return self._call(lambda: self.client.run(self.pinned_run))  # type: ignore[arg-type]
+        runs = [r for r in self._call(lambda: self.client.runs(limit=50)) if is_open(r)]
+        runs.sort(key=lambda r: r.id, reverse=True)
+        with_work = [r for r in runs if r.queue.pending > 0]
+        return (with_work or runs or [None])[0]
+
+    def run(self, run_id: int) -> RunRead:
+        return self._call(lambda: self.client.run(run_id))
+
+    def claim(self, run_id: int) -> ClaimRead | None:
+        """The next query under a lease (or the one this labeler already holds, renewed)."""
+        return self._call(lambda: self.client.claim(run_id, lease_s=self.lease_s))
+
+    def submit(self, run_id: int, query_id: str, value: Submission, seconds: float | None, request_id: str) -> LabelAck:
+        """Label or skip; `request_id` makes a repeat of the same key press harmless."""
+        return self._retrying(
+            lambda: self.client.submit(run_id, query_id, value, seconds=seconds, client_request_id=request_id)
+        )
+
+    def undo(self, run_id: int, query_id: str, request_id: str) -> LabelAck:
+        return self._retrying(lambda: self.client.undo(run_id, query_id, client_request_id=request_id))
+
+    def release(self, run_id: int, query_id: str) -> None:
+        """Hand a held query back to the pool. The service has no release call yet; a skip is the
+        documented way to release a lease (it is not a label)."""
+        self._call(lambda: self.client.skip(run_id, query_id))
+
+    def progress(self, run_id: int, session: int) -> Progress:
+        run = self._call(lambda: self.client.run(run_id))
+        queries = self._call(lambda: self.client.queries(run_id, session=session, limit=5000))
+        done = sum(1 for q in queries if q.label is not None)
+        return Progress(session, done, len(queries), run.n_labels, run.n_total)
+
+    def wait_for_events(self, run_id: int, after: int, wait_s: float) -> int:
+        """Block up to wait_s for anything new on the run's stream; returns the last event id."""
+        page = self._call(lambda: self.client.events(run_id, after=after, wait_s=wait_s, limit=100))
+        return page.last_id
+
+    def _retrying(self, fn: Callable[[], T], attempts: int = 4) -> T:
+        delay = 0.25
+        for attempt in range(attempts):
+            try:
+                return self._call(fn)
+            except ServiceDown:
+                if attempt == attempts - 1:
+                    raise
+                time.sleep(delay)
+                delay *= 2
+        raise AssertionError("unreachable")
+
+
+def is_open(run: RunRead) -> bool:
+    return run.status not in FINISHED and run.control != "stop"

@@ -1,0 +1,110 @@
+"""The oracle teacher as a labeler: claims queries and labels them through the service's API, with
+the same kind of labeler token a person uses, by the task rule (collie.teacher.OracleTeacher)."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+import numpy as np
+
+from collie.client import ApiError, CollieClient, Unreachable, new_request_id
+from collie.schemas import FINISHED, QueryRead
+from collie.tasks import get_task
+from collie.teacher import OracleTeacher
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+
+def oracle_for(client: CollieClient, run_id: int, noise_band: float, seed: int) -> OracleTeacher:
+    """The teacher for the run's task, env and scenery (the run's seed places random layouts)."""
+    run = client.run(run_id)
+    layout_seed = run.config.get("seed")
+    task = get_task(run.task, run.env, layout_seed=layout_seed if isinstance(layout_seed, int) else None)
+    return OracleTeacher(task, noise_band=noise_band, seed=seed)
+
+
+def segment_label(oracle: OracleTeacher, query: QueryRead) -> int:
+    xy = np.asarray(query.xy, dtype=np.float64)
+    pitch = None if query.pitch is None else np.array([np.nan if p is None else p for p in query.pitch], np.float64)
+    return oracle.label(xy, pitch)
+
+
+class TeacherLoop:
+    """Claim → label → submit, at most `rate` labels per second. `run` returns the number labelled."""
+
+    def __init__(
+        self,
+        client: CollieClient,
+        run_id: int,
+        oracle: OracleTeacher,
+        rate: float | None = None,
+        stop: threading.Event | None = None,
+        idle_wait_s: float = 10.0,
+    ) -> None:
+        self.client = client
+        self.run_id = run_id
+        self.oracle = oracle
+        self.min_gap_s = 0.0 if not rate else 1.0 / rate
+        self.stop = stop or threading.Event()
+        self.idle_wait_s = idle_wait_s
+        self.labelled = 0
+        self._last_submit = 0.0
+
+    def run(self, until_done: bool = False) -> int:
+        """Label what is claimable; with until_done, keep waiting for new sessions until the run
+        is finished, failed or stopped."""
+        after = self._retry(lambda: self.client.run(self.run_id)).last_event_id
+        while not self.stop.is_set():
+            try:
+                claim = self._retry(lambda: self.client.claim(self.run_id))
+            except ApiError as exc:
+                if exc.status == 409:  # finished, failed or stopping: nothing more to do
+                    log.info("run %s takes no more labels: %s", self.run_id, exc.detail)
+                    break
+                raise
+            if claim is not None:
+                self._label(claim.query)
+                continue
+            if not until_done or self._retry(lambda: self.client.run(self.run_id)).status in FINISHED:
+                break
+            # Sleep until something happens on the run (new queries, a status change).
+            after = self._retry(
+                lambda a=after: self.client.events(self.run_id, after=a, wait_s=self.idle_wait_s)
+            ).last_id
+        return self.labelled
+
+    def _label(self, query: QueryRead) -> None:
+        started = time.monotonic()
+        value = segment_label(self.oracle, query)
+        wait = self._last_submit + self.min_gap_s - time.monotonic()
+        if wait > 0:
+            self.stop.wait(wait)
+        request_id = new_request_id()  # one id for every retry: the label is stored once
+        seconds = time.monotonic() - started
+        try:
+            self._retry(lambda: self.client.submit(self.run_id, query.query_id, value, seconds, request_id))  # type: ignore[arg-type]
+        except ApiError as exc:
+            if exc.status != 409:  # lost the lease (expired and taken) or the run ended: move on
+                raise
+            log.info("label for %s not taken: %s", query.query_id, exc.detail)
+            return
+        self._last_submit = time.monotonic()
+        self.labelled += 1
+        log.info("labelled %s → %d", query.query_id, value)
+
+    def _retry(self, call: Callable[[], T]) -> T:
+        delay = 0.1
+        while True:
+            try:
+                return call()
+            except Unreachable as exc:
+                if self.stop.is_set():
+                    raise
+                log.warning("service unreachable (%s); retrying in %.1f s", exc, delay)
+                self.stop.wait(delay)
+                delay = min(2 * delay, 5.0)

@@ -1,0 +1,40 @@
+"""`collie teacher`: the scripted oracle labels a run's queries through the API, like a person."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+
+from collie.client import CollieClient
+from teacher import TeacherLoop, oracle_for
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--api", required=True, help="service URL, e.g. http://127.0.0.1:8000")
+    parser.add_argument("--token", default=os.environ.get("COLLIE_LABELER_TOKEN"), help="a labeler token")
+    parser.add_argument("--run", type=int, required=True, help="run id")
+    parser.add_argument("--noise-band", type=float, default=0.0, help="R_error: random labels this close to a boundary")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    parser.add_argument("--rate", type=float, default=None, help="at most this many labels per second")
+    parser.add_argument(
+        "--until-done", action="store_true", help="keep waiting for new queries until the run is finished or stopped"
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every label")
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.token:
+        print("collie teacher: give --token or set COLLIE_LABELER_TOKEN", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
+    with CollieClient(args.api, args.token) as client:
+        oracle = oracle_for(client, args.run, args.noise_band, args.seed)
+        loop = TeacherLoop(client, args.run, oracle, rate=args.rate)
+        try:
+            n = loop.run(until_done=args.until_done)
+        except KeyboardInterrupt:
+            n = loop.labelled
+    print(f"collie teacher: labelled {n} queries of run {args.run}", flush=True)
+    return 0

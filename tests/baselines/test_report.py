@@ -1,0 +1,78 @@
+"""`collie report` on synthetic run folders: paper-format cells, method order, CSV, figures."""
+
+import csv
+import json
+
+import numpy as np
+
+from trainer.report import format_cell, write_report
+
+
+def fake_run(root, env, task, method, seed, cov, status="finished", variant="", downstream=None):
+    name = f"{env}-{task}-{method}{'+' + variant if variant else ''}-s{seed}"
+    d = root / name
+    d.mkdir(parents=True)
+    cfg = {"env": env, "task": task, "method": method, "seed": seed}
+    (d / "summary.json").write_text(json.dumps({
+        "status": status, "safe_coverage": cov, "safe_ratio": 0.5 + seed / 10, "composite_coverage": cov,
+        "weighted_composite_coverage": cov + 1, "wall_s": 10.0, "config": cfg}))
+    if variant:
+        (d / "sweep_run.json").write_text(json.dumps({"variant": variant}))
+    if downstream:
+        (d / "downstream.json").write_text(json.dumps(downstream))
+    angles = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    xy = np.stack([np.cos(angles), np.sin(angles)], 1)[:, None, :] * np.arange(11)[None, :, None]
+    np.savez(d / "eval_latest.npz", xy=xy, skill=np.stack([np.cos(angles), np.sin(angles)], 1), epoch=1)
+    return d
+
+
+def test_format_cell_is_mean_and_sample_std():
+    assert format_cell([4, 4, 4, 4, 5], 2) == "4.20 ± 0.45"  # the paper's DIAYN cell
+    assert format_cell([3.0], 2) == "3.00"
+    assert format_cell([], 2) == "–"
+
+
+def test_report_tables_csv_and_figures(tmp_path):
+    runs = tmp_path / "runs"
+    for seed, cov in enumerate([100.0, 120.0]):
+        fake_run(runs, "point", "north", "collie", seed, cov, downstream={"zero_shot": {"mean": 10.0 + seed,
+                                                                                        "best": 20.0}})
+        fake_run(runs, "point", "north", "metra", seed, -cov)
+        fake_run(runs, "point", "north", "dodont", seed, 5.0)
+    fake_run(runs, "point", "range", "collie", 0, 50.0, variant="additive")
+    fake_run(runs, "point", "north", "diayn", 0, 1.0, status="running")
+    paths = write_report([runs], tmp_path / "report")
+    md = paths["markdown"].read_text()
+    table = md.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    lines = [ln for ln in table.strip().splitlines()]
+    assert lines[0] == "| method | point north | point range |"
+    body = [ln.split(" | ")[0].lstrip("| ") for ln in lines[2:]]
+    assert body == ["METRA", "DoDont*", "COLLIE", "COLLIE (additive)"]  # the paper's order, variants last
+    assert "| COLLIE | 110.00 ± 14.14 | – |" in table
+    assert "| METRA | -110.00 ± 14.14 | – |" in table
+    assert "| COLLIE (additive) | – | 50.00 |" in table
+    assert "0.550 ± 0.071" in md  # safe ratio, three digits
+    assert "Zero-shot motion return (Table 3)" in md and "10.50 ± 0.71" in md
+    assert "point-north-diayn-s0" in md and "(running)" in md  # unfinished: listed, left out
+    assert "DIAYN" not in table
+    rows = list(csv.DictReader(paths["metrics_csv"].read_text().splitlines()))
+    cov = [r for r in rows if r["label"] == "COLLIE" and r["metric"] == "safe_coverage" and r["task"] == "north"]
+    assert len(cov) == 1 and float(cov[0]["mean"]) == 110.0 and cov[0]["n"] == "2" and cov[0]["seeds"] == "0 1"
+    assert any(r["metric"] == "zero_shot_best" for r in rows)
+    assert len(list(csv.DictReader(paths["runs_csv"].read_text().splitlines()))) == 7
+    for name in ("skills_point_north.png", "skills_point_range.png"):
+        assert (tmp_path / "report" / "figures" / name).stat().st_size > 1000
+        assert f"figures/{name}" in md
+
+
+def test_collie_report_cli(tmp_path, capsys):
+    import argparse
+
+    from trainer import report
+
+    fake_run(tmp_path, "point", "north", "oracle", 0, 9.0)
+    args = argparse.Namespace(roots=[str(tmp_path)], out=None, no_figures=True)
+    assert report.run(args) == 0
+    assert "| Oracle | 9.00 |" in capsys.readouterr().out
+    assert (tmp_path / "report" / "report.md").exists()
+    assert report.run(argparse.Namespace(roots=[str(tmp_path / "nope")], out=None, no_figures=True)) == 2

@@ -1,0 +1,68 @@
+"""`collie sweep`: finished runs are not rerun, interrupted ones resume, folders name their runs."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from trainer import sweep
+from trainer.sweep import RunSpec, grid, run_all, run_one, train_command
+
+
+def finished(folder, **summary):
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"status": "finished", "safe_coverage": 1.0, **summary}))
+
+
+def test_grid_names_folders_and_orders_seed_by_seed(tmp_path):
+    specs = grid(tmp_path, "point", ["north", "range"], ["metra", "collie"], [0, 1], variant="additive")
+    assert [s.seed for s in specs] == [0] * 4 + [1] * 4
+    assert specs[0].out == str(tmp_path / "point-north-metra+additive-s0")
+
+
+def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeypatch):
+    done = RunSpec("point", "north", "metra", 0, str(tmp_path / "done"))
+    finished(tmp_path / "done", safe_coverage=7.0)
+    half = RunSpec("point", "north", "collie", 0, str(tmp_path / "half"), flags=("--epochs", "3"))
+    (tmp_path / "half").mkdir()
+    (tmp_path / "half" / "checkpoint.pt").write_bytes(b"")
+    calls = []
+
+    def fake_run(cmd, **kw):
+        calls.append(cmd)
+        (tmp_path / "half" / "summary.json").write_text(json.dumps({"status": "finished"}))
+        return subprocess.CompletedProcess(cmd, 0)
+
+    monkeypatch.setattr(sweep.subprocess, "run", fake_run)
+    results = {s.out: r for s, r in run_all([done, half], jobs=2)}
+    assert results[done.out]["safe_coverage"] == 7.0
+    assert len(calls) == 1 and calls[0][-1] == "--resume" and "--epochs" in calls[0]
+    assert json.loads((tmp_path / "half" / "sweep_run.json").read_text())["method"] == "collie"
+    assert "--resume" not in train_command(RunSpec("point", "north", "metra", 0, str(tmp_path / "new")))
+
+
+def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
+    monkeypatch.setattr(sweep.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 1))
+    finished(tmp_path / "ok")
+    specs = [RunSpec("point", "north", "metra", 0, str(tmp_path / "bad")),
+             RunSpec("point", "north", "metra", 1, str(tmp_path / "ok"))]
+    out = {s.out: r for s, r in run_all(specs, jobs=1)}
+    assert isinstance(out[specs[0].out], RuntimeError) and "see" in str(out[specs[0].out])
+    assert out[specs[1].out]["status"] == "finished"
+    with pytest.raises(RuntimeError):
+        run_one(specs[0])
+
+
+def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
+    cmd = [sys.executable, "-m", "collie.cli", "sweep", "--tasks", "north", "--methods", "lsd", "--seeds", "1",
+           "--preset", "smoke", "--out", str(tmp_path), "--jobs", "1", "--", "--epochs", "2"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    summary = tmp_path / "point-north-lsd-s0" / "summary.json"
+    stamp = summary.stat().st_mtime_ns
+    assert json.loads(summary.read_text())["epochs_done"] == 2
+    assert "LSD" in (tmp_path / "report" / "report.md").read_text()
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0 and "1 already finished" in again.stdout
+    assert summary.stat().st_mtime_ns == stamp

@@ -1,0 +1,102 @@
+"""A real service for the tests: uvicorn on an ephemeral 127.0.0.1 port over a SQLite file."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from backend.settings import Settings
+from collie.client import CollieClient
+from collie.schemas import EnvDims, QueryIn, RunCreate, RunRead, SessionPost
+
+TOKENS = {"operator": "op-token-0123456789", "trainer": "tr-token-0123456789", "labeler": "lb-token-0123456789"}
+DIMS = EnvDims(obs_dim=4, nq=3, nv=2, horizon=5, skill_dim=2)
+
+
+def settings_for(db: Path, **overrides: object) -> Settings:
+    return Settings(
+        database_url=f"sqlite:///{db}",
+        operator_token=TOKENS["operator"],
+        trainer_token=TOKENS["trainer"],
+        labeler_token=TOKENS["labeler"],
+        **overrides,  # type: ignore[arg-type]
+    )
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BackgroundServer]:
+    db = tmp_path_factory.mktemp("svc") / "collie.db"
+    with BackgroundServer(create_app(settings_for(db))) as server:
+        yield server
+
+
+@pytest.fixture(scope="module")
+def operator(live: BackgroundServer) -> Iterator[CollieClient]:
+    with CollieClient(live.url, TOKENS["operator"]) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def trainer(live: BackgroundServer) -> Iterator[CollieClient]:
+    with CollieClient(live.url, TOKENS["trainer"]) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def labeler(live: BackgroundServer) -> Iterator[CollieClient]:
+    with CollieClient(live.url, TOKENS["labeler"]) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def new_labeler(live: BackgroundServer, operator: CollieClient) -> Iterator[Callable[[str], CollieClient]]:
+    """Another labeler with a token of their own."""
+    made: list[CollieClient] = []
+
+    def make(name: str) -> CollieClient:
+        created = operator.create_labeler(name)
+        made.append(CollieClient(live.url, created.token))
+        return made[-1]
+
+    yield make
+    for client in made:
+        client.close()
+
+
+def make_run_spec(dims: EnvDims = DIMS, task: str = "north") -> RunCreate:
+    return RunCreate(env="point", task=task, method="collie", config={"preset": "smoke"}, dims=dims, n_total=10)
+
+
+def make_query(query_id: str, dims: EnvDims = DIMS, seed: int = 0) -> QueryIn:
+    rng = np.random.default_rng(seed)
+    h = dims.horizon
+    return QueryIn(
+        query_id=query_id,
+        start=int(rng.integers(0, 100)),
+        score=float(rng.random()),
+        skill=rng.normal(size=dims.skill_dim).tolist(),
+        obs=rng.normal(size=(h, dims.obs_dim)).tolist(),
+        xy=rng.normal(size=(h, 2)).tolist(),
+        pitch=[None if i == 0 else float(v) for i, v in enumerate(rng.normal(size=h))],
+        qpos=rng.normal(size=(h, dims.nq)).tolist(),
+        qvel=rng.normal(size=(h, dims.nv)).tolist(),
+        path_xy=rng.normal(size=(3 * h, 2)).tolist(),
+    )
+
+
+def make_session(session: int, n: int, dims: EnvDims = DIMS, epoch: int = 0) -> SessionPost:
+    queries = [make_query(f"{session}-{i}", dims, seed=1000 * session + i) for i in range(n)]
+    return SessionPost(session=session, epoch=epoch, queries=queries)
+
+
+@pytest.fixture
+def run(trainer: CollieClient) -> RunRead:
+    """A fresh run with one session of 4 queries (0-0 … 0-3)."""
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 4))
+    return created

@@ -1,0 +1,217 @@
+"""The main flows of the API against a live service."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import threading
+from collections.abc import Callable
+
+import pytest
+
+from collie.client import ApiError, CollieClient
+from collie.schemas import MetricsIn, Rollout, RolloutsIn, RunRead
+
+from .conftest import DIMS, make_run_spec, make_session
+
+
+def test_health_needs_no_token(live: object) -> None:
+    with CollieClient(live.url, "nobody") as anonymous:  # type: ignore[attr-defined]
+        assert anonymous.health().status == "ok"
+
+
+def test_create_read_and_list_runs(trainer: CollieClient, labeler: CollieClient) -> None:
+    created = trainer.create_run(make_run_spec())
+    assert (created.status, created.control, created.epoch, created.n_labels) == ("training", "run", 0, 0)
+    assert created.dims == DIMS
+    assert labeler.run(created.id) == created
+    assert created.id in {r.id for r in labeler.runs()}
+    updated = trainer.set_status(created.id, "training", epoch=7)
+    assert updated.epoch == 7 and updated.updated_at >= created.updated_at
+
+
+def test_post_session_is_idempotent_and_keeps_the_stored_segment(trainer: CollieClient, run: RunRead) -> None:
+    again = make_session(0, 6)
+    again.queries[0].start = 999_999  # a different segment under an existing id is not stored
+    posted = trainer.post_session(run.id, again)
+    assert posted.existing == ["0-0", "0-1", "0-2", "0-3"] and posted.created == ["0-4", "0-5"]
+    assert trainer.query(run.id, "0-0").start != 999_999
+    assert trainer.run(run.id).queue.pending == 6
+
+
+def test_query_round_trips_exactly(trainer: CollieClient, run: RunRead) -> None:
+    sent = make_session(0, 4).queries[2]
+    got = trainer.query(run.id, "0-2")
+    for name in ("skill", "obs", "xy", "pitch", "qpos", "qvel", "path_xy"):
+        assert getattr(got, name) == getattr(sent, name), name
+    assert (got.session, got.status, got.label) == (0, "pending", None)
+
+
+def test_claim_label_and_counts(labeler: CollieClient, run: RunRead) -> None:
+    claim = labeler.claim(run.id)
+    assert claim is not None and claim.query.query_id == "0-0" and claim.query.status == "leased"
+    assert labeler.claim(run.id).query.query_id == "0-0"  # one lease at a time: claiming again renews it
+    ack = labeler.submit(run.id, "0-0", 2, seconds=3.5)
+    assert (ack.label, ack.query_status, ack.duplicate, ack.event.kind) == (2, "labelled", False, "label")
+    state = labeler.run(run.id)
+    assert state.n_labels == 1 and state.queue.labelled == 1 and state.queue.pending == 3
+
+
+def test_submit_is_idempotent_by_client_request_id(labeler: CollieClient, run: RunRead) -> None:
+    labeler.claim(run.id)
+    first = labeler.submit(run.id, "0-0", 1, client_request_id="req-1")
+    again = labeler.submit(run.id, "0-0", 1, client_request_id="req-1")
+    assert again.duplicate and again.event.id == first.event.id
+    assert len(labeler.label_events(run.id)) == 1 and labeler.run(run.id).n_labels == 1
+    with pytest.raises(ApiError) as err:
+        labeler.submit(run.id, "0-0", 2, client_request_id="req-1")
+    assert err.value.status == 409
+
+
+def test_lease_expiry_returns_the_query_to_the_pool(
+    labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
+) -> None:
+    other = new_labeler("expiry-other")
+    first = labeler.claim(run.id, lease_s=0.3)
+    assert first is not None
+    taken = {other.claim(run.id).query.query_id}
+    assert first.query.query_id not in taken
+    threading.Event().wait(0.4)  # the first labeler walks away; their lease runs out
+    third = new_labeler("expiry-third")
+    got = third.claim(run.id)
+    assert got is not None and got.query.query_id == first.query.query_id
+    with pytest.raises(ApiError) as err:
+        labeler.submit(run.id, first.query.query_id, 1)
+    assert err.value.status == 409  # leased to someone else now
+
+
+def test_two_labelers_never_hold_the_same_query(
+    live: object, new_labeler: Callable[[str], CollieClient], trainer: CollieClient
+) -> None:
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 40))
+    workers = [new_labeler(f"race-{i}") for i in range(8)]
+    held: dict[str, list[str]] = {}
+    lock = threading.Lock()
+
+    def work(client: CollieClient, name: str) -> None:
+        while (claim := client.claim(created.id)) is not None:
+            with lock:
+                held.setdefault(claim.query.query_id, []).append(name)
+            client.submit(created.id, claim.query.query_id, 1)
+
+    threads = [threading.Thread(target=work, args=(c, f"w{i}")) for i, c in enumerate(workers)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(held) == 40 and all(len(v) == 1 for v in held.values())
+    assert trainer.run(created.id).n_labels == 40
+
+
+def test_skip_releases_and_prefers_another_labeler(
+    labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
+) -> None:
+    claim = labeler.claim(run.id)
+    ack = labeler.skip(run.id, claim.query.query_id)
+    assert (ack.event.kind, ack.label, ack.query_status) == ("skip", None, "pending")
+    assert labeler.claim(run.id).query.query_id != claim.query.query_id  # the skipped one comes last to me
+    other = new_labeler("skip-other")
+    assert other.claim(run.id).query.query_id == claim.query.query_id
+
+
+def test_undo_and_revise(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
+    labeler.claim(run.id)
+    first = labeler.submit(run.id, "0-0", 0)
+    revised = labeler.submit(run.id, "0-0", 2)  # a revision of my own label
+    assert revised.event.revises_event_id == first.event.id and revised.label == 2
+    undone = labeler.undo(run.id, "0-0")
+    assert (undone.label, undone.query_status, undone.event.kind) == (None, "leased", "undo")
+    assert trainer.run(run.id).n_labels == 0
+    assert labeler.claim(run.id).query.query_id == "0-0"  # it came back to me, to relabel
+    labeler.submit(run.id, "0-0", 1)
+    assert [(e.query_id, e.label) for e in trainer.effective_labels(run.id)] == [("0-0", 1)]
+    with pytest.raises(ApiError) as err:
+        labeler.undo(run.id, "0-1")
+    assert err.value.status == 409
+
+
+def test_export_json_and_csv(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
+    for value in (2, 0):
+        claim = labeler.claim(run.id)
+        labeler.submit(run.id, claim.query.query_id, value, seconds=1.25)
+    labeler.undo(run.id, "0-1")
+    events = json.loads(trainer.export(run.id, "json"))
+    assert [(e["query_id"], e["kind"], e["value"]) for e in events] == [
+        ("0-0", "label", 2),
+        ("0-1", "label", 0),
+        ("0-1", "undo", None),
+    ]
+    effective = list(csv.DictReader(io.StringIO(trainer.export(run.id, "csv", effective=True))))
+    assert [(r["query_id"], r["label"], r["seconds"]) for r in effective] == [("0-0", "2", "1.25")]
+    rows = list(csv.DictReader(io.StringIO(trainer.export(run.id, "csv"))))
+    assert len(rows) == 3 and rows[0]["labeler"] == "labeler"
+
+
+def test_rollouts_and_metrics_are_bounded(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
+    for epoch in range(12):
+        trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values={"safe_ratio": epoch / 10, "loss": -1.0}))
+        trainer.post_rollouts(
+            run.id, RolloutsIn(epoch=epoch, rollouts=[Rollout(skill=[1.0, 0.0], xy=[[0, 0], [1, 1]])])
+        )
+    assert [m.epoch for m in labeler.metrics(run.id, limit=3)] == [9, 10, 11]
+    assert [m.epoch for m in labeler.metrics(run.id, after_epoch=10)] == [11]
+    assert [r.epoch for r in labeler.rollouts(run.id, limit=2)] == [10, 11]
+    with pytest.raises(ApiError) as err:
+        labeler.rollouts(run.id, limit=51)
+    assert err.value.status == 422
+    too_many = {"epoch": 0, "rollouts": [{"skill": [0.0], "xy": [[0.0, 0.0]]}] * 65}
+    with pytest.raises(ApiError) as err:
+        trainer._send("POST", f"/runs/{run.id}/rollouts", json=too_many)
+    assert err.value.status == 422
+
+
+def test_control_pause_resume_stop(operator: CollieClient, labeler: CollieClient, run: RunRead) -> None:
+    assert operator.pause(run.id).control == "pause"
+    assert labeler.claim(run.id) is not None  # labelling goes on while the trainer is paused
+    assert operator.resume(run.id).control == "run"
+    assert operator.stop(run.id).control == "stop"
+    with pytest.raises(ApiError) as err:
+        operator.resume(run.id)
+    assert err.value.status == 409
+    with pytest.raises(ApiError) as err:
+        labeler.claim(run.id)
+    assert err.value.status == 409
+    kinds = [(e.kind, e.data) for e in operator.events(run.id).events if e.kind == "control"]
+    assert [d["control"] for _, d in kinds] == ["pause", "run", "stop"]
+
+
+def test_finished_run_refuses_new_work(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
+    claim = labeler.claim(run.id)
+    trainer.set_status(run.id, "finished")
+    with pytest.raises(ApiError) as err:
+        labeler.submit(run.id, claim.query.query_id, 1)
+    assert err.value.status == 409
+    with pytest.raises(ApiError) as err:
+        trainer.post_session(run.id, make_session(1, 1))
+    assert err.value.status == 409
+
+
+def test_labelled_history_pages(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
+    for value in (0, 1, 2):
+        claim = labeler.claim(run.id)
+        labeler.submit(run.id, claim.query.query_id, value)
+    items = list(trainer.labelled(run.id, page_size=2))
+    assert [(i.query.query_id, i.label) for i in items] == [("0-0", 0), ("0-1", 1), ("0-2", 2)]
+    assert items[0].query.obs == make_session(0, 4).queries[0].obs
+
+
+def test_submit_with_next_claims_the_following_query(labeler: CollieClient, operator: CollieClient, run: RunRead) -> None:
+    claim = labeler.claim(run.id)
+    ack = labeler.submit(run.id, claim.query.query_id, 1, next=True)
+    assert ack.label == 1 and ack.next is not None and ack.next.query.query_id == "0-1"
+    assert ack.next.query.lease_owner == "labeler" and ack.next.query.obs == make_session(0, 4).queries[1].obs
+    operator.stop(run.id)
+    last = labeler.submit(run.id, "0-1", 2, next=True)  # the label stands; there is no next
+    assert last.label == 2 and last.next is None

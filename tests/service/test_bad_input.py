@@ -1,0 +1,234 @@
+"""Bad input gets a clear 4xx and leaves nothing half-written."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from collie.client import ApiError, CollieClient
+from collie.schemas import EnvDims, RunRead
+
+from .conftest import DIMS, TOKENS, make_run_spec, make_session, settings_for
+
+
+def post(url: str, role: str, path: str, **kwargs: object) -> httpx.Response:
+    headers = {"Authorization": f"Bearer {TOKENS[role]}", **kwargs.pop("headers", {})}  # type: ignore[dict-item]
+    return httpx.post(url + path, headers=headers, timeout=30, **kwargs)  # type: ignore[arg-type]
+
+
+def snapshot(client: CollieClient, run_id: int) -> tuple[object, ...]:
+    run = client.run(run_id)
+    return run.queue, run.n_labels, run.last_event_id, len(client.label_events(run_id))
+
+
+@pytest.mark.parametrize("value", [3, -1, "good", True, 1.0, None, [1]])
+def test_label_value_out_of_range(live: BackgroundServer, labeler: CollieClient, run: RunRead, value: object) -> None:
+    labeler.claim(run.id)
+    before = snapshot(labeler, run.id)
+    body = {"query_id": "0-0", "value": value, "client_request_id": "x1"}
+    response = post(live.url, "labeler", f"/api/runs/{run.id}/labels", json=body)
+    assert response.status_code == 422 and "value" in response.text
+    assert snapshot(labeler, run.id) == before
+
+
+def test_unknown_ids(labeler: CollieClient, run: RunRead) -> None:
+    for call in (
+        lambda: labeler.run(987654),
+        lambda: labeler.claim(987654),
+        lambda: labeler.query(run.id, "no-such-query"),
+        lambda: labeler.submit(run.id, "no-such-query", 1),
+        lambda: labeler.submit(987654, "0-0", 1),
+        lambda: labeler.undo(run.id, "no-such-query"),
+        lambda: labeler.events(987654),
+    ):
+        with pytest.raises(ApiError) as err:
+            call()
+        assert err.value.status == 404 and "no " in str(err.value.detail)
+
+
+def test_label_for_another_runs_query(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
+    other = trainer.create_run(make_run_spec())
+    trainer.post_session(other.id, make_session(7, 1))
+    claim = labeler.claim(other.id)
+    assert claim is not None and claim.query.query_id == "7-0"
+    before = snapshot(labeler, run.id)
+    with pytest.raises(ApiError) as err:
+        labeler.submit(run.id, "7-0", 1)  # that id lives in the other run only
+    assert err.value.status == 404
+    with pytest.raises(ApiError) as err:
+        labeler.submit(run.id, "0-1", 1)  # exists here, but this labeler holds no lease on it here
+    assert err.value.status == 409
+    assert snapshot(labeler, run.id) == before
+
+
+def test_label_on_a_query_leased_to_someone_else(
+    labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
+) -> None:
+    claim = labeler.claim(run.id)
+    intruder = new_labeler("intruder")
+    before = snapshot(labeler, run.id)
+    for call in (
+        lambda: intruder.submit(run.id, claim.query.query_id, 0),
+        lambda: intruder.skip(run.id, claim.query.query_id),
+    ):
+        with pytest.raises(ApiError) as err:
+            call()
+        assert err.value.status == 409 and "leased to someone else" in err.value.detail
+    assert snapshot(labeler, run.id) == before
+
+
+@pytest.mark.parametrize("body", [b"{not json", b'{"query_id": "0-0", "value": 1', b"", b"[]", b'"x"'])
+def test_malformed_json(live: BackgroundServer, labeler: CollieClient, run: RunRead, body: bytes) -> None:
+    before = snapshot(labeler, run.id)
+    response = post(
+        live.url, "labeler", f"/api/runs/{run.id}/labels", content=body, headers={"Content-Type": "application/json"}
+    )
+    assert response.status_code == 422 and response.json()["detail"]
+    assert snapshot(labeler, run.id) == before
+
+
+def test_unknown_fields_and_bad_ids_are_refused(live: BackgroundServer, run: RunRead) -> None:
+    body = {"query_id": "0-0", "value": 1, "client_request_id": "a", "extra": 1}
+    assert post(live.url, "labeler", f"/api/runs/{run.id}/labels", json=body).status_code == 422
+    body = {"query_id": "../etc", "value": 1, "client_request_id": "a"}
+    assert post(live.url, "labeler", f"/api/runs/{run.id}/labels", json=body).status_code == 422
+    assert post(live.url, "labeler", "/api/runs/abc/claim").status_code == 422
+
+
+def test_oversize_bodies(live: BackgroundServer, labeler: CollieClient, run: RunRead) -> None:
+    before = snapshot(labeler, run.id)
+    big = {"query_id": "0-0", "value": 1, "client_request_id": "x" * (2 * 1024 * 1024)}
+    response = post(live.url, "labeler", f"/api/runs/{run.id}/labels", json=big)
+    assert response.status_code == 413 and "larger than" in response.json()["detail"]
+
+    def chunks() -> Iterator[bytes]:  # no Content-Length: counted while read
+        yield b'{"query_id": "0-0", "value": 1, "client_request_id": "'
+        for _ in range(40):
+            yield b"y" * 65536
+        yield b'"}'
+
+    response = post(
+        live.url,
+        "labeler",
+        f"/api/runs/{run.id}/labels",
+        content=chunks(),
+        headers={"Content-Type": "application/json"},
+    )
+    assert response.status_code == 413
+    assert snapshot(labeler, run.id) == before
+
+
+@pytest.fixture(scope="module")
+def tight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BackgroundServer]:
+    """A service with small limits, to reach them cheaply."""
+    settings = settings_for(
+        tmp_path_factory.mktemp("tight") / "t.db", max_session_bytes=200_000, max_queries_per_session=5
+    )
+    with BackgroundServer(create_app(settings)) as server:
+        yield server
+
+
+def test_session_limits(tight: BackgroundServer) -> None:
+    with CollieClient(tight.url, TOKENS["trainer"]) as trainer:
+        created = trainer.create_run(make_run_spec())
+        with pytest.raises(ApiError) as err:
+            trainer.post_session(created.id, make_session(0, 6))
+        assert err.value.status == 422 and "at most 5" in err.value.detail
+        big = make_session(0, 1, EnvDims(obs_dim=4000, nq=3, nv=2, horizon=5, skill_dim=2))
+        with pytest.raises(ApiError) as err:
+            trainer.post_session(created.id, big)
+        assert err.value.status == 413
+        assert trainer.run(created.id).queue.pending == 0
+
+
+@pytest.mark.parametrize("bad", ["NaN", "Infinity", "-Infinity", "1e999"])
+def test_non_finite_arrays(live: BackgroundServer, trainer: CollieClient, bad: str) -> None:
+    created = trainer.create_run(make_run_spec())
+    session = make_session(0, 3).model_dump(mode="json")
+    session["queries"][2]["obs"][1][0] = "__BAD__"
+    text = json.dumps(session).replace('"__BAD__"', bad)
+    response = post(
+        live.url,
+        "trainer",
+        f"/api/runs/{created.id}/sessions",
+        content=text,
+        headers={"Content-Type": "application/json"},
+    )
+    assert response.status_code == 422 and "finite" in response.text
+    assert trainer.run(created.id).queue.pending == 0  # not even the two good queries
+
+
+@pytest.mark.parametrize(
+    ("field", "change", "words"),
+    [
+        ("obs", lambda q: q["obs"][0].append(0.5), "unequal length"),
+        ("obs", lambda q: [row.append(0.5) for row in q["obs"]], "width 5, run expects 4"),
+        ("qpos", lambda q: q["qpos"].pop(), "qpos has 4 frames"),
+        ("xy", lambda q: [row.append(0.0) for row in q["xy"]], "2 columns"),
+        ("skill", lambda q: q["skill"].append(1.0), "skill has 3 dims"),
+        ("all", lambda q: [q[k].pop() for k in ("obs", "xy", "pitch", "qpos", "qvel")], "H=5"),
+    ],
+)
+def test_segment_shapes_must_match_the_run(
+    live: BackgroundServer, trainer: CollieClient, field: str, change: Callable[[dict], object], words: str
+) -> None:
+    created = trainer.create_run(make_run_spec())
+    session = make_session(0, 3).model_dump(mode="json")
+    change(session["queries"][1])
+    response = post(live.url, "trainer", f"/api/runs/{created.id}/sessions", json=session)
+    assert response.status_code == 422 and words in response.text, response.text
+    assert trainer.run(created.id).queue.pending == 0
+
+
+def test_repeated_query_ids_in_one_session(live: BackgroundServer, trainer: CollieClient) -> None:
+    created = trainer.create_run(make_run_spec())
+    session = make_session(0, 2).model_dump(mode="json")
+    session["queries"][1]["query_id"] = session["queries"][0]["query_id"]
+    response = post(live.url, "trainer", f"/api/runs/{created.id}/sessions", json=session)
+    assert response.status_code == 422 and "repeat" in response.text
+
+
+def test_run_spec_is_validated(live: BackgroundServer) -> None:
+    spec = make_run_spec().model_dump(mode="json")
+    for change in (
+        lambda s: s["dims"].update(obs_dim=0),
+        lambda s: s.update(env="point; drop table runs"),
+        lambda s: s.update(config={"x": "y" * 70_000}),
+        lambda s: s.pop("dims"),
+    ):
+        bad = json.loads(json.dumps(spec))
+        change(bad)
+        assert post(live.url, "trainer", "/api/runs", json=bad).status_code == 422
+
+
+def test_database_stays_consistent(tmp_path: Path) -> None:
+    """After a burst of refused requests the effective labels recomputed from the event log equal
+    the cached ones."""
+    with BackgroundServer(create_app(settings_for(tmp_path / "c.db"))) as server:
+        trainer = CollieClient(server.url, TOKENS["trainer"])
+        labeler = CollieClient(server.url, TOKENS["labeler"])
+        created = trainer.create_run(make_run_spec())
+        trainer.post_session(created.id, make_session(0, 5))
+        for i in range(5):
+            claim = labeler.claim(created.id)
+            labeler.submit(created.id, claim.query.query_id, i % 3)
+            for bad in (5, "x"):
+                post(
+                    server.url,
+                    "labeler",
+                    f"/api/runs/{created.id}/labels",
+                    json={"query_id": claim.query.query_id, "value": bad, "client_request_id": f"b{i}{bad}"},
+                )
+        labeler.undo(created.id, "0-2")
+        cached = {q.query_id: q.label for q in trainer.queries(created.id) if q.label is not None}
+        assert {e.query_id: e.label for e in trainer.effective_labels(created.id)} == cached
+        assert trainer.run(created.id).n_labels == len(cached) == 4
+        trainer.close()
+        labeler.close()
+    assert DIMS.horizon == 5

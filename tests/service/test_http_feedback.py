@@ -1,0 +1,237 @@
+"""The trainer's HTTP feedback source against a live service: blocking collect, timeout policy,
+revisions, pause and stop, history after a restart of the trainer, and a restart of the service."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from collie.client import ApiError, CollieClient
+from trainer.feedback.base import LabelEvent, Segment, StopRequested
+from trainer.feedback.http import HttpFeedback
+
+from .conftest import DIMS, TOKENS, make_run_spec, settings_for
+
+
+def segments(session: int, n: int, seed: int = 0) -> list[Segment]:
+    rng = np.random.default_rng(seed + 100 * session)
+    h = DIMS.horizon
+    return [
+        Segment(
+            query_id=f"s{session}-q{j}",
+            session=session,
+            epoch=10 * session,
+            skill=rng.normal(size=DIMS.skill_dim),
+            start=j,
+            obs=rng.normal(size=(h, DIMS.obs_dim)).astype(np.float32),
+            xy=rng.normal(size=(h, 2)),
+            pitch=np.where(np.arange(h) == 0, np.nan, rng.normal(size=h)),
+            qpos=rng.normal(size=(h, DIMS.nq)),
+            qvel=rng.normal(size=(h, DIMS.nv)),
+            score=float(j),
+            path_xy=rng.normal(size=(20, 2)),
+            extra={"note": np.float32(1.5)},
+        )
+        for j in range(n)
+    ]
+
+
+def rule(query_id: str) -> int:
+    return int(query_id.rsplit("q", 1)[1]) % 3
+
+
+def label_in_background(url: str, run_id: int, count: int, delay_s: float = 0.0) -> threading.Thread:
+    """A labeler that labels `count` queries as they come (waiting when the queue is empty)."""
+
+    def work() -> None:
+        deadline = time.monotonic() + 20  # a test bug must not hang the suite
+        with CollieClient(url, TOKENS["labeler"]) as client:
+            done = 0
+            while done < count and time.monotonic() < deadline:
+                claim = client.claim(run_id)
+                if claim is None:
+                    time.sleep(0.02)
+                    continue
+                time.sleep(delay_s)
+                client.submit(run_id, claim.query.query_id, rule(claim.query.query_id))  # type: ignore[arg-type]
+                done += 1
+
+    thread = threading.Thread(target=work, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.fixture
+def feedback(live: BackgroundServer) -> Iterator[HttpFeedback]:
+    source = HttpFeedback.create(live.url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=2.0)
+    yield source
+    source.close()
+
+
+def as_dict(events: list[LabelEvent]) -> dict[str, int | None]:
+    return {e.query_id: e.label for e in events}
+
+
+def test_collect_blocks_until_every_label_is_in(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    labeler = label_in_background(live.url, feedback.run_id, 4, delay_s=0.05)
+    got = feedback.collect(0, 0, segments(0, 4))
+    assert as_dict(got) == {f"s0-q{j}": rule(f"s0-q{j}") for j in range(4)}
+    labeler.join()
+    assert feedback.revisions() == []
+    run = feedback.client.run(feedback.run_id)
+    assert run.status == "training" and run.n_labels == 4
+    statuses = [e.data["status"] for e in feedback.client.events(feedback.run_id).events if e.kind == "status"]
+    assert statuses == ["training", "waiting_for_labels", "training"]
+
+
+def test_timeout_policy_goes_on_with_what_arrived(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    feedback.timeout_s = 0.5
+    started = time.monotonic()
+    assert feedback.collect(0, 0, segments(0, 2)) == []
+    assert 0.4 < time.monotonic() - started < 5
+    label_in_background(live.url, feedback.run_id, 2).join()
+    assert as_dict(feedback.revisions()) == {"s0-q0": 0, "s0-q1": 1}  # late labels, once
+    assert feedback.revisions() == []
+
+
+def test_undo_and_relabel_come_back_as_revisions(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    label_in_background(live.url, feedback.run_id, 3)
+    assert len(feedback.collect(0, 0, segments(0, 3))) == 3
+    with CollieClient(live.url, TOKENS["labeler"]) as labeler:
+        labeler.undo(feedback.run_id, "s0-q1")
+        assert feedback.revisions() == [LabelEvent("s0-q1", None)]
+        labeler.submit(feedback.run_id, "s0-q1", 2)
+        labeler.submit(feedback.run_id, "s0-q2", 0)  # a revision of my own label (it was 2)
+    assert as_dict(feedback.revisions()) == {"s0-q1": 2, "s0-q2": 0}
+    assert feedback.revisions() == []
+
+
+def test_stop_while_waiting_raises(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        threading.Timer(0.3, operator.stop, args=(feedback.run_id,)).start()
+        with pytest.raises(StopRequested):
+            feedback.collect(0, 0, segments(0, 2))
+        assert feedback.control() == "stop"
+
+
+def test_pause_holds_collect_until_resume(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        operator.pause(feedback.run_id)
+        assert feedback.control() == "pause"
+        assert operator.run(feedback.run_id).status == "paused"
+        labeler = label_in_background(live.url, feedback.run_id, 2)  # labelling goes on while paused
+        threading.Timer(1.0, operator.resume, args=(feedback.run_id,)).start()
+        started = time.monotonic()
+        assert len(feedback.collect(0, 0, segments(0, 2))) == 2
+        labeler.join()
+        assert time.monotonic() - started >= 0.9
+        assert feedback.control() == "run" and operator.run(feedback.run_id).status == "training"
+
+
+def test_restarted_trainer_rebuilds_everything_once(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    url, run_id = live.url, feedback.run_id
+    label_in_background(url, run_id, 3)
+    first = segments(0, 3)
+    assert len(feedback.collect(0, 0, first)) == 3
+    # Session 1 is posted and partly labelled, then the trainer dies (its collect never returns).
+    feedback.timeout_s = 0.1
+    feedback.collect(1, 10, segments(1, 4))
+    feedback.close()
+    label_in_background(url, run_id, 2).join()
+
+    again = HttpFeedback(url, TOKENS["trainer"], run_id, wait_chunk_s=2.0)
+    history = again.history()
+    assert sorted(s.query_id for s, _ in history) == ["s0-q0", "s0-q1", "s0-q2", "s1-q0", "s1-q1"]
+    by_id = {s.query_id: (s, label) for s, label in history}
+    stored, label = by_id["s0-q1"]
+    assert label == rule("s0-q1")
+    np.testing.assert_array_equal(stored.obs, first[1].obs)
+    assert np.isnan(stored.pitch[0]) and stored.extra == {"note": 1.5}
+    with CollieClient(url, TOKENS["labeler"]) as labeler:  # the leftovers of session 1 are closed
+        assert {q.query_id for q in labeler.queries(run_id, status="retired")} == {"s1-q2", "s1-q3"}
+        assert labeler.claim(run_id) is None
+        with pytest.raises(ApiError):
+            labeler.submit(run_id, "s1-q2", 1)
+    assert again.revisions() == []
+    label_in_background(url, run_id, 2)
+    applied = {s.query_id: label for s, label in history} | as_dict(again.collect(2, 20, segments(2, 2)))
+    with CollieClient(url, TOKENS["trainer"]) as trainer:
+        effective = {e.query_id: e.label for e in trainer.effective_labels(run_id)}
+    assert effective == applied and len(applied) == 7  # exactly what the trainer was given
+    again.close()
+
+
+def test_reposted_session_keeps_the_stored_segments(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    feedback.timeout_s = 0.2
+    original = segments(0, 2, seed=1)
+    feedback.collect(0, 0, original)  # the trainer dies before any label; on restart it re-posts
+    again = HttpFeedback(live.url, TOKENS["trainer"], feedback.run_id, wait_chunk_s=2.0)
+    assert again.history() == []
+    replay = segments(0, 2, seed=2)
+    held = replay[0].obs  # the loop keeps references to these arrays
+    label_in_background(live.url, feedback.run_id, 2)
+    assert len(again.collect(0, 0, replay)) == 2
+    np.testing.assert_array_equal(held, original[0].obs)
+    np.testing.assert_array_equal(replay[1].qpos, original[1].qpos)
+    again.close()
+
+
+def test_service_restart_mid_session(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path / "restart.db")
+    server = BackgroundServer(create_app(settings)).start()
+    port = int(server.url.rsplit(":", 1)[1])
+    source = HttpFeedback.create(server.url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=1.0, max_backoff_s=0.2)
+    result: list[list[LabelEvent]] = []
+    waiting = threading.Thread(target=lambda: result.append(source.collect(0, 0, segments(0, 4))), daemon=True)
+    waiting.start()
+    with CollieClient(server.url, TOKENS["labeler"]) as labeler:
+        for _ in range(2):
+            while (claim := labeler.claim(source.run_id)) is None:
+                time.sleep(0.02)
+            labeler.submit(source.run_id, claim.query.query_id, 2)
+    server.stop()
+    time.sleep(0.5)  # the trainer keeps waiting while the service is down
+    server = BackgroundServer(create_app(settings), port=port).start()
+    label_in_background(server.url, source.run_id, 2).join()
+    waiting.join(20)
+    server.stop()
+    source.close()
+    assert as_dict(result[0]) == {"s0-q0": 2, "s0-q1": 2, "s0-q2": 2, "s0-q3": 0}
+
+
+def test_report_is_best_effort_and_bounded(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    record = {"epoch": 5, "safe_ratio": np.float32(0.5), "n_labelled_states": [1, 2, 3], "bad": float("nan"), "s": "x"}
+    feedback.report("metrics", record)
+    feedback.report("rollouts", {"epoch": 5, "skills": np.eye(2), "xy": np.zeros((100, 5000, 2))})
+    feedback.report("status", {"status": "stopped", "epoch": 6})
+    metrics = feedback.client.metrics(feedback.run_id)
+    assert metrics[-1].values == {
+        "safe_ratio": 0.5,
+        "n_labelled_states[0]": 1.0,
+        "n_labelled_states[1]": 2.0,
+        "n_labelled_states[2]": 3.0,
+    }
+    rollouts = feedback.client.rollouts(feedback.run_id)[-1].rollouts
+    assert len(rollouts) == 64 and len(rollouts[0].xy) == 1000
+    assert feedback.client.run(feedback.run_id).status == "finished"
+    dead = HttpFeedback("http://127.0.0.1:9", TOKENS["trainer"], 1, report_timeout_s=0.5)
+    started = time.monotonic()
+    for _ in range(20):
+        dead.report("metrics", {"epoch": 1, "x": 1.0})
+    assert time.monotonic() - started < 3
+
+
+@pytest.mark.parametrize("module", ["backend.main", "trainer.feedback.http"])
+def test_no_torch_or_mujoco_on_import(module: str) -> None:
+    code = f"import sys, {module}; print(sorted(m for m in ('torch', 'mujoco') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

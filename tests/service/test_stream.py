@@ -1,0 +1,104 @@
+"""The run's stream: ordered per-run ids, resumable (long poll and SSE), nothing missed or doubled,
+also across a service restart."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import httpx
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.schemas import RunRead, StreamEvent
+
+from .conftest import TOKENS, make_run_spec, make_session, settings_for
+
+
+def label_all(labeler: CollieClient, run_id: int) -> list[str]:
+    done = []
+    while (claim := labeler.claim(run_id)) is not None:
+        labeler.submit(run_id, claim.query.query_id, 1)
+        done.append(claim.query.query_id)
+    return done
+
+
+def test_long_poll_wakes_when_a_label_arrives(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
+    after = trainer.events(run.id).last_id
+    claim = labeler.claim(run.id)
+    timer = threading.Timer(0.3, labeler.submit, args=(run.id, claim.query.query_id, 2))
+    timer.start()
+    started = time.monotonic()
+    page = trainer.events(run.id, after=after, wait_s=10)
+    assert time.monotonic() - started < 5
+    assert [(e.kind, e.data["query_id"], e.data["label"]) for e in page.events] == [("label", "0-0", 2)]
+    assert page.last_id == page.events[-1].id
+    timer.join()
+    assert trainer.events(run.id, after=page.last_id, wait_s=0.2).events == []
+
+
+def test_paging_misses_nothing_and_repeats_nothing(trainer: CollieClient, labeler: CollieClient) -> None:
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 25))
+    label_all(labeler, created.id)
+    everything = trainer.events(created.id).events
+    seen, after = [], 0
+    while page := trainer.events(created.id, after=after, limit=7).events:
+        seen += page
+        after = page[-1].id
+    assert [e.id for e in seen] == list(range(1, len(everything) + 1))
+    assert seen == everything
+    kinds = [e.kind for e in everything]
+    assert kinds[:2] == ["status", "queries"] and kinds.count("label") == 25
+
+
+def test_sse_resumes_from_last_event_id(live: BackgroundServer, trainer: CollieClient, run: RunRead) -> None:
+    headers = {"Authorization": f"Bearer {TOKENS['labeler']}", "Last-Event-ID": "1"}
+    with httpx.stream("GET", f"{live.url}/api/runs/{run.id}/stream", headers=headers, timeout=5) as response:
+        assert response.headers["content-type"].startswith("text/event-stream")
+        lines = response.iter_lines()
+        ids = []
+        for line in lines:
+            if line.startswith("id:"):
+                ids.append(int(line[3:]))
+                break
+    assert ids == [2]  # event 1 (run created) is not repeated
+
+
+def test_sse_accepts_access_token_for_eventsource(live: BackgroundServer, run: RunRead) -> None:
+    url = f"{live.url}/api/runs/{run.id}/stream?after=0&access_token={TOKENS['labeler']}"
+    with httpx.stream("GET", url, timeout=5) as response:
+        assert response.status_code == 200
+    assert httpx.get(f"{live.url}/api/runs/{run.id}/stream?access_token=bad").status_code == 401
+
+
+def test_sse_consumer_survives_a_service_restart(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path / "restart.db")
+    server = BackgroundServer(create_app(settings)).start()
+    port = int(server.url.rsplit(":", 1)[1])
+    trainer = CollieClient(server.url, TOKENS["trainer"])
+    labeler = CollieClient(server.url, TOKENS["labeler"])
+    run = trainer.create_run(make_run_spec())
+    trainer.post_session(run.id, make_session(0, 10))
+    stream = CollieClient(server.url, TOKENS["operator"]).stream(run.id, max_backoff_s=0.2)
+    received: list[StreamEvent] = []
+    consumer = threading.Thread(target=lambda: received.extend(stream) or None, daemon=True)
+    consumer.start()
+    for _ in range(5):
+        claim = labeler.claim(run.id)
+        labeler.submit(run.id, claim.query.query_id, 0)
+    server.stop()
+    server = BackgroundServer(create_app(settings), port=port).start()
+    label_all(labeler, run.id)
+    expected = trainer.events(run.id).events
+    deadline = time.monotonic() + 15
+    while len(received) < len(expected) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    stream.close()
+    server.stop()
+    assert [e.id for e in received] == [e.id for e in expected] == list(range(1, len(expected) + 1))
+    assert stream.reconnects >= 1
+    for client in (trainer, labeler, stream.client):
+        client.close()

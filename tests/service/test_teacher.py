@@ -1,0 +1,75 @@
+"""The oracle teacher labels through the API with a labeler token, by the task rule."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.tasks import get_task
+from collie.teacher import OracleTeacher
+from teacher import TeacherLoop, oracle_for, segment_label
+from trainer.feedback.http import HttpFeedback
+
+from .conftest import TOKENS, make_run_spec, make_session
+from .test_http_feedback import segments
+
+
+def expected(client: CollieClient, run_id: int) -> dict[str, int]:
+    oracle = OracleTeacher(get_task("north", "point"))
+    return {q.query_id: segment_label(oracle, client.query(run_id, q.query_id)) for q in client.queries(run_id)}
+
+
+def test_cli_labels_every_query_by_the_rule(live: BackgroundServer, trainer: CollieClient) -> None:
+    run = trainer.create_run(make_run_spec())
+    session = make_session(0, 6)
+    for i, q in enumerate(session.queries):  # spread the paths over the plane: all three labels occur
+        q.xy = (np.asarray(q.xy) * 0.1 + [[(-1) ** i * 3.0, 5.0 - 2 * i]]).tolist()
+    trainer.post_session(run.id, session)
+    command = [sys.executable, "-m", "collie.cli", "teacher", "--api", live.url, "--run", str(run.id)]
+    out = subprocess.run(
+        [*command, "--token", TOKENS["labeler"]], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert "labelled 6 queries" in out.stdout
+    got = {e.query_id: e.label for e in trainer.effective_labels(run.id)}
+    assert got == expected(trainer, run.id)
+    assert {e.labeler for e in trainer.label_events(run.id)} == {"labeler"}
+
+
+def test_until_done_waits_for_new_sessions_and_stops_when_finished(
+    live: BackgroundServer, trainer: CollieClient, labeler: CollieClient
+) -> None:
+    run = trainer.create_run(make_run_spec())
+    loop = TeacherLoop(labeler, run.id, oracle_for(labeler, run.id, 0.0, 0), idle_wait_s=1.0)
+    worker = threading.Thread(target=loop.run, kwargs={"until_done": True}, daemon=True)
+    worker.start()
+    trainer.post_session(run.id, make_session(0, 3))
+    deadline = time.monotonic() + 10
+    while trainer.run(run.id).n_labels < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    trainer.post_session(run.id, make_session(1, 2))
+    while trainer.run(run.id).n_labels < 5 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    trainer.set_status(run.id, "finished")
+    worker.join(5)
+    assert not worker.is_alive() and loop.labelled == 5
+
+
+def test_feedback_source_collects_from_the_teacher_with_a_rate(live: BackgroundServer, labeler: CollieClient) -> None:
+    source = HttpFeedback.create(live.url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=2.0)
+    loop = TeacherLoop(labeler, source.run_id, oracle_for(labeler, source.run_id, 0.0, 0), rate=20.0, idle_wait_s=1.0)
+    worker = threading.Thread(target=loop.run, kwargs={"until_done": True}, daemon=True)
+    worker.start()
+    started = time.monotonic()
+    got = source.collect(0, 0, segments(0, 6))
+    assert time.monotonic() - started >= 5 / 20  # six labels at 20 per second
+    assert {e.query_id: e.label for e in got} == expected(labeler, source.run_id)
+    source.report("status", {"status": "finished", "epoch": 1})
+    worker.join(5)
+    assert not worker.is_alive()
+    source.close()

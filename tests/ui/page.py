@@ -1,0 +1,50 @@
+"""What a test reads off the labeler's page."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+from playwright.sync_api import Browser, Page
+
+VIEWPORT = {"width": 1024, "height": 640}
+
+_SEGMENT_ID = """() => {
+  const p = [...document.querySelectorAll("p")].find((e) => e.textContent.startsWith("Segment "));
+  return p ? p.querySelector("code")?.textContent ?? null : null;
+}"""
+
+
+def open_labeler(browser: Browser, url: str) -> Page:
+    page = browser.new_context(viewport=VIEWPORT).new_page()
+    page.goto(url)
+    return page
+
+
+def segment_id(page: Page) -> str | None:
+    return page.evaluate(_SEGMENT_ID)
+
+
+def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 20.0) -> str:
+    """The id of the segment on screen, once it differs from `not_id`."""
+    page.wait_for_function(
+        f"(old) => {{ const id = ({_SEGMENT_ID})(); return id !== null && id !== old; }}",
+        arg=not_id,
+        timeout=timeout_s * 1000,
+    )
+    found = segment_id(page)
+    assert found is not None
+    return found
+
+
+def wait_text(page: Page, text: str, timeout_s: float = 20.0) -> None:
+    page.get_by_text(text).first.wait_for(timeout=timeout_s * 1000)
+
+
+def canvas_pixels(page: Page, save_as: Path) -> np.ndarray:
+    """The 3D canvas as an (H, W, 3) array, also saved as a screenshot artifact."""
+    page.screenshot(path=str(save_as.with_name(save_as.stem + "-page.png")))
+    png = page.locator("canvas").first.screenshot(path=str(save_as))
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float64)

@@ -1,0 +1,176 @@
+"""The labeling UI in a real browser against a real service."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("playwright.sync_api", reason="pip install playwright")
+from playwright.sync_api import Browser
+
+from .page import canvas_pixels, open_labeler, segment_id, wait_segment, wait_text
+from .stack import Stack
+
+pytestmark = pytest.mark.slow
+DWELL_S = 0.1  # the UI ignores label keys this long after a segment appears
+
+
+def press(page: object, key: str) -> None:
+    time.sleep(DWELL_S + 0.05)
+    page.keyboard.press(key)  # type: ignore[attr-defined]
+
+
+def effective(stack: Stack, run_id: int) -> dict[str, tuple[int, str]]:
+    return {e.query_id: (e.label, e.labeler) for e in stack.trainer.effective_labels(run_id)}
+
+
+def test_label_five_by_keys_then_undo(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 6)
+    token = stack.new_labeler("keys")
+    page = open_labeler(browser, stack.ui(run.id, min_dwell_s=DWELL_S).labeler_url(token))
+    seen, shown = [], None
+    for key in ["1", "2", "3", "3", "1"]:
+        shown = wait_segment(page, shown)
+        seen.append(shown)
+        if len(seen) == 1:
+            wait_text(page, "This session 0 / 6")
+            page.screenshot(path=str(artifacts / "label-first-segment.png"))
+        press(page, key)
+    after = wait_segment(page, shown)  # the sixth segment
+    assert after not in seen
+    wait_text(page, "This session 5 / 6")
+    expected = dict(zip(seen, [0, 1, 2, 2, 0], strict=True))
+    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == expected
+
+    press(page, "u")  # the last label comes back to be labelled again
+    assert wait_segment(page, after) == seen[-1]
+    wait_text(page, "This session 4 / 6")
+    page.screenshot(path=str(artifacts / "label-after-undo.png"))
+    del expected[seen[-1]]
+    labels = effective(stack, run.id)
+    assert {q: v for q, (v, _) in labels.items()} == expected
+    assert {who for _, who in labels.values()} == {"keys"}
+
+    press(page, "3")  # relabel it; then the segment held before the undo is back
+    assert wait_segment(page, seen[-1]) == after
+    expected[seen[-1]] = 2
+    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == expected
+    page.context.close()
+
+
+@pytest.mark.parametrize("env", ["point", "ant"])
+def test_replay_canvas_is_not_blank(stack: Stack, browser: Browser, artifacts: Path, env: str) -> None:
+    run = stack.post_run(env, 1, seed=3)
+    page = open_labeler(browser, stack.ui(run.id).labeler_url(stack.new_labeler(f"canvas-{env}")))
+    wait_segment(page)
+    time.sleep(1.0)  # a few replay frames
+    pixels = canvas_pixels(page, artifacts / f"replay-{env}.png")
+    assert pixels.std() > 10.0, f"the {env} replay canvas looks blank (std {pixels.std():.1f})"
+    # the robot is drawn: the canvas centre (where the followed robot sits) is not floor-white/grey
+    h, w, _ = pixels.shape
+    centre = pixels[h // 2 - 40 : h // 2 + 40, w // 2 - 40 : w // 2 + 40]
+    assert centre.std() > 10.0
+    page.context.close()
+
+
+def test_two_labelers_at_once_never_overlap(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 8, seed=5)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S)
+    pages = [open_labeler(browser, app.labeler_url(stack.new_labeler(name))) for name in ("ann", "bob")]
+    current = [wait_segment(p) for p in pages]
+    assert current[0] != current[1]
+    seen: dict[str, list[str]] = {"ann": [current[0]], "bob": [current[1]]}
+    for step in range(6):  # interleaved: each labels three while the other holds a claim
+        i = step % 2
+        press(pages[i], "2")
+        current[i] = wait_segment(pages[i], current[i])
+        seen[("ann", "bob")[i]].append(current[i])
+        assert current[0] != current[1]
+    pages[0].screenshot(path=str(artifacts / "two-labelers-ann.png"))
+    pages[1].screenshot(path=str(artifacts / "two-labelers-bob.png"))
+    labels = effective(stack, run.id)
+    assert len(labels) == 6
+    for name, ids in seen.items():
+        labelled = {q for q, (_, who) in labels.items() if who == name}
+        assert labelled == set(ids[:3])
+    assert not set(seen["ann"]) & set(seen["bob"])
+    for p in pages:
+        p.context.close()
+
+
+def test_wrong_token_is_refused_with_no_scene(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 2)
+    app = stack.ui(run.id)
+    page = open_labeler(browser, app.labeler_url("not-a-real-token"))
+    wait_text(page, "The service refused this token")
+    page.screenshot(path=str(artifacts / "wrong-token.png"))
+    assert segment_id(page) is None
+    assert all(s.scene.env is None for s in app.sessions.values())  # no scene was ever built
+    assert stack.trainer.run(run.id).queue.leased == 0
+    page.context.close()
+
+
+def test_closed_tab_releases_its_claim(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 1)
+    app = stack.ui(run.id, release_grace_s=0.5)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("closer")))
+    wait_segment(page)
+    assert stack.trainer.run(run.id).queue.leased == 1
+    page.context.close()
+    deadline = time.monotonic() + 10
+    while stack.trainer.run(run.id).queue.leased and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert stack.trainer.run(run.id).queue.pending == 1
+
+
+def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 0)
+    page = open_labeler(browser, stack.ui(run.id).labeler_url(stack.new_labeler("waiter")))
+    wait_text(page, "Nothing to label right now")
+    page.screenshot(path=str(artifacts / "waiting.png"))
+    stack.post_session(run.id, "point", 1, 2, seed=7)
+    assert wait_segment(page).startswith("1-")  # no reload
+    page.context.close()
+
+
+def test_unbuildable_model_can_be_skipped(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    broken = stack.post_run("no_such_robot", 2, rollout_env="point")
+    page = open_labeler(browser, stack.ui(broken.id, min_dwell_s=DWELL_S).labeler_url(stack.new_labeler("skipper")))
+    first = wait_segment(page)
+    wait_text(page, "cannot be replayed")
+    page.screenshot(path=str(artifacts / "unbuildable-model.png"))
+    press(page, "1")  # a label is refused on a segment that cannot be shown
+    press(page, "s")
+    assert wait_segment(page, first) != first
+    events = stack.trainer.label_events(broken.id)
+    assert [(e.query_id, e.kind) for e in events] == [(first, "skip")]
+
+
+def test_unreachable_service_is_reported(stack: Stack, browser: Browser) -> None:
+    from labeling_ui.app import LabelingApp
+    from labeling_ui.session import UiConfig
+
+    app = LabelingApp(UiConfig(api="http://127.0.0.1:9", retry_max_s=1.0), port=0)
+    stack.apps.append(app)
+    page = open_labeler(browser, app.labeler_url("any-token"))
+    wait_text(page, "unreachable")
+    assert np.isfinite(app.port)
+    page.context.close()
+
+
+def test_sign_in_field_and_reload_stays_signed_in(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 2)
+    app = stack.ui(run.id, release_grace_s=30.0)  # however slow the reload, the claim waits for it
+    page = open_labeler(browser, app.url)  # no token in the URL
+    wait_text(page, "Paste the labeler token")
+    page.get_by_role("textbox").first.fill(stack.new_labeler("typist"))
+    page.get_by_role("button", name="Sign in").click()
+    first = wait_segment(page)
+    wait_text(page, "signed in as")
+    page.screenshot(path=str(artifacts / "signed-in-by-field.png"))
+    page.reload()  # the token is remembered in the page's storage; the claim is still ours
+    assert wait_segment(page) == first
+    page.context.close()

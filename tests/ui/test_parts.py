@@ -1,0 +1,159 @@
+"""The labeling UI's parts without a browser: replay pacing, poses, the inset, the service link."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from collie.tasks import get_task
+from labeling_ui.inset import SIZE, render_inset, view_box
+from labeling_ui.models import ModelError, Poser, replay_model
+from labeling_ui.playback import Player
+from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
+from labeling_ui.service import AuthRefused, ServiceDown, ServiceLink
+
+from .stack import Stack
+
+
+def test_labeling_ui_imports_no_torch() -> None:
+    code = "import sys, labeling_ui.cli, labeling_ui.app; assert 'torch' not in sys.modules, 'torch imported'"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_poser_interpolates_on_the_joint_manifold() -> None:
+    model = replay_model("ant")
+    rng = np.random.default_rng(0)
+    qpos = np.tile(model.qpos0, (3, 1))
+    qpos[:, :2] = [[0, 0], [1, 0], [2, 2]]
+    for row in qpos:  # random unit torso quaternions
+        q = rng.normal(size=4)
+        row[3:7] = q / np.linalg.norm(q)
+    poser = Poser(model, qpos)
+    np.testing.assert_allclose(poser.configuration(1.0), qpos[1])
+    half = poser.configuration(0.5)
+    np.testing.assert_allclose(half[:2], [0.5, 0.0], atol=1e-9)
+    assert abs(np.linalg.norm(half[3:7]) - 1) < 1e-9
+    np.testing.assert_allclose(poser.configuration(99.0), qpos[2])  # clamped to the last frame
+    assert poser.pose(0.0).xpos[1][0] == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize(
+    ("env", "qpos", "message"),
+    [("no_such_robot", np.zeros((2, 2)), "cannot build"), ("point", np.zeros((2, 5)), "nq=2")],
+)
+def test_unreplayable_segments_raise_model_error(env: str, qpos: np.ndarray, message: str) -> None:
+    with pytest.raises(ModelError, match=message):
+        Poser(replay_model(env), qpos)
+
+
+class Recorder:
+    def __init__(self) -> None:
+        self.positions: list[float] = []
+        self.frames: list[tuple[int, bool]] = []
+        self.lock = threading.Lock()
+
+    def render(self, position: float) -> None:
+        with self.lock:
+            self.positions.append(position)
+
+
+def test_player_paces_at_most_30_hz_and_loops() -> None:
+    rec = Recorder()
+    player = Player(rec.render, lambda f, p: rec.frames.append((f, p)), fps=20.0)
+    player.load(20)
+    assert rec.positions == [0.0]  # the first frame is drawn at once, by the caller
+    time.sleep(1.5)
+    player.close()
+    ticks = len(rec.positions) - 1
+    assert 25 <= ticks / 1.5 <= 31
+    assert max(rec.positions) < 20 and min(rec.positions[2:]) < 5  # wrapped around (1 s per loop)
+
+
+def test_player_step_seek_speed_and_stop_at_end() -> None:
+    rec = Recorder()
+    player = Player(rec.render, fps=20.0)
+    player.load(10, play=False)
+    player.step(3)
+    assert player.position == 3.0 and not player.playing
+    player.step(-10)
+    assert player.position == 0.0
+    player.seek(42)
+    assert player.position == 9.0
+    player.set_speed(100)
+    assert player.speed == 4.0
+    player.loop = False
+    player.replay()
+    time.sleep(0.4)  # 10 frames at 20 fps × 4 = 0.125 s
+    assert not player.playing and player.position == 9.0
+    player.close()
+
+
+def test_inset_is_north_up_and_paints_the_task() -> None:
+    task = get_task("north", "ant")
+    image = render_inset(task, np.array([[0.0, 1.0], [0.0, 3.0]]), np.array([[0.0, 0.0], [0.0, 1.0]]))
+    assert image.shape == (SIZE, SIZE, 3) and image.dtype == np.uint8
+    top, bottom = image[5, SIZE // 2 + 20], image[-5, SIZE // 2 + 20]  # beside the drawn y axis
+    assert tuple(top) == (232, 234, 238)  # north of the origin: the (neutral) wedge
+    assert tuple(bottom) == (248, 200, 200)  # south: bad
+    cx, cy, half = view_box(np.array([[10.0, 10.0]]))
+    assert half >= 5 and 0 <= cx <= 10 and 0 <= cy <= 10  # holds the origin and the path
+
+
+def test_floor_map_and_region_outlines() -> None:
+    task = get_task("north", "ant")
+    ((rgb, vertices, faces),) = tint_meshes(task, 0.0, 0.0, 10.0, cells=20)  # bad only: north has no good
+    assert rgb == TINT_RGB[0] and faces.max() < len(vertices)
+    inside = vertices[faces].mean(axis=1)[:, :2]  # triangle centroids all lie in the bad area
+    assert (task.classify(inside) == 0).all()
+    assert tint_meshes(task, 0.0, 50.0, 1.0, cells=8) == []  # all inside the wedge
+    kinds = {r["kind"]: region_outline(r) for r in get_task("hole", "ant").to_dict()["regions"]}
+    outline = kinds["disc"]
+    assert outline is not None and outline.shape[1] == 3
+
+
+def test_service_link_sorts_errors(stack: Stack) -> None:
+    with pytest.raises(AuthRefused):
+        ServiceLink(stack.api, "wrong").login()
+    with pytest.raises(AuthRefused, match="trainer token"):
+        ServiceLink(stack.api, "tr-token-0123456789").login()
+    with pytest.raises(ServiceDown):
+        ServiceLink("http://127.0.0.1:9", "x").login()
+    link = ServiceLink(stack.api, stack.new_labeler("linked"))
+    assert link.login().name == "linked"
+    run = stack.post_run("point", 2)
+    assert link.pick_run() is not None
+    claim = link.claim(run.id)
+    assert claim is not None
+    link.submit(run.id, claim.query.query_id, 2, 1.5, "req-1")
+    link.submit(run.id, claim.query.query_id, 2, 1.5, "req-1")  # a retry: no second event
+    progress = link.progress(run.id, 0)
+    assert (progress.session_done, progress.session_size, progress.total_done) == (1, 2, 1)
+    assert len(stack.trainer.label_events(run.id)) == 1
+
+
+def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path: Path) -> None:
+    info = tmp_path / "ui.json"
+    cmd = [sys.executable, "-m", "labeling_ui.cli"]
+    args = ["--api", stack.api, "--port", "0", "--info-json", str(info), "--token", "tok en"]
+    proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not info.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        served = json.loads(info.read_text())
+        page = httpx.get(served["url"], timeout=10)
+        assert page.status_code == 200 and "<html" in page.text.lower()  # viser's client
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0
+    assert f"labeler URL: {served['url']}?token=tok%20en" in out

@@ -1,0 +1,48 @@
+"""Skills of a finished run, loaded back for downstream tasks and report figures: the run's config,
+its learner (π, φ, Q) from `checkpoint.pt`, the skill prior and the observation normaliser."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from trainer.checkpoint import load_checkpoint
+from trainer.config import Config
+from trainer.envs import make_env
+from trainer.methods import build_agent
+from trainer.metra import Metra
+from trainer.rollout import Normaliser
+from trainer.skills import SkillPrior
+
+
+@dataclass
+class TrainedSkills:
+    cfg: Config
+    agent: Metra
+    prior: SkillPrior
+    normalise: Normaliser
+    epoch: int
+
+
+def run_config(run_dir: str | Path) -> Config:
+    """The run's own config.json (keys this version does not know are ignored)."""
+    stored = json.loads((Path(run_dir) / "config.json").read_text())
+    known = {f.name for f in dataclasses.fields(Config)}
+    return Config(**{k: v for k, v in stored.items() if k in known})
+
+
+def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
+    """Rebuild the run's learner from its checkpoint, on `device`, ready to act."""
+    cfg = run_config(run_dir)
+    state = load_checkpoint(Path(run_dir) / "checkpoint.pt")
+    env = make_env(cfg.env, episode_steps=cfg.episode_steps)
+    obs_shape, action_dim, mean, std = env.obs_shape, env.action_dim, env.obs_mean, env.obs_std
+    env.close()
+    prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+    agent, _ = build_agent(cfg, obs_shape, action_dim, prior, torch.device(device))
+    agent.load_state_dict(state["agent"])
+    return TrainedSkills(cfg, agent, prior, Normaliser(mean, std), int(state["epoch"]))

@@ -1,0 +1,221 @@
+"""`collie report RUN_ROOT…`: run folders → the paper's tables (mean ± std over seeds, markdown and
+CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
+
+    report.md       safe coverage (Table 1), safe ratio (Table 2), composite and weighted composite
+                    coverage, wall time per run, zero-shot (Table 3) and hierarchical (Table 4)
+                    downstream returns when downstream.json exists; methods in the paper's order
+    metrics.csv     one row per (env, task, method, variant, metric): mean, std, n, seeds
+    runs.csv        one row per run folder with its final metrics
+    figures/skills_<env>_<task>.png   one panel per method: its lowest seed's final evaluation
+                    skills over the task's shaded regions
+
+A run folder is any folder with summary.json; runs not "finished" are listed and left out. ± is the
+sample standard deviation over seeds (as the paper's tables); a single seed shows its value alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+METRICS: tuple[tuple[str, str, int], ...] = (
+    ("safe_coverage", "Safe state coverage (Table 1)", 2),
+    ("safe_ratio", "Safe state ratio (Table 2)", 3),
+    ("composite_coverage", "Composite safe coverage (+1 good, +1 neutral, −1 bad)", 2),
+    ("weighted_composite_coverage", "Weighted composite safe coverage (+2 good, +1 neutral, −1 bad)", 2),
+    ("wall_s", "Wall time per run (s)", 0),
+)
+METHOD_ORDER = ("oracle", "diayn", "lsd", "metra", "ddg", "dodont", "collie")
+DISPLAY = {"oracle": "Oracle", "diayn": "DIAYN", "lsd": "LSD", "metra": "METRA", "ddg": "DDG*",
+           "dodont": "DoDont*", "collie": "COLLIE"}
+
+
+@dataclass
+class RunResult:
+    path: Path
+    env: str
+    task: str
+    method: str
+    seed: int
+    status: str
+    metrics: dict[str, Any]
+    variant: str = ""
+    downstream: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        name = DISPLAY.get(self.method, self.method)
+        return f"{name} ({self.variant})" if self.variant else name
+
+    @property
+    def column(self) -> str:
+        return f"{self.env} {self.task}"
+
+    def order(self) -> tuple[int, str]:
+        rank = METHOD_ORDER.index(self.method) if self.method in METHOD_ORDER else len(METHOD_ORDER)
+        return rank, self.variant
+
+
+def load_run(folder: Path) -> RunResult:
+    summary = json.loads((folder / "summary.json").read_text())
+    cfg = summary.get("config") or json.loads((folder / "config.json").read_text())
+    sweep = folder / "sweep_run.json"
+    variant = json.loads(sweep.read_text()).get("variant", "") if sweep.exists() else ""
+    down = folder / "downstream.json"
+    return RunResult(folder, cfg["env"], cfg["task"], cfg["method"], int(cfg["seed"]), summary.get("status", "?"),
+                     summary, variant, json.loads(down.read_text()) if down.exists() else {})
+
+
+def find_runs(roots: list[Path]) -> list[RunResult]:
+    """Every run folder (one with summary.json) under `roots`, in a stable order."""
+    folders = sorted({p.parent for root in roots for p in Path(root).rglob("summary.json")})
+    return [load_run(f) for f in folders]
+
+
+def format_cell(values: list[float], digits: int) -> str:
+    """'mean ± std' (sample std over seeds); a lone value as itself; nothing as '–'."""
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+    if len(v) == 0:
+        return "–"
+    if len(v) == 1:
+        return f"{v[0]:.{digits}f}"
+    return f"{v.mean():.{digits}f} ± {v.std(ddof=1):.{digits}f}"
+
+
+def _table(rows: list[str], columns: list[str], cell: dict[tuple[str, str], str], corner: str = "method") -> str:
+    lines = [f"| {corner} | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
+    lines += [f"| {r} | " + " | ".join(cell.get((r, c), "–") for c in columns) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _rows_and_columns(runs: list[RunResult]) -> tuple[list[str], list[str]]:
+    rows = [r.label for r in sorted(runs, key=RunResult.order)]
+    columns = sorted({r.column for r in runs})
+    return list(dict.fromkeys(rows)), columns
+
+
+def _group(runs: list[RunResult]) -> dict[tuple[str, str], list[RunResult]]:
+    groups: dict[tuple[str, str], list[RunResult]] = {}
+    for r in runs:
+        groups.setdefault((r.label, r.column), []).append(r)
+    return groups
+
+
+def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
+    """Methods × tasks, each cell mean ± std of the run's final `metric` over seeds."""
+    rows, columns = _rows_and_columns(runs)
+    cells = {k: format_cell([r.metrics.get(metric, math.nan) for r in g], digits) for k, g in _group(runs).items()}
+    return _table(rows, columns, cells)
+
+
+def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
+    """(title, markdown) for the zero-shot (avg and best per task) and hierarchical returns."""
+    out = []
+    zs = [r for r in runs if "zero_shot" in r.downstream]
+    if zs:
+        rows, columns = _rows_and_columns(zs)
+        cells: dict[tuple[str, str], str] = {}
+        for (label, col), g in _group(zs).items():
+            cells[(label, f"{col} (avg)")] = format_cell([r.downstream["zero_shot"]["mean"] for r in g], 2)
+            cells[(label, f"{col} (best)")] = format_cell([r.downstream["zero_shot"]["best"] for r in g], 2)
+        cols = [f"{c} (avg)" for c in columns] + [f"{c} (best)" for c in columns]
+        out.append(("Zero-shot motion return (Table 3)", _table(rows, cols, cells)))
+    hi = [r for r in runs if "hierarchical" in r.downstream]
+    if hi:
+        rows, columns = _rows_and_columns(hi)
+        cells = {}
+        for (label, col), g in _group(hi).items():
+            cells[(label, col)] = format_cell([r.downstream["hierarchical"]["mean"] for r in g], 2)
+            cells[(label, f"{col} (random skills)")] = format_cell(
+                [r.downstream["hierarchical"]["random_skills_mean"] for r in g], 2)
+        cols = [c for col in columns for c in (col, f"{col} (random skills)")]
+        out.append(("Hierarchical Goal return, PPO over frozen skills (Table 4)", _table(rows, cols, cells)))
+    return out
+
+
+def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
+    """metrics.csv: one row per (env, task, method, variant, metric)."""
+    rows = []
+    for (_, _), g in sorted(_group(runs).items(), key=lambda kv: (kv[1][0].column, kv[1][0].order())):
+        r0 = g[0]
+        values: dict[str, list[float]] = {m: [r.metrics.get(m, math.nan) for r in g] for m, _, _ in METRICS}
+        for kind, key in (("zero_shot", "mean"), ("zero_shot", "best"), ("hierarchical", "mean")):
+            if all(kind in r.downstream for r in g):
+                values[f"{kind}_{key}"] = [r.downstream[kind][key] for r in g]
+        for metric, v in values.items():
+            a = np.asarray(v, dtype=float)
+            rows.append({"env": r0.env, "task": r0.task, "method": r0.method, "variant": r0.variant,
+                         "label": r0.label, "metric": metric, "mean": float(a.mean()),
+                         "std": float(a.std(ddof=1)) if len(a) > 1 else math.nan, "n": len(a),
+                         "seeds": " ".join(str(r.seed) for r in g)})
+    return rows
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["empty"])
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path], out: Path) -> str:
+    seeds = sorted({len(g) for g in _group(runs).values()})
+    parts = [f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
+             "Cells: mean ± sample std over seeds of each run's final evaluation."]
+    if skipped:
+        parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
+    for metric, title, digits in METRICS:
+        if any(metric in r.metrics for r in runs):
+            parts.append(f"## {title}\n\n{metric_table(runs, metric, digits)}")
+    for title, table in downstream_tables(runs):
+        parts.append(f"## {title}\n\n{table}")
+    if figures:
+        parts.append("## Skills (final evaluation, lowest seed)\n\n"
+                     + "\n".join(f"![{p.stem}]({p.relative_to(out)})" for p in figures))
+    return "\n\n".join(parts) + "\n"
+
+
+def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str, Path]:
+    """Find the runs under `roots`, write report.md, metrics.csv, runs.csv and figures into `out`."""
+    every = [r for r in find_runs(roots) if out not in r.path.parents]
+    runs = [r for r in every if r.status == "finished"]
+    skipped = [r for r in every if r.status != "finished"]
+    out.mkdir(parents=True, exist_ok=True)
+    paths: list[Path] = []
+    if figures and runs:
+        from trainer.report_figures import skill_figures
+
+        paths = skill_figures(runs, out / "figures")
+    _write_csv(out / "metrics.csv", long_rows(runs))
+    _write_csv(out / "runs.csv", [{"path": str(r.path), "env": r.env, "task": r.task, "method": r.method,
+                                   "variant": r.variant, "seed": r.seed,
+                                   **{m: r.metrics.get(m) for m, _, _ in METRICS}} for r in runs])
+    (out / "report.md").write_text(markdown(runs, skipped, paths, out))
+    return {"markdown": out / "report.md", "metrics_csv": out / "metrics.csv", "runs_csv": out / "runs.csv"}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("roots", nargs="+", help="folders holding run folders (searched recursively)")
+    p.add_argument("--out", default=None, help="report folder (default: FIRST_ROOT/report)")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+
+
+def run(args: argparse.Namespace) -> int:
+    roots = [Path(r) for r in args.roots]
+    missing = [str(r) for r in roots if not r.is_dir()]
+    if missing:
+        print(f"collie report: error: not a folder: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else roots[0] / "report"
+    paths = write_report(roots, out, figures=not args.no_figures)
+    print((out / "report.md").read_text())
+    print(f"written: {', '.join(str(p) for p in paths.values())}")
+    return 0

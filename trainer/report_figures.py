@@ -1,0 +1,64 @@
+"""Fig. 2-style figures for `collie report`: per (env, task), one panel per method with the final
+evaluation skills of its lowest seed over the task's shaded regions. Paths come from the run's
+eval_latest.npz; runs written before that file existed are rolled out again from checkpoint.pt
+(deterministic policy, the evaluation skills of `Trainer.evaluate`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from collie.tasks import get_task
+from trainer.envs import env_class
+from trainer.plots import draw_skill_panel
+from trainer.report import RunResult
+
+
+def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """(xy (n, T+1, 2), skills (n, k)) of the run's last evaluation."""
+    saved = run.path / "eval_latest.npz"
+    if saved.exists():
+        with np.load(saved) as f:
+            return f["xy"], f["skill"]
+    from trainer.envs import VectorEnv
+    from trainer.pretrained import load_skills
+    from trainer.rollout import rollout
+
+    skills = load_skills(run.path)
+    c = skills.cfg
+    env = VectorEnv(c.env, c.eval_trajectories, episode_steps=c.episode_steps, layout_seed=c.seed)
+    z = skills.prior.evaluation_skills(c.eval_trajectories, seed=c.seed)
+    traj = rollout(env, skills.agent, z, [c.seed * 1000 + i for i in range(c.eval_trajectories)],
+                   skills.normalise, deterministic=True)
+    env.close()
+    return traj.xy, traj.skill
+
+
+def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
+    """One PNG per (env, task) present in `runs`; returns their paths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for env, task_name in sorted({(r.env, r.task) for r in runs}):
+        group = sorted((r for r in runs if (r.env, r.task) == (env, task_name)), key=lambda r: (r.order(), r.seed))
+        first = list({r.label: r for r in reversed(group)}.values())[::-1]  # lowest seed per method
+        first.sort(key=RunResult.order)
+        dims = env_class(env).position_dims
+        fig = Figure(figsize=(3.2 * len(first), 3.4 if dims == 2 else 3.0))
+        for i, run in enumerate(first):
+            xy, skill = final_skills(run)
+            task = get_task(task_name, env, layout_seed=run.seed)
+            ax = fig.add_subplot(1, len(first), i + 1)
+            cov = run.metrics.get("safe_coverage", float("nan"))
+            draw_skill_panel(ax, list(xy), task, skills=skill, position_dims=dims, legend=False,
+                             title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}")
+            ax.tick_params(labelsize=7)
+        fig.suptitle(f"{env} {task_name}", fontsize=11)
+        fig.tight_layout()
+        path = folder / f"skills_{env}_{task_name}.png"
+        FigureCanvasAgg(fig)
+        fig.savefig(path, dpi=90)
+        paths.append(path)
+    return paths

@@ -1,0 +1,186 @@
+"""`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
+thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
+
+Resumable: a run folder whose summary.json says "finished" is not rerun; a run with a checkpoint
+continues from it (`collie train --resume`); with `--downstream`, a run whose downstream.json already
+holds its task is not re-evaluated. Folders: OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with
+sweep_run.json naming its method and variant for `collie report`. After the runs, the report of
+OUT is written to OUT/report/.
+
+    collie sweep --env point --tasks north,range --methods metra,collie --seeds 3 --out runs/sweep
+    collie sweep --methods collie --variant additive --out runs/ablations -- --reward-form additive
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import shlex
+import subprocess
+import sys
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from trainer.config import METHODS, PRESETS
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    env: str
+    task: str
+    method: str
+    seed: int
+    out: str  # the run folder
+    preset: str = "cpu"
+    variant: str = ""  # a name for extra flags (an ablation), part of the folder name and report label
+    flags: tuple[str, ...] = ()  # extra `collie train` flags
+    downstream: bool = False
+    downstream_flags: tuple[str, ...] = field(default=())
+
+
+def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, variant: str = "") -> Path:
+    label = f"{method}+{variant}" if variant else method
+    return Path(root) / f"{env}-{task}-{label}-s{seed}"
+
+
+def grid(root: str | Path, env: str, tasks: list[str], methods: list[str], seeds: list[int],
+         **kw: Any) -> list[RunSpec]:
+    """Every (task, method, seed) as a RunSpec under `root`, seed by seed (a sweep cut short still
+    holds whole comparisons)."""
+    variant = kw.get("variant", "")
+    return [RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), **kw)
+            for s in seeds for t in tasks for m in methods]
+
+
+def is_finished(out: str | Path) -> bool:
+    summary = Path(out) / "summary.json"
+    return summary.exists() and json.loads(summary.read_text()).get("status") == "finished"
+
+
+def train_command(spec: RunSpec) -> list[str]:
+    cmd = [sys.executable, "-m", "collie.cli", "train", "--env", spec.env, "--task", spec.task, "--method",
+           spec.method, "--preset", spec.preset, "--seed", str(spec.seed), "--out", spec.out, "--threads", "1",
+           "--no-progress", *spec.flags]
+    if (Path(spec.out) / "checkpoint.pt").exists():
+        cmd.append("--resume")
+    return cmd
+
+
+def downstream_done(out: str | Path) -> bool:
+    path = Path(out) / "downstream.json"
+    return path.exists() and bool(json.loads(path.read_text()))
+
+
+def _call(cmd: list[str], log: Path) -> None:
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "a") as f:
+        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    if proc.returncode != 0:
+        raise RuntimeError(f"failed ({proc.returncode}): {shlex.join(cmd)} — see {log}")
+
+
+def run_one(spec: RunSpec) -> dict[str, Any]:
+    """Train (or resume, or skip) one run, then its downstream task if asked; returns summary.json."""
+    out = Path(spec.out)
+    if not is_finished(out):
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
+        _call(train_command(spec), out.with_suffix(".log"))
+    if spec.downstream and not downstream_done(out):
+        _call([sys.executable, "-m", "trainer.downstream", str(out), *spec.downstream_flags],
+              out.with_suffix(".downstream.log"))
+    return json.loads((out / "summary.json").read_text())
+
+
+def run_all(specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None
+            ) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+    """Yield (spec, summary or the exception it raised) as runs end. Local: `jobs` runs at a time,
+    each a child process. Ray: one task per run (1 CPU each) on the cluster at `ray_address`;
+    the run folders must be on a file system the cluster's nodes share."""
+    if ray_address:
+        yield from _run_on_ray(specs, ray_address)
+        return
+    with ThreadPoolExecutor(max(1, jobs)) as pool:
+        futures = {pool.submit(run_one, s): s for s in specs}
+        for fut in as_completed(futures):
+            exc = fut.exception()
+            yield futures[fut], (exc if exc is not None else fut.result())
+
+
+def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+    try:
+        ray = importlib.import_module("ray")
+    except ModuleNotFoundError as exc:
+        raise RuntimeError("--ray needs the `ray` package on this machine and the cluster (pip install ray)") from exc
+    ray.init(address=address)
+    remote = ray.remote(num_cpus=1)(run_one)
+    pending = {remote.remote(s): s for s in specs}
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1)
+        spec = pending.pop(done[0])
+        try:
+            yield spec, ray.get(done[0])
+        except Exception as exc:  # a failed run is reported, the others go on
+            yield spec, exc
+
+
+# ---- `collie sweep` ------------------------------------------------------------------------------
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--env", default="point")
+    p.add_argument("--tasks", default="north,range,hole_north", help="comma-separated task names")
+    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)}")
+    p.add_argument("--seeds", type=int, default=3, help="seeds 0 … N−1")
+    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
+    p.add_argument("--out", default="runs/sweep", help="root folder of the run folders")
+    p.add_argument("--variant", default="", help="name of this ablation (folder suffix and report label)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at a time on this machine")
+    p.add_argument("--ray", default=None, metavar="ADDRESS", help="run on the Ray cluster at ADDRESS instead")
+    p.add_argument("--downstream", action="store_true", help="evaluate each finished run's downstream task")
+    p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
+    p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
+    p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    methods, tasks = args.methods.split(","), args.tasks.split(",")
+    bad = [m for m in methods if m not in METHODS]
+    bad_variant = bool(args.variant) and not args.variant.replace("_", "").isalnum()
+    problem = (f"unknown method(s) {', '.join(bad)}; valid: {', '.join(METHODS)}" if bad
+               else "--seeds must be ≥ 1" if args.seeds < 1
+               else "--variant: letters, digits and _ only" if bad_variant
+               else None)
+    if problem:
+        print(f"collie sweep: error: {problem}", file=sys.stderr)
+        return 2
+    flags = tuple(f for f in args.train_flags if f != "--")
+    specs = grid(args.out, args.env, tasks, methods, list(range(args.seeds)), preset=args.preset,
+                 variant=args.variant, flags=flags, downstream=args.downstream,
+                 downstream_flags=tuple(shlex.split(args.downstream_flags)))
+    todo = sum(not is_finished(s.out) for s in specs)
+    print(f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
+          f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}")
+    failed: list[tuple[RunSpec, Exception]] = []
+    try:
+        with tqdm(total=len(specs), desc="sweep", unit="run") as bar:
+            for spec, result in run_all(specs, args.jobs, args.ray):
+                if isinstance(result, Exception):
+                    failed.append((spec, result))
+                bar.update(1)
+    except RuntimeError as exc:  # the engine itself could not start
+        print(f"collie sweep: error: {exc}", file=sys.stderr)
+        return 2
+    for spec, exc in failed:
+        print(f"FAILED {spec.out}: {exc}", file=sys.stderr)
+    if not args.no_report:
+        from trainer.report import write_report
+
+        paths = write_report([Path(args.out)], Path(args.out) / "report")
+        print(f"report: {paths['markdown']}")
+    return 1 if failed else 0
