@@ -6,12 +6,24 @@ PY := $(VENV)/bin/python
 # CPU Linux: the pinned CPU wheel (an unpinned torch pulls GBs of CUDA). On a GPU host: make TORCH_SPEC=torch==2.13.0 PIP_TORCH_INDEX=
 TORCH_SPEC ?= torch==2.13.0
 STAMP := $(VENV)/.stamp-install
+# Debian packages: Chromium for the browser tests, EGL (Mesa) for MuJoCo's offscreen rendering.
+SYSTEM_PACKAGES := chromium libegl1 libegl-mesa0 libgl1 libgles2 libosmesa6 fonts-liberation
+SYS_STAMP := $(VENV)/.stamp-system
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test lint bench-guidance bench-update bench-service clean
+.PHONY: setup demo test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard clean
 
-$(STAMP): pyproject.toml Makefile
+$(SYS_STAMP):
+	@mkdir -p $(VENV)
+	@if command -v dpkg >/dev/null && ! dpkg -s $(SYSTEM_PACKAGES) >/dev/null 2>&1; then \
+	  echo "installing Debian packages: $(SYSTEM_PACKAGES)"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; \
+	fi
+	@touch $(SYS_STAMP)
+
+$(STAMP): pyproject.toml Makefile $(SYS_STAMP)
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH_SPEC)" mujoco==3.17.0
@@ -35,6 +47,12 @@ bench-guidance: $(STAMP)
 
 bench-update: $(STAMP)
 	$(PY) benchmarks/bench_update.py
+
+bench-pixels: $(STAMP)
+	$(PY) benchmarks/bench_pixels.py
+
+bench-encoders: $(STAMP)
+	$(PY) benchmarks/bench_encoders.py
 
 clean:
 	rm -rf runs .pytest_cache .ruff_cache

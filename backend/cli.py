@@ -7,6 +7,7 @@ the bound URL is printed either way (and written to the tokens file as "api").""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -51,15 +52,19 @@ def run(args: argparse.Namespace) -> int:
     generated = {r for r in tokens if f"COLLIE_{r.upper()}_TOKEN" not in os.environ}
     app = create_app(settings)
     sock, url = bind(args.host, args.port)
-    if args.tokens_json is not None:
+    if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
         args.tokens_json.parent.mkdir(parents=True, exist_ok=True)
-        args.tokens_json.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
-        args.tokens_json.chmod(0o600)
+        partial = args.tokens_json.with_suffix(".partial")
+        partial.touch(mode=0o600)
+        partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
+        partial.replace(args.tokens_json)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
     for role, token in tokens.items():  # secrets given through the environment stay out of logs
         shown = token if getattr(settings, f"{role}_token") is not None and role in generated else "(from environment)"
         print(f"  {role} token: {shown}", flush=True)
-    uvicorn_server(app, args.log_level).run(sockets=[sock])
+    # uvicorn shuts down cleanly, then re-raises Ctrl-C: for us that is a normal exit.
+    with contextlib.suppress(KeyboardInterrupt):
+        uvicorn_server(app, args.log_level).run(sockets=[sock])
     return 0
 
 

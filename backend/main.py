@@ -12,14 +12,13 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel
 from sqlalchemy.exc import IntegrityError
 
 from backend import __version__, migrate
 from backend.db import Database
 from backend.limits import BodyLimit
-from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry
+from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
 from backend.services.errors import ServiceError
 from backend.services.events import EventHub
@@ -112,6 +111,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
     _document_raw_bodies(app, (SessionPost,))
     app.add_middleware(BodyLimit, default_bytes=settings.max_body_bytes, by_suffix=large)
-    if settings.web_dir is not None and (settings.web_dir / "index.html").is_file():
-        app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    web.install(app, settings.web_dir)  # the operators' dashboard: /api/dashboard, and web/ at /
     return app

@@ -219,15 +219,17 @@ class CollieClient:
         value: Submission,
         seconds: float | None = None,
         client_request_id: str | None = None,
+        next: bool = False,
     ) -> LabelAck:
-        """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely."""
+        """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely.
+        With next=True the answer also carries the labeler's next claimed query (ack.next)."""
         body = LabelSubmit(
             query_id=query_id,
             value=value,
             seconds=seconds,
             client_request_id=client_request_id or new_request_id(),
         )
-        return self._post(LabelAck, f"/runs/{run_id}/labels", body)
+        return self._post(LabelAck, f"/runs/{run_id}/labels", body, next="true" if next else None)
 
     def skip(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
         return self.submit(run_id, query_id, "skip", client_request_id=client_request_id)

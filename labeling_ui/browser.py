@@ -28,7 +28,7 @@ if (token !== null) {
 """
 
 
-def read_token(client: viser.ClientHandle, timeout_s: float = 5.0) -> str | None:
+def read_token(client: viser.ClientHandle, timeout_s: float = 30.0) -> str | None:
     """The token given in the URL, else the one remembered from before, else None."""
     script = _TOKEN_FROM_URL % json.dumps(_STORAGE_PREFIX + TOKEN_KEY)
     client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=script))

@@ -9,6 +9,7 @@ with the floor.
 
 from __future__ import annotations
 
+import copy
 import threading
 import time
 from collections.abc import Hashable
@@ -65,8 +66,9 @@ class ReplayScene:
             self.client.scene.reset()
             self._overlays, self._floor, self._floor_key, self._trail = [], [], None, None
             # mjviser's scene takes a server; a ClientHandle offers the same scene/atomic/flush
-            # surface, which keeps every node local to this browser.
-            self._mj = ViserMujocoScene(cast(viser.ViserServer, self.client), model, num_envs=1)
+            # surface, which keeps every node local to this browser. It gets its own copy of the
+            # model because it rescales the model's visual options in place.
+            self._mj = ViserMujocoScene(cast(viser.ViserServer, self.client), copy.copy(model), num_envs=1)
             # mjviser lights with an HDR environment map, whose prefiltering stalls software-WebGL
             # browsers for seconds; viser's default lights are enough for a replay
             self.client.scene.configure_environment_map(hdri=None)

@@ -28,7 +28,7 @@ from labeling_ui.browser import read_token, remember_token
 from labeling_ui.inset import render_inset
 from labeling_ui.keys import bind_keys
 from labeling_ui.models import ModelError, Poser
-from labeling_ui.panels import LABEL_NAMES, Panels, SegmentInfo
+from labeling_ui.panels import Panels, SegmentInfo
 from labeling_ui.playback import Player
 from labeling_ui.regions import tint_grid, tint_meshes
 from labeling_ui.scene import ReplayScene
@@ -503,5 +503,3 @@ class LabelerSession:
                 self.waiting_on = (target[0], last)
                 self._actions.put(Action("wake"))
 
-
-__all__ = ["LABEL_NAMES", "LabelerSession", "UiConfig"]

@@ -59,16 +59,19 @@ class TeacherLoop:
         """Label what is claimable; with until_done, keep waiting for new sessions until the run
         is finished, failed or stopped."""
         after = self._retry(lambda: self.client.run(self.run_id)).last_event_id
+        held: QueryRead | None = None
         while not self.stop.is_set():
-            try:
-                claim = self._retry(lambda: self.client.claim(self.run_id))
-            except ApiError as exc:
-                if exc.status == 409:  # finished, failed or stopping: nothing more to do
-                    log.info("run %s takes no more labels: %s", self.run_id, exc.detail)
-                    break
-                raise
-            if claim is not None:
-                self._label(claim.query)
+            if held is None:
+                try:
+                    claim = self._retry(lambda: self.client.claim(self.run_id))
+                except ApiError as exc:
+                    if exc.status == 409:  # finished, failed or stopping: nothing more to do
+                        log.info("run %s takes no more labels: %s", self.run_id, exc.detail)
+                        break
+                    raise
+                held = claim.query if claim is not None else None
+            if held is not None:
+                held = self._label(held)
                 continue
             if not until_done or self._retry(lambda: self.client.run(self.run_id)).status in FINISHED:
                 break
@@ -78,7 +81,8 @@ class TeacherLoop:
             ).last_id
         return self.labelled
 
-    def _label(self, query: QueryRead) -> None:
+    def _label(self, query: QueryRead) -> QueryRead | None:
+        """Label `query`; returns the next query, claimed in the same round trip (or None)."""
         started = time.monotonic()
         value = segment_label(self.oracle, query)
         wait = self._last_submit + self.min_gap_s - time.monotonic()
@@ -87,15 +91,18 @@ class TeacherLoop:
         request_id = new_request_id()  # one id for every retry: the label is stored once
         seconds = time.monotonic() - started
         try:
-            self._retry(lambda: self.client.submit(self.run_id, query.query_id, value, seconds, request_id))  # type: ignore[arg-type]
+            ack = self._retry(
+                lambda: self.client.submit(self.run_id, query.query_id, value, seconds, request_id, next=True)  # type: ignore[arg-type]
+            )
         except ApiError as exc:
             if exc.status != 409:  # lost the lease (expired and taken) or the run ended: move on
                 raise
             log.info("label for %s not taken: %s", query.query_id, exc.detail)
-            return
+            return None
         self._last_submit = time.monotonic()
         self.labelled += 1
         log.info("labelled %s → %d", query.query_id, value)
+        return ack.next.query if ack.next is not None else None
 
     def _retry(self, call: Callable[[], T]) -> T:
         delay = 0.1

@@ -6,8 +6,9 @@ import argparse
 import logging
 import os
 import sys
+import time
 
-from collie.client import CollieClient
+from collie.client import ApiError, CollieClient, Unreachable
 from teacher import TeacherLoop, oracle_for
 
 
@@ -21,7 +22,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--until-done", action="store_true", help="keep waiting for new queries until the run is finished or stopped"
     )
+    parser.add_argument(
+        "--wait", type=float, default=0.0, help="seconds to wait for the service and the run to appear (compose)"
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every label")
+
+
+def wait_for_run(client: CollieClient, run_id: int, patience_s: float) -> None:
+    """Started beside a trainer that has yet to create its run: wait for it (or give up)."""
+    deadline = time.monotonic() + patience_s
+    while True:
+        try:
+            client.run(run_id)
+            return
+        except (ApiError, Unreachable) as exc:
+            if (isinstance(exc, ApiError) and exc.status != 404) or time.monotonic() > deadline:
+                raise
+        time.sleep(1.0)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,6 +47,11 @@ def run(args: argparse.Namespace) -> int:
         return 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
     with CollieClient(args.api, args.token) as client:
+        try:
+            wait_for_run(client, args.run, args.wait)
+        except (ApiError, Unreachable) as exc:
+            print(f"collie teacher: {exc}", file=sys.stderr)
+            return 1
         oracle = oracle_for(client, args.run, args.noise_band, args.seed)
         loop = TeacherLoop(client, args.run, oracle, rate=args.rate)
         try:

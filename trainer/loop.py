@@ -238,9 +238,29 @@ class Trainer:
         np.savez_compressed(self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch,
                             skill=traj.skill)  # the final skills' paths, for `collie report` figures
         self.feedback.report("metrics", record)
-        self.feedback.report("rollouts", {"epoch": self.epoch, "skills": traj.skill.tolist(),
-                                          "xy": np.round(traj.xy[:, ::2], 3).tolist()})
+        rollouts = {"epoch": self.epoch, "skills": traj.skill.tolist(), "xy": np.round(traj.xy[:, ::2], 3).tolist()}
+        w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
+        if w is not None:
+            rollouts["w"] = np.round(w, 2).tolist()
+        self.feedback.report("rollouts", rollouts)
         return record
+
+    def guidance_along(self, obs: np.ndarray) -> np.ndarray | None:
+        """w_e(s) = (1 − β_e)·w(s) + β_e (Eq. 8, smoothed as in Section 4.5) at states `obs`
+        (n, T, *obs_shape), as COLLIE's weight_fn applies it; None while w_e ≡ 1 or for methods
+        without this guidance."""
+        if self.cfg.method in ("metra", "lsd", "diayn", "ddg", "dodont", "oracle"):
+            return None
+        beta = self.beta()
+        if len(self.labelled) == 0 or beta >= 1.0:
+            return None
+        flat = self.normalise(obs.reshape(-1, *obs.shape[2:]))
+        emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version)
+        with torch.no_grad():
+            w = torch.cat([guidance_weight(self.agent.phi(torch.as_tensor(chunk, dtype=torch.float32,
+                                                                           device=self.device)), emb)
+                           for chunk in np.array_split(flat, -(-len(flat) // 4096))])
+        return ((1.0 - beta) * w + beta).cpu().numpy().astype(np.float64).reshape(obs.shape[:2])
 
     def plot(self, traj: Trajectories, record: dict[str, Any]) -> None:
         labelled = [(self.segment_xy[q], s.label) for q, s in self.labelled.segments.items() if q in self.segment_xy]

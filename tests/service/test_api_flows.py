@@ -207,7 +207,9 @@ def test_labelled_history_pages(labeler: CollieClient, trainer: CollieClient, ru
     assert items[0].query.obs == make_session(0, 4).queries[0].obs
 
 
-def test_submit_with_next_claims_the_following_query(labeler: CollieClient, operator: CollieClient, run: RunRead) -> None:
+def test_submit_with_next_claims_the_following_query(
+    labeler: CollieClient, operator: CollieClient, run: RunRead
+) -> None:
     claim = labeler.claim(run.id)
     ack = labeler.submit(run.id, claim.query.query_id, 1, next=True)
     assert ack.label == 1 and ack.next is not None and ack.next.query.query_id == "0-1"

@@ -43,6 +43,11 @@ POLICY: dict[tuple[str, str], str] = {
     ("GET", "/api/runs/{run_id}/rollouts"): ANY,
     ("GET", "/api/runs/{run_id}/events"): ANY,
     ("GET", "/api/runs/{run_id}/stream"): ANY,
+    # the operators' dashboard (backend/routes/dashboard.py): read-only views
+    ("GET", "/api/dashboard/runs"): ANY,
+    ("GET", "/api/dashboard/runs/{run_id}"): ANY,
+    ("GET", "/api/dashboard/runs/{run_id}/metrics"): ANY,
+    ("GET", "/api/dashboard/runs/{run_id}/labeling"): ANY,
 }
 
 

@@ -37,7 +37,7 @@ schema = schemathesis.openapi.from_dict(create_app(Settings(database_url="sqlite
 
 
 @schema.parametrize()
-@settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=10, deadline=None, suppress_health_check=list(HealthCheck))
 def test_no_server_errors(case: Case, fuzzed: BackgroundServer) -> None:
     if case.query and "wait_s" in case.query:
         case.query["wait_s"] = 0  # a long poll would only make the test slow

@@ -27,7 +27,7 @@ def segment_id(page: Page) -> str | None:
     return page.evaluate(_SEGMENT_ID)
 
 
-def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 20.0) -> str:
+def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 60.0) -> str:
     """The id of the segment on screen, once it differs from `not_id`."""
     page.wait_for_function(
         f"(old) => {{ const id = ({_SEGMENT_ID})(); return id !== null && id !== old; }}",
@@ -39,7 +39,7 @@ def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 20.0)
     return found
 
 
-def wait_text(page: Page, text: str, timeout_s: float = 20.0) -> None:
+def wait_text(page: Page, text: str, timeout_s: float = 60.0) -> None:
     page.get_by_text(text).first.wait_for(timeout=timeout_s * 1000)
 
 

@@ -157,3 +157,12 @@ def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0
     assert f"labeler URL: {served['url']}?token=tok%20en" in out
+
+
+def test_fits_the_collie_command(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from collie import cli
+
+    monkeypatch.setitem(cli.SUBCOMMANDS, "label-ui", ("labeling_ui.cli", "serve the labeling UI"))
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["label-ui", "--help"])
+    assert exit_.value.code == 0 and "--api" in capsys.readouterr().out

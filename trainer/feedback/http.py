@@ -340,18 +340,23 @@ def flat_numbers(record: dict[str, Any]) -> dict[str, float]:
 
 
 def rollouts_of(payload: dict[str, Any], max_points: int = 1000) -> RolloutsIn:
-    """{"epoch", "skills": (N, dz), "xy": (N, T, 2)} → at most MAX_ROLLOUTS paths of at most
-    max_points finite points each (evenly thinned; millimetres are plenty for a plot)."""
+    """{"epoch", "skills": (N, dz), "xy": (N, T, 2), optional "w": (N, T)} → at most MAX_ROLLOUTS
+    paths of at most max_points finite points each (evenly thinned; millimetres are plenty for a
+    plot); w(s) at the same points goes in each rollout's extra["w"]."""
     skills = np.asarray(payload.get("skills", []), dtype=float)
     paths = payload.get("xy", [])
+    weights = payload.get("w") or []
     rollouts = []
     for i, path in enumerate(paths[:MAX_ROLLOUTS]):
         xy = np.asarray(path, dtype=float).reshape(-1, 2)
-        xy = xy[np.isfinite(xy).all(axis=1)]
-        if len(xy) > min(max_points, MAX_ROLLOUT_POINTS):
-            xy = xy[np.linspace(0, len(xy) - 1, min(max_points, MAX_ROLLOUT_POINTS)).round().astype(int)]
+        kept = np.flatnonzero(np.isfinite(xy).all(axis=1))
+        if len(kept) > min(max_points, MAX_ROLLOUT_POINTS):
+            kept = kept[np.linspace(0, len(kept) - 1, min(max_points, MAX_ROLLOUT_POINTS)).round().astype(int)]
         skill = skills[i].reshape(-1) if i < len(skills) else np.zeros(1)
-        rollouts.append(Rollout(skill=np.nan_to_num(skill).tolist(), xy=np.round(xy, 3).tolist()))
+        extra = {}
+        if i < len(weights) and len(weights[i]) == len(xy):
+            extra["w"] = np.round(np.nan_to_num(np.asarray(weights[i], dtype=float)[kept], nan=1.0), 2).tolist()
+        rollouts.append(Rollout(skill=np.nan_to_num(skill).tolist(), xy=np.round(xy[kept], 3).tolist(), extra=extra))
     return RolloutsIn(epoch=_epoch(payload) or 0, rollouts=rollouts)
 
 

@@ -1,0 +1,92 @@
+"""The operators' dashboard API: read-only views for web/ (any role may read; run control stays
+with /api/runs/{id}/pause|resume|stop, operators only).
+
+- GET /dashboard/runs — the runs list, as a long poll (?after=VERSION&wait_s=S answers as soon as
+  any run's log grows): the page keeps one request open, as the trainer does with /events;
+- GET /dashboard/runs/{id} — the whole run page in one read, with the stream id to follow it from;
+- GET /dashboard/runs/{id}/metrics — the metric history, thinned to at most max_points rows;
+- GET /dashboard/runs/{id}/labeling — the labeling panel and labelled states, after label events.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Query, Request
+
+from backend.routes.deps import DB, AnyCaller, RunId
+from backend.services import dashboard
+from backend.services.label_stats import SegmentCache
+from collie.dashboard_schemas import (
+    DEFAULT_HISTORY_POINTS,
+    MAX_HISTORY_POINTS,
+    LabelingView,
+    MetricHistory,
+    RunDashboard,
+    RunsPage,
+)
+from collie.schemas import MAX_INT
+
+router = APIRouter(prefix="/dashboard", tags=["dashboard"])
+
+POLL_S = 0.25  # how often a waiting runs request looks for news (one indexed max())
+Points = Annotated[int, Query(ge=2, le=MAX_HISTORY_POINTS)]
+RunsLimit = Annotated[int, Query(ge=1, le=1000)]
+
+
+async def segment_cache(request: Request) -> SegmentCache:
+    state = request.app.state
+    if getattr(state, "dashboard_segments", None) is None:
+        state.dashboard_segments = SegmentCache()
+    return state.dashboard_segments
+
+
+Cache = Annotated[SegmentCache, Depends(segment_cache)]
+
+
+@router.get("/runs")
+async def list_runs(
+    request: Request,
+    _: AnyCaller,
+    db: DB,
+    limit: RunsLimit = 100,
+    after: Annotated[int, Query(ge=0, le=MAX_INT, description="the version last seen")] = 0,
+    wait_s: Annotated[float, Query(ge=0, le=60, description="wait this long for a newer version")] = 0.0,
+) -> RunsPage:
+    """The newest runs. A long poll: with wait_s, answers as soon as any run's log grows past
+    version `after`, else after wait_s (lease counts change without a version)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + wait_s
+    while True:
+        with db.read() as conn:
+            version = dashboard.latest_event_id(conn)
+        if version != after or loop.time() >= deadline or await request.is_disconnected():
+            break
+        await asyncio.sleep(min(POLL_S, max(0.0, deadline - loop.time())))
+
+    def page() -> RunsPage:
+        with db.read() as conn:
+            return RunsPage(version=dashboard.latest_event_id(conn), runs=dashboard.summaries(conn, limit))
+
+    return await asyncio.to_thread(page)
+
+
+@router.get("/runs/{run_id}")
+def run_page(
+    run_id: RunId, _: AnyCaller, db: DB, cache: Cache, max_points: Points = DEFAULT_HISTORY_POINTS
+) -> RunDashboard:
+    with db.read() as conn:
+        return dashboard.run_page(conn, run_id, max_points, cache)
+
+
+@router.get("/runs/{run_id}/metrics")
+def metric_history(run_id: RunId, _: AnyCaller, db: DB, max_points: Points = DEFAULT_HISTORY_POINTS) -> MetricHistory:
+    with db.read() as conn:
+        return dashboard.metric_history(conn, run_id, max_points)
+
+
+@router.get("/runs/{run_id}/labeling")
+def labeling(run_id: RunId, _: AnyCaller, db: DB, cache: Cache) -> LabelingView:
+    with db.read() as conn:
+        return dashboard.labeling_view(conn, run_id, cache)

@@ -1,0 +1,95 @@
+"""The command line: `collie serve` (port 0, tokens file), `collie export`, and the schema the
+migrations build matching the models."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from alembic.autogenerate import compare_metadata
+from alembic.migration import MigrationContext
+
+from backend.db import Database
+from backend.migrate import upgrade
+from backend.models import Base
+from collie.client import CollieClient
+
+from .conftest import make_run_spec, make_session
+
+
+def collie(*args: str, **kwargs: object) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "collie.cli", *args], capture_output=True, text=True, timeout=60, **kwargs
+    )  # type: ignore[call-overload]
+
+
+def test_serve_then_export(tmp_path: Path) -> None:
+    db, tokens_file = tmp_path / "svc.db", tmp_path / "tokens.json"
+    env = {**os.environ, "COLLIE_LABELER_TOKEN": "labeler-from-env-0123"}
+    command = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "serve",
+        "--port",
+        "0",
+        "--db",
+        str(db),
+        "--tokens-json",
+        str(tokens_file),
+    ]
+    server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        banner = server.stdout.readline()  # type: ignore[union-attr]
+        assert banner.startswith("collie service listening on http://127.0.0.1:")
+        info = json.loads(tokens_file.read_text())
+        assert info["api"] in banner and info["tokens"]["labeler"] == "labeler-from-env-0123"
+        assert oct(tokens_file.stat().st_mode & 0o777) == "0o600"
+        rest = [server.stdout.readline() for _ in range(3)]  # type: ignore[union-attr]
+        assert "labeler token: (from environment)" in "".join(rest)  # secrets given by env are not echoed
+        trainer = CollieClient(info["api"], info["tokens"]["trainer"])
+        labeler = CollieClient(info["api"], info["tokens"]["labeler"])
+        run = trainer.create_run(make_run_spec())
+        trainer.post_session(run.id, make_session(0, 2))
+        for value in (2, 0):
+            labeler.submit(run.id, labeler.claim(run.id).query.query_id, value)
+        labeler.undo(run.id, "0-1")
+        out = collie("export", "--db", str(db), "--run", str(run.id), "--format", "json")
+        assert out.returncode == 0, out.stderr
+        assert [(e["query_id"], e["kind"]) for e in json.loads(out.stdout)] == [
+            ("0-0", "label"),
+            ("0-1", "label"),
+            ("0-1", "undo"),
+        ]
+        out = collie("export", "--db", str(db), "--run", str(run.id), "--format", "csv", "--effective")
+        assert [(r["query_id"], r["label"]) for r in csv.DictReader(io.StringIO(out.stdout))] == [("0-0", "2")]
+        assert out.stdout == trainer.export(run.id, "csv", effective=True).rstrip("\n") + "\n"
+        trainer.close()
+        labeler.close()
+    finally:
+        server.send_signal(signal.SIGINT)
+        assert server.wait(20) == 0
+    missing = collie("export", "--db", str(tmp_path / "nope.db"), "--run", "1")
+    assert missing.returncode == 2 and "no database" in missing.stderr and not (tmp_path / "nope.db").exists()
+    unknown = collie("export", "--db", str(db), "--run", "99")
+    assert unknown.returncode == 1 and "no run 99" in unknown.stderr
+
+
+def test_migrations_build_exactly_the_models(tmp_path: Path) -> None:
+    db = Database(f"sqlite:///{tmp_path / 'm.db'}")
+    upgrade(db.engine)
+    upgrade(db.engine)  # idempotent
+    with db.engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+        modes = (
+            conn.exec_driver_sql("PRAGMA journal_mode").scalar(),
+            conn.exec_driver_sql("PRAGMA foreign_keys").scalar(),
+        )
+    assert modes == ("wal", 1)
+    db.dispose()

@@ -1,0 +1,35 @@
+"""`collie up` end to end with real processes: service (uvicorn + SQLite file), trainer and the
+oracle teacher over HTTP. Every feedback session completes, and the labels in the database are
+exactly those the trainer applied (no label lost, none counted twice)."""
+
+import json
+import subprocess
+import sys
+
+import torch
+
+
+def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path):
+    info = tmp_path / "info.json"
+    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
+           "--preset", "smoke", "--port", "0", "--out", str(tmp_path), "--info-json", str(info),
+           "--exit-when-done"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    meta = json.loads(info.read_text())
+    assert set(meta) >= {"api", "labeling_ui", "dashboard", "run_id", "tokens"}
+    assert set(meta["tokens"]) == {"operator", "labeler", "trainer"}
+
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["epoch"] == summary["config"]["epochs"]
+    n_total = summary["config"]["total_queries"]
+    assert summary["n_labels"] == n_total  # every feedback session was answered
+
+    export = subprocess.run([sys.executable, "-m", "collie.cli", "export", "--db", str(tmp_path / "collie.db"),
+                             "--run", str(meta["run_id"]), "--format", "json", "--effective"],
+                            capture_output=True, text=True, timeout=120)
+    assert export.returncode == 0, export.stderr
+    in_db = {row["query_id"]: row["label"] for row in json.loads(export.stdout)}
+    ckpt = torch.load(tmp_path / "trainer" / "checkpoint.pt", weights_only=False)
+    applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
+    assert applied == in_db and len(applied) == n_total

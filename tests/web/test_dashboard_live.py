@@ -1,0 +1,126 @@
+"""The dashboard in Debian's Chromium against a live `smoke` run of real processes: `collie up`
+starts the service, the trainer and the oracle teacher, each its own process talking HTTP.
+The tests share the run and go in order: watch it train, pause and resume it, try a wrong token,
+stop it."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from collie.client import CollieClient
+
+pytestmark = pytest.mark.slow
+START_S = 240.0  # the trainer imports torch and MuJoCo; generous for a busy machine
+WAIT_MS = 120_000
+
+
+@pytest.fixture(scope="module")
+def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+    out = tmp_path_factory.mktemp("up")
+    info = out / "info.json"
+    command = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
+               "--preset", "smoke", "--port", "0", "--out", str(out), "--info-json", str(info), "--exit-when-done",
+               "--train-args=--epochs 100000 --eval-every 2"]  # long enough to pause; evaluated often
+    with open(out / "up.log", "wb") as log:
+        proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            deadline = time.monotonic() + START_S
+            while not info.exists():
+                assert proc.poll() is None, (out / "up.log").read_text()[-3000:]
+                assert time.monotonic() < deadline, "collie up did not start"
+                time.sleep(0.2)
+            yield json.loads(info.read_text())
+        finally:
+            proc.send_signal(signal.SIGINT)  # collie up stops its children
+            try:
+                proc.wait(60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+@pytest.fixture(scope="module")
+def page(stack: dict[str, Any], browser: Any) -> Iterator[Any]:
+    page = browser.new_page(viewport={"width": 1400, "height": 1500})
+    page.goto(f"{stack['api']}/?token={stack['tokens']['operator']}")
+    yield page
+    page.close()
+
+
+def number(page: Any, selector: str, attribute: str | None = None) -> int:
+    value = page.get_attribute(selector, f"data-{attribute}") if attribute else page.text_content(selector)
+    return int(value or 0)
+
+
+def test_trajectories_appear_and_update_while_training(
+    stack: dict[str, Any], page: Any, artifacts: Path
+) -> None:
+    assert "token=" not in page.url  # the token leaves the address bar (history, screenshots)
+    page.wait_for_function("document.querySelector('#map').dataset.trajectories === '8'", timeout=WAIT_MS)
+    first = number(page, "#map", "epoch")
+    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) > {first}", timeout=WAIT_MS)
+    page.wait_for_function("Number(document.querySelector('#map').dataset.labelled) > 0", timeout=WAIT_MS)
+    assert page.locator("#runs-body tr[data-run-id]").count() == 1
+    assert page.locator("#labeling-body").inner_text().count("labeler") >= 1
+    page.screenshot(path=str(artifacts / "dashboard.png"), full_page=True)
+    with CollieClient(stack["api"], stack["tokens"]["operator"]) as client:  # once guidance starts, w(s) comes
+        deadline = time.monotonic() + WAIT_MS / 1000
+        while "w" not in (latest := client.rollouts(stack["run_id"], limit=1)[0]).rollouts[0].extra:
+            assert time.monotonic() < deadline, "no w(s) in the trainer's rollouts"
+            time.sleep(1)
+    page.select_option("#colour-by", "w")
+    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) >= {latest.epoch}", timeout=WAIT_MS)
+    page.wait_for_function("!document.querySelector('#map-note').textContent.includes('no w(s)')", timeout=WAIT_MS)
+    page.screenshot(path=str(artifacts / "dashboard-w.png"), full_page=True)
+
+
+def test_pause_stops_the_epoch_counter_and_resume_restarts_it(stack: dict[str, Any], page: Any) -> None:
+    page.click("#pause")
+    page.wait_for_function("document.body.dataset.runStatus === 'paused'", timeout=WAIT_MS)
+    held = number(page, "#run-epoch")
+    page.wait_for_timeout(4000)  # several epochs' worth on this preset
+    assert number(page, "#run-epoch") == held and page.is_enabled("#resume") and not page.is_enabled("#pause")
+    page.click("#resume")
+    page.wait_for_function(f"Number(document.querySelector('#run-epoch').textContent) > {held}", timeout=WAIT_MS)
+    assert page.get_attribute("body", "data-run-control") == "run"
+
+
+def test_a_wrong_token_cannot_pause(stack: dict[str, Any], browser: Any) -> None:
+    api, run_id = stack["api"], stack["run_id"]
+    labeler = browser.new_page()  # a labeler's token may watch, not steer
+    labeler.goto(f"{api}/?token={stack['tokens']['labeler']}")
+    labeler.wait_for_function("document.body.dataset.runControl === 'run'", timeout=WAIT_MS)
+    labeler.click("#pause")
+    labeler.wait_for_function("document.querySelector('#control-message').textContent.includes('403')")
+    labeler.close()
+    stranger = browser.new_page()
+    stranger.goto(f"{api}/?token=not-a-token")
+    stranger.wait_for_selector("#token-form:not([hidden])")
+    assert "unknown or revoked token" in stranger.text_content("#token-error")
+    assert stranger.locator("#runs-body tr[data-run-id]").count() == 0
+    stranger.close()
+    refused = httpx.post(f"{api}/api/runs/{run_id}/pause", headers={"Authorization": "Bearer not-a-token"})
+    assert refused.status_code == 401
+    with CollieClient(api, stack["tokens"]["operator"]) as client:
+        assert client.run(run_id).control == "run"
+
+
+def test_stop_finishes_the_run(stack: dict[str, Any], page: Any) -> None:
+    page.click("#stop")
+    assert page.text_content("#stop") == "Really stop?"
+    page.click("#stop")
+    page.wait_for_function("document.body.dataset.runStatus === 'finished'", timeout=WAIT_MS)
+    page.wait_for_function(
+        "document.querySelector('#runs-body .status').textContent === 'finished'", timeout=WAIT_MS
+    )
+    assert all(not page.is_enabled(b) for b in ("#pause", "#resume", "#stop"))

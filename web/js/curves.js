@@ -1,0 +1,99 @@
+// Training curves over epochs, in one Plotly figure of small panels. The history arrives thinned
+// by the service (at most `maxPoints` rows, whatever the run's length); live rows are appended
+// and the series thinned again by halves when it grows past twice that.
+
+const PANELS = [
+  { title: "safe coverage", keys: ["safe_coverage"] },
+  { title: "safe ratio", keys: ["safe_ratio"] },
+  { title: "composite coverage", keys: ["composite_coverage", "weighted_composite_coverage"] },
+  { title: "λ (Lagrange multiplier)", keys: ["lambda"] },
+  { title: "α (entropy)", keys: ["alpha"], log: true },
+  { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss") },
+  { title: "epochs / min", keys: ["epochs_per_min"] },
+  { title: "labels", keys: ["n_labels"] },
+];
+const COLUMNS = 2;
+const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
+
+export class Curves {
+  constructor(element, note, maxPoints) {
+    this.element = element;
+    this.note = note;
+    this.maxPoints = maxPoints;
+    this.history = { epochs: [], created_at: [], series: {}, n_stored: 0, stride: 1 };
+  }
+
+  load(history) {
+    this.history = history;
+    return this.render();
+  }
+
+  append(epoch, values, createdAt) {
+    const h = this.history;
+    const row = h.epochs.length;
+    h.epochs.push(epoch);
+    h.created_at.push(createdAt);
+    for (const [name, value] of Object.entries(values)) {
+      if (!h.series[name]) h.series[name] = new Array(row).fill(null);
+      h.series[name].push(value);
+    }
+    for (const column of Object.values(h.series)) if (column.length === row) column.push(null);
+    h.n_stored += 1;
+    if (h.epochs.length > 2 * this.maxPoints) this.halve();
+  }
+
+  halve() {
+    const h = this.history;
+    const keep = (_, i) => i % 2 === 0 || i === h.epochs.length - 1;
+    h.epochs = h.epochs.filter(keep);
+    h.created_at = h.created_at.filter(keep);
+    for (const name of Object.keys(h.series)) h.series[name] = h.series[name].filter(keep);
+    h.stride *= 2;
+  }
+
+  // Δepochs / Δminutes between consecutive rows (wall-clock time of the posts, pauses included).
+  epochsPerMinute() {
+    const { epochs, created_at: t } = this.history;
+    return epochs.map((e, i) => (i === 0 || t[i] <= t[i - 1] ? null : (60 * (e - epochs[i - 1])) / (t[i] - t[i - 1])));
+  }
+
+  render() {
+    const h = this.history;
+    const series = { ...h.series, epochs_per_min: this.epochsPerMinute() };
+    const shown = (v) => v?.some((x) => x != null);
+    const panels = PANELS.map((panel) => ({
+      ...panel,
+      names: [...panel.keys, ...(panel.other ? Object.keys(series).filter((k) => panel.other(k) && !panel.keys.includes(k)) : [])]
+        .filter((k) => shown(series[k])),
+    })).filter((panel) => panel.names.length); // axes without a trace would be left out of the grid
+    const rows = Math.max(1, Math.ceil(panels.length / COLUMNS));
+    const traces = [];
+    const layout = {
+      grid: { rows, columns: COLUMNS, pattern: "independent", ygap: 0.45, xgap: 0.12 },
+      margin: { l: 55, r: 10, t: 24, b: 30 }, showlegend: false, annotations: [], uirevision: "curves",
+      height: 40 + 150 * rows,
+    };
+    panels.forEach((panel, p) => {
+      const axis = p === 0 ? "" : String(p + 1);
+      panel.names.forEach((name, i) => traces.push({
+        type: "scatter", mode: h.epochs.length > 60 ? "lines" : "lines+markers", x: h.epochs, y: series[name],
+        name, xaxis: `x${axis}`, yaxis: `y${axis}`, connectgaps: true, marker: { size: 4 },
+        line: { color: PALETTE[i % PALETTE.length], width: 1.5 },
+        hovertemplate: `${name}<br>epoch %{x}: %{y:.4g}<extra></extra>`,
+      }));
+      layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined };
+      layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
+      layout.annotations.push({
+        text: `<b>${panel.title}</b>${panel.names.length > 1 ? ` · ${panel.names.join(", ")}` : ""}`, showarrow: false,
+        xref: `x${axis} domain`, yref: `y${axis} domain`, x: 0, y: 1.02, xanchor: "left", yanchor: "bottom",
+        font: { size: 12 },
+      });
+    });
+    this.note.textContent = h.n_stored ? `${h.n_stored} evaluations${h.stride > 1 ? `, every ${h.stride}th shown` : ""}` : "no evaluations yet";
+    return window.Plotly.react(this.element, traces, layout, { responsive: true, displaylogo: false }).then(() => {
+      this.element.dataset.points = String(h.epochs.length);
+      this.element.dataset.lastEpoch = h.epochs.length ? String(h.epochs[h.epochs.length - 1]) : "";
+      this.element.dataset.renderedAt = String(Date.now());
+    });
+  }
+}

@@ -1,0 +1,46 @@
+// Small display helpers.
+
+export const STATUS_TEXT = {
+  training: "training",
+  waiting_for_labels: "waiting for labels",
+  paused: "paused",
+  finished: "finished",
+  failed: "failed",
+};
+
+export function ago(isoTime, now = Date.now()) {
+  if (!isoTime) return "—";
+  const s = Math.max(0, (now - Date.parse(isoTime)) / 1000);
+  if (s < 60) return `${Math.floor(s)} s ago`;
+  if (s < 3600) return `${Math.floor(s / 60)} min ago`;
+  if (s < 86400) return `${(s / 3600).toFixed(1)} h ago`;
+  return `${(s / 86400).toFixed(1)} d ago`;
+}
+
+export const of = (n, total) => (total == null ? `${n}` : `${n} / ${total}`);
+
+export function num(x, digits = 2) {
+  if (x == null || Number.isNaN(x)) return "—";
+  return Math.abs(x) >= 1000 ? Math.round(x).toLocaleString("en") : Number(x.toFixed(digits)).toString();
+}
+
+export const percent = (x) => (x == null ? "—" : `${Math.round(100 * x)}%`);
+
+// Run `fn` at most once per `ms`; calls in between are merged into one trailing call.
+export function coalesce(fn, ms) {
+  let timer = null;
+  let last = 0;
+  return () => {
+    if (timer) return;
+    const wait = Math.max(0, last + ms - performance.now());
+    timer = setTimeout(() => {
+      timer = null;
+      last = performance.now();
+      fn();
+    }, wait);
+  };
+}
+
+export function escapeHtml(text) {
+  return String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+}

@@ -1,0 +1,89 @@
+// The operators' dashboard: the runs list, and the selected run (#run=ID) below it.
+// Open as {service}/?token=OPERATOR_TOKEN (optionally &ui=LABELING_UI_URL for the 3-D watch link).
+
+import { api, setToken, takeTokenFromUrl, token } from "./api.js";
+import { renderRuns, tickTimes } from "./runs.js";
+import { RunPage } from "./run.js";
+
+const $ = (selector) => document.querySelector(selector);
+const runsBody = $("#runs-body");
+const runPage = new RunPage($("#run"), showConnection);
+const RUNS_WAIT_S = 20;
+let runs = [];
+let started = 0; // bumped by a new token: the old poll loop ends
+
+function showConnection(state) {
+  const pill = $("#connection");
+  pill.className = `pill ${state === "live" ? "live" : "down"}`;
+  pill.textContent = { live: "live", down: "reconnecting…", closed: "disconnected" }[state] ?? state;
+}
+
+function selectedRun() {
+  const match = /run=(\d+)/.exec(window.location.hash);
+  return match ? Number(match[1]) : null;
+}
+
+function askForToken(message) {
+  $("#token-form").hidden = false;
+  $("#token-error").textContent = message;
+}
+
+async function openSelected() {
+  const runId = selectedRun() ?? runs[0]?.id ?? null;
+  renderRuns(runsBody, runs, runId);
+  if (runId == null || runId === runPage.runId) return;
+  try {
+    await runPage.open(runId, sessionStorage.getItem("collie-ui"));
+  } catch (error) {
+    if (error.status === 401) askForToken(error.message);
+    else $("#control-message").textContent = `could not load run ${runId}: ${error.message}`;
+  }
+}
+
+// The runs list, kept live by a long poll: the service answers as soon as any run changes.
+async function followRuns(generation) {
+  let version = 0;
+  let wait = 0; // the first answer at once
+  while (generation === started) {
+    try {
+      const page = await api(`dashboard/runs?after=${version}&wait_s=${wait}`);
+      wait = RUNS_WAIT_S;
+      if (generation !== started) return;
+      version = page.version;
+      runs = page.runs;
+      $("#token-form").hidden = true;
+      await openSelected();
+    } catch (error) {
+      if (error.status === 401) {
+        askForToken(error.message);
+        return;
+      }
+      showConnection("down");
+      await new Promise((resolve) => setTimeout(resolve, 2000));
+    }
+  }
+}
+
+function start() {
+  started += 1;
+  followRuns(started);
+}
+
+takeTokenFromUrl();
+const ui = new URL(window.location.href).searchParams.get("ui");
+if (ui) sessionStorage.setItem("collie-ui", ui);
+
+runsBody.addEventListener("click", (event) => {
+  const row = event.target.closest("tr[data-run-id]");
+  if (row) window.location.hash = `run=${row.dataset.runId}`;
+});
+window.addEventListener("hashchange", openSelected);
+$("#token-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  setToken($("#token-input").value.trim());
+  start();
+});
+setInterval(() => tickTimes(), 1000);
+
+if (token()) start();
+else askForToken("");

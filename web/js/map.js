@@ -1,0 +1,128 @@
+// The skill map: the latest evaluation's trajectories over the task's regions, the labelled
+// states coloured by label, and optionally the guidance w(s) along the trajectories. 2-D robots
+// are drawn in x-y; 1-D ones (HalfCheetah: y is always 0) as x over time.
+
+import { CLASS_COLOURS, regionShapes, undrawn } from "./regions.js";
+
+const LABEL_NAMES = ["bad", "neutral", "good"];
+const W_SCALE = [[0, CLASS_COLOURS[0]], [0.5, CLASS_COLOURS[1]], [1, CLASS_COLOURS[2]]]; // w ∈ [0, 2]
+
+// One colour per skill: its direction for 2-D skills (as METRA's plots), else its index.
+function skillColour(skill, i, n) {
+  const angle = skill.length === 2 ? Math.atan2(skill[1], skill[0]) : (2 * Math.PI * i) / Math.max(n, 1);
+  const hue = Math.round(((angle * 180) / Math.PI + 360) % 360);
+  return `hsl(${hue}, 70%, 42%)`;
+}
+
+function bounds(paths, oneD) {
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const p of paths) {
+    for (let i = 0; i < p.length; i++) {
+      const x = p[i][0];
+      const y = oneD ? i : p[i][1];
+      if (x < x0) x0 = x;
+      if (x > x1) x1 = x;
+      if (y < y0) y0 = y;
+      if (y > y1) y1 = y;
+    }
+  }
+  if (!Number.isFinite(x0)) return { x: [-10, 10], y: [-10, 10] };
+  if (oneD) {
+    const pad = Math.max(1, 0.08 * (x1 - x0));
+    return { x: [x0 - pad, x1 + pad], y: [y0, y1 || 1] };
+  }
+  const half = Math.max(1, 0.55 * Math.max(x1 - x0, y1 - y0));
+  const cx = (x0 + x1) / 2;
+  const cy = (y0 + y1) / 2;
+  return { x: [cx - half, cx + half], y: [cy - half, cy + half] };
+}
+
+export class SkillMap {
+  constructor(element, note) {
+    this.element = element;
+    this.note = note;
+    this.task = null;
+    this.rollouts = null;
+    this.labelled = [];
+    this.colourBy = "skill";
+    this.oneD = false;
+  }
+
+  set({ task, rollouts, labelled, colourBy, env }) {
+    if (task !== undefined) this.task = task;
+    if (rollouts !== undefined) this.rollouts = rollouts;
+    if (labelled !== undefined) this.labelled = labelled;
+    if (colourBy !== undefined) this.colourBy = colourBy;
+    if (env !== undefined) this.env = env;
+    const paths = (this.rollouts?.rollouts ?? []).map((r) => r.xy);
+    this.oneD = this.env === "half_cheetah" || (paths.length > 0 && paths.every((p) => p.every((q) => q[1] === 0)));
+    return this.render();
+  }
+
+  trajectoryTraces(rollouts) {
+    const at = (xy, i) => (this.oneD ? [xy[i][0], i] : xy[i]);
+    const coords = (r) => r.xy.map((_, i) => at(r.xy, i));
+    const hasW = rollouts.some((r) => Array.isArray(r.extra?.w));
+    if (this.colourBy === "w" && hasW) {
+      const x = [], y = [], w = [];
+      for (const r of rollouts) {
+        coords(r).forEach(([px, py], i) => { x.push(px); y.push(py); w.push(r.extra.w?.[i] ?? null); });
+        x.push(null); y.push(null); w.push(null);
+      }
+      return [{
+        type: "scatter", mode: "lines+markers", x, y, name: "w(s)", showlegend: false, hoverinfo: "skip",
+        line: { color: "rgba(60,60,60,0.25)", width: 1 },
+        marker: { size: 4, color: w, cmin: 0, cmax: 2, colorscale: W_SCALE, colorbar: { title: { text: "w(s)" }, thickness: 12 } },
+      }];
+    }
+    return rollouts.map((r, i) => {
+      const xy = coords(r);
+      return {
+        type: "scatter", mode: "lines", x: xy.map((p) => p[0]), y: xy.map((p) => p[1]),
+        name: `skill ${i}`, showlegend: false, hovertemplate: `skill ${i}<br>%{x:.2f}, %{y:.2f}<extra></extra>`,
+        line: { color: skillColour(r.skill, i, rollouts.length), width: 1.6 },
+      };
+    });
+  }
+
+  labelledTraces() {
+    if (this.oneD) return [];
+    return [0, 1, 2].map((label) => {
+      const segments = this.labelled.filter((s) => s.label === label);
+      const x = [], y = [];
+      for (const s of segments) for (const [px, py] of s.xy) { x.push(px); y.push(py); }
+      return {
+        type: "scatter", mode: "markers", x, y, name: `labelled ${LABEL_NAMES[label]} (${segments.length})`,
+        visible: segments.length ? true : "legendonly", hoverinfo: "name",
+        marker: { size: 7, symbol: "x", color: CLASS_COLOURS[label], line: { width: 1, color: "#222" } },
+      };
+    });
+  }
+
+  render() {
+    const rollouts = this.rollouts?.rollouts ?? [];
+    const view = bounds([...rollouts.map((r) => r.xy), ...(this.oneD ? [] : this.labelled.map((s) => s.xy))], this.oneD);
+    const traces = [...this.trajectoryTraces(rollouts), ...this.labelledTraces()];
+    const layout = {
+      margin: { l: 45, r: 10, t: 10, b: 40 },
+      xaxis: { range: view.x, title: { text: "x" }, zeroline: false },
+      yaxis: { range: view.y, title: { text: this.oneD ? "step" : "y" }, zeroline: false,
+        ...(this.oneD ? {} : { scaleanchor: "x", scaleratio: 1 }) },
+      shapes: regionShapes(this.task, view, this.oneD),
+      legend: { orientation: "h", y: -0.12 },
+      uirevision: "map",
+      plot_bgcolor: "#fff",
+    };
+    const notes = undrawn(this.task, this.oneD);
+    if (this.colourBy === "w" && rollouts.length && !rollouts.some((r) => Array.isArray(r.extra?.w))) {
+      notes.push("no w(s) in this evaluation (w ≡ 1 until guidance starts, or the method has none)");
+    }
+    this.note.textContent = notes.join(" · ");
+    return window.Plotly.react(this.element, traces, layout, { responsive: true, displaylogo: false }).then(() => {
+      this.element.dataset.epoch = this.rollouts ? String(this.rollouts.epoch) : "";
+      this.element.dataset.trajectories = String(rollouts.length);
+      this.element.dataset.labelled = String(this.labelled.length);
+      this.element.dataset.renderedAt = String(Date.now());
+    });
+  }
+}

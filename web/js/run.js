@@ -1,0 +1,126 @@
+// One run's page: loaded in one request, then kept live from the run's own event stream (opened
+// at the snapshot's last event id, so nothing is missed or applied twice).
+
+import { api, stream } from "./api.js";
+import { Controls } from "./controls.js";
+import { Curves } from "./curves.js";
+import { STATUS_TEXT, coalesce } from "./format.js";
+import { renderLabeling } from "./labeling.js";
+import { SkillMap } from "./map.js";
+
+const MAX_POINTS = 1000;
+const LABELING_REFRESH_MS = 5000; // lease changes are not on the stream
+
+export class RunPage {
+  constructor(root, onConnection) {
+    this.root = root;
+    this.onConnection = onConnection;
+    this.map = new SkillMap(root.querySelector("#map"), root.querySelector("#map-note"));
+    this.curves = new Curves(root.querySelector("#curves"), root.querySelector("#curves-note"), MAX_POINTS);
+    this.controls = new Controls(root, (run) => this.showRun(run));
+    this.colourBy = root.querySelector("#colour-by");
+    this.colourBy.addEventListener("change", () => this.map.set({ colourBy: this.colourBy.value }));
+    this.refreshLabeling = coalesce(() => this.loadLabeling().catch(() => this.onConnection("down")), 300);
+    this.renderCurves = coalesce(() => this.curves.render(), 200);
+    this.source = null;
+    this.timer = null;
+  }
+
+  async open(runId, watchUrl) {
+    this.close();
+    this.runId = runId;
+    const page = await api(`dashboard/runs/${runId}?max_points=${MAX_POINTS}`);
+    if (this.runId !== runId) return;
+    this.root.hidden = false;
+    this.epoch = 0;
+    this.run = page.run;
+    this.root.querySelector("#run-title").textContent = `Run #${runId} · ${page.run.env} ${page.run.task} · ${page.run.method}`;
+    this.setWatchLink(watchUrl, runId);
+    this.showRun(page.run);
+    renderLabeling(this.root.querySelector("#labeling-body"), page);
+    await Promise.all([
+      this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
+      this.curves.load(page.metrics),
+    ]);
+    this.seeEpoch(page.metrics.epochs.at(-1) ?? 0);
+    this.seeEpoch(page.rollouts?.epoch ?? 0);
+    this.source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, {
+      status: (e) => this.onStatus(e),
+      control: (e) => this.showRun({ ...this.run, control: e.data.control }),
+      metrics: (e) => this.onMetrics(e),
+      rollouts: () => this.loadRollouts().catch(() => this.onConnection("down")),
+      queries: () => this.refreshLabeling(),
+      retired: () => this.refreshLabeling(),
+      label: () => this.refreshLabeling(),
+      withdrawn: () => this.refreshLabeling(),
+    }, this.onConnection);
+    this.timer = setInterval(() => this.refreshLabeling(), LABELING_REFRESH_MS);
+  }
+
+  close() {
+    this.source?.close();
+    clearInterval(this.timer);
+    this.source = null;
+    this.runId = null;
+  }
+
+  setWatchLink(watchUrl, runId) {
+    const link = this.root.querySelector("#watch-3d");
+    link.hidden = !watchUrl;
+    if (watchUrl) link.href = `${watchUrl}${watchUrl.includes("?") ? "&" : "?"}run=${runId}&watch=1`;
+  }
+
+  showRun(run) {
+    this.run = run;
+    const status = this.root.querySelector("#run-status");
+    const pending = run.control !== "run" && run.status !== "finished" && run.status !== "failed";
+    status.className = `status ${run.status}`;
+    status.textContent = (STATUS_TEXT[run.status] ?? run.status) + (pending && run.status !== "paused" ? ` (${run.control} requested)` : "");
+    document.body.dataset.runStatus = run.status;
+    document.body.dataset.runControl = run.control;
+    this.root.querySelector("#run-labels").textContent = run.n_labels;
+    this.root.querySelector("#run-labels-total").textContent = run.n_total == null ? "" : ` / ${run.n_total}`;
+    this.root.querySelector("#run-epochs-total").textContent = run.epochs_total == null ? "" : ` / ${run.epochs_total}`;
+    this.seeEpoch(run.epoch);
+    this.controls.show(run);
+  }
+
+  seeEpoch(epoch) {
+    if (epoch == null || epoch < this.epoch) return;
+    this.epoch = epoch;
+    this.root.querySelector("#run-epoch").textContent = epoch;
+  }
+
+  onStatus(event) {
+    this.showRun({ ...this.run, status: event.data.status, epoch: event.data.epoch ?? this.run.epoch });
+  }
+
+  onMetrics(event) {
+    this.curves.append(event.data.epoch, event.data.values, Date.parse(event.created_at) / 1000);
+    this.seeEpoch(event.data.epoch);
+    if (event.data.values.n_labels != null) {
+      this.root.querySelector("#run-labels").textContent = Math.max(this.run.n_labels, event.data.values.n_labels);
+    }
+    this.renderCurves();
+  }
+
+  async loadRollouts() {
+    const runId = this.runId;
+    const [latest] = await api(`runs/${runId}/rollouts?limit=1`);
+    if (latest && runId === this.runId) {
+      this.seeEpoch(latest.epoch);
+      await this.map.set({ rollouts: latest });
+    }
+  }
+
+  async loadLabeling() {
+    const runId = this.runId;
+    if (runId == null) return;
+    const view = await api(`dashboard/runs/${runId}/labeling`);
+    if (runId !== this.runId) return;
+    renderLabeling(this.root.querySelector("#labeling-body"), view);
+    this.root.querySelector("#run-labels").textContent = view.labeling.n_labels;
+    this.run = { ...this.run, n_labels: view.labeling.n_labels, queue: view.labeling.queue };
+    await this.map.set({ labelled: view.labelled });
+  }
+}
