@@ -10,19 +10,11 @@ from __future__ import annotations
 
 import json
 from datetime import datetime
-from enum import IntEnum
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
-
-class Label(IntEnum):
-    BAD = 0
-    NEUTRAL = 1
-    GOOD = 2
-
-
-LabelValue = Literal[0, 1, 2]
+LabelValue = Literal[0, 1, 2]  # 0 bad, 1 neutral, 2 good
 Submission = Literal[0, 1, 2, "skip"]
 Role = Literal["operator", "trainer", "labeler"]
 RunStatus = Literal["training", "waiting_for_labels", "paused", "finished", "failed"]

@@ -13,7 +13,8 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Depends, Query, Request, Response
+from pydantic import BaseModel
 
 from backend.routes.deps import DB, AnyCaller, RunId
 from backend.services import dashboard
@@ -72,18 +73,23 @@ async def list_runs(
     return await asyncio.to_thread(page)
 
 
-@router.get("/runs/{run_id}")
+def as_json(model: BaseModel) -> Response:
+    """Serialised once (FastAPI would dump, validate and serialise a returned model again)."""
+    return Response(model.model_dump_json(), media_type="application/json")
+
+
+@router.get("/runs/{run_id}", response_model=RunDashboard)
 def run_page(
     run_id: RunId, _: AnyCaller, db: DB, cache: Cache, max_points: Points = DEFAULT_HISTORY_POINTS
-) -> RunDashboard:
+) -> Response:
     with db.read() as conn:
-        return dashboard.run_page(conn, run_id, max_points, cache)
+        return as_json(dashboard.run_page(conn, run_id, max_points, cache))
 
 
-@router.get("/runs/{run_id}/metrics")
-def metric_history(run_id: RunId, _: AnyCaller, db: DB, max_points: Points = DEFAULT_HISTORY_POINTS) -> MetricHistory:
+@router.get("/runs/{run_id}/metrics", response_model=MetricHistory)
+def metric_history(run_id: RunId, _: AnyCaller, db: DB, max_points: Points = DEFAULT_HISTORY_POINTS) -> Response:
     with db.read() as conn:
-        return dashboard.metric_history(conn, run_id, max_points)
+        return as_json(dashboard.metric_history(conn, run_id, max_points))
 
 
 @router.get("/runs/{run_id}/labeling")

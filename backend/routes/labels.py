@@ -38,13 +38,13 @@ async def submit_label(
     """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision)."""
     with db.write() as conn:
         ack = labels.submit(conn, run_id, caller, body)
-    if not next:
-        return _ack_response(ack)
-    try:  # the label is committed; the claim is a second, independent transaction
-        with db.write() as conn:
-            return _ack_response(ack, leases.claim(conn, run_id, caller, settings.lease_s))
-    except ServiceError:  # e.g. the run was stopped meanwhile: the label stands, there is no next
-        return _ack_response(ack)
+        if not next:
+            return _ack_response(ack)
+        try:  # in the same transaction: one commit per labeler round trip
+            following = leases.claim(conn, run_id, caller, settings.lease_s)
+        except ServiceError:  # e.g. the run is being stopped: the label stands, there is no next
+            following = None
+    return _ack_response(ack, following)
 
 
 @router.post("/undo", response_model=LabelAck, status_code=201, responses=_REPEAT)

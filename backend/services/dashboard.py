@@ -74,7 +74,7 @@ def metric_history(conn: Connection, run_id: int, max_points: int) -> MetricHist
     for r in rows:
         names.update(dict.fromkeys(r.values))
     series = {name: [r.values.get(name) for r in rows] for name in names}
-    return MetricHistory(
+    return MetricHistory.model_construct(  # values were validated when posted: no second pass over them
         n_stored=n,
         stride=stride,
         epochs=[r.epoch for r in rows],

@@ -10,6 +10,7 @@ from PIL import Image
 from playwright.sync_api import Browser, Page
 
 VIEWPORT = {"width": 1024, "height": 640}
+TIMEOUT_S = 90.0  # generous: a shared 2-core machine runs software WebGL many times slower when busy
 
 _SEGMENT_ID = """() => {
   const p = [...document.querySelectorAll("p")].find((e) => e.textContent.startsWith("Segment "));
@@ -18,7 +19,9 @@ _SEGMENT_ID = """() => {
 
 
 def open_labeler(browser: Browser, url: str) -> Page:
-    page = browser.new_context(viewport=VIEWPORT).new_page()
+    context = browser.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(TIMEOUT_S * 1000)
+    page = context.new_page()
     page.goto(url)
     return page
 
@@ -27,7 +30,7 @@ def segment_id(page: Page) -> str | None:
     return page.evaluate(_SEGMENT_ID)
 
 
-def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 60.0) -> str:
+def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = TIMEOUT_S) -> str:
     """The id of the segment on screen, once it differs from `not_id`."""
     page.wait_for_function(
         f"(old) => {{ const id = ({_SEGMENT_ID})(); return id !== null && id !== old; }}",
@@ -39,7 +42,7 @@ def wait_segment(page: Page, not_id: str | None = None, timeout_s: float = 60.0)
     return found
 
 
-def wait_text(page: Page, text: str, timeout_s: float = 60.0) -> None:
+def wait_text(page: Page, text: str, timeout_s: float = TIMEOUT_S) -> None:
     page.get_by_text(text).first.wait_for(timeout=timeout_s * 1000)
 
 

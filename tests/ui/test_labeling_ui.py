@@ -120,7 +120,7 @@ def test_closed_tab_releases_its_claim(stack: Stack, browser: Browser) -> None:
     wait_segment(page)
     assert stack.trainer.run(run.id).queue.leased == 1
     page.context.close()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 30
     while stack.trainer.run(run.id).queue.leased and time.monotonic() < deadline:
         time.sleep(0.1)
     assert stack.trainer.run(run.id).queue.pending == 1

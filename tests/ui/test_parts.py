@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import signal
 import subprocess
@@ -69,13 +70,15 @@ class Recorder:
 def test_player_paces_at_most_30_hz_and_loops() -> None:
     rec = Recorder()
     player = Player(rec.render, lambda f, p: rec.frames.append((f, p)), fps=20.0)
+    start = time.perf_counter()
     player.load(20)
     assert rec.positions == [0.0]  # the first frame is drawn at once, by the caller
     time.sleep(1.5)
     player.close()
-    ticks = len(rec.positions) - 1
-    assert 25 <= ticks / 1.5 <= 31
-    assert max(rec.positions) < 20 and min(rec.positions[2:]) < 5  # wrapped around (1 s per loop)
+    elapsed = time.perf_counter() - start
+    assert 5 <= len(rec.positions) - 1 <= 31 * elapsed  # the rate itself is benchmarked, not tested
+    assert max(rec.positions) < 20 and any(b < a for a, b in itertools.pairwise(rec.positions))  # wrapped
+    assert rec.frames[0] == (0, True)
 
 
 def test_player_step_seek_speed_and_stop_at_end() -> None:
@@ -92,7 +95,9 @@ def test_player_step_seek_speed_and_stop_at_end() -> None:
     assert player.speed == 4.0
     player.loop = False
     player.replay()
-    time.sleep(0.4)  # 10 frames at 20 fps × 4 = 0.125 s
+    deadline = time.monotonic() + 10  # 10 frames at 20 fps × 4 take 0.125 s
+    while player.playing and time.monotonic() < deadline:
+        time.sleep(0.02)
     assert not player.playing and player.position == 9.0
     player.close()
 

@@ -52,6 +52,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
 @pytest.fixture(scope="module")
 def page(stack: dict[str, Any], browser: Any) -> Iterator[Any]:
     page = browser.new_page(viewport={"width": 1400, "height": 1500})
+    page.set_default_timeout(WAIT_MS)  # a busy machine renders slowly
     page.goto(f"{stack['api']}/?token={stack['tokens']['operator']}")
     yield page
     page.close()
@@ -66,10 +67,10 @@ def test_trajectories_appear_and_update_while_training(
     stack: dict[str, Any], page: Any, artifacts: Path
 ) -> None:
     assert "token=" not in page.url  # the token leaves the address bar (history, screenshots)
-    page.wait_for_function("document.querySelector('#map').dataset.trajectories === '8'", timeout=WAIT_MS)
+    page.wait_for_function("document.querySelector('#map').dataset.trajectories === '8'")
     first = number(page, "#map", "epoch")
-    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) > {first}", timeout=WAIT_MS)
-    page.wait_for_function("Number(document.querySelector('#map').dataset.labelled) > 0", timeout=WAIT_MS)
+    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) > {first}")
+    page.wait_for_function("Number(document.querySelector('#map').dataset.labelled) > 0")
     assert page.locator("#runs-body tr[data-run-id]").count() == 1
     assert page.locator("#labeling-body").inner_text().count("labeler") >= 1
     page.screenshot(path=str(artifacts / "dashboard.png"), full_page=True)
@@ -79,31 +80,33 @@ def test_trajectories_appear_and_update_while_training(
             assert time.monotonic() < deadline, "no w(s) in the trainer's rollouts"
             time.sleep(1)
     page.select_option("#colour-by", "w")
-    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) >= {latest.epoch}", timeout=WAIT_MS)
-    page.wait_for_function("!document.querySelector('#map-note').textContent.includes('no w(s)')", timeout=WAIT_MS)
+    page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) >= {latest.epoch}")
+    page.wait_for_function("!document.querySelector('#map-note').textContent.includes('no w(s)')")
     page.screenshot(path=str(artifacts / "dashboard-w.png"), full_page=True)
 
 
 def test_pause_stops_the_epoch_counter_and_resume_restarts_it(stack: dict[str, Any], page: Any) -> None:
     page.click("#pause")
-    page.wait_for_function("document.body.dataset.runStatus === 'paused'", timeout=WAIT_MS)
+    page.wait_for_function("document.body.dataset.runStatus === 'paused'")
     held = number(page, "#run-epoch")
     page.wait_for_timeout(4000)  # several epochs' worth on this preset
     assert number(page, "#run-epoch") == held and page.is_enabled("#resume") and not page.is_enabled("#pause")
     page.click("#resume")
-    page.wait_for_function(f"Number(document.querySelector('#run-epoch').textContent) > {held}", timeout=WAIT_MS)
+    page.wait_for_function(f"Number(document.querySelector('#run-epoch').textContent) > {held}")
     assert page.get_attribute("body", "data-run-control") == "run"
 
 
 def test_a_wrong_token_cannot_pause(stack: dict[str, Any], browser: Any) -> None:
     api, run_id = stack["api"], stack["run_id"]
     labeler = browser.new_page()  # a labeler's token may watch, not steer
+    labeler.set_default_timeout(WAIT_MS)
     labeler.goto(f"{api}/?token={stack['tokens']['labeler']}")
-    labeler.wait_for_function("document.body.dataset.runControl === 'run'", timeout=WAIT_MS)
+    labeler.wait_for_function("document.body.dataset.runControl === 'run'")
     labeler.click("#pause")
     labeler.wait_for_function("document.querySelector('#control-message').textContent.includes('403')")
     labeler.close()
     stranger = browser.new_page()
+    stranger.set_default_timeout(WAIT_MS)
     stranger.goto(f"{api}/?token=not-a-token")
     stranger.wait_for_selector("#token-form:not([hidden])")
     assert "unknown or revoked token" in stranger.text_content("#token-error")
@@ -119,8 +122,6 @@ def test_stop_finishes_the_run(stack: dict[str, Any], page: Any) -> None:
     page.click("#stop")
     assert page.text_content("#stop") == "Really stop?"
     page.click("#stop")
-    page.wait_for_function("document.body.dataset.runStatus === 'finished'", timeout=WAIT_MS)
-    page.wait_for_function(
-        "document.querySelector('#runs-body .status').textContent === 'finished'", timeout=WAIT_MS
-    )
+    page.wait_for_function("document.body.dataset.runStatus === 'finished'")
+    page.wait_for_function("document.querySelector('#runs-body .status').textContent === 'finished'")
     assert all(not page.is_enabled(b) for b in ("#pause", "#resume", "#stop"))

@@ -122,7 +122,7 @@ class HttpFeedback(FeedbackSource):
 
     def revisions(self) -> list[LabelEvent]:
         try:
-            self._pump(0.0)
+            self._pump(0.0, patient=False)
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, revisions wait: %s", exc)
             return []
@@ -130,7 +130,7 @@ class HttpFeedback(FeedbackSource):
 
     def control(self) -> Literal["run", "pause", "stop"]:
         try:
-            self._pump(0.0)
+            self._pump(0.0, patient=False)
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, keeping control=%s: %s", self._control, exc)
         if self._control == "pause":
@@ -140,8 +140,8 @@ class HttpFeedback(FeedbackSource):
         return self._control
 
     def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:
-        if time.monotonic() < self._report_quiet_until:
-            return  # the service failed recently: do not slow training down
+        if kind != "status" and time.monotonic() < self._report_quiet_until:
+            return  # the service failed recently: skip the bulky reports, do not slow training down
         try:
             if kind == "status":
                 status, message = _run_status(str(payload.get("status", "")), payload.get("error"))
@@ -155,7 +155,7 @@ class HttpFeedback(FeedbackSource):
                 self._reporter.post_rollouts(self.run_id, rollouts_of(payload))
         except Exception as exc:  # best effort by contract: a dashboard never stops training
             log.warning("report %s not delivered: %s", kind, exc)
-            self._report_quiet_until = time.monotonic() + 10.0
+            self._report_quiet_until = time.monotonic() + 10.0  # status changes (rare) are still tried
 
     def history(self) -> list[tuple[Segment, int]]:
         """Every labelled segment of the run, once each (the trainer rebuilds D0/D1/D2 from it)."""
@@ -176,14 +176,18 @@ class HttpFeedback(FeedbackSource):
 
     # ---------------------------------------------------------------- the log
 
-    def _pump(self, wait_s: float) -> None:
-        """Apply the run's new events, waiting up to wait_s for the first. Reconnects by itself."""
-        page = self._next_page(wait_s)
+    def _pump(self, wait_s: float, patient: bool = True) -> None:
+        """Apply the run's new events, waiting up to wait_s for the first. Patient: wait out an
+        unreachable service (collect, history); else raise Unreachable at once (polls between epochs)."""
+        page = self._next_page(wait_s, patient)
         while len(page.events) == events_page_size:  # catch up on a long backlog at once
-            page = self._next_page(0.0)
+            page = self._next_page(0.0, patient)
 
-    def _next_page(self, wait_s: float) -> EventPage:
-        page = self._retry(lambda: self.client.events(self.run_id, after=self._after, wait_s=wait_s))
+    def _next_page(self, wait_s: float, patient: bool) -> EventPage:
+        def call() -> EventPage:
+            return self.client.events(self.run_id, after=self._after, wait_s=wait_s)
+
+        page = self._retry(call) if patient else call()
         self._apply(page.events)
         return page
 

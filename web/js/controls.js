@@ -34,7 +34,7 @@ export class Controls {
     if (action === "stop" && !this.armed) {
       this.buttons.stop.classList.add("confirm");
       this.buttons.stop.textContent = "Really stop?";
-      this.armed = setTimeout(() => this.disarm(), 4000);
+      this.armed = setTimeout(() => this.disarm(), 8000);
       return;
     }
     this.disarm();

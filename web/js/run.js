@@ -8,7 +8,7 @@ import { STATUS_TEXT, coalesce } from "./format.js";
 import { renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
 
-const MAX_POINTS = 1000;
+const MAX_POINTS = 500; // per curve: about one per pixel column of a panel
 const LABELING_REFRESH_MS = 5000; // lease changes are not on the stream
 
 export class RunPage {
