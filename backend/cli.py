@@ -55,13 +55,13 @@ def run(args: argparse.Namespace) -> int:
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
         args.tokens_json.parent.mkdir(parents=True, exist_ok=True)
         partial = args.tokens_json.with_suffix(".partial")
-        partial.touch(mode=0o600)
+        partial.unlink(missing_ok=True)
+        partial.touch(mode=0o600)  # secrets: readable by this user only
         partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
         partial.replace(args.tokens_json)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
     for role, token in tokens.items():  # secrets given through the environment stay out of logs
-        shown = token if getattr(settings, f"{role}_token") is not None and role in generated else "(from environment)"
-        print(f"  {role} token: {shown}", flush=True)
+        print(f"  {role} token: {token if role in generated else '(from environment)'}", flush=True)
     # uvicorn shuts down cleanly, then re-raises Ctrl-C: for us that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):
         uvicorn_server(app, args.log_level).run(sockets=[sock])

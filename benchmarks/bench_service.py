@@ -231,7 +231,12 @@ async def run_inserts(port: int, rate: float, seconds: float) -> dict[str, float
     latency = [x for w in workers for x in w.latency]
     for c in conns:
         c.close()
-    return {"rps": len(latency) / elapsed, "p50": percentile(latency, 50), "p99": percentile(latency, 99)}
+    return {
+        "n": len(latency),
+        "rps": len(latency) / elapsed,
+        "p50": percentile(latency, 50),
+        "p99": percentile(latency, 99),
+    }
 
 
 async def run_labels(port: int, run_id: int, tokens: list[str], rate: float, seconds: float) -> tuple[dict, dict]:
@@ -349,7 +354,7 @@ def main() -> int:
         port = int(api.rsplit(":", 1)[1])
         wait_up(f"{api}/api/health")
         wait_up(f"http://127.0.0.1:{base_port}/health")
-        code = measure(args, api, port, tokens, base_port)
+        code = measure(args, api, port, tokens, base_port, {"collie": service.pid, "baseline": baseline.pid})
         print(f"service start (import + migrations, fresh interpreter): {startup_seconds(tmp / 'start.db'):.2f} s")
         return code
     finally:
@@ -372,7 +377,16 @@ def say(message: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {message}", file=sys.stderr, flush=True)
 
 
-def measure(args: argparse.Namespace, api: str, port: int, tokens: dict[str, str], base_port: int) -> int:
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (Linux /proc): unlike wall-clock latency, it does
+    not grow when other work shares the machine."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(
+    args: argparse.Namespace, api: str, port: int, tokens: dict[str, str], base_port: int, pids: dict[str, int]
+) -> int:
     say("posting sessions")
     rng = np.random.default_rng(0)
     n_labels = int(args.rate * args.seconds * 1.2) + LABELERS
@@ -394,7 +408,9 @@ def measure(args: argparse.Namespace, api: str, port: int, tokens: dict[str, str
 
     say("baseline inserts")
     asyncio.run(run_inserts(base_port, args.rate, 1.0))  # warm-up
+    cpu = cpu_seconds(pids["baseline"])
     base = asyncio.run(run_inserts(base_port, args.rate, args.seconds))
+    base["cpu_ms"] = 1000 * (cpu_seconds(pids["baseline"]) - cpu) / base["n"]
 
     queue: mp.Queue = mp.Queue()
     after = trainer.run(run.id).last_event_id
@@ -404,7 +420,9 @@ def measure(args: argparse.Namespace, api: str, port: int, tokens: dict[str, str
     assert queue.get(timeout=30) == "ready"
     time.sleep(0.5)
     say("labels")
+    cpu = cpu_seconds(pids["collie"])
     labels, sent = asyncio.run(run_labels(port, run.id, labelers, args.rate, args.seconds))
+    labels["cpu_ms"] = 1000 * (cpu_seconds(pids["collie"]) - cpu) / len(sent)
     done.set()
     applied: dict[str, float] = queue.get(timeout=120)
     reader.join(10)
@@ -426,6 +444,11 @@ def measure(args: argparse.Namespace, api: str, port: int, tokens: dict[str, str
     )
     print(f"labels not seen on the stream: {missing}")
     print(f"ratios vs baseline: rate {labels['rps'] / base['rps']:.2f}×, p99 {labels['p99'] / base['p99']:.2f}×")
+    print(
+        f"server CPU per request: baseline insert {base['cpu_ms']:.2f} ms, collie label + next query"
+        f" {labels['cpu_ms']:.2f} ms ({labels['cpu_ms'] / base['cpu_ms']:.2f}×; one core serves"
+        f" ≈ {1000 / labels['cpu_ms']:.0f} labels/s)"
+    )
     ok = (
         labels["rps"] >= 0.95 * args.rate
         and labels["p99"] <= 20

@@ -2,6 +2,8 @@
 // by the service (at most `maxPoints` rows, whatever the run's length); live rows are appended
 // and the series thinned again by halves when it grows past twice that.
 
+import { plot } from "./plotly.js";
+
 const PANELS = [
   { title: "safe coverage", keys: ["safe_coverage"] },
   { title: "safe ratio", keys: ["safe_ratio"] },
@@ -90,7 +92,7 @@ export class Curves {
       });
     });
     this.note.textContent = h.n_stored ? `${h.n_stored} evaluations${h.stride > 1 ? `, every ${h.stride}th shown` : ""}` : "no evaluations yet";
-    return window.Plotly.react(this.element, traces, layout, { responsive: true, displaylogo: false }).then(() => {
+    return plot(this.element, traces, layout).then(() => {
       this.element.dataset.points = String(h.epochs.length);
       this.element.dataset.lastEpoch = h.epochs.length ? String(h.epochs[h.epochs.length - 1]) : "";
       this.element.dataset.renderedAt = String(Date.now());

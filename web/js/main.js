@@ -67,6 +67,7 @@ async function followRuns(generation) {
 function start() {
   started += 1;
   followRuns(started);
+  if (selectedRun() != null) openSelected(); // a linked run loads beside the list, not after it
 }
 
 takeTokenFromUrl();

@@ -2,6 +2,7 @@
 // states coloured by label, and optionally the guidance w(s) along the trajectories. 2-D robots
 // are drawn in x-y; 1-D ones (HalfCheetah: y is always 0) as x over time.
 
+import { plot } from "./plotly.js";
 import { CLASS_COLOURS, regionShapes, undrawn } from "./regions.js";
 
 const LABEL_NAMES = ["bad", "neutral", "good"];
@@ -106,7 +107,7 @@ export class SkillMap {
     const layout = {
       margin: { l: 45, r: 10, t: 10, b: 40 },
       xaxis: { range: view.x, title: { text: "x" }, zeroline: false },
-      yaxis: { range: view.y, title: { text: this.oneD ? "step" : "y" }, zeroline: false,
+      yaxis: { range: view.y, title: { text: this.oneD ? "time (samples along the episode)" : "y" }, zeroline: false,
         ...(this.oneD ? {} : { scaleanchor: "x", scaleratio: 1 }) },
       shapes: regionShapes(this.task, view, this.oneD),
       legend: { orientation: "h", y: -0.12 },
@@ -118,7 +119,7 @@ export class SkillMap {
       notes.push("no w(s) in this evaluation (w ≡ 1 until guidance starts, or the method has none)");
     }
     this.note.textContent = notes.join(" · ");
-    return window.Plotly.react(this.element, traces, layout, { responsive: true, displaylogo: false }).then(() => {
+    return plot(this.element, traces, layout).then(() => {
       this.element.dataset.epoch = this.rollouts ? String(this.rollouts.epoch) : "";
       this.element.dataset.trajectories = String(rollouts.length);
       this.element.dataset.labelled = String(this.labelled.length);

@@ -29,7 +29,13 @@ export class RunPage {
   async open(runId, watchUrl) {
     this.close();
     this.runId = runId;
-    const page = await api(`dashboard/runs/${runId}?max_points=${MAX_POINTS}`);
+    let page;
+    try {
+      page = await api(`dashboard/runs/${runId}?max_points=${MAX_POINTS}`);
+    } catch (error) {
+      if (this.runId === runId) this.runId = null; // the next runs update tries again
+      throw error;
+    }
     if (this.runId !== runId) return;
     this.root.hidden = false;
     this.epoch = 0;

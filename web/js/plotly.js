@@ -1,0 +1,12 @@
+// Plotly (vendor/plotly-basic.min.js, a classic deferred script) is executed after this module
+// graph, so the page's first requests overlap with its start-up; draw through `plot`, which waits.
+
+const ready = new Promise((resolve) => {
+  if (window.Plotly) resolve(window.Plotly);
+  else document.addEventListener("DOMContentLoaded", () => resolve(window.Plotly));
+});
+
+export async function plot(element, traces, layout) {
+  const Plotly = await ready;
+  return Plotly.react(element, traces, layout, { responsive: true, displaylogo: false });
+}
