@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -27,14 +27,21 @@ $(STAMP): pyproject.toml Makefile $(SYS_STAMP)
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH_SPEC)" mujoco==3.17.0
-	$(PY) -m pip install -q -e ".[trainer,service,dev]"
+	$(PY) -m pip install -q -e ".[trainer,service,ui,dev]"
 	@touch $(STAMP)
 
 setup: $(STAMP)
 
+# The main job: service + trainer + labeling UI on the embedded SQLite; you label in the browser.
 demo: $(STAMP)
-	$(VENV)/bin/collie train --env point --task north --method collie --preset cpu --out runs/demo
-	@echo "plots: runs/demo/skills_latest.png runs/demo/curves.png · metrics: runs/demo/metrics.jsonl"
+	$(VENV)/bin/collie up --env point --task north --method collie --preset cpu --out runs/demo
+	@echo "plots: runs/demo/trainer/skills_latest.png · metrics: runs/demo/trainer/metrics.jsonl"
+
+# The same loop, unattended: the scripted oracle labels through the same API.
+demo-oracle: $(STAMP)
+	$(VENV)/bin/collie up --env point --task north --method collie --preset cpu --teacher oracle \
+	  --out runs/demo-oracle --exit-when-done
+	@echo "plots: runs/demo-oracle/trainer/skills_latest.png · metrics: runs/demo-oracle/trainer/metrics.jsonl"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
@@ -47,6 +54,9 @@ bench-guidance: $(STAMP)
 
 bench-update: $(STAMP)
 	$(PY) benchmarks/bench_update.py
+
+bench-labeling: $(STAMP)
+	$(PY) benchmarks/bench_labeling.py
 
 bench-pixels: $(STAMP)
 	$(PY) benchmarks/bench_pixels.py

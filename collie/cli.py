@@ -12,6 +12,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("trainer.cli", "run Algorithm 1 (METRA / COLLIE / Oracle) on one env and task"),
     "serve": ("backend.cli", "run the labeling service (FastAPI + SQLite)"),
     "teacher": ("teacher.cli", "label a run's queries through the API with the scripted oracle"),
+    "label-ui": ("labeling_ui.cli", "serve the labeling UI (viser) for a labeling service"),
     "up": ("collie.up", "start service, trainer and teacher together on the embedded SQLite"),
     "export": ("backend.export", "print a run's label events (or effective labels) as JSON or CSV"),
     "sweep": ("trainer.sweep", "run methods × tasks × seeds of `collie train` (resumable; local pool or Ray)"),

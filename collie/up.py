@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from urllib.parse import quote
 
 from tqdm import tqdm
 
@@ -35,6 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", type=int, default=8000, help="service port (0 = any free port)")
     p.add_argument("--info-json", type=Path, default=None, help="write URLs, run id and tokens here")
     p.add_argument("--exit-when-done", action="store_true", help="exit 0 when the run finishes")
+    p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
+    p.add_argument("--ui-port", type=int, default=8080, help="labeling UI port (0 = any free port)")
     p.add_argument("--train-args", default="", help="extra `collie train` flags, e.g. \"--epochs 50\"")
 
 
@@ -129,10 +132,21 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         if args.teacher_rate:
             teach += ["--rate", str(args.teacher_rate)]
         stack.start("teacher", teach)
-    urls = {"api": api, "labeling_ui": None, "dashboard": f"{api}/"}
+    labeler_url = None
+    if not args.no_label_ui:
+        ui_info = out / "labeling_ui.json"
+        ui_info.unlink(missing_ok=True)
+        ui = stack.start("labeling_ui", ["label-ui", "--api", api, "--run", str(run_id), "--port", str(args.ui_port),
+                                          "--info-json", str(ui_info)])
+        labeler_url = wait_for(ui_info, ui, "the labeling UI")["url"] + "?token=" + quote(tokens["labeler"])
+    dashboard = f"{api}/?token={quote(tokens['operator'])}"
+    urls = {"api": api, "labeling_ui": labeler_url, "dashboard": dashboard}
     write_info(args.info_json, urls, run_id, tokens)
     print(f"collie up: run {run_id} · {args.env} {args.task} {args.method} ({args.preset})")
     print(f"  service   {api}   (API docs {api}/docs)")
+    if labeler_url:
+        print(f"  label     {labeler_url}")
+    print(f"  dashboard {dashboard}")
     print(f"  tokens    operator {tokens['operator']} · labeler {tokens['labeler']}")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
@@ -185,7 +199,7 @@ def watch(api: str, token: str, run_id: int, stack: Stack, exit_when_done: bool,
                 while not stopping["flag"]:
                     time.sleep(0.5)
                 return 0
-            broken = [n for n in stack.dead() if n in ("service",)]
+            broken = [n for n in stack.dead() if n in ("service", "labeling_ui")]
             if broken:
                 raise RuntimeError(f"{', '.join(broken)} exited unexpectedly")
             time.sleep(0.5)

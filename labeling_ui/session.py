@@ -502,4 +502,3 @@ class LabelerSession:
             if last > target[1] and self.waiting_on == target:
                 self.waiting_on = (target[0], last)
                 self._actions.put(Action("wake"))
-

@@ -12,13 +12,15 @@ import torch
 def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path):
     info = tmp_path / "info.json"
     cmd = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
-           "--preset", "smoke", "--port", "0", "--out", str(tmp_path), "--info-json", str(info),
+           "--preset", "smoke", "--port", "0", "--ui-port", "0", "--out", str(tmp_path), "--info-json", str(info),
            "--exit-when-done"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     meta = json.loads(info.read_text())
     assert set(meta) >= {"api", "labeling_ui", "dashboard", "run_id", "tokens"}
     assert set(meta["tokens"]) == {"operator", "labeler", "trainer"}
+    assert meta["labeling_ui"].startswith("http://") and "token=" in meta["labeling_ui"]
+    assert meta["dashboard"].startswith(meta["api"]) and "token=" in meta["dashboard"]
 
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["epoch"] == summary["config"]["epochs"]

@@ -97,7 +97,7 @@ def test_timeout_policy_goes_on_with_what_arrived(live: BackgroundServer, feedba
     feedback.timeout_s = 0.5
     started = time.monotonic()
     assert feedback.collect(0, 0, segments(0, 2)) == []
-    assert 0.4 < time.monotonic() - started < 5
+    assert 0.4 < time.monotonic() - started < 30  # returns after the timeout, not never
     label_in_background(live.url, feedback.run_id, 2).join()
     assert as_dict(feedback.revisions()) == {"s0-q0": 0, "s0-q1": 1}  # late labels, once
     assert feedback.revisions() == []
@@ -231,7 +231,7 @@ def test_report_is_best_effort_and_bounded(live: BackgroundServer) -> None:
         dead.report("metrics", {"epoch": 1, "x": 1.0})
         dead.report("status", {"status": "training", "epoch": 1})
         assert dead.revisions() == [] and dead.control() == "run"  # the last known state, at once
-    assert time.monotonic() - started < 10  # refused at once; never raises
+    assert time.monotonic() - started < 30  # refused at once (generous for a busy CI box); never raises
     dead.close()
 
 
