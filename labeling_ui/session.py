@@ -100,7 +100,7 @@ class LabelerSession:
         self._retry: Action | None = None
         self._down_since: float | None = None
         self._closed = threading.Event()
-        self._tasks: dict[tuple[str, str], Task | None] = {}
+        self._tasks: dict[tuple[str, str, object], Task | None] = {}
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
         self._watcher = threading.Thread(target=self._watch, name=f"collie-watch-{client.client_id}", daemon=True)
 
@@ -398,10 +398,10 @@ class LabelerSession:
         self.scene.set_floor(key, task.to_dict() if task else None, tint, tint_grid(cx, cy, FLOOR_HALF_WIDTH))
 
     def _task(self, run: RunRead) -> Task | None:
-        key = (run.task, run.env)
+        key = (run.task, run.env, run.config.get("seed"))
         if key not in self._tasks:
             try:
-                self._tasks[key] = get_task(run.task, run.env)
+                self._tasks[key] = get_task(run.task, run.env, layout_seed=run.config.get("seed"))
             except ValueError:
                 self._tasks[key] = None
         return self._tasks[key]
