@@ -55,6 +55,9 @@ bench-guidance: $(STAMP)
 bench-update: $(STAMP)
 	$(PY) benchmarks/bench_update.py
 
+bench-service: $(STAMP)
+	$(PY) benchmarks/bench_service.py
+
 bench-labeling: $(STAMP)
 	$(PY) benchmarks/bench_labeling.py
 

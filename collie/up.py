@@ -48,9 +48,9 @@ class Stack:
         self.out, self.procs = out, {}
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
-    def start(self, name: str, args: list[str]) -> subprocess.Popen:
+    def start(self, name: str, args: list[str], env_extra: dict[str, str] | None = None) -> subprocess.Popen:
         log = open(self.out / "logs" / f"{name}.log", "ab")  # noqa: SIM115 - lives as long as the child
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env_extra or {})}
         proc = subprocess.Popen([sys.executable, "-m", "collie.cli", *args], stdout=log, stderr=subprocess.STDOUT,
                                 env=env, start_new_session=True)  # our Ctrl-C is handled here, not by children
         self.procs[name] = proc
@@ -109,9 +109,13 @@ def run(args: argparse.Namespace) -> int:
 
 def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopping: dict) -> int:
     tokens_file = out / "tokens.json"
-    tokens_file.unlink(missing_ok=True)
+    keep: dict[str, str] = {}  # a resumed stack keeps its tokens, so links already handed out stay valid
+    if tokens_file.exists():
+        saved = json.loads(tokens_file.read_text())["tokens"]
+        keep = {f"COLLIE_{role.upper()}_TOKEN": tok for role, tok in saved.items()}
+        tokens_file.unlink()
     service = stack.start("service", ["serve", "--host", "127.0.0.1", "--port", str(args.port), "--db", str(db),
-                                      "--tokens-json", str(tokens_file)])
+                                      "--tokens-json", str(tokens_file)], env_extra=keep)
     info = wait_for(tokens_file, service, "the service")
     api, tokens = info["api"], info["tokens"]
     with CollieClient(api, tokens["operator"]) as client:

@@ -30,7 +30,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     info = out / "info.json"
     command = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
                "--preset", "smoke", "--port", "0", "--out", str(out), "--info-json", str(info), "--exit-when-done",
-               "--train-args=--epochs 100000 --eval-every 2"]  # long enough to pause; evaluated often
+               "--no-label-ui", "--train-args=--epochs 100000 --eval-every 2"]  # long enough to pause; evaluated often
     with open(out / "up.log", "wb") as log:
         proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:

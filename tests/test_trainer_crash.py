@@ -1,0 +1,64 @@
+"""kill -9 of a trainer while it waits for labels, then a restart: it resumes from its checkpoint,
+rebuilds D0/D1/D2 from the service, and finishes — no label lost, none applied twice."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from collie.client import CollieClient
+
+TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": "lb-" + "l" * 30}
+
+
+def cli(*args: str, log: Path) -> subprocess.Popen:
+    env = {**os.environ, **{f"COLLIE_{k.upper()}_TOKEN": v for k, v in TOKENS.items()}}
+    return subprocess.Popen([sys.executable, "-m", "collie.cli", *args], stdout=open(log, "ab"),
+                            stderr=subprocess.STDOUT, env=env)
+
+
+def wait_until(pred, timeout_s: float = 180.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if pred():
+            return
+        time.sleep(0.2)
+    raise TimeoutError("condition not reached")
+
+
+def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
+    info = tmp_path / "service.json"
+    service = cli("serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info),
+                  log=tmp_path / "service.log")
+    try:
+        wait_until(info.exists)
+        api = json.loads(info.read_text())["api"]
+        out = tmp_path / "trainer"
+        train = ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--token", TOKENS["trainer"],
+                 "--no-progress", "--checkpoint-every", "1"]
+        trainer = cli(*train, log=tmp_path / "trainer.log")
+        memo = out / "service_run.json"
+        wait_until(memo.exists)
+        run_id = json.loads(memo.read_text())["run_id"]
+        with CollieClient(api, TOKENS["operator"]) as client:
+            wait_until(lambda: client.run(run_id).status == "waiting_for_labels")
+            trainer.send_signal(signal.SIGKILL)
+            trainer.wait()
+            teacher = cli("teacher", "--api", api, "--token", TOKENS["labeler"], "--run", str(run_id),
+                          "--until-done", log=tmp_path / "teacher.log")
+            restarted = cli(*train, "--resume", log=tmp_path / "trainer.log")
+            assert restarted.wait(timeout=300) == 0, (tmp_path / "trainer.log").read_text()[-3000:]
+            teacher.wait(timeout=60)
+            in_db = {e.query_id: e.label for e in client.effective_labels(run_id)}
+        ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+        applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
+        assert applied == in_db and len(applied) == ckpt["config"]["total_queries"]
+        assert ckpt["epoch"] == ckpt["config"]["epochs"]
+    finally:
+        service.terminate()
+        service.wait(timeout=30)
