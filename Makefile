@@ -58,6 +58,9 @@ bench-update: $(STAMP)
 bench-service: $(STAMP)
 	$(PY) benchmarks/bench_service.py
 
+bench-dashboard: $(STAMP)
+	$(PY) benchmarks/bench_dashboard.py
+
 bench-labeling: $(STAMP)
 	$(PY) benchmarks/bench_labeling.py
 
