@@ -336,10 +336,14 @@ class Trainer:
     def wait_while_paused(self, bar: Any) -> bool:
         """Honour the operator: returns False when the run must stop."""
         wish = self.feedback.control()
-        while wish == "pause":
+        if wish == "pause":
+            self.feedback.report("status", {"status": "paused", "epoch": self.epoch})
             bar.set_description("paused")
-            time.sleep(0.5)
-            wish = self.feedback.control()
+            while wish == "pause":
+                time.sleep(0.5)
+                wish = self.feedback.control()
+            if wish != "stop":
+                self.feedback.report("status", {"status": "training", "epoch": self.epoch})
         return wish != "stop"
 
     def run(self, resume: bool = False) -> dict[str, Any]:
@@ -382,6 +386,7 @@ class Trainer:
                 if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
                     self.checkpoint()
                 bar.update(1)
+                self.report_progress()
         except StopRequested:
             status = "stopped"
         finally:
@@ -391,6 +396,14 @@ class Trainer:
         if status == "stopped":
             self.checkpoint()
         return self.finish(status, record)
+
+    def report_progress(self) -> None:
+        """The current epoch for live views, at most once a second (best effort, skipped while the
+        service is unreachable)."""
+        now = time.monotonic()
+        if now - getattr(self, "_last_progress", 0.0) >= 1.0:
+            self._last_progress = now
+            self.feedback.report("status", {"status": "training", "epoch": self.epoch, "progress": True})
 
     def finish(self, status: str, record: dict[str, Any] | None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]

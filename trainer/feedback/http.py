@@ -140,7 +140,7 @@ class HttpFeedback(FeedbackSource):
         return self._control
 
     def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:
-        if kind != "status" and time.monotonic() < self._report_quiet_until:
+        if (kind != "status" or payload.get("progress")) and time.monotonic() < self._report_quiet_until:
             return  # the service failed recently: skip the bulky reports, do not slow training down
         try:
             if kind == "status":
