@@ -16,6 +16,8 @@ from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
 from trainer.report import RunResult
 
+MAX_COLUMNS = 4  # panels per row
+
 
 def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
     """(xy (n, T+1, 2), skills (n, k)) of the run's last evaluation."""
@@ -46,11 +48,13 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
         first = list({r.label: r for r in reversed(group)}.values())[::-1]  # lowest seed per method
         first.sort(key=RunResult.order)
         dims = env_class(env).position_dims
-        fig = Figure(figsize=(3.2 * len(first), 3.4 if dims == 2 else 3.0))
+        cols = min(len(first), MAX_COLUMNS)
+        rows = -(-len(first) // cols)
+        fig = Figure(figsize=(3.4 * cols, (3.6 if dims == 2 else 3.0) * rows))
         for i, run in enumerate(first):
             xy, skill = final_skills(run)
             task = get_task(task_name, env, layout_seed=run.seed)
-            ax = fig.add_subplot(1, len(first), i + 1)
+            ax = fig.add_subplot(rows, cols, i + 1)
             cov = run.metrics.get("safe_coverage", float("nan"))
             draw_skill_panel(ax, list(xy), task, skills=skill, position_dims=dims, legend=False,
                              title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}")
