@@ -21,6 +21,7 @@ from collie.schemas import (
     ClaimRead,
     EffectiveLabel,
     EventPage,
+    FeedbackPolicy,
     Health,
     LabelAck,
     LabelerCreate,
@@ -35,6 +36,7 @@ from collie.schemas import (
     MetricsRead,
     QueryRead,
     QuerySummary,
+    Released,
     Retired,
     RetireRequest,
     Role,
@@ -168,6 +170,11 @@ class CollieClient:
     def stop(self, run_id: int) -> RunRead:
         return self._post(RunRead, f"/runs/{run_id}/stop")
 
+    def set_feedback_policy(self, run_id: int, timeout_s: float | None) -> RunRead:
+        """The trainer continues after timeout_s seconds of a session with what arrived (None: waits
+        for every label); applies to the session it is waiting on now."""
+        return self._post(RunRead, f"/runs/{run_id}/feedback-policy", FeedbackPolicy(timeout_s=timeout_s))
+
     # ---------------------------------------------------------------- queries
 
     def post_session(self, run_id: int, session: SessionPost) -> SessionPosted:
@@ -196,9 +203,12 @@ class CollieClient:
     def query(self, run_id: int, query_id: str) -> QueryRead:
         return self._get(QueryRead, f"/runs/{run_id}/queries/{query_id}")
 
-    def claim(self, run_id: int, lease_s: float | None = None) -> ClaimRead | None:
-        """The next query under a lease, or None when nothing is claimable right now."""
-        params = {"lease_s": lease_s} if lease_s is not None else {}
+    def claim(self, run_id: int, lease_s: float | None = None, hold: int = 1) -> ClaimRead | None:
+        """The next query under a lease, or None when nothing is claimable right now. With hold=2 a
+        second query is taken besides the one held (to preload it); every held lease is renewed."""
+        params: dict[str, float | int] = {"lease_s": lease_s} if lease_s is not None else {}
+        if hold != 1:
+            params["hold"] = hold
         response = self._send("POST", f"/runs/{run_id}/claim", params=params)
         return None if response.status_code == 204 else ClaimRead.model_validate_json(response.content)
 
@@ -230,6 +240,10 @@ class CollieClient:
             client_request_id=client_request_id or new_request_id(),
         )
         return self._post(LabelAck, f"/runs/{run_id}/labels", body, next="true" if next else None)
+
+    def release(self, run_id: int, query_id: str) -> Released:
+        """Hand a held query back to the pool (records nothing, unlike a skip)."""
+        return self._post(Released, f"/runs/{run_id}/queries/{query_id}/release", None)
 
     def skip(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
         return self.submit(run_id, query_id, "skip", client_request_id=client_request_id)

@@ -21,7 +21,7 @@ RunStatus = Literal["training", "waiting_for_labels", "paused", "finished", "fai
 Control = Literal["run", "pause", "stop"]
 QueryStatus = Literal["pending", "leased", "labelled", "retired"]
 EventKind = Literal["label", "skip", "undo"]
-StreamKind = Literal["queries", "retired", "label", "withdrawn", "status", "control", "metrics", "rollouts"]
+StreamKind = Literal["queries", "retired", "label", "withdrawn", "status", "control", "policy", "metrics", "rollouts"]
 
 FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 
@@ -32,9 +32,13 @@ MAX_INT = 2**53  # ints stay exact in JSON numbers and fit every database's inte
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
 Matrix = list[list[FiniteFloat]]
+MAX_FEEDBACK_TIMEOUT_S = 7 * 86_400
+# how long the trainer waits for a session's labels before it continues with what arrived
+FeedbackTimeout = Annotated[float, Field(gt=0, le=MAX_FEEDBACK_TIMEOUT_S, allow_inf_nan=False)]
 
 MAX_CONFIG_BYTES = 64 * 1024
 MAX_EXTRA_BYTES = 16 * 1024
+MAX_HOLD = 2  # queries one labeler may hold at once in a run: the one on screen and the next
 MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
 MAX_METRICS = 256
@@ -85,6 +89,9 @@ class RunCreate(Wire):
     dims: EnvDims
     n_total: int | None = Field(default=None, ge=0, le=MAX_INT, description="planned number of labels (budget)")
     epochs_total: int | None = Field(default=None, ge=0, le=MAX_INT)
+    feedback_timeout_s: FeedbackTimeout | None = Field(
+        default=None, description="seconds the trainer waits for a session's labels; null: every label"
+    )
 
     @field_validator("config")
     @classmethod
@@ -117,6 +124,14 @@ class RunRead(Wire):
     queue: QueueCounts
     created_at: datetime
     updated_at: datetime
+    feedback_timeout_s: float | None = Field(default=None, description="null: the trainer waits for every label")
+
+
+class FeedbackPolicy(Wire):
+    """An operator's feedback timeout policy: the trainer continues after `timeout_s` seconds of a
+    session with the labels that arrived (later ones come as revisions); null waits for every label."""
+
+    timeout_s: FeedbackTimeout | None
 
 
 class StatusUpdate(Wire):
@@ -241,6 +256,12 @@ class ClaimRead(Wire):
     model_config = ConfigDict(strict=False)
     query: QueryRead
     lease_expires_at: datetime
+    held: list[QueryId] = Field(default_factory=list, description="every query the caller holds in the run now")
+
+
+class Released(Wire):
+    query_id: QueryId
+    status: QueryStatus = Field(description="the query's status after the call (pending once released)")
 
 
 # ---------------------------------------------------------------- labels

@@ -11,6 +11,7 @@ from urllib.parse import quote
 
 import viser
 
+from labeling_ui.models import warm_models
 from labeling_ui.session import LabelerSession, UiConfig
 
 
@@ -28,6 +29,9 @@ class LabelingApp:
         self._lock = threading.Lock()
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        self.compile_s: dict[str, float] = {}  # env → seconds its model took to compile, once warm
+        self._warm = threading.Thread(target=lambda: self.compile_s.update(warm_models()), name="collie-warm")
+        self._warm.start()
 
     @property
     def port(self) -> int:
@@ -49,12 +53,14 @@ class LabelingApp:
         session.start()
 
     def _held_elsewhere(self, closing: LabelerSession, run_id: int, query_id: str) -> bool:
-        """Whether another open tab of the same labeler shows this query (a reload picked it up:
-        the service keeps one claim per labeler, so that tab now holds the very same lease)."""
+        """Whether another open tab of the same labeler shows or preloads this query (a reload picked
+        it up: the service keeps a labeler's claims per labeler, so that tab holds the same lease)."""
         with self._lock:
             others = [s for s in self.sessions.values() if s is not closing and s.token == closing.token]
         return any(
-            s.shown is not None and (s.shown.run.id, s.shown.query.query_id) == (run_id, query_id) for s in others
+            (item.run.id, item.query.query_id) == (run_id, query_id)
+            for s in others
+            for item in [*([s.shown] if s.shown is not None else []), *s.ahead]
         )
 
     def _disconnect(self, client: viser.ClientHandle) -> None:
@@ -73,3 +79,4 @@ class LabelingApp:
         for session in sessions:
             session.join(timeout_s / max(len(sessions), 1))
         self.server.stop()
+        self._warm.join(30.0)  # exiting in the middle of a MuJoCo compile crashes the process

@@ -8,12 +8,15 @@ replay shows exactly the states the trainer recorded.
 from __future__ import annotations
 
 import functools
+import math
 import threading
+import time
+from collections import defaultdict
 
 import mujoco
 import numpy as np
 
-from trainer.envs import load_model
+from trainer.envs import ENV_NAMES, load_model
 
 
 class ModelError(Exception):
@@ -21,7 +24,8 @@ class ModelError(Exception):
     width does not fit the model."""
 
 
-_compile_lock = threading.Lock()
+_locks: dict[str, threading.Lock] = defaultdict(threading.Lock)  # one per env: a slow compile blocks only its env
+_locks_guard = threading.Lock()
 
 
 @functools.lru_cache(maxsize=16)
@@ -31,11 +35,27 @@ def _compiled(env: str) -> mujoco.MjModel:
 
 def replay_model(env: str) -> mujoco.MjModel:
     """The compiled model of `env` (shared, read-only; each viewer keeps its own MjData)."""
+    with _locks_guard:
+        lock = _locks[env]
     try:
-        with _compile_lock:
+        with lock:
             return _compiled(env)
     except Exception as exc:  # unknown names raise ValueError, broken XML raises mujoco errors
         raise ModelError(f"cannot build the MuJoCo model for env '{env}': {exc}") from exc
+
+
+def warm_models(envs: tuple[str, ...] = ENV_NAMES) -> dict[str, float]:
+    """Compile every env's model ahead of the first labeler (quadruped takes about 1 s); returns
+    env → seconds, NaN for a model that does not compile (its segments then say so)."""
+    took = {}
+    for env in envs:
+        start = time.perf_counter()
+        try:
+            replay_model(env)
+            took[env] = time.perf_counter() - start
+        except ModelError:
+            took[env] = math.nan
+    return took
 
 
 class Poser:

@@ -83,9 +83,10 @@ class ServiceLink:
     def run(self, run_id: int) -> RunRead:
         return self._call(lambda: self.client.run(run_id))
 
-    def claim(self, run_id: int) -> ClaimRead | None:
-        """The next query under a lease (or the one this labeler already holds, renewed)."""
-        return self._call(lambda: self.client.claim(run_id, lease_s=self.lease_s))
+    def claim(self, run_id: int, hold: int = 1) -> ClaimRead | None:
+        """The next query under a lease (or the newest this labeler holds); every lease they hold
+        is renewed. hold=2 takes a second query to preload besides the one on screen."""
+        return self._call(lambda: self.client.claim(run_id, lease_s=self.lease_s, hold=hold))
 
     def submit(self, run_id: int, query_id: str, value: Submission, seconds: float | None, request_id: str) -> LabelAck:
         """Label or skip; `request_id` makes a repeat of the same key press harmless."""
@@ -97,9 +98,8 @@ class ServiceLink:
         return self._retrying(lambda: self.client.undo(run_id, query_id, client_request_id=request_id))
 
     def release(self, run_id: int, query_id: str) -> None:
-        """Hand a held query back to the pool. The service has no release call yet; a skip is the
-        documented way to release a lease (it is not a label)."""
-        self._call(lambda: self.client.skip(run_id, query_id))
+        """Hand a held query back to the pool (nothing is recorded: it was never judged)."""
+        self._call(lambda: self.client.release(run_id, query_id))
 
     def progress(self, run_id: int, session: int) -> Progress:
         run = self._call(lambda: self.client.run(run_id))

@@ -3,6 +3,8 @@ and the error screens.
 
 GUI callbacks only enqueue; one worker thread talks to the service in order, so a fast labeler's
 keys are handled one at a time, each against the segment that was on screen when it was pressed.
+While a segment is on screen the next one is already claimed and prepared (the service lets a
+labeler hold two), so a label key shows the next segment without a round trip.
 While nothing is claimable, a watcher thread long-polls the run's event stream and wakes the
 worker when something happens, so new queries appear without a reload.
 """
@@ -22,12 +24,12 @@ import numpy as np
 import viser
 
 from collie.client import new_request_id
-from collie.schemas import QueryRead, RunRead
+from collie.schemas import MAX_HOLD, QueryRead, RunRead
 from collie.tasks import Task, get_task
 from labeling_ui.browser import read_token, remember_token
 from labeling_ui.inset import render_inset
 from labeling_ui.keys import bind_keys
-from labeling_ui.models import ModelError, Poser
+from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import Panels, SegmentInfo
 from labeling_ui.playback import Player
 from labeling_ui.regions import tint_grid, tint_meshes
@@ -48,6 +50,7 @@ class UiConfig:
     lease_s: float = 60.0  # renewed while the tab is open; a crashed UI frees its claim this fast
     fps: float = 20.0  # segment frames per second at 1× (env steps are 0.05 s)
     min_dwell_s: float = 0.3  # label keys are ignored this long after a segment appears
+    prefetch: bool = True  # claim and prepare the next segment while one is on screen
     wait_s: float = 10.0  # long-poll length while waiting for work
     release_grace_s: float = 5.0  # a closed tab's claims wait this long for a reload of it
     retry_max_s: float = 5.0
@@ -93,6 +96,7 @@ class LabelerSession:
         self.signed_in = False
         self.shown: Shown | None = None
         self.held: set[tuple[int, str]] = set()  # (run, query) leases this tab holds
+        self.ahead: list[Shown] = []  # claimed and prepared, shown next (a preload, an undo's interrupted one)
         self.history: list[Shown] = []
         self.waiting_on: tuple[int, int] | None = None  # (run, last event id) while idle
         self.timings: list[dict[str, float | str]] = []  # key → next first frame, for benchmarks
@@ -284,6 +288,7 @@ class LabelerSession:
         self.link = self.watch_link = None
         self.signed_in = False
         self.shown = None
+        self.ahead.clear()
         self.waiting_on = None
         self.history.clear()
         self.player.unload()
@@ -298,8 +303,13 @@ class LabelerSession:
     # ---------------------------------------------------------------- claiming and showing
 
     def _claim_next(self, run: RunRead | None = None) -> bool:
-        """Claim and show the next segment; False (and the waiting screen) when there is none."""
+        """Show the next segment (the preloaded one, else a fresh claim); False (and the waiting
+        screen) when there is none."""
         assert self.link is not None
+        if self.ahead:
+            self.waiting_on = None
+            self._present(self.ahead.pop(0))
+            return True
         claim = None
         if run is not None:
             claim = self._claim(run)
@@ -316,7 +326,7 @@ class LabelerSession:
             self._waiting(self._run_status(run))
             return False
         self.waiting_on = None
-        self._present(claim[0], claim[1])
+        self._present(self._prepare(*claim))
         return True
 
     def _claim(self, run: RunRead) -> tuple[RunRead, QueryRead] | None:
@@ -344,13 +354,22 @@ class LabelerSession:
             f"{q.leased} being labelled by others, {run.n_labels} labelled."
         )
 
-    def _present(self, run: RunRead, query: QueryRead) -> None:
+    def _prepare(self, run: RunRead, query: QueryRead) -> Shown:
+        """A claimed segment made ready to show: its model compiled and its frames checked."""
         self.held.add((run.id, query.query_id))
-        poser, error = None, None
         try:
-            poser = Poser(self.scene.load(run.env), np.asarray(query.qpos, float))
+            return Shown(run, query, Poser(replay_model(run.env), np.asarray(query.qpos, float)), None)
         except ModelError as exc:
-            error = str(exc)
+            return Shown(run, query, None, str(exc))
+
+    def _present(self, item: Shown) -> None:
+        run, query, poser, error = item.run, item.query, item.poser, item.error
+        self.held.add((run.id, query.query_id))
+        if poser is not None:
+            try:
+                self.scene.load(run.env)  # builds the robot when the env changes
+            except ModelError as exc:
+                poser, error = None, str(exc)
         task = self._task(run)
         info = SegmentInfo(
             query.query_id,
@@ -386,6 +405,21 @@ class LabelerSession:
             self.panels.show_task(run.task, f"Unknown task '{run.task}' for {run.env}: judge by its name.", {})
         self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
         self._show_progress()
+        self._preload()
+
+    def _preload(self) -> None:
+        """Claim the segment after the one on screen and prepare it, so the label key that ends
+        this one shows the next at once. Best effort: without it the next is claimed on demand."""
+        shown = self.shown
+        if not self.config.prefetch or self.link is None or shown is None or self.ahead or len(self.held) >= MAX_HOLD:
+            return
+        try:
+            claimed = self.link.claim(shown.run.id, hold=MAX_HOLD)
+        except (Rejected, ServiceDown) as exc:
+            log.info("no preload for run %s: %s", shown.run.id, exc)
+            return
+        if claimed is not None and claimed.query.query_id != shown.query.query_id:
+            self.ahead.append(self._prepare(shown.run, claimed.query))
 
     def _show_floor(self, run: RunRead, task: Task | None, xy: np.ndarray) -> None:
         """The task's regions on the floor around the segment, recomputed only when the segment
@@ -411,20 +445,29 @@ class LabelerSession:
             self.panels.show_progress(self.link.progress(self.shown.run.id, self.shown.query.session))
 
     def _renew(self) -> None:
-        """Keep the claim alive while the labeler watches (claiming again renews what one holds)."""
+        """Keep the claims alive while the labeler watches (a claim renews every lease one holds);
+        a segment whose lease was lost meanwhile (this tab stalled past it) is dropped."""
         shown = self.shown
-        if self.link is None or shown is None or len(self.held) != 1:
+        if self.link is None or shown is None:
             return
         try:
             claimed = self.link.claim(shown.run.id)
         except Rejected as exc:
             self.panels.notify("Run closed", str(exc), "orange")
             self.shown = None
+            self.ahead.clear()
             return
-        if claimed is not None and claimed.query.query_id != shown.query.query_id:
+        still = set(claimed.held) if claimed is not None else set()
+        for item in [i for i in self.ahead if i.query.query_id not in still]:
+            self.ahead.remove(item)
+            self.held.discard((item.run.id, item.query.query_id))
+        if shown.query.query_id not in still:
             self.held.discard((shown.run.id, shown.query.query_id))
             self.panels.notify("Claim lost", f"segment {shown.query.query_id} went to someone else", "orange")
-            self._present(shown.run, claimed.query)
+            self.shown = None
+            if claimed is not None and all(i.query.query_id != claimed.query.query_id for i in self.ahead):
+                self.ahead.insert(0, self._prepare(shown.run, claimed.query))
+            self._claim_next(shown.run)
 
     # ---------------------------------------------------------------- labels
 
@@ -466,13 +509,15 @@ class LabelerSession:
         self.history.pop()
         self.player.pause()
         self.panels.notify("Label withdrawn", f"segment {last.query.query_id} is back: label it again", "blue")
-        self._present(last.run, last.query)
+        if self.shown is not None and self.shown.query.query_id != last.query.query_id:
+            self.ahead.insert(0, self.shown)  # it comes back after the relabel
+        self._present(last)
 
     def _recovered(self) -> None:
         down_since, self._down_since = self._down_since, None
         shown = self.shown
         if shown is not None and down_since is not None and shown.appeared < down_since:
-            self._present(shown.run, shown.query)  # the outage screen hid it; show it again
+            self._present(shown)  # the outage screen hid it; show it again
 
     def _release_all(self) -> None:
         """Hand every claim this tab holds back to the pool (a closed tab, a sign-out)."""
@@ -482,6 +527,7 @@ class LabelerSession:
                 with contextlib.suppress(Rejected, ServiceDown, AuthRefused):  # else the lease runs out
                     link.release(run_id, query_id)
         self.held.clear()
+        self.ahead.clear()
 
     # ---------------------------------------------------------------- the watcher
 

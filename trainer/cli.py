@@ -31,7 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--token", default=None, help="trainer token for --api")
     p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
     p.add_argument("--feedback-timeout", type=float, default=None,
-                   help="seconds to wait for a session's labels before continuing with what arrived")
+                   help="seconds to wait for a session's labels before continuing with what arrived "
+                        "(an operator may change it from the dashboard)")
     group = p.add_argument_group("hyperparameters (override the preset)")
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
@@ -63,12 +64,14 @@ def config_from_args(args: argparse.Namespace) -> Config:
 def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
     """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
     (a restarted trainer rebuilds D0/D1/D2 from it), else create a run and remember it."""
-    from collie.schemas import EnvDims, RunCreate
+    from collie.schemas import MAX_FEEDBACK_TIMEOUT_S, EnvDims, RunCreate
     from trainer.envs import make_env
     from trainer.feedback.http import HttpFeedback
 
     if not args.token:
         raise ValueError("--api needs --token (a trainer token)")
+    if args.feedback_timeout is not None and not 0 < args.feedback_timeout <= MAX_FEEDBACK_TIMEOUT_S:
+        raise ValueError(f"--feedback-timeout must be in (0, {MAX_FEEDBACK_TIMEOUT_S}] seconds")
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
@@ -82,7 +85,8 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
                        skill_dim=cfg.skill_dim)
         env.close()
         spec = RunCreate(env=cfg.env, task=cfg.task, method=cfg.method, config=cfg.to_dict(), dims=dims,
-                         n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0, epochs_total=cfg.epochs)
+                         n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0, epochs_total=cfg.epochs,
+                         feedback_timeout_s=args.feedback_timeout)
         source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))

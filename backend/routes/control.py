@@ -1,4 +1,5 @@
-"""Run control by an operator: pause, resume, stop. The trainer polls it and reports its status."""
+"""Run control by an operator: pause, resume, stop, and the feedback timeout policy. The trainer
+polls them (the run's event log) and reports its status."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from fastapi import APIRouter
 
 from backend.routes.deps import DB, OperatorCaller, RunId
 from backend.services import runs
-from collie.schemas import RunRead
+from collie.schemas import FeedbackPolicy, RunRead
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
 
@@ -27,3 +28,11 @@ async def resume(run_id: RunId, _: OperatorCaller, db: DB) -> RunRead:
 async def stop(run_id: RunId, _: OperatorCaller, db: DB) -> RunRead:
     with db.write() as conn:
         return runs.set_control(conn, run_id, "stop")
+
+
+@router.post("/feedback-policy")
+async def feedback_policy(run_id: RunId, body: FeedbackPolicy, _: OperatorCaller, db: DB) -> RunRead:
+    """How long the trainer waits for a session's labels before it continues with what arrived
+    (null: for every label); applies to the session it is waiting on now."""
+    with db.write() as conn:
+        return runs.set_feedback_policy(conn, run_id, body)

@@ -9,6 +9,7 @@ from fastapi import APIRouter, Query, Request, Response
 from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller, json_body, parse_body
 from backend.services import leases, queries
 from collie.schemas import (
+    MAX_HOLD,
     MAX_INT,
     ClaimRead,
     LabelledPage,
@@ -16,6 +17,7 @@ from collie.schemas import (
     QueryRead,
     QueryStatus,
     QuerySummary,
+    Released,
     Retired,
     RetireRequest,
     SessionPost,
@@ -69,12 +71,22 @@ async def claim(
     db: DB,
     settings: SettingsDep,
     lease_s: Annotated[float | None, Query(gt=0, le=3600, description="lease length; default from settings")] = None,
+    hold: Annotated[int, Query(ge=1, le=MAX_HOLD, description="hold up to this many (2: preload the next)")] = 1,
 ) -> Response:
+    """Renew every lease the caller holds here and return their `hold`-th query, taking the oldest
+    pending one when they hold fewer (204: none to take now)."""
     with db.write() as conn:
-        claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s)
+        claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s, hold)
     if claimed is None:
         return Response(status_code=204)
     return Response(claimed, media_type="application/json")
+
+
+@router.post("/queries/{query_id}/release")
+async def release(run_id: RunId, query_id: QueryId, caller: LabelerCaller, db: DB) -> Released:
+    """Hand a held query back to the pool without a skip (a preloaded segment nobody will see)."""
+    with db.write() as conn:
+        return Released(query_id=query_id, status=leases.release(conn, run_id, caller, query_id))
 
 
 @router.get("/labelled")

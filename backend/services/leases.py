@@ -2,7 +2,9 @@
 be pending), so two labelers never hold the same query, on SQLite or PostgreSQL alike. Expired
 leases go back to the pool at the next claim in their run (keeping their last holder, who may
 still hand in a late label while nobody else has the query). Queries a labeler skipped come to
-them last. Statements are built once: this is the hottest path of the service."""
+them last. A labeler may hold up to MAX_HOLD queries (the one on screen and the next, preloaded);
+a claim renews every lease they hold. Statements are built once: this is the hottest path of the
+service."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from sqlalchemy.orm import aliased
 from backend.models import LabelEvent, Query, QueryData, Run
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED
+from collie.schemas import FINISHED, QueryStatus
 
 _RETURNED = (
     Query.id,
@@ -38,21 +40,19 @@ _SWEEP = (
 )
 
 
-def _held() -> Update:
-    """Renew and return the caller's live lease in this run (a labeler works one query at a time)."""
-    mine = aliased(Query)
-    held = (
-        select(mine.id)
-        .where(mine.run_id == bindparam("run"), mine.status == "leased", mine.lease_owner_id == bindparam("me"))
-        .limit(1)
-        .scalar_subquery()
+_RENEW = (
+    update(Query)
+    .where(
+        Query.run_id == bindparam("run"), Query.status == "leased", Query.lease_owner_id == bindparam("me"), _RUN_OPEN
     )
-    return (
-        update(Query)
-        .where(Query.id == held, _RUN_OPEN)
-        .values(lease_expires_at=bindparam("expires"))
-        .returning(*_RETURNED)
-    )
+    .values(lease_expires_at=bindparam("expires"))
+    .returning(*_RETURNED)
+)
+_RELEASE = (
+    update(Query)
+    .where(Query.id == bindparam("pk"), Query.status == "leased", Query.lease_owner_id == bindparam("me"))
+    .values(status="pending", lease_expires_at=bindparam("now"))
+)
 
 
 def _take(avoid_skipped: bool) -> Update:
@@ -73,25 +73,29 @@ def _take(avoid_skipped: bool) -> Update:
     )
 
 
-_HELD = _held()
 _TAKE = (_take(avoid_skipped=True), _take(avoid_skipped=False))
 
 
-def claim(conn: Connection, run_id: int, caller: Caller, lease_s: float) -> bytes | None:
-    """The caller's query as ClaimRead JSON, or None when nothing is claimable right now."""
+def claim(conn: Connection, run_id: int, caller: Caller, lease_s: float, hold: int = 1) -> bytes | None:
+    """ClaimRead JSON for the caller's `hold`-th query (by session, then posting order): every lease
+    they hold in the run is renewed; with fewer than `hold` held, the oldest pending query is taken
+    and returned. None when one is needed and none is claimable right now."""
     now = time.time()
     params = {"run": run_id, "me": caller.id, "now": now, "expires": now + lease_s}
     conn.execute(_SWEEP, params)
-    row = conn.execute(_HELD, params).first()
+    held = sorted(conn.execute(_RENEW, params).all(), key=lambda r: (r.session, r.id))
+    row = held[hold - 1] if len(held) >= hold else None
     # PostgreSQL: a concurrent claim may win our candidate (the re-checked WHERE then fails); try again.
     attempts = 1 if conn.dialect.name == "sqlite" else 4
     for take in [*_TAKE] * attempts:
         if row is not None:
             break
         row = conn.execute(take, params).first()
+        if row is not None:
+            held.append(row)
     if row is not None:
         data = conn.execute(_DATA, {"pk": row.id}).one()
-        return claim_json(row, data, caller.name, now + lease_s)
+        return claim_json(row, data, caller.name, now + lease_s, [r.query_id for r in held])
     state = conn.execute(select(Run.status, Run.control).where(Run.id == run_id)).first()
     if state is None:
         raise NotFound(f"no run {run_id}")
@@ -100,11 +104,27 @@ def claim(conn: Connection, run_id: int, caller: Caller, lease_s: float) -> byte
     return None
 
 
+def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> QueryStatus:
+    """Hand a held query back to the pool (not a skip: nothing is recorded). Releasing what is no
+    longer held by the caller (expired, released already) is a no-op; the query's status comes back."""
+    row = conn.execute(
+        select(Query.id, Query.status, Query.lease_owner_id).where(Query.run_id == run_id, Query.query_id == query_id)
+    ).first()
+    if row is None:
+        raise NotFound(f"no query {query_id!r} in run {run_id}")
+    if row.status == "leased" and row.lease_owner_id != caller.id:
+        raise Conflict(f"query {query_id!r} is held by another labeler")
+    if row.status == "leased":
+        conn.execute(_RELEASE, {"pk": row.id, "me": caller.id, "now": time.time()})
+        return "pending"
+    return row.status
+
+
 def iso(t: float) -> str:
     return datetime.fromtimestamp(t, UTC).isoformat().replace("+00:00", "Z")
 
 
-def claim_json(row: Any, data: Any, owner: str, expires: float) -> bytes:
+def claim_json(row: Any, data: Any, owner: str, expires: float, held: list[str]) -> bytes:
     """ClaimRead as JSON. The stored frames are JSON already (QueryFrames): they are spliced in
     rather than parsed and re-serialised (about 1,600 floats per Ant segment)."""
     head = {
@@ -122,4 +142,4 @@ def claim_json(row: Any, data: Any, owner: str, expires: float) -> bytes:
         "extra": data.extra,
     }
     query = json.dumps(head)[:-1] + "," + data.frames[1:]
-    return f'{{"query":{query},"lease_expires_at":"{iso(expires)}"}}'.encode()
+    return f'{{"query":{query},"lease_expires_at":"{iso(expires)}","held":{json.dumps(held)}}}'.encode()

@@ -1,5 +1,5 @@
-"""Runs: created by a trainer, status reported by the trainer, control (run / pause / stop) set by
-an operator. Both changes go on the run's stream."""
+"""Runs: created by a trainer, status reported by the trainer, control (run / pause / stop) and the
+feedback timeout policy set by an operator. Every change goes on the run's stream."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from backend.models import Query, Run
 from backend.services import events
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, Control, QueueCounts, RunCreate, RunRead, StatusUpdate
+from collie.schemas import FINISHED, Control, FeedbackPolicy, QueueCounts, RunCreate, RunRead, StatusUpdate
 
 _CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "stop": "stop"}
 
@@ -33,6 +33,7 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
             n_labels=0,
             n_total=spec.n_total,
             epochs_total=spec.epochs_total,
+            feedback_timeout_s=spec.feedback_timeout_s,
             last_event_id=0,
             created_by=caller.id,
             created_at=now,
@@ -82,6 +83,7 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         queue=counts,
         created_at=row.created_at,
         updated_at=row.updated_at,
+        feedback_timeout_s=row.feedback_timeout_s,
     )
 
 
@@ -133,4 +135,20 @@ def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(control=wanted, updated_at=now))
         events.append(conn, run_id, "control", {"control": wanted}, now)
+    return get(conn, run_id)
+
+
+def set_feedback_policy(conn: Connection, run_id: int, policy: FeedbackPolicy) -> RunRead:
+    """How long the trainer waits for a session's labels (None: for every label). The trainer reads
+    the "policy" event and re-times the session it is waiting on from the session's start."""
+    current = row(conn, run_id)
+    if current.status in FINISHED:
+        raise Conflict(f"run {run_id} is {current.status}")
+    if current.control == "stop":
+        raise Conflict(f"run {run_id} is being stopped")
+    now = time.time()
+    conn.execute(update(Run).where(Run.id == run_id).values(feedback_timeout_s=policy.timeout_s, updated_at=now))
+    # always on the stream, also when the column already says so: a trainer restarted with another
+    # --feedback-timeout on an existing run still hears the operator's word
+    events.append(conn, run_id, "policy", {"timeout_s": policy.timeout_s}, now)
     return get(conn, run_id)

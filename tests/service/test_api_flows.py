@@ -58,6 +58,37 @@ def test_claim_label_and_counts(labeler: CollieClient, run: RunRead) -> None:
     assert state.n_labels == 1 and state.queue.labelled == 1 and state.queue.pending == 3
 
 
+def test_hold_two_preloads_the_next_and_release_hands_it_back(
+    labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
+) -> None:
+    shown = labeler.claim(run.id)
+    ahead = labeler.claim(run.id, hold=2)  # the next segment, preloaded while 0-0 is on screen
+    assert (shown.query.query_id, ahead.query.query_id, ahead.held) == ("0-0", "0-1", ["0-0", "0-1"])
+    assert labeler.claim(run.id, hold=2).query.query_id == "0-1"  # holding two already: renews both
+    assert labeler.claim(run.id).held == ["0-0", "0-1"]
+    assert labeler.run(run.id).queue.leased == 2
+    other = new_labeler("hold-other")
+    assert other.claim(run.id).query.query_id == "0-2"  # neither of mine
+    ack = labeler.submit(run.id, "0-0", 2)
+    assert ack.label == 2
+    following = labeler.claim(run.id)
+    assert following.query.query_id == "0-1" and following.held == ["0-1"]
+    released = labeler.release(run.id, "0-1")  # the tab closes: no skip is recorded
+    assert (released.query_id, released.status) == ("0-1", "pending")
+    assert labeler.release(run.id, "0-1").status == "pending"  # again: a no-op
+    assert [e.kind for e in labeler.label_events(run.id)] == ["label"]
+    assert other.claim(run.id, hold=2).query.query_id == "0-1"
+    with pytest.raises(ApiError) as err:
+        labeler.release(run.id, "0-1")  # someone else's now
+    assert err.value.status == 409
+    with pytest.raises(ApiError) as err:
+        labeler.release(run.id, "no-such")
+    assert err.value.status == 404
+    with pytest.raises(ApiError) as err:
+        labeler.claim(run.id, hold=3)
+    assert err.value.status == 422
+
+
 def test_submit_is_idempotent_by_client_request_id(labeler: CollieClient, run: RunRead) -> None:
     labeler.claim(run.id)
     first = labeler.submit(run.id, "0-0", 1, client_request_id="req-1")

@@ -113,17 +113,29 @@ def test_wrong_token_is_refused_with_no_scene(stack: Stack, browser: Browser, ar
     page.context.close()
 
 
-def test_closed_tab_releases_its_claim(stack: Stack, browser: Browser) -> None:
-    run = stack.post_run("point", 1)
-    app = stack.ui(run.id, release_grace_s=0.5)
+def wait_until(condition: object, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:  # type: ignore[operator]
+        time.sleep(0.05)
+    assert condition(), "timed out"  # type: ignore[operator]
+
+
+def test_next_segment_is_preloaded_and_a_closed_tab_releases_both(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, release_grace_s=0.5)
     page = open_labeler(browser, app.labeler_url(stack.new_labeler("closer")))
-    wait_segment(page)
-    assert stack.trainer.run(run.id).queue.leased == 1
+    first = wait_segment(page)
+    (session,) = app.sessions.values()
+    wait_until(lambda: len(session.ahead) == 1)  # the next one is claimed and ready before any key
+    preloaded = session.ahead[0].query.query_id
+    assert preloaded != first and stack.trainer.run(run.id).queue.leased == 2
+    press(page, "3")
+    assert wait_segment(page, first) == preloaded
+    wait_until(lambda: len(session.ahead) == 1)  # and the one after it
     page.context.close()
-    deadline = time.monotonic() + 30
-    while stack.trainer.run(run.id).queue.leased and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert stack.trainer.run(run.id).queue.pending == 1
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 0)
+    assert stack.trainer.run(run.id).queue.pending == 2
+    assert [e.kind for e in stack.trainer.label_events(run.id)] == ["label"]  # a release is no skip
 
 
 def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, artifacts: Path) -> None:

@@ -17,7 +17,7 @@ import pytest
 
 from collie.tasks import get_task
 from labeling_ui.inset import SIZE, render_inset, view_box
-from labeling_ui.models import ModelError, Poser, replay_model
+from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
 from labeling_ui.service import AuthRefused, ServiceDown, ServiceLink
@@ -65,6 +65,14 @@ class Recorder:
     def render(self, position: float) -> None:
         with self.lock:
             self.positions.append(position)
+
+
+def test_warm_models_compiles_ahead_and_names_what_fails() -> None:
+    took = warm_models(("point", "no_such_robot"))
+    assert np.isfinite(took["point"]) and np.isnan(took["no_such_robot"])
+    start = time.perf_counter()
+    replay_model("point")  # compiled already: a cache hit
+    assert time.perf_counter() - start < took["point"] + 0.05
 
 
 def test_player_paces_at_most_30_hz_and_loops() -> None:

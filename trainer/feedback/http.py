@@ -4,8 +4,10 @@ The trainer's side of the contract (docs/service.md):
 - `collect` posts the session's segments in one call, marks the run waiting_for_labels and reads
   the run's event log (long poll, resumable by event id) until every segment of the session has an
   effective label — or, with `timeout_s`, until that many seconds passed (then it goes on with what
-  arrived; later labels come through `revisions`). A stop raises StopRequested; while paused it
-  keeps waiting and does not return.
+  arrived; later labels come through `revisions`). An operator may change `timeout_s` at any time
+  (a "policy" event): the session being waited on is then re-timed from its start, so a shorter
+  timeout that has already passed releases it at once, and None waits for every label again.
+  A stop raises StopRequested; while paused it keeps waiting and does not return.
 - Every label the trainer is given is remembered with its value, so a label reaches the trainer
   once, and a change of it (undo, relabel, a late label) once more as a revision.
 - `history` returns the labelled segments of the run for a restarted trainer. The loop then
@@ -82,7 +84,9 @@ class HttpFeedback(FeedbackSource):
 
     @classmethod
     def create(cls, api: str, token: str, spec: RunCreate, **kwargs: Any) -> HttpFeedback:
-        """Create the run on the service and return a source for it."""
+        """Create the run on the service and return a source for it (timeout_s defaults to the
+        spec's feedback_timeout_s)."""
+        kwargs.setdefault("timeout_s", spec.feedback_timeout_s)
         with CollieClient(api, token) as client:
             run = client.create_run(spec)
         return cls(api, token, run.id, **kwargs)
@@ -101,7 +105,7 @@ class HttpFeedback(FeedbackSource):
         for s in segments:
             self._given.setdefault(s.query_id, None)
         ids = [s.query_id for s in segments]
-        deadline = None if self.timeout_s is None else time.monotonic() + self.timeout_s
+        started = time.monotonic()  # the deadline is started + self.timeout_s, as the policy says now
         self._show("waiting_for_labels", epoch)
         wait = 0.0  # first look without waiting: the labels may all be in already (a re-posted session)
         while True:
@@ -113,7 +117,7 @@ class HttpFeedback(FeedbackSource):
                 wait = self.wait_chunk_s  # labels keep arriving while paused; we return after a resume
                 continue
             self._show("waiting_for_labels", epoch)
-            left = math.inf if deadline is None else deadline - time.monotonic()
+            left = math.inf if self.timeout_s is None else started + self.timeout_s - time.monotonic()
             if not self._missing(ids) or left <= 0:
                 break
             wait = min(self.wait_chunk_s, left)
@@ -199,6 +203,8 @@ class HttpFeedback(FeedbackSource):
                 self._changed.add(query_id)
             elif event.kind == "control":
                 self._control = event.data["control"]
+            elif event.kind == "policy":
+                self.timeout_s = event.data["timeout_s"]
             self._after = event.id
 
     def _missing(self, ids: list[str]) -> bool:

@@ -6,7 +6,9 @@ const KEY = "collie-token";
 
 export class ApiError extends Error {
   constructor(status, detail) {
-    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    // FastAPI's validation errors are a list of {loc, msg, …}: their messages say enough
+    const text = Array.isArray(detail) && detail.every((d) => d?.msg) ? detail.map((d) => d.msg).join("; ") : detail;
+    super(typeof text === "string" ? text : JSON.stringify(text));
     this.status = status;
   }
 }

@@ -53,6 +53,7 @@ export class RunPage {
     this.source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, {
       status: (e) => this.onStatus(e),
       control: (e) => this.showRun({ ...this.run, control: e.data.control }),
+      policy: (e) => this.showRun({ ...this.run, feedback_timeout_s: e.data.timeout_s }),
       metrics: (e) => this.onMetrics(e),
       rollouts: () => this.loadRollouts().catch(() => this.onConnection("down")),
       queries: () => this.refreshLabeling(),

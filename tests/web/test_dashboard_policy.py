@@ -1,0 +1,87 @@
+"""The dashboard's feedback timeout control in Debian's Chromium against a live service: it shows
+the run's policy, sets and clears it (the service's run changes), follows a change made elsewhere
+from the stream, and shows a refusal."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from service.conftest import TOKENS, make_run_spec
+
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.schemas import RunRead
+
+WAIT_MS = 30_000
+
+
+@pytest.fixture(scope="module")
+def run(trainer: CollieClient) -> RunRead:
+    return trainer.create_run(make_run_spec().model_copy(update={"feedback_timeout_s": 120.0}))
+
+
+@pytest.fixture(scope="module")
+def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    page.set_default_timeout(WAIT_MS)
+    page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run.id}")
+    yield page
+    page.close()
+
+
+def shown(page: Any, text: str) -> None:
+    page.wait_for_function(f"document.querySelector('#policy-text').textContent === {text!r}")
+
+
+def test_the_control_sets_and_clears_the_policy(page: Any, trainer: CollieClient, run: RunRead) -> None:
+    shown(page, "continue after 120 s")  # what the trainer stored at creation
+    assert page.is_enabled("#policy-apply") and page.is_enabled("#policy-wait")
+    page.fill("#policy-seconds", "30")
+    page.click("#policy-apply")
+    shown(page, "continue after 30 s")
+    assert trainer.run(run.id).feedback_timeout_s == 30.0
+    assert page.input_value("#policy-seconds") == ""
+    page.click("#policy-wait")
+    shown(page, "wait for every label")
+    assert trainer.run(run.id).feedback_timeout_s is None
+    assert not page.is_enabled("#policy-wait")  # already so
+    kinds = [(e.kind, e.data) for e in trainer.events(run.id).events if e.kind == "policy"]
+    assert kinds == [("policy", {"timeout_s": 30.0}), ("policy", {"timeout_s": None})]
+
+
+def test_a_change_made_elsewhere_shows_live(page: Any, live: BackgroundServer, run: RunRead) -> None:
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        operator.set_feedback_policy(run.id, 2.5)
+    shown(page, "continue after 2.5 s")  # from the run's stream, no reload
+    assert page.get_attribute("#policy", "data-timeout") == "2.5"
+
+
+def test_a_bad_value_is_refused_and_said(page: Any, trainer: CollieClient, run: RunRead) -> None:
+    page.fill("#policy-seconds", "-3")
+    page.click("#policy-apply")
+    page.wait_for_function("document.querySelector('#control-message').textContent.includes('422')")
+    assert trainer.run(run.id).feedback_timeout_s == 2.5
+    shown(page, "continue after 2.5 s")
+
+
+def test_a_labeler_token_may_not_set_it(
+    live: BackgroundServer, browser: Any, trainer: CollieClient, run: RunRead
+) -> None:
+    labeler = browser.new_page()
+    labeler.set_default_timeout(WAIT_MS)
+    labeler.goto(f"{live.url}/?token={TOKENS['labeler']}#run={run.id}")
+    shown(labeler, "continue after 2.5 s")
+    labeler.fill("#policy-seconds", "9")
+    labeler.click("#policy-apply")
+    labeler.wait_for_function("document.querySelector('#control-message').textContent.includes('403')")
+    labeler.close()
+    assert trainer.run(run.id).feedback_timeout_s == 2.5
+
+
+def test_a_stopped_run_disables_the_control(page: Any, live: BackgroundServer, run: RunRead) -> None:
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        operator.stop(run.id)
+    page.wait_for_function("document.body.dataset.runControl === 'stop'")
+    assert not page.is_enabled("#policy-apply") and not page.is_enabled("#policy-wait")
