@@ -41,6 +41,7 @@ MAX_EXTRA_BYTES = 16 * 1024
 MAX_HOLD = 2  # queries one labeler may hold at once in a run: the one on screen and the next
 MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
+MAX_QPOS_WIDTH = 128  # humanoid's nq is 28
 MAX_METRICS = 256
 
 
@@ -373,12 +374,20 @@ class Rollout(Wire):
     skill: Vector
     xy: Matrix = Field(max_length=MAX_ROLLOUT_POINTS)
     pitch: list[FiniteFloat | None] | None = Field(default=None, max_length=MAX_ROLLOUT_POINTS)
+    qpos: Matrix | None = Field(
+        default=None, max_length=MAX_ROLLOUT_POINTS, description="simulator state at the xy points (3D replay)"
+    )
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _shape(self) -> Rollout:
         if self.xy and _width(self.xy, "xy") != 2:
             raise ValueError("xy rows must have 2 columns")
+        if self.qpos is not None:
+            if len(self.qpos) != len(self.xy):
+                raise ValueError(f"qpos has {len(self.qpos)} rows, xy {len(self.xy)}: one state per point")
+            if self.qpos and _width(self.qpos, "qpos") > MAX_QPOS_WIDTH:
+                raise ValueError(f"qpos rows may have at most {MAX_QPOS_WIDTH} values")
         _bounded_json(self.extra, MAX_EXTRA_BYTES, "extra")
         return self
 

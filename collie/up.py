@@ -144,6 +144,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
                                           "--info-json", str(ui_info)])
         labeler_url = wait_for(ui_info, ui, "the labeling UI")["url"] + "?token=" + quote(tokens["labeler"])
     dashboard = f"{api}/?token={quote(tokens['operator'])}"
+    if labeler_url:  # the dashboard's "watch skills in 3D" link opens the labeling UI in watch mode
+        dashboard += "&ui=" + quote(labeler_url.split("?")[0], safe="")
     urls = {"api": api, "labeling_ui": labeler_url, "dashboard": dashboard}
     write_info(args.info_json, urls, run_id, tokens)
     print(f"collie up: run {run_id} · {args.env} {args.task} {args.method} ({args.preset})")

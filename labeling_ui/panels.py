@@ -151,6 +151,10 @@ class Panels:
             for element in self.segment_only:
                 element.visible = False
 
+    def show_watch(self, status: str) -> None:
+        """Watch mode: the replay and its context, nothing to label."""
+        self._screen(status, replay=True)
+
     def show_segment(self, info: SegmentInfo, error: str | None = None) -> None:
         status = f"⚠️ **This segment cannot be replayed** — {error}  \nPress **S** to skip it." if error else ""
         with self.client.atomic():

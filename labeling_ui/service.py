@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from collie.client import ApiError, CollieClient, Unreachable
-from collie.schemas import FINISHED, ClaimRead, LabelAck, Me, RunRead, Submission
+from collie.schemas import FINISHED, ClaimRead, EventPage, LabelAck, Me, RolloutsRead, RunRead, Submission
 
 T = TypeVar("T")
 
@@ -106,6 +106,14 @@ class ServiceLink:
         queries = self._call(lambda: self.client.queries(run_id, session=session, limit=5000))
         done = sum(1 for q in queries if q.label is not None)
         return Progress(session, done, len(queries), run.n_labels, run.n_total)
+
+    def latest_rollouts(self, run_id: int) -> RolloutsRead | None:
+        """The run's newest evaluation rollouts (with simulator states, when the trainer sent them)."""
+        found = self._call(lambda: self.client.rollouts(run_id, limit=1))
+        return found[-1] if found else None
+
+    def events(self, run_id: int, after: int, wait_s: float) -> EventPage:
+        return self._call(lambda: self.client.events(run_id, after=after, wait_s=wait_s, limit=1000))
 
     def wait_for_events(self, run_id: int, after: int, wait_s: float) -> int:
         """Block up to wait_s for anything new on the run's stream; returns the last event id."""

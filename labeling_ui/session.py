@@ -26,7 +26,7 @@ import viser
 from collie.client import new_request_id
 from collie.schemas import MAX_HOLD, QueryRead, RunRead
 from collie.tasks import Task, get_task
-from labeling_ui.browser import read_token, remember_token
+from labeling_ui.browser import read_token, read_watch, remember_token
 from labeling_ui.inset import render_inset
 from labeling_ui.keys import bind_keys
 from labeling_ui.models import ModelError, Poser, replay_model
@@ -35,6 +35,7 @@ from labeling_ui.playback import Player
 from labeling_ui.regions import tint_grid, tint_meshes
 from labeling_ui.scene import ReplayScene
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
+from labeling_ui.watch import SkillWatch
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +101,8 @@ class LabelerSession:
         self.history: list[Shown] = []
         self.waiting_on: tuple[int, int] | None = None  # (run, last event id) while idle
         self.timings: list[dict[str, float | str]] = []  # key → next first frame, for benchmarks
+        self.watch_run: int | None = None  # ?watch=RUN: replay that run's skills instead of labeling
+        self._skills: SkillWatch | None = None
         self._actions: queue.Queue[Action] = queue.Queue()
         self._retry: Action | None = None
         self._down_since: float | None = None
@@ -111,6 +114,10 @@ class LabelerSession:
     @property
     def token(self) -> str | None:
         return self.link.client.token if self.link is not None else None
+
+    @property
+    def closed(self) -> threading.Event:
+        return self._closed
 
     def start(self) -> LabelerSession:
         self._worker.start()
@@ -183,6 +190,7 @@ class LabelerSession:
 
     def _work(self) -> None:
         token = read_token(self.client)
+        self.watch_run = read_watch(self.client)
         if token:
             self._start_link(token)
         else:
@@ -231,6 +239,10 @@ class LabelerSession:
             self.signed_in = True
             self.panels.greet(me.name)
             self.panels.show_message("Looking for segments to label…")
+            return
+        if self.watch_run is not None:
+            self._skills = self._skills or SkillWatch(self, self.watch_run)
+            self._skills.run()  # until the tab closes
             return
         if self.shown is None:
             if not self._claim_next():
@@ -370,7 +382,7 @@ class LabelerSession:
                 self.scene.load(run.env)  # builds the robot when the env changes
             except ModelError as exc:
                 poser, error = None, str(exc)
-        task = self._task(run)
+        task = self.task_of(run)
         info = SegmentInfo(
             query.query_id,
             run.id,
@@ -398,7 +410,7 @@ class LabelerSession:
         self.shown = Shown(run, query, poser, error, appeared=time.perf_counter())
         # what follows is context, sent after the first frame is out
         if poser is not None:
-            self._show_floor(run, task, np.asarray(query.xy, float))
+            self.show_floor(run, task, np.asarray(query.xy, float))
         if task is not None:
             self.panels.show_task(task.name, task.description, task.meaning)
         else:
@@ -421,7 +433,7 @@ class LabelerSession:
         if claimed is not None and claimed.query.query_id != shown.query.query_id:
             self.ahead.append(self._prepare(shown.run, claimed.query))
 
-    def _show_floor(self, run: RunRead, task: Task | None, xy: np.ndarray) -> None:
+    def show_floor(self, run: RunRead, task: Task | None, xy: np.ndarray) -> None:
         """The task's regions on the floor around the segment, recomputed only when the segment
         leaves the area they cover (centres snap to a coarse grid)."""
         cx, cy = np.round(xy.mean(axis=0) / FLOOR_SNAP) * FLOOR_SNAP
@@ -431,7 +443,7 @@ class LabelerSession:
         tint = tint_meshes(task, cx, cy, FLOOR_HALF_WIDTH)
         self.scene.set_floor(key, task.to_dict() if task else None, tint, tint_grid(cx, cy, FLOOR_HALF_WIDTH))
 
-    def _task(self, run: RunRead) -> Task | None:
+    def task_of(self, run: RunRead) -> Task | None:
         key = (run.task, run.env, run.config.get("seed"))
         if key not in self._tasks:
             try:

@@ -238,7 +238,8 @@ class Trainer:
         np.savez_compressed(self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch,
                             skill=traj.skill)  # the final skills' paths, for `collie report` figures
         self.feedback.report("metrics", record)
-        rollouts = {"epoch": self.epoch, "skills": traj.skill.tolist(), "xy": np.round(traj.xy[:, ::2], 3).tolist()}
+        rollouts = {"epoch": self.epoch, "skills": traj.skill.tolist(), "xy": np.round(traj.xy[:, ::2], 3).tolist(),
+                    "qpos": np.round(traj.qpos[:, ::2], 4).tolist()}  # the labeling UI's watch mode replays these
         w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
         if w is not None:
             rollouts["w"] = np.round(w, 2).tolist()

@@ -84,8 +84,13 @@ def metric_history(conn: Connection, run_id: int, max_points: int) -> MetricHist
 
 
 def latest_rollouts(conn: Connection, run_id: int) -> RolloutsRead | None:
+    """The newest evaluation's paths, without their simulator states (the map does not draw them;
+    the labeling UI's watch mode reads them from /runs/{id}/rollouts)."""
     row = conn.execute(select(Rollouts).where(Rollouts.run_id == run_id).order_by(Rollouts.id.desc()).limit(1)).first()
-    return None if row is None else RolloutsRead.model_validate(row, from_attributes=True)
+    if row is None:
+        return None
+    paths = [{k: v for k, v in r.items() if k != "qpos"} for r in row.rollouts]
+    return RolloutsRead(id=row.id, run_id=row.run_id, epoch=row.epoch, rollouts=paths, created_at=row.created_at)
 
 
 def task_of(run: Any) -> tuple[Any, str | None]:

@@ -71,6 +71,19 @@ def test_trainer_rollouts_are_thinned_with_w_at_the_same_points() -> None:
     assert "w" not in rollouts_of({"epoch": 3, "skills": [[1.0, 0.0]], "xy": [[[0, 0], [1, 1]]]}).rollouts[0].extra
 
 
+def test_trainer_rollouts_carry_states_at_the_same_points_for_the_watch_mode() -> None:
+    xy = np.cumsum(np.ones((2, 3000, 2)), axis=1)
+    qpos = np.concatenate([xy, np.zeros((2, 3000, 13))], axis=2)  # ant-sized states, x and y first
+    body = rollouts_of({"epoch": 3, "skills": np.eye(2), "xy": xy.tolist(), "qpos": qpos.tolist()})
+    first = body.rollouts[0]
+    assert len(first.qpos) == len(first.xy) == 1000 and len(first.qpos[0]) == 15
+    assert [q[:2] for q in first.qpos] == first.xy
+    too_wide = {"epoch": 3, "skills": np.eye(1), "xy": xy[:1].tolist(), "qpos": np.zeros((1, 3000, 200)).tolist()}
+    assert rollouts_of(too_wide).rollouts[0].qpos is None  # left out, the paths still go
+    with pytest.raises(ValueError, match="one state per point"):
+        RolloutsIn(epoch=1, rollouts=[{"skill": [1.0], "xy": [[0.0, 0.0]], "qpos": [[0.0], [1.0]]}])
+
+
 def test_metric_history_is_thinned_and_keeps_the_newest(live: BackgroundServer, trainer: CollieClient) -> None:
     run = trainer.create_run(make_run_spec())
     with live.app.state.db.write() as conn:  # 2500 evaluations without 2500 round trips

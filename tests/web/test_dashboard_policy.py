@@ -85,3 +85,12 @@ def test_a_stopped_run_disables_the_control(page: Any, live: BackgroundServer, r
         operator.stop(run.id)
     page.wait_for_function("document.body.dataset.runControl === 'stop'")
     assert not page.is_enabled("#policy-apply") and not page.is_enabled("#policy-wait")
+
+
+def test_watch_link_opens_the_labeling_ui_in_watch_mode(live: BackgroundServer, browser: Any, run: RunRead) -> None:
+    page = browser.new_page()
+    page.goto(f"{live.url}/?token={TOKENS['operator']}&ui=http%3A%2F%2F127.0.0.1%3A8080%2F#run={run.id}")
+    page.wait_for_selector("#watch-3d:not([hidden])", timeout=WAIT_MS)
+    href = page.get_attribute("#watch-3d", "href")
+    assert href == f"http://127.0.0.1:8080/?watch={run.id}&token={TOKENS['operator']}"
+    page.close()

@@ -33,6 +33,7 @@ import numpy as np
 from collie.client import ApiError, CollieClient, Unreachable
 from collie.schemas import (
     MAX_METRICS,
+    MAX_QPOS_WIDTH,
     MAX_ROLLOUT_POINTS,
     MAX_ROLLOUTS,
     EventPage,
@@ -350,12 +351,14 @@ def flat_numbers(record: dict[str, Any]) -> dict[str, float]:
 
 
 def rollouts_of(payload: dict[str, Any], max_points: int = 1000) -> RolloutsIn:
-    """{"epoch", "skills": (N, dz), "xy": (N, T, 2), optional "w": (N, T)} → at most MAX_ROLLOUTS
-    paths of at most max_points finite points each (evenly thinned; millimetres are plenty for a
-    plot); w(s) at the same points goes in each rollout's extra["w"]."""
+    """{"epoch", "skills": (N, dz), "xy": (N, T, 2), optional "w": (N, T), optional "qpos": (N, T, nq)}
+    → at most MAX_ROLLOUTS paths of at most max_points finite points each (evenly thinned;
+    millimetres are plenty for a plot); w(s) at the same points goes in each rollout's extra["w"],
+    the simulator state at the same points in its qpos (for a 3D replay)."""
     skills = np.asarray(payload.get("skills", []), dtype=float)
     paths = payload.get("xy", [])
     weights = payload.get("w") or []
+    states = payload.get("qpos") or []
     rollouts = []
     for i, path in enumerate(paths[:MAX_ROLLOUTS]):
         xy = np.asarray(path, dtype=float).reshape(-1, 2)
@@ -366,7 +369,14 @@ def rollouts_of(payload: dict[str, Any], max_points: int = 1000) -> RolloutsIn:
         extra = {}
         if i < len(weights) and len(weights[i]) == len(xy):
             extra["w"] = np.round(np.nan_to_num(np.asarray(weights[i], dtype=float)[kept], nan=1.0), 2).tolist()
-        rollouts.append(Rollout(skill=np.nan_to_num(skill).tolist(), xy=np.round(xy[kept], 3).tolist(), extra=extra))
+        qpos = None
+        if i < len(states) and len(states[i]) == len(xy):
+            q = np.asarray(states[i], dtype=float)[kept]
+            if q.ndim == 2 and q.shape[1] <= MAX_QPOS_WIDTH and np.isfinite(q).all():
+                qpos = np.round(q, 4).tolist()
+        rollouts.append(
+            Rollout(skill=np.nan_to_num(skill).tolist(), xy=np.round(xy[kept], 3).tolist(), qpos=qpos, extra=extra)
+        )
     return RolloutsIn(epoch=_epoch(payload) or 0, rollouts=rollouts)
 
 

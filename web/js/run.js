@@ -1,7 +1,7 @@
 // One run's page: loaded in one request, then kept live from the run's own event stream (opened
 // at the snapshot's last event id, so nothing is missed or applied twice).
 
-import { api, stream } from "./api.js";
+import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
 import { STATUS_TEXT, coalesce } from "./format.js";
@@ -74,7 +74,11 @@ export class RunPage {
   setWatchLink(watchUrl, runId) {
     const link = this.root.querySelector("#watch-3d");
     link.hidden = !watchUrl;
-    if (watchUrl) link.href = `${watchUrl}${watchUrl.includes("?") ? "&" : "?"}run=${runId}&watch=1`;
+    // the labeling UI's watch mode (labeling_ui/watch.py) signs in with this page's token
+    if (watchUrl) {
+      const query = new URLSearchParams({ watch: runId, token: token() });
+      link.href = `${watchUrl}${watchUrl.includes("?") ? "&" : "?"}${query}`;
+    }
   }
 
   showRun(run) {

@@ -1,0 +1,54 @@
+"""Watch mode: the dashboard's "watch skills in 3D" link replays every skill of the latest
+evaluation from the simulator states the trainer posted, and claims nothing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from urllib.parse import quote
+
+import pytest
+
+pytest.importorskip("playwright.sync_api", reason="pip install playwright")
+from playwright.sync_api import Browser
+
+from collie.schemas import RolloutsIn
+from trainer.feedback.http import rollouts_of
+
+from .page import canvas_pixels, open_labeler, wait_text
+from .stack import TOKENS, Stack, rollout_queries
+
+pytestmark = pytest.mark.slow
+
+
+def evaluation(epoch: int, n: int) -> RolloutsIn:
+    """n Ant rollouts as the trainer posts them (through the trainer's own thinning)."""
+    walks = rollout_queries("ant", 0, n, seed=21)
+    return rollouts_of(
+        {"epoch": epoch, "skills": [w.skill for w in walks], "xy": [w.xy for w in walks],
+         "qpos": [w.qpos for w in walks]}
+    )  # fmt: skip
+
+
+def test_watch_replays_every_skill_and_claims_nothing(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("ant", 2)  # queries are waiting, but a watcher must not take them
+    app = stack.ui(run.id)
+    page = open_labeler(browser, f"{app.url}?token={quote(TOKENS['operator'])}&watch={run.id}")
+    wait_text(page, "No evaluation to replay yet")
+    stack.trainer.post_rollouts(run.id, evaluation(25, 3))  # appears without a reload
+    wait_text(page, "skill 1 / 3")
+    pixels = canvas_pixels(page, artifacts / "watch-skill-1.png")
+    assert pixels.std() > 10.0
+    page.get_by_role("button", name="next ▶").click()
+    wait_text(page, "skill 2 / 3")
+    assert stack.trainer.run(run.id).queue.leased == 0
+    stack.trainer.post_rollouts(run.id, evaluation(50, 4))  # a newer evaluation replaces the skills
+    wait_text(page, "evaluation at epoch 50")
+    page.context.close()
+
+
+def test_dashboard_rollouts_leave_the_states_out(stack: Stack) -> None:
+    run = stack.post_run("ant", 0)
+    stack.trainer.post_rollouts(run.id, evaluation(5, 2))
+    assert all(r.qpos for r in stack.trainer.rollouts(run.id)[-1].rollouts)  # the watch mode's read
+    page = stack.operator._http.get(f"/dashboard/runs/{run.id}").json()
+    assert page["rollouts"]["epoch"] == 5 and all(r.get("qpos") is None for r in page["rollouts"]["rollouts"])
