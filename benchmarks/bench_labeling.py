@@ -70,18 +70,20 @@ def row(name: str, value: float, unit: str, target: str, ratio: float | None = N
 def scene_builds(stack: Stack, browser: object, envs: list[str]) -> dict[str, tuple[float, float, float]]:
     """env → (model compile seconds at UI start, server scene build seconds, page-open-to-segment seconds)."""
     result = {}
+    compiled: dict[str, float] = {}  # the first UI's warm-up compiles every model (later ones hit its cache)
     for env in envs:
         run = stack.post_run(env, 1)
         app = stack.ui(run.id)
         deadline = time.monotonic() + 60
         while env not in app.compile_s and time.monotonic() < deadline:  # a labeler comes after start-up
             time.sleep(0.05)
+        compiled = compiled or dict(app.compile_s)
         start = time.perf_counter()
         page = open_labeler(browser, app.labeler_url(stack.new_labeler(f"build-{env}")))  # type: ignore[arg-type]
         wait_segment(page, timeout_s=60)
         shown = time.perf_counter() - start
         session = next(iter(app.sessions.values()))
-        result[env] = (app.compile_s.get(env, float("nan")), session.scene.build_s, shown)
+        result[env] = (compiled.get(env, float("nan")), session.scene.build_s, shown)
         page.context.close()
     return result
 

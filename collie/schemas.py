@@ -1,14 +1,19 @@
 """Wire schemas of the labeling service, written once: the server validates with them and every
 client (trainer feedback source, teacher, labeling UI, tests) builds and reads them.
 
-Arrays travel as (nested) lists of finite floats; shapes are checked here, and again against the
-run's env dims on the server. A label is 0 bad, 1 neutral, 2 good; "skip" is a submission that is
-not a label (it hands the query back to the pool).
+Arrays travel as (nested) lists of finite floats (image observations packed: PackedFrames);
+shapes are checked here, and again against the run's env dims on the server. A label is 0 bad,
+1 neutral, 2 good; "skip" is a submission that is not a label (it hands the query back to the
+pool).
 """
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
+import math
+import zlib
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
@@ -38,6 +43,7 @@ FeedbackTimeout = Annotated[float, Field(gt=0, le=MAX_FEEDBACK_TIMEOUT_S, allow_
 
 MAX_CONFIG_BYTES = 64 * 1024
 MAX_EXTRA_BYTES = 16 * 1024
+MAX_PACKED_CHARS = 16 * 1024 * 1024  # one segment's packed image observations, base64
 MAX_HOLD = 2  # queries one labeler may hold at once in a run: the one on screen and the next
 MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
@@ -144,11 +150,36 @@ class StatusUpdate(Wire):
 # ---------------------------------------------------------------- queries
 
 
+class PackedFrames(Wire):
+    """H image observations as raw uint8 bytes, zlib-compressed, base64 (collie/frames.py packs
+    and unpacks). The decompressed size must be n × prod(shape); checked without inflating more."""
+
+    dtype: Literal["uint8"]
+    n: Count
+    shape: list[Annotated[int, Field(ge=1, le=4096)]] = Field(min_length=1, max_length=4, description="one frame")
+    zlib_b64: str = Field(max_length=MAX_PACKED_CHARS)
+
+    @model_validator(mode="after")
+    def _size(self) -> PackedFrames:
+        want = self.n * math.prod(self.shape)
+        try:
+            inflate = zlib.decompressobj()
+            got = len(inflate.decompress(base64.b64decode(self.zlib_b64, validate=True), want + 1))
+        except (binascii.Error, zlib.error) as exc:
+            raise ValueError(f"zlib_b64 is not base64 of zlib data: {exc}") from None
+        if got != want or not inflate.eof:
+            raise ValueError(f"packed frames hold {'more than ' if got > want else ''}{got} bytes, "
+                             f"{self.n} × {self.shape} needs {want}")
+        return self
+
+
 class QueryFrames(Wire):
-    """What a labeler replays and what the trainer rebuilds its labelled sets from (H frames)."""
+    """What a labeler replays and what the trainer rebuilds its labelled sets from (H frames).
+    Image observations travel packed in obs_packed (obs is then empty)."""
 
     skill: Vector
-    obs: Matrix
+    obs: Matrix = Field(default_factory=list)
+    obs_packed: PackedFrames | None = Field(default=None, description="image observations (obs empty)")
     xy: Matrix
     pitch: list[FiniteFloat | None] | None = Field(default=None, description="null where undefined")
     qpos: Matrix
@@ -157,10 +188,14 @@ class QueryFrames(Wire):
 
     @model_validator(mode="after")
     def _shapes(self) -> QueryFrames:
-        h = len(self.obs)
-        for name in ("xy", "qpos", "qvel") + (("pitch",) if self.pitch is not None else ()):
+        h = len(self.xy)
+        if self.obs_packed is not None and (self.obs or self.obs_packed.n != h):
+            raise ValueError(f"obs_packed needs an empty obs and {h} frames, has {self.obs_packed.n}")
+        for name in ("obs", "qpos", "qvel") + (("pitch",) if self.pitch is not None else ()):
+            if name == "obs" and self.obs_packed is not None:
+                continue
             if len(getattr(self, name)) != h:
-                raise ValueError(f"{name} has {len(getattr(self, name))} frames, obs has {h}")
+                raise ValueError(f"{name} has {len(getattr(self, name))} frames, xy has {h}")
         for name in ("obs", "qpos", "qvel"):
             _width(getattr(self, name), name)
         if h and _width(self.xy, "xy") != 2:
@@ -172,7 +207,9 @@ class QueryFrames(Wire):
     def shape_errors(self, dims: EnvDims) -> list[str]:
         """Mismatches against the run's env dims (empty when the segment fits)."""
         want = {"obs": dims.obs_dim, "qpos": dims.nq, "qvel": dims.nv}
-        errors = [f"{len(self.obs)} frames, run expects H={dims.horizon}"] if len(self.obs) != dims.horizon else []
+        errors = [f"{len(self.xy)} frames, run expects H={dims.horizon}"] if len(self.xy) != dims.horizon else []
+        if self.obs_packed is not None and math.prod(self.obs_packed.shape) != dims.obs_dim:
+            errors.append(f"packed obs of {self.obs_packed.shape}, run expects {dims.obs_dim} values per frame")
         errors += [
             f"{name} width {len(getattr(self, name)[0])}, run expects {w}"
             for name, w in want.items()
@@ -245,6 +282,7 @@ class QuerySummary(Wire):
 class QueryRead(QuerySummary):
     skill: list[float]
     obs: list[list[float]]
+    obs_packed: PackedFrames | None = None
     xy: list[list[float]]
     pitch: list[float | None] | None
     qpos: list[list[float]]

@@ -16,6 +16,7 @@ from service.conftest import TOKENS, settings_for
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import CollieClient
+from collie.frames import pack_frames
 from collie.schemas import EnvDims, QueryIn, RunCreate, RunRead, SessionPost
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
@@ -48,7 +49,8 @@ def rollout_queries(env_name: str, session: int, n: int, seed: int = 0, episode:
                 query_id=f"{session}-{i}",
                 start=start,
                 skill=[math.cos(angle), math.sin(angle)],
-                obs=[r[0].astype(float).tolist() for r in window],
+                obs=[] if window[0][0].ndim > 1 else [r[0].astype(float).tolist() for r in window],
+                obs_packed=pack_frames(np.stack([r[0] for r in window])) if window[0][0].ndim > 1 else None,
                 xy=[r[1]["xy"].tolist() for r in window],
                 pitch=pitch,
                 qpos=[r[1]["qpos"].tolist() for r in window],

@@ -27,7 +27,7 @@ class Segment:
     epoch: int  # epoch at which the session was opened
     skill: np.ndarray  # (dim_z,)
     start: int  # index of s_t within its trajectory
-    obs: np.ndarray  # (H, obs_dim) raw observations (the trainer's labelled sets use these)
+    obs: np.ndarray  # (H, *obs_shape) raw observations, uint8 images for pixel envs (the labelled sets use these)
     xy: np.ndarray  # (H, 2) x-y (y = 0 for 1-D envs)
     pitch: np.ndarray  # (H,) pitch in radians (nan where undefined)
     qpos: np.ndarray  # (H, nq) for replay

@@ -31,6 +31,7 @@ from typing import Any, Literal, TypeVar
 import numpy as np
 
 from collie.client import ApiError, CollieClient, Unreachable
+from collie.frames import pack_frames, unpack_frames
 from collie.schemas import (
     MAX_METRICS,
     MAX_QPOS_WIDTH,
@@ -262,6 +263,9 @@ class HttpFeedback(FeedbackSource):
 
 
 def to_wire(s: Segment) -> QueryIn:
+    """A segment as the service takes it: image observations (pixel envs) packed, others as lists."""
+    obs = np.asarray(s.obs)
+    images = obs.ndim > 2
     pitch = (
         None if s.pitch is None else [None if not math.isfinite(v) else v for v in np.asarray(s.pitch, float).tolist()]
     )
@@ -270,7 +274,8 @@ def to_wire(s: Segment) -> QueryIn:
         start=int(s.start),
         score=float(s.score),
         skill=np.asarray(s.skill, float).reshape(-1).tolist(),
-        obs=np.asarray(s.obs, float).tolist(),
+        obs=[] if images else obs.astype(float).tolist(),
+        obs_packed=pack_frames(obs.astype(np.uint8)) if images else None,
         xy=np.asarray(s.xy, float).tolist(),
         pitch=pitch,
         qpos=np.asarray(s.qpos, float).tolist(),
@@ -290,11 +295,11 @@ def from_wire(q: QueryRead) -> Segment:
         epoch=q.epoch,
         skill=arr(q.skill),
         start=q.start,
-        obs=arr(q.obs),
+        obs=unpack_frames(q.obs_packed) if q.obs_packed is not None else arr(q.obs),
         xy=arr(q.xy),
         pitch=arr([math.nan if v is None else v for v in q.pitch])
         if q.pitch is not None
-        else np.full(len(q.obs), math.nan),
+        else np.full(len(q.xy), math.nan),
         qpos=arr(q.qpos),
         qvel=arr(q.qvel),
         score=q.score,
