@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -69,6 +69,18 @@ bench-pixels: $(STAMP)
 
 bench-encoders: $(STAMP)
 	$(PY) benchmarks/bench_encoders.py
+
+# Issue 7's comparison: every method on the point tasks, 3 seeds, then the paper-format report
+# (hours on 2 cores; resumable: rerun it to continue). docs/results.md says what it measured.
+BASELINE_RUNS ?= runs/baselines
+bench-baselines: $(STAMP)
+	$(VENV)/bin/collie sweep --env point --tasks north,range,hole_north,hole,range_north \
+	  --methods oracle,collie,dodont,ddg,metra,lsd,diayn --seeds 3 --preset cpu --jobs 2 --downstream --out $(BASELINE_RUNS)
+	$(VENV)/bin/collie sweep --env point --tasks north,range,hole_north --methods dodont --variant paper_protocol \
+	  --seeds 1 --preset cpu --jobs 2 --out $(BASELINE_RUNS) -- --segment-length 201 --queries-per-session 2 --query-strategy uniform
+	$(VENV)/bin/collie sweep --env half_cheetah --tasks right,not_flip --methods oracle,collie,metra \
+	  --seeds 1 --preset cpu --jobs 2 --downstream --out $(BASELINE_RUNS)-cheetah -- --epochs 300
+	$(VENV)/bin/collie report $(BASELINE_RUNS) $(BASELINE_RUNS)-cheetah --out $(BASELINE_RUNS)/report
 
 clean:
 	rm -rf runs .pytest_cache .ruff_cache
