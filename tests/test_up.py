@@ -6,12 +6,14 @@ import json
 import subprocess
 import sys
 
+import pytest
 import torch
 
 
-def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path):
+@pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: pixel segments travel packed
+def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path, env):
     info = tmp_path / "info.json"
-    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
+    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", env, "--task", "north", "--teacher", "oracle",
            "--preset", "smoke", "--port", "0", "--ui-port", "0", "--out", str(tmp_path), "--info-json", str(info),
            "--exit-when-done"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
@@ -20,7 +22,7 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     assert set(meta) >= {"api", "labeling_ui", "dashboard", "run_id", "tokens"}
     assert set(meta["tokens"]) == {"operator", "labeler", "trainer"}
     assert meta["labeling_ui"].startswith("http://") and "token=" in meta["labeling_ui"]
-    assert meta["dashboard"].startswith(meta["api"]) and "token=" in meta["dashboard"]
+    assert meta["dashboard"].startswith(meta["api"]) and "token=" in meta["dashboard"] and "&ui=" in meta["dashboard"]
 
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["epoch"] == summary["config"]["epochs"]
