@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
                 stored = json.loads(saved.read_text())
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
+                stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
                 cfg = Config(**stored)
         from trainer.loop import Trainer
 

@@ -105,3 +105,16 @@ def test_smoke_runs_on_locomotion_envs(tmp_path, env):
     summary = smoke(tmp_path, env=env, task=task, epochs=2, episode_steps=20, episodes_per_epoch=2,
                     eval_trajectories=4, segment_length=5, warmup=1, feedback_every=1).run()
     assert summary["status"] == "finished" and np.isfinite(summary["safe_coverage"])
+
+
+def test_a_moved_run_folder_resumes_where_it_is_now(tmp_path):
+    train = [sys.executable, "-m", "collie.cli", "train", "--env", "point", "--preset", "smoke", "--no-progress"]
+    first = subprocess.run([*train, "--epochs", "2", "--out", str(tmp_path / "was")], capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr[-2000:]
+    (tmp_path / "was").rename(tmp_path / "now")
+    again = subprocess.run([*train, "--epochs", "4", "--out", str(tmp_path / "now"), "--resume"],
+                           capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr[-2000:]
+    summary = json.loads((tmp_path / "now" / "summary.json").read_text())
+    assert summary["epoch"] == 4 and summary["config"]["out"] == str(tmp_path / "now")
+    assert not (tmp_path / "was").exists()
