@@ -30,7 +30,10 @@ class LabelingApp:
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         self.compile_s: dict[str, float] = {}  # env → seconds its model took to compile, once warm
-        self._warm = threading.Thread(target=lambda: self.compile_s.update(warm_models()), name="collie-warm")
+        self._stopping = threading.Event()
+        self._warm = threading.Thread(
+            target=lambda: self.compile_s.update(warm_models(stop=self._stopping)), name="collie-warm"
+        )
         self._warm.start()
 
     @property
@@ -71,6 +74,7 @@ class LabelingApp:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Close every tab's session (each hands its claims back), then the server."""
+        self._stopping.set()  # the warm-up ends after the model it is compiling
         with self._lock:
             sessions = list(self.sessions.values())
             self.sessions.clear()

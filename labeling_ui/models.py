@@ -44,11 +44,14 @@ def replay_model(env: str) -> mujoco.MjModel:
         raise ModelError(f"cannot build the MuJoCo model for env '{env}': {exc}") from exc
 
 
-def warm_models(envs: tuple[str, ...] = ENV_NAMES) -> dict[str, float]:
+def warm_models(envs: tuple[str, ...] = ENV_NAMES, stop: threading.Event | None = None) -> dict[str, float]:
     """Compile every env's model ahead of the first labeler (quadruped takes about 1 s); returns
-    env → seconds, NaN for a model that does not compile (its segments then say so)."""
+    env → seconds, NaN for a model that does not compile (its segments then say so). Stops
+    between models once `stop` is set."""
     took = {}
     for env in envs:
+        if stop is not None and stop.is_set():
+            break
         start = time.perf_counter()
         try:
             replay_model(env)

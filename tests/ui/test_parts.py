@@ -70,6 +70,9 @@ class Recorder:
 def test_warm_models_compiles_ahead_and_names_what_fails() -> None:
     took = warm_models(("point", "no_such_robot"))
     assert np.isfinite(took["point"]) and np.isnan(took["no_such_robot"])
+    stopped = threading.Event()
+    stopped.set()
+    assert warm_models(("humanoid",), stop=stopped) == {}  # a stopping UI compiles nothing more
     start = time.perf_counter()
     replay_model("point")  # compiled already: a cache hit
     assert time.perf_counter() - start < took["point"] + 0.05
