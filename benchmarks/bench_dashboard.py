@@ -31,7 +31,6 @@ from collie.client import CollieClient
 from collie.schemas import EnvDims, MetricsIn, RunCreate
 from trainer.feedback.http import rollouts_of
 
-CHROMIUM = "/usr/bin/chromium"
 TOKENS = {"operator": "bench-operator-0123456789", "trainer": "bench-trainer-0123456789",
           "labeler": "bench-labeler-0123456789"}
 TARGET_MS = 1000.0
@@ -132,20 +131,19 @@ def answer(api: str, path: str) -> tuple[float, int]:
 
 
 def main() -> int:
-    from playwright.sync_api import sync_playwright
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from chromium import chromium
 
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory() as tmp:
         proc, api = serve(Path(tmp))
         try:
-            with CollieClient(api, TOKENS["trainer"]) as trainer, sync_playwright() as p:
+            with CollieClient(api, TOKENS["trainer"]) as trainer, chromium() as browser:
                 run_id = new_run(trainer)
                 fill(f"sqlite:///{Path(tmp) / 'c.db'}", run_id, rng)
                 trainer.post_rollouts(run_id, rollouts_of(rollouts(EPOCHS - 1, rng)))
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
                 loads = cold_load(browser, api, run_id)
                 live = live_latency(browser, api, trainer, run_id, rng)
-                browser.close()
             page_s, page_bytes = answer(api, f"dashboard/runs/{run_id}?max_points=500")  # as the page asks
             full_s, full_bytes = answer(api, f"runs/{run_id}/metrics?limit=10000")
         finally:

@@ -27,9 +27,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from chromium import chromium
 from ui.page import open_labeler, wait_segment
 from ui.stack import Stack, real_stack
 
@@ -138,13 +139,11 @@ def main() -> int:
     width, height = (int(v) for v in args.viewport.split("x"))
     ui.page.VIEWPORT = {"width": width, "height": height}
 
-    with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--enable-unsafe-swiftshader"])
+    with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack, chromium() as browser:
         builds = scene_builds(stack, browser, list(ENV_NAMES))
         in_page, server = label_latency(stack, browser, args.labels, args.think_s)
         rates = replay_rates(stack, browser, args.fps_s)
         renderer = browser.version
-        browser.close()
 
     print(f"\nbench-labeling · chromium {renderer} · viewport {args.viewport} · {args.labels} labels")
     print("model compile (once, as the UI starts), scene build (mjviser → viser), page open → segment shown:")

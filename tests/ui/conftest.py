@@ -1,17 +1,17 @@
-"""Fixtures for the labeling-UI tests: a real stack per module, and Debian's /usr/bin/chromium
-driven by Playwright from pip (never `playwright install`), headless WebGL through SwiftShader."""
+"""Fixtures for the labeling-UI tests: a real stack per module, and Debian's Chromium
+(tests/chromium.py)."""
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from chromium import chromium
+from playwright.sync_api import Browser
 
 from .stack import Stack, real_stack
 
-CHROMIUM = "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "ui"
 
 
@@ -28,11 +28,6 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
 
 
 @pytest.fixture(scope="module")
-def browser() -> Iterator[object]:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
-    if shutil.which(CHROMIUM) is None:
-        pytest.skip(f"{CHROMIUM} missing: apt-get install -y chromium")
-    with sync_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
+def browser() -> Iterator[Browser]:
+    with chromium() as b:
         yield b
-        b.close()

@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-pytest.importorskip("playwright.sync_api", reason="pip install playwright")
 from playwright.sync_api import Browser
 
 from .page import canvas_pixels, open_labeler, segment_id, wait_segment, wait_text

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 import viser
-from playwright.sync_api import sync_playwright
+from chromium import chromium
 
 from labeling_ui.models import Poser, replay_model
 from labeling_ui.scene import ReplayScene
@@ -23,8 +23,7 @@ def test_replay_scene_builds_and_poses_each_new_env(env_name: str) -> None:
         frames.append(info["qpos"])
     env.close()
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=["--enable-unsafe-swiftshader"])
+    with chromium() as browser:
         try:
             page = browser.new_page()
             page.goto(f"http://127.0.0.1:{server.get_port()}")
@@ -34,7 +33,6 @@ def test_replay_scene_builds_and_poses_each_new_env(env_name: str) -> None:
             client = next(iter(server.get_clients().values()))
             build_and_pose(client, env_name, frames)
         finally:
-            browser.close()
             server.stop()
 
 

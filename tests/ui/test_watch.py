@@ -7,8 +7,6 @@ from pathlib import Path
 from urllib.parse import quote
 
 import pytest
-
-pytest.importorskip("playwright.sync_api", reason="pip install playwright")
 from playwright.sync_api import Browser
 
 from collie.schemas import RolloutsIn

@@ -1,20 +1,16 @@
-"""Fixtures for the dashboard tests: a real service on an ephemeral port over a SQLite file, and
-Debian's /usr/bin/chromium driven by Playwright from pip (never `playwright install`)."""
+"""Fixtures for the dashboard tests: the service tests' live service (uvicorn on an ephemeral port
+over a SQLite file) and its clients, and Debian's Chromium (tests/chromium.py)."""
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from service.conftest import TOKENS, settings_for
+from chromium import chromium
+from playwright.sync_api import Browser
+from service.conftest import labeler, live, operator, trainer  # noqa: F401 (the same live service)
 
-from backend.main import create_app
-from backend.server import BackgroundServer
-from collie.client import CollieClient
-
-CHROMIUM = "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "web"
 
 
@@ -25,30 +21,6 @@ def artifacts() -> Path:
 
 
 @pytest.fixture(scope="module")
-def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BackgroundServer]:
-    db = tmp_path_factory.mktemp("dashboard") / "collie.db"
-    with BackgroundServer(create_app(settings_for(db))) as server:
-        yield server
-
-
-@pytest.fixture(scope="module")
-def trainer(live: BackgroundServer) -> Iterator[CollieClient]:
-    with CollieClient(live.url, TOKENS["trainer"]) as client:
-        yield client
-
-
-@pytest.fixture(scope="module")
-def labeler(live: BackgroundServer) -> Iterator[CollieClient]:
-    with CollieClient(live.url, TOKENS["labeler"]) as client:
-        yield client
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[object]:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
-    if shutil.which(CHROMIUM) is None:
-        pytest.skip(f"{CHROMIUM} missing: apt-get install -y chromium")
-    with sync_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader"])
+def browser() -> Iterator[Browser]:
+    with chromium() as b:
         yield b
-        b.close()
