@@ -56,10 +56,12 @@ def serve(folder: Path) -> tuple[subprocess.Popen, str]:
 
 
 def rollouts(epoch: int, rng: np.random.Generator) -> dict:
-    """What Trainer.evaluate reports: 48 skills, 201 steps thinned to 101 points, w(s) alike."""
+    """What Trainer.evaluate reports: 48 skills, 201 steps thinned to 101 points, w(s) alike, and
+    Ant's 15-value qpos at each point (for the watch mode; stored in the same row the page reads)."""
     steps = rng.normal(size=(48, 101, 2)).cumsum(axis=1) * 0.3
+    qpos = np.concatenate([steps, rng.normal(size=(48, 101, 13))], axis=2)
     return {"epoch": epoch, "skills": rng.normal(size=(48, 2)).tolist(), "xy": steps.tolist(),
-            "w": rng.uniform(0, 2, size=(48, 101)).tolist()}
+            "w": rng.uniform(0, 2, size=(48, 101)).tolist(), "qpos": qpos.tolist()}
 
 
 def new_run(trainer: CollieClient) -> int:

@@ -39,7 +39,11 @@ async def post_rollouts(run_id: RunId, body: RolloutsIn, _: TrainerCaller, db: D
 
 @router.get("/rollouts")
 def list_rollouts(
-    run_id: RunId, _: AnyCaller, db: DB, limit: Annotated[int, Query(ge=1, le=50)] = 5
+    run_id: RunId,
+    _: AnyCaller,
+    db: DB,
+    limit: Annotated[int, Query(ge=1, le=50)] = 5,
+    states: Annotated[bool, Query(description="include each rollout's qpos (for a 3D replay)")] = True,
 ) -> list[RolloutsRead]:
     with db.read() as conn:
-        return telemetry.list_rollouts(conn, run_id, limit)
+        return telemetry.list_rollouts(conn, run_id, limit, states)

@@ -9,7 +9,7 @@ from typing import Any
 from sqlalchemy import Connection, func, or_, select
 
 from backend.models import LabelEvent, Metrics, Rollouts, StreamEvent
-from backend.services import label_stats, runs
+from backend.services import label_stats, runs, telemetry
 from backend.services.label_stats import SegmentCache
 from collie.dashboard_schemas import MetricHistory, RunDashboard, RunSummary
 from collie.schemas import RolloutsRead
@@ -84,13 +84,9 @@ def metric_history(conn: Connection, run_id: int, max_points: int) -> MetricHist
 
 
 def latest_rollouts(conn: Connection, run_id: int) -> RolloutsRead | None:
-    """The newest evaluation's paths, without their simulator states (the map does not draw them;
-    the labeling UI's watch mode reads them from /runs/{id}/rollouts)."""
+    """The newest evaluation's paths, without their simulator states (the map does not draw them)."""
     row = conn.execute(select(Rollouts).where(Rollouts.run_id == run_id).order_by(Rollouts.id.desc()).limit(1)).first()
-    if row is None:
-        return None
-    paths = [{k: v for k, v in r.items() if k != "qpos"} for r in row.rollouts]
-    return RolloutsRead(id=row.id, run_id=row.run_id, epoch=row.epoch, rollouts=paths, created_at=row.created_at)
+    return None if row is None else telemetry.read_rollouts(row, states=False)
 
 
 def task_of(run: Any) -> tuple[Any, str | None]:

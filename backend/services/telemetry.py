@@ -44,9 +44,16 @@ def post_rollouts(conn: Connection, run_id: int, body: RolloutsIn) -> RolloutsRe
     return RolloutsRead(id=row_id, run_id=run_id, epoch=body.epoch, rollouts=body.rollouts, created_at=now)
 
 
-def list_rollouts(conn: Connection, run_id: int, limit: int) -> list[RolloutsRead]:
+def list_rollouts(conn: Connection, run_id: int, limit: int, states: bool = True) -> list[RolloutsRead]:
+    """The newest `limit` evaluations, oldest first; without their simulator states unless `states`
+    (the plots do not draw them; the labeling UI's watch mode replays them)."""
     runs.row(conn, run_id)
     rows = conn.execute(
         select(Rollouts).where(Rollouts.run_id == run_id).order_by(Rollouts.id.desc()).limit(limit)
     ).all()
-    return [RolloutsRead.model_validate(r, from_attributes=True) for r in reversed(rows)]
+    return [read_rollouts(r, states) for r in reversed(rows)]
+
+
+def read_rollouts(row: Rollouts, states: bool) -> RolloutsRead:
+    paths = row.rollouts if states else [{k: v for k, v in r.items() if k != "qpos"} for r in row.rollouts]
+    return RolloutsRead(id=row.id, run_id=row.run_id, epoch=row.epoch, rollouts=paths, created_at=row.created_at)

@@ -117,7 +117,7 @@ export class RunPage {
 
   async loadRollouts() {
     const runId = this.runId;
-    const [latest] = await api(`runs/${runId}/rollouts?limit=1`);
+    const [latest] = await api(`runs/${runId}/rollouts?limit=1&states=false`);
     if (latest && runId === this.runId) {
       this.seeEpoch(latest.epoch);
       await this.map.set({ rollouts: latest });
