@@ -45,6 +45,7 @@ demo-oracle: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 test: $(STAMP) lint
 	$(VENV)/bin/pytest -q

@@ -31,22 +31,62 @@ from collie.client import CollieClient
 from collie.schemas import EnvDims, MetricsIn, RunCreate
 from trainer.feedback.http import rollouts_of
 
-TOKENS = {"operator": "bench-operator-0123456789", "trainer": "bench-trainer-0123456789",
-          "labeler": "bench-labeler-0123456789"}
+TOKENS = {
+    "operator": "bench-operator-0123456789",
+    "trainer": "bench-trainer-0123456789",
+    "labeler": "bench-labeler-0123456789",
+}
 TARGET_MS = 1000.0
 POSTS = 10
 EPOCHS = 10_000
-KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage", "n_bins", "n_bad_bins",
-        "n_neutral_bins", "n_good_bins", "n_states", "n_labels", "lambda", "alpha", "beta", "wall_s", "qf_loss",
-        "policy_loss", "q", "entropy", "phi_loss", "lambda_loss", "alpha_loss", "reward", "w_mean", "env_steps",
-        "n_labelled_states[0]")
+KEYS = (
+    "safe_coverage",
+    "safe_ratio",
+    "composite_coverage",
+    "weighted_composite_coverage",
+    "n_bins",
+    "n_bad_bins",
+    "n_neutral_bins",
+    "n_good_bins",
+    "n_states",
+    "n_labels",
+    "lambda",
+    "alpha",
+    "beta",
+    "wall_s",
+    "qf_loss",
+    "policy_loss",
+    "q",
+    "entropy",
+    "phi_loss",
+    "lambda_loss",
+    "alpha_loss",
+    "reward",
+    "w_mean",
+    "env_steps",
+    "n_labelled_states[0]",
+)
 
 
 def serve(folder: Path) -> tuple[subprocess.Popen, str]:
     env = {**os.environ, **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in TOKENS.items()}}
     tokens = folder / "tokens.json"
-    proc = subprocess.Popen([sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(folder / "c.db"),
-                             "--tokens-json", str(tokens)], env=env, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "collie.cli",
+            "serve",
+            "--port",
+            "0",
+            "--db",
+            str(folder / "c.db"),
+            "--tokens-json",
+            str(tokens),
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 60
     while not tokens.exists():
         if proc.poll() is not None or time.monotonic() > deadline:
@@ -60,14 +100,26 @@ def rollouts(epoch: int, rng: np.random.Generator) -> dict:
     Ant's 15-value qpos at each point (for the watch mode; stored in the same row the page reads)."""
     steps = rng.normal(size=(48, 101, 2)).cumsum(axis=1) * 0.3
     qpos = np.concatenate([steps, rng.normal(size=(48, 101, 13))], axis=2)
-    return {"epoch": epoch, "skills": rng.normal(size=(48, 2)).tolist(), "xy": steps.tolist(),
-            "w": rng.uniform(0, 2, size=(48, 101)).tolist(), "qpos": qpos.tolist()}
+    return {
+        "epoch": epoch,
+        "skills": rng.normal(size=(48, 2)).tolist(),
+        "xy": steps.tolist(),
+        "w": rng.uniform(0, 2, size=(48, 101)).tolist(),
+        "qpos": qpos.tolist(),
+    }
 
 
 def new_run(trainer: CollieClient) -> int:
     dims = EnvDims(obs_dim=29, nq=15, nv=14, horizon=20, skill_dim=2)
-    spec = RunCreate(env="ant", task="range_north", method="collie", config={"preset": "paper"}, dims=dims,
-                     n_total=100, epochs_total=EPOCHS)
+    spec = RunCreate(
+        env="ant",
+        task="range_north",
+        method="collie",
+        config={"preset": "paper"},
+        dims=dims,
+        n_total=100,
+        epochs_total=EPOCHS,
+    )
     return trainer.create_run(spec).id
 
 
@@ -113,10 +165,16 @@ def cold_load(browser, api: str, run_id: int) -> list[float]:
         context = browser.new_context(viewport={"width": 1400, "height": 1400})
         page = context.new_page()
         page.goto(f"{api}/?token={TOKENS['operator']}#run={run_id}")
-        page.wait_for_function("document.querySelector('#curves').dataset.points && "
-                               "document.querySelector('#map').dataset.renderedAt", timeout=60_000)
-        loads.append(page.evaluate("Math.max(document.querySelector('#curves').dataset.renderedAt, "
-                                   "document.querySelector('#map').dataset.renderedAt) - performance.timeOrigin"))
+        page.wait_for_function(
+            "document.querySelector('#curves').dataset.points && document.querySelector('#map').dataset.renderedAt",
+            timeout=60_000,
+        )
+        loads.append(
+            page.evaluate(
+                "Math.max(document.querySelector('#curves').dataset.renderedAt, "
+                "document.querySelector('#map').dataset.renderedAt) - performance.timeOrigin"
+            )
+        )
         context.close()
     return loads
 
@@ -154,15 +212,21 @@ def main() -> int:
     print(f"dashboard benchmark (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
     for kind, ms in live.items():
         p50, worst = statistics.median(ms), max(ms)
-        print(f"  trainer post → page drawn, {kind:8s}: p50 {p50:6.0f} ms, max {worst:6.0f} ms over {len(ms)} posts "
-              f"(target ≤ {TARGET_MS:.0f} ms: p50 at {p50 / TARGET_MS:.2f}×, max at {worst / TARGET_MS:.2f}× of it)")
+        print(
+            f"  trainer post → page drawn, {kind:8s}: p50 {p50:6.0f} ms, max {worst:6.0f} ms over {len(ms)} posts "
+            f"(target ≤ {TARGET_MS:.0f} ms: p50 at {p50 / TARGET_MS:.2f}×, max at {worst / TARGET_MS:.2f}× of it)"
+        )
     load = statistics.median(loads)
-    print(f"  {EPOCHS} evaluations, cold page load → curves and map drawn: median {load:.0f} ms, "
-          f"max {max(loads):.0f} ms over {len(loads)} loads (target ≤ {TARGET_MS:.0f} ms: {load / TARGET_MS:.2f}×)")
+    print(
+        f"  {EPOCHS} evaluations, cold page load → curves and map drawn: median {load:.0f} ms, "
+        f"max {max(loads):.0f} ms over {len(loads)} loads (target ≤ {TARGET_MS:.0f} ms: {load / TARGET_MS:.2f}×)"
+    )
     print(f"    each load (ms): {', '.join(f'{x:.0f}' for x in loads)}")
-    print(f"  the run page's answer: {page_bytes / 1e3:.0f} kB in {page_s * 1000:.0f} ms; all {EPOCHS} rows "
-          f"(/metrics?limit=10000): {full_bytes / 1e6:.1f} MB in {full_s * 1000:.0f} ms "
-          f"→ {full_bytes / page_bytes:.0f}× fewer bytes, {full_s / page_s:.1f}× faster")
+    print(
+        f"  the run page's answer: {page_bytes / 1e3:.0f} kB in {page_s * 1000:.0f} ms; all {EPOCHS} rows "
+        f"(/metrics?limit=10000): {full_bytes / 1e6:.1f} MB in {full_s * 1000:.0f} ms "
+        f"→ {full_bytes / page_bytes:.0f}× fewer bytes, {full_s / page_s:.1f}× faster"
+    )
     return 0
 
 

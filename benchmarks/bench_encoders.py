@@ -54,8 +54,9 @@ def body_state(qpos: np.ndarray) -> np.ndarray:
     return np.stack([qpos[:, 2], upright], axis=1)
 
 
-def batches(frames: np.ndarray, actions: np.ndarray, prior: SkillPrior, n: int, size: int,
-            dev: torch.device) -> list[TorchBatch]:
+def batches(
+    frames: np.ndarray, actions: np.ndarray, prior: SkillPrior, n: int, size: int, dev: torch.device
+) -> list[TorchBatch]:
     rng = np.random.default_rng(0)
     skills = prior.sample(len(frames), rng)  # one skill per episode, as in a rollout
     out = []
@@ -66,22 +67,26 @@ def batches(frames: np.ndarray, actions: np.ndarray, prior: SkillPrior, n: int, 
         def img(x: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(x, dtype=torch.float32, device=dev) / 255.0
 
-        out.append(TorchBatch(img(frames[i, t]), img(frames[i, t + 1]), torch.as_tensor(actions[i, t], device=dev),
-                              z, z))
+        out.append(
+            TorchBatch(img(frames[i, t]), img(frames[i, t + 1]), torch.as_tensor(actions[i, t], device=dev), z, z)
+        )
     return out
 
 
 @torch.no_grad()
 def features(encoder: torch.nn.Module, frames: np.ndarray, dev: torch.device) -> np.ndarray:
     flat = frames.reshape(-1, *frames.shape[2:])
-    out = [encoder(torch.as_tensor(flat[i:i + 256], dtype=torch.float32, device=dev) / 255.0)
-           for i in range(0, len(flat), 256)]
+    out = [
+        encoder(torch.as_tensor(flat[i : i + 256], dtype=torch.float32, device=dev) / 255.0)
+        for i in range(0, len(flat), 256)
+    ]
     f = torch.cat([o if o.dim() == 2 else o[0] for o in out])  # twin critics: the first one's CNN
     return f.cpu().numpy().astype(np.float64)
 
 
-def ridge_r2(train_x: np.ndarray, train_y: np.ndarray, test_x: np.ndarray, test_y: np.ndarray,
-             alpha: float = 1.0) -> float:
+def ridge_r2(
+    train_x: np.ndarray, train_y: np.ndarray, test_x: np.ndarray, test_y: np.ndarray, alpha: float = 1.0
+) -> float:
     """Held-out R² (averaged over targets) of a ridge regression on standardised features."""
     mu, sd = train_x.mean(0), train_x.std(0) + 1e-6
     a, b = (train_x - mu) / sd, (test_x - mu) / sd
@@ -114,8 +119,14 @@ def main() -> None:
         cfg = make_config("paper", ENV, encoder=kind, hidden=a.hidden, batch_size=a.batch)
         agents[kind] = Metra((9, 64, 64), actions.shape[-1], prior, cfg, dev)
     for kind, agent in agents.items():
-        report[kind] = {"probe_r2_untrained": ridge_r2(features(agent.policy.encoder, probe_train, dev), y_train,
-                                                       features(agent.policy.encoder, probe_test, dev), y_test)}
+        report[kind] = {
+            "probe_r2_untrained": ridge_r2(
+                features(agent.policy.encoder, probe_train, dev),
+                y_train,
+                features(agent.policy.encoder, probe_test, dev),
+                y_test,
+            )
+        }
     for kind, agent in agents.items():  # learning: the same K batches for both
         start, losses = time.perf_counter(), []
         for b in data:
@@ -125,8 +136,9 @@ def main() -> None:
         report[kind]["final_losses"] = {k: float(np.mean([x[k] for x in losses[-10:]])) for k in losses[-1]}
         for net in ("policy", "qf"):
             enc = getattr(agent, net).encoder
-            report[kind][f"probe_r2_{net}"] = ridge_r2(features(enc, probe_train, dev), y_train,
-                                                       features(enc, probe_test, dev), y_test)
+            report[kind][f"probe_r2_{net}"] = ridge_r2(
+                features(enc, probe_train, dev), y_train, features(enc, probe_test, dev), y_test
+            )
     speed = {kind: {"steps_per_s": []} for kind in agents}
     for _ in range(3):  # interleaved rounds: both see the same machine load
         for kind, agent in agents.items():
@@ -137,12 +149,16 @@ def main() -> None:
     for kind in agents:
         report[kind]["steps_per_s"] = float(np.median(speed[kind]["steps_per_s"]))
     sep, sh = report["separate"], report["shared"]
-    print(f"device {dev}, {torch.get_num_threads()} threads, batch {a.batch}, hidden {a.hidden}, {a.steps} steps, "
-          f"{len(y_train)} probe states, {len(y_test)} held out")
+    print(
+        f"device {dev}, {torch.get_num_threads()} threads, batch {a.batch}, hidden {a.hidden}, {a.steps} steps, "
+        f"{len(y_train)} probe states, {len(y_test)} held out"
+    )
     for kind, r in report.items():
-        print(f"{kind:9s} {r['steps_per_s']:6.2f} grad steps/s   height+upright R² from π's features "
-              f"{r['probe_r2_untrained']:.3f} → {r['probe_r2_policy']:.3f}, from Q's {r['probe_r2_qf']:.3f}   "
-              f"losses {r['final_losses']}")
+        print(
+            f"{kind:9s} {r['steps_per_s']:6.2f} grad steps/s   height+upright R² from π's features "
+            f"{r['probe_r2_untrained']:.3f} → {r['probe_r2_policy']:.3f}, from Q's {r['probe_r2_qf']:.3f}   "
+            f"losses {r['final_losses']}"
+        )
     print(f"shared / separate speed: {sh['steps_per_s'] / sep['steps_per_s']:.2f}×")
     print(json.dumps(report))
 

@@ -24,8 +24,10 @@ METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_compos
 
 
 def table(results: dict[tuple[str, str], list[dict]], tasks: list[str], methods: list[str]) -> str:
-    lines = ["| task | method | safe coverage | safe ratio | composite cov. | weighted composite cov. | wall s/run |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| task | method | safe coverage | safe ratio | composite cov. | weighted composite cov. | wall s/run |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for task in tasks:
         for method in methods:
             rs = results.get((task, method), [])
@@ -60,8 +62,10 @@ def main() -> None:
         results.setdefault((spec.task, spec.method), []).append(summary)
     md = table(results, tasks, methods)
     cmd = "make bench-guidance" + (f"  (extra: {' '.join(a.extra)})" if a.extra else "")
-    header = (f"env `{a.env}`, preset `cpu`, {a.seeds} seeds, mean ± std over seeds; "
-              f"{platform.machine()} with {os.cpu_count()} cores, {a.jobs} runs at a time; command: `{cmd}`\n\n")
+    header = (
+        f"env `{a.env}`, preset `cpu`, {a.seeds} seeds, mean ± std over seeds; "
+        f"{platform.machine()} with {os.cpu_count()} cores, {a.jobs} runs at a time; command: `{cmd}`\n\n"
+    )
     (root / "results.md").write_text(header + md + "\n")
     print(header + md)
     north = {m: results.get(("north", m)) for m in ("collie", "metra")}

@@ -48,8 +48,12 @@ def bench(name: str, steps: int) -> dict[str, float]:
     env.physics.model.vis.quality.offsamples = 4  # dm_control's defaults, in its own context
     dmc_rate = rate(lambda: env.physics.render(64, 64, camera_id="pixels"), max(20, steps // 20))
     env.close()
-    return {"agent_steps_per_s": full, "physics_agent_steps_per_s": physics_rate, "renders_per_s": render_rate,
-            "dm_control_default_renders_per_s": dmc_rate}
+    return {
+        "agent_steps_per_s": full,
+        "physics_agent_steps_per_s": physics_rate,
+        "renders_per_s": render_rate,
+        "dm_control_default_renders_per_s": dmc_rate,
+    }
 
 
 def main() -> None:
@@ -65,9 +69,11 @@ def main() -> None:
         r = bench(name, a.steps)
         results[name] = r
         verdict = "ok" if r["agent_steps_per_s"] >= TARGET else "BELOW TARGET"
-        print(f"{name:10s} {r['agent_steps_per_s']:7.0f} agent steps/s (step + render; target ≥ {TARGET:.0f}: "
-              f"{verdict})   physics alone {r['physics_agent_steps_per_s']:6.0f}/s   render alone "
-              f"{r['renders_per_s']:6.0f}/s   dm_control default render {r['dm_control_default_renders_per_s']:4.0f}/s")
+        print(
+            f"{name:10s} {r['agent_steps_per_s']:7.0f} agent steps/s (step + render; target ≥ {TARGET:.0f}: "
+            f"{verdict})   physics alone {r['physics_agent_steps_per_s']:6.0f}/s   render alone "
+            f"{r['renders_per_s']:6.0f}/s   dm_control default render {r['dm_control_default_renders_per_s']:4.0f}/s"
+        )
     print(json.dumps(results))
 
 

@@ -44,8 +44,13 @@ def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
     def batch() -> TorchBatch:
         z = torch.as_tensor(prior.sample(b, rng), device=dev)
         obs = torch.randn(b, env.obs_dim, device=dev)
-        return TorchBatch(obs, obs + 0.1 * torch.randn_like(obs), torch.rand(b, env.action_dim, device=dev) * 2 - 1,
-                          z, torch.as_tensor(prior.reward_direction(z.cpu().numpy()), device=dev))
+        return TorchBatch(
+            obs,
+            obs + 0.1 * torch.randn_like(obs),
+            torch.rand(b, env.action_dim, device=dev) * 2 - 1,
+            z,
+            torch.as_tensor(prior.reward_direction(z.cpu().numpy()), device=dev),
+        )
 
     labelled = LabelledSets(lambda x: x, dev)
     for q in range(40):  # N_total = 40 segments × H = 20 states
@@ -95,8 +100,10 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="gradient steps per timed block")
     p.add_argument("--rounds", type=int, default=5)
     a = p.parse_args()
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, "
-          f"device {'cuda' if torch.cuda.is_available() else 'cpu'}")
+    print(
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, "
+        f"device {'cuda' if torch.cuda.is_available() else 'cpu'}"
+    )
     u = bench_update(a.env, a.steps, a.rounds)
     print(f"update  ({a.env}, 2×1024, batch 256, 800 labelled states)")
     print(f"  full COLLIE step  {u['full_steps_per_s']:8.1f} steps/s")

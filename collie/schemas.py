@@ -168,8 +168,10 @@ class PackedFrames(Wire):
         except (binascii.Error, zlib.error) as exc:
             raise ValueError(f"zlib_b64 is not base64 of zlib data: {exc}") from None
         if got != want or not inflate.eof:
-            raise ValueError(f"packed frames hold {'more than ' if got > want else ''}{got} bytes, "
-                             f"{self.n} × {self.shape} needs {want}")
+            raise ValueError(
+                f"packed frames hold {'more than ' if got > want else ''}{got} bytes, "
+                f"{self.n} × {self.shape} needs {want}"
+            )
         return self
 
 

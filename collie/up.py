@@ -27,8 +27,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="collie")
     p.add_argument("--preset", default="cpu")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--teacher", choices=("none", "oracle"), default="none",
-                   help="oracle: a scripted labeler labels through the API (default: people label)")
+    p.add_argument(
+        "--teacher",
+        choices=("none", "oracle"),
+        default="none",
+        help="oracle: a scripted labeler labels through the API (default: people label)",
+    )
     p.add_argument("--teacher-rate", type=float, default=None, help="oracle labels per second (like a person)")
     p.add_argument("--noise-band", type=float, default=0.0, help="oracle R_error noise band")
     p.add_argument("--db", type=Path, default=None, help="SQLite file (default OUT/collie.db)")
@@ -38,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exit-when-done", action="store_true", help="exit 0 when the run finishes")
     p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
     p.add_argument("--ui-port", type=int, default=8080, help="labeling UI port (0 = any free port)")
-    p.add_argument("--train-args", default="", help="extra `collie train` flags, e.g. \"--epochs 50\"")
+    p.add_argument("--train-args", default="", help='extra `collie train` flags, e.g. "--epochs 50"')
 
 
 class Stack:
@@ -51,8 +55,13 @@ class Stack:
     def start(self, name: str, args: list[str], env_extra: dict[str, str] | None = None) -> subprocess.Popen:
         log = open(self.out / "logs" / f"{name}.log", "ab")  # noqa: SIM115 - lives as long as the child
         env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env_extra or {})}
-        proc = subprocess.Popen([sys.executable, "-m", "collie.cli", *args], stdout=log, stderr=subprocess.STDOUT,
-                                env=env, start_new_session=True)  # our Ctrl-C is handled here, not by children
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "collie.cli", *args],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+        )  # our Ctrl-C is handled here, not by children
         self.procs[name] = proc
         return proc
 
@@ -114,8 +123,11 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         saved = json.loads(tokens_file.read_text())["tokens"]
         keep = {f"COLLIE_{role.upper()}_TOKEN": tok for role, tok in saved.items()}
         tokens_file.unlink()
-    service = stack.start("service", ["serve", "--host", "127.0.0.1", "--port", str(args.port), "--db", str(db),
-                                      "--tokens-json", str(tokens_file)], env_extra=keep)
+    service = stack.start(
+        "service",
+        ["serve", "--host", "127.0.0.1", "--port", str(args.port), "--db", str(db), "--tokens-json", str(tokens_file)],
+        env_extra=keep,
+    )
     info = wait_for(tokens_file, service, "the service")
     api, tokens = info["api"], info["tokens"]
     with CollieClient(api, tokens["operator"]) as client:
@@ -125,14 +137,46 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
     resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
     if not resume:
         memo.unlink(missing_ok=True)
-    train = ["train", "--env", args.env, "--task", args.task, "--method", args.method, "--preset", args.preset,
-             "--seed", str(args.seed), "--out", str(trainer_out), "--api", api, "--token", tokens["trainer"],
-             "--no-progress", "--noise-band", str(args.noise_band), *args.train_args.split()]
+    train = [
+        "train",
+        "--env",
+        args.env,
+        "--task",
+        args.task,
+        "--method",
+        args.method,
+        "--preset",
+        args.preset,
+        "--seed",
+        str(args.seed),
+        "--out",
+        str(trainer_out),
+        "--api",
+        api,
+        "--token",
+        tokens["trainer"],
+        "--no-progress",
+        "--noise-band",
+        str(args.noise_band),
+        *args.train_args.split(),
+    ]
     trainer = stack.start("trainer", [*train, "--resume"] if resume else train)
     run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
     if args.teacher == "oracle":
-        teach = ["teacher", "--api", api, "--token", tokens["labeler"], "--run", str(run_id), "--until-done",
-                 "--noise-band", str(args.noise_band), "--seed", str(args.seed)]
+        teach = [
+            "teacher",
+            "--api",
+            api,
+            "--token",
+            tokens["labeler"],
+            "--run",
+            str(run_id),
+            "--until-done",
+            "--noise-band",
+            str(args.noise_band),
+            "--seed",
+            str(args.seed),
+        ]
         if args.teacher_rate:
             teach += ["--rate", str(args.teacher_rate)]
         stack.start("teacher", teach)
@@ -140,8 +184,10 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
     if not args.no_label_ui:
         ui_info = out / "labeling_ui.json"
         ui_info.unlink(missing_ok=True)
-        ui = stack.start("labeling_ui", ["label-ui", "--api", api, "--run", str(run_id), "--port", str(args.ui_port),
-                                          "--info-json", str(ui_info)])
+        ui = stack.start(
+            "labeling_ui",
+            ["label-ui", "--api", api, "--run", str(run_id), "--port", str(args.ui_port), "--info-json", str(ui_info)],
+        )
         labeler_url = wait_for(ui_info, ui, "the labeling UI")["url"] + "?token=" + quote(tokens["labeler"])
     dashboard = f"{api}/?token={quote(tokens['operator'])}"
     if labeler_url:  # the dashboard's "watch skills in 3D" link opens the labeling UI in watch mode

@@ -142,4 +142,3 @@ class SkillWatch:
             if any(e.kind == "rollouts" for e in page.events):
                 self._fresh.set()
             after = page.last_id
-

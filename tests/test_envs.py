@@ -47,8 +47,7 @@ def test_normaliser_stats_finite_and_positive(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", DIMS)
-def test_model_path_rebuilds_the_same_model(name: str, tmp_path: Path,
-                                            monkeypatch: pytest.MonkeyPatch) -> None:
+def test_model_path_rebuilds_the_same_model(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
     env = make_env(name)
     model = load_model(name)
@@ -91,8 +90,12 @@ def test_ant_obs_starts_with_xy_and_matches_gymnasium() -> None:
     import gymnasium as gym
 
     env = make_env("ant", seed=3)
-    ref = gym.make("Ant-v5", exclude_current_positions_from_observation=False,
-                   include_cfrc_ext_in_observation=False, terminate_when_unhealthy=False)
+    ref = gym.make(
+        "Ant-v5",
+        exclude_current_positions_from_observation=False,
+        include_cfrc_ext_in_observation=False,
+        terminate_when_unhealthy=False,
+    )
     obs, info = env.reset()
     ref_obs, _ = ref.reset(seed=3)
     rng = np.random.default_rng(0)

@@ -91,7 +91,7 @@ def test_model_xml_rebuilds_the_scene(name: str) -> None:
     assert (model.nq, model.nu, painted.nq, painted.nu) == (nq, action_dim, nq, action_dim)
     assert model.camera("pixels").mode == mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM
     tex = painted.texture("position_floor")
-    texels = painted.tex_data[tex.adr[0]:tex.adr[0] + 3 * tex.width[0] * tex.height[0]]
+    texels = painted.tex_data[tex.adr[0] : tex.adr[0] + 3 * tex.width[0] * tex.height[0]]
     assert np.array_equal(texels, floor_texture(int(tex.width[0])).reshape(-1))
     with pytest.raises(NotImplementedError, match="model_xml"):
         model_path(name)
@@ -114,8 +114,8 @@ def test_twin_encoder_is_two_independent_cnns(one_thread: None) -> None:
         for mine, theirs in zip(single.net, twin.net, strict=True):
             if isinstance(mine, torch.nn.Conv2d):
                 out = mine.out_channels
-                mine.weight.data.copy_(theirs.weight.data[copy * out:(copy + 1) * out])
-                mine.bias.data.copy_(theirs.bias.data[copy * out:(copy + 1) * out])
+                mine.weight.data.copy_(theirs.weight.data[copy * out : (copy + 1) * out])
+                mine.bias.data.copy_(theirs.bias.data[copy * out : (copy + 1) * out])
         assert single(obs).shape == (5, 1536)
         torch.testing.assert_close(twin(obs)[copy], single(obs))
 

@@ -61,9 +61,7 @@ def test_not_flip_pitch() -> None:
     task = get_task("not_flip", "half_cheetah")
     xy = np.zeros((8, 2))
     half = math.pi / 2
-    pitch = np.array(
-        [0, half, -half, half + EPS, -half - EPS, math.pi, 2 * math.pi, 2 * math.pi + half + 0.1]
-    )
+    pitch = np.array([0, half, -half, half + EPS, -half - EPS, math.pi, 2 * math.pi, 2 * math.pi + half + 0.1])
     assert task.classify(xy, pitch).tolist() == [NEUTRAL] * 3 + [BAD] * 3 + [NEUTRAL, BAD]
     far = np.array([[1e3, -1e3]])
     assert task.classify(far, np.array([0.0])).tolist() == [NEUTRAL]  # position ignored
@@ -119,9 +117,7 @@ def test_boundary_distance() -> None:
     )
     assert np.allclose(get_task("hole").boundary_distance(pts), [8, 2, math.hypot(3, 16) - 12, 2])
     # the good/neutral edge y = |x| is not a safety boundary: range_north = range's circle
-    assert np.allclose(
-        get_task("range_north").boundary_distance(pts), get_task("range").boundary_distance(pts)
-    )
+    assert np.allclose(get_task("range_north").boundary_distance(pts), get_task("range").boundary_distance(pts))
     pitch = np.array([0.0, math.pi / 2, 2.0, -math.pi])
     assert np.allclose(
         get_task("not_flip").boundary_distance(pts, pitch), [math.pi / 2, 0, 2 - math.pi / 2, math.pi / 2]

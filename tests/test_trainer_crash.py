@@ -18,8 +18,9 @@ TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": 
 
 def cli(*args: str, log: Path) -> subprocess.Popen:
     env = {**os.environ, **{f"COLLIE_{k.upper()}_TOKEN": v for k, v in TOKENS.items()}}
-    return subprocess.Popen([sys.executable, "-m", "collie.cli", *args], stdout=open(log, "ab"),
-                            stderr=subprocess.STDOUT, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "collie.cli", *args], stdout=open(log, "ab"), stderr=subprocess.STDOUT, env=env
+    )
 
 
 def wait_until(pred, timeout_s: float = 180.0) -> None:
@@ -33,14 +34,27 @@ def wait_until(pred, timeout_s: float = 180.0) -> None:
 
 def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
     info = tmp_path / "service.json"
-    service = cli("serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info),
-                  log=tmp_path / "service.log")
+    service = cli(
+        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
+    )
     try:
         wait_until(info.exists)
         api = json.loads(info.read_text())["api"]
         out = tmp_path / "trainer"
-        train = ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--token", TOKENS["trainer"],
-                 "--no-progress", "--checkpoint-every", "1"]
+        train = [
+            "train",
+            "--preset",
+            "smoke",
+            "--out",
+            str(out),
+            "--api",
+            api,
+            "--token",
+            TOKENS["trainer"],
+            "--no-progress",
+            "--checkpoint-every",
+            "1",
+        ]
         trainer = cli(*train, log=tmp_path / "trainer.log")
         memo = out / "service_run.json"
         wait_until(memo.exists)
@@ -49,8 +63,17 @@ def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
             wait_until(lambda: client.run(run_id).status == "waiting_for_labels")
             trainer.send_signal(signal.SIGKILL)
             trainer.wait()
-            teacher = cli("teacher", "--api", api, "--token", TOKENS["labeler"], "--run", str(run_id),
-                          "--until-done", log=tmp_path / "teacher.log")
+            teacher = cli(
+                "teacher",
+                "--api",
+                api,
+                "--token",
+                TOKENS["labeler"],
+                "--run",
+                str(run_id),
+                "--until-done",
+                log=tmp_path / "teacher.log",
+            )
             restarted = cli(*train, "--resume", log=tmp_path / "trainer.log")
             assert restarted.wait(timeout=300) == 0, (tmp_path / "trainer.log").read_text()[-3000:]
             teacher.wait(timeout=60)

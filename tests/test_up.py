@@ -13,9 +13,29 @@ import torch
 @pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: pixel segments travel packed
 def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path, env):
     info = tmp_path / "info.json"
-    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", env, "--task", "north", "--teacher", "oracle",
-           "--preset", "smoke", "--port", "0", "--ui-port", "0", "--out", str(tmp_path), "--info-json", str(info),
-           "--exit-when-done"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "up",
+        "--env",
+        env,
+        "--task",
+        "north",
+        "--teacher",
+        "oracle",
+        "--preset",
+        "smoke",
+        "--port",
+        "0",
+        "--ui-port",
+        "0",
+        "--out",
+        str(tmp_path),
+        "--info-json",
+        str(info),
+        "--exit-when-done",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     meta = json.loads(info.read_text())
@@ -29,9 +49,24 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     n_total = summary["config"]["total_queries"]
     assert summary["n_labels"] == n_total  # every feedback session was answered
 
-    export = subprocess.run([sys.executable, "-m", "collie.cli", "export", "--db", str(tmp_path / "collie.db"),
-                             "--run", str(meta["run_id"]), "--format", "json", "--effective"],
-                            capture_output=True, text=True, timeout=120)
+    export = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "collie.cli",
+            "export",
+            "--db",
+            str(tmp_path / "collie.db"),
+            "--run",
+            str(meta["run_id"]),
+            "--format",
+            "json",
+            "--effective",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert export.returncode == 0, export.stderr
     in_db = {row["query_id"]: row["label"] for row in json.loads(export.stdout)}
     ckpt = torch.load(tmp_path / "trainer" / "checkpoint.pt", weights_only=False)

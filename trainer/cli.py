@@ -30,9 +30,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
     p.add_argument("--token", default=None, help="trainer token for --api")
     p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
-    p.add_argument("--feedback-timeout", type=float, default=None,
-                   help="seconds to wait for a session's labels before continuing with what arrived "
-                        "(an operator may change it from the dashboard)")
+    p.add_argument(
+        "--feedback-timeout",
+        type=float,
+        default=None,
+        help="seconds to wait for a session's labels before continuing with what arrived "
+        "(an operator may change it from the dashboard)",
+    )
     group = p.add_argument_group("hyperparameters (override the preset)")
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
@@ -54,8 +58,11 @@ def _parse_bool(text: str) -> bool:
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
-    overrides = {f.name: getattr(args, f.name, None) for f in dataclasses.fields(Config)
-                 if f.name not in ("env", "preset", "extra")}
+    overrides = {
+        f.name: getattr(args, f.name, None)
+        for f in dataclasses.fields(Config)
+        if f.name not in ("env", "preset", "extra")
+    }
     out = args.out or f"runs/{args.env}-{args.task}-{args.method}-s{args.seed}"
     overrides["out"] = out
     return make_config(args.preset, args.env, **overrides)
@@ -81,12 +88,18 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
         source = HttpFeedback(args.api, args.token, int(run_id), **kwargs)
     else:
         env = make_env(cfg.env, episode_steps=cfg.episode_steps)
-        dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length,
-                       skill_dim=cfg.skill_dim)
+        dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length, skill_dim=cfg.skill_dim)
         env.close()
-        spec = RunCreate(env=cfg.env, task=cfg.task, method=cfg.method, config=cfg.to_dict(), dims=dims,
-                         n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0, epochs_total=cfg.epochs,
-                         feedback_timeout_s=args.feedback_timeout)
+        spec = RunCreate(
+            env=cfg.env,
+            task=cfg.task,
+            method=cfg.method,
+            config=cfg.to_dict(),
+            dims=dims,
+            n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0,
+            epochs_total=cfg.epochs,
+            feedback_timeout_s=args.feedback_timeout,
+        )
         source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
@@ -115,9 +128,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
     summary = trainer.run(resume=args.resume)
-    keys = ("epoch", "safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage",
-            "n_labels", "wall_s", "status")
+    keys = (
+        "epoch",
+        "safe_coverage",
+        "safe_ratio",
+        "composite_coverage",
+        "weighted_composite_coverage",
+        "n_labels",
+        "wall_s",
+        "status",
+    )
     print(json.dumps({k: summary.get(k) for k in keys}))
-    print(f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
-          f"plots/, tb/, checkpoint.pt)")
+    print(
+        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
+        f"plots/, tb/, checkpoint.pt)"
+    )
     return 0 if summary.get("status") in ("finished", "stopped") else 1

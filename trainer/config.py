@@ -83,19 +83,36 @@ class Config:
                 raise ValueError(msg)
 
         need(self.method in METHODS, f"unknown method {self.method!r}; valid: {', '.join(METHODS)}")
-        need(self.query_strategy in QUERY_STRATEGIES,
-             f"unknown query strategy {self.query_strategy!r}; valid: {', '.join(QUERY_STRATEGIES)}")
+        need(
+            self.query_strategy in QUERY_STRATEGIES,
+            f"unknown query strategy {self.query_strategy!r}; valid: {', '.join(QUERY_STRATEGIES)}",
+        )
         need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
         need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
-        for name in ("epochs", "episodes_per_epoch", "episode_steps", "batch_size", "hidden", "layers",
-                     "feedback_every", "queries_per_session", "segment_length", "eval_every", "knn_k"):
+        for name in (
+            "epochs",
+            "episodes_per_epoch",
+            "episode_steps",
+            "batch_size",
+            "hidden",
+            "layers",
+            "feedback_every",
+            "queries_per_session",
+            "segment_length",
+            "eval_every",
+            "knn_k",
+        ):
             need(getattr(self, name) > 0, f"{name} must be positive, got {getattr(self, name)}")
-        need(self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
-             "replay_capacity must hold at least one epoch of transitions")
+        need(
+            self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
+            "replay_capacity must hold at least one epoch of transitions",
+        )
         need(self.w_at in ("next", "current"), "w_at must be 'next' or 'current'")
         need(self.distance in DISTANCES, f"unknown distance {self.distance!r}; valid: {', '.join(DISTANCES)}")
-        need(self.reward_form in REWARD_FORMS,
-             f"unknown reward form {self.reward_form!r}; valid: {', '.join(REWARD_FORMS)}")
+        need(
+            self.reward_form in REWARD_FORMS,
+            f"unknown reward form {self.reward_form!r}; valid: {', '.join(REWARD_FORMS)}",
+        )
         need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
         need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
@@ -111,16 +128,46 @@ class Config:
 PRESET_VALUES: dict[str, dict[str, Any]] = {
     "paper": {},  # the dataclass defaults are the paper's values
     "cpu": dict(
-        hidden=256, lr=1e-3, batch_size=256, epochs=400, episodes_per_epoch=8, episode_steps=200,
-        grad_steps=32, start_transitions=3200, replay_capacity=200_000, warmup=40, feedback_every=25,
-        queries_per_session=5, total_queries=40, segment_length=20, candidates=50, knn_k=5,
-        eval_every=25, checkpoint_every=25,
+        hidden=256,
+        lr=1e-3,
+        batch_size=256,
+        epochs=400,
+        episodes_per_epoch=8,
+        episode_steps=200,
+        grad_steps=32,
+        start_transitions=3200,
+        replay_capacity=200_000,
+        warmup=40,
+        feedback_every=25,
+        queries_per_session=5,
+        total_queries=40,
+        segment_length=20,
+        candidates=50,
+        knn_k=5,
+        eval_every=25,
+        checkpoint_every=25,
     ),
     "smoke": dict(
-        hidden=64, lr=1e-3, batch_size=64, epochs=8, episodes_per_epoch=4, episode_steps=50,
-        grad_steps=8, start_transitions=200, replay_capacity=5_000, warmup=2, feedback_every=2,
-        queries_per_session=2, total_queries=6, segment_length=5, candidates=6, knn_k=2,
-        eval_every=4, eval_trajectories=8, checkpoint_every=2, threads=1,
+        hidden=64,
+        lr=1e-3,
+        batch_size=64,
+        epochs=8,
+        episodes_per_epoch=4,
+        episode_steps=50,
+        grad_steps=8,
+        start_transitions=200,
+        replay_capacity=5_000,
+        warmup=2,
+        feedback_every=2,
+        queries_per_session=2,
+        total_queries=6,
+        segment_length=5,
+        candidates=6,
+        knn_k=2,
+        eval_every=4,
+        eval_trajectories=8,
+        checkpoint_every=2,
+        threads=1,
     ),
 }
 
@@ -137,13 +184,40 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
 # at epoch 4850. `cpu` only tries the loop out (a CNN update costs ≈ 1 s on 2 cores);
 # `smoke` finishes in seconds.
 PIXEL_PRESETS: dict[str, dict[str, Any]] = {
-    "paper": dict(epochs=5000, grad_steps=200, total_queries=100, feedback_every=150, eval_every=125,
-                  replay_capacity=300_000),
-    "cpu": dict(hidden=256, batch_size=32, epochs=40, grad_steps=4, start_transitions=1600, replay_capacity=20_000,
-                warmup=10, feedback_every=5, eval_every=10, eval_trajectories=8, checkpoint_every=10),
-    "smoke": dict(hidden=32, batch_size=8, epochs=3, episodes_per_epoch=2, episode_steps=20, grad_steps=2,
-                  start_transitions=20, replay_capacity=400, warmup=1, feedback_every=1, queries_per_session=2,
-                  total_queries=4, segment_length=5, candidates=4, eval_every=3, eval_trajectories=2),
+    "paper": dict(
+        epochs=5000, grad_steps=200, total_queries=100, feedback_every=150, eval_every=125, replay_capacity=300_000
+    ),
+    "cpu": dict(
+        hidden=256,
+        batch_size=32,
+        epochs=40,
+        grad_steps=4,
+        start_transitions=1600,
+        replay_capacity=20_000,
+        warmup=10,
+        feedback_every=5,
+        eval_every=10,
+        eval_trajectories=8,
+        checkpoint_every=10,
+    ),
+    "smoke": dict(
+        hidden=32,
+        batch_size=8,
+        epochs=3,
+        episodes_per_epoch=2,
+        episode_steps=20,
+        grad_steps=2,
+        start_transitions=20,
+        replay_capacity=400,
+        warmup=1,
+        feedback_every=1,
+        queries_per_session=2,
+        total_queries=4,
+        segment_length=5,
+        candidates=4,
+        eval_every=3,
+        eval_trajectories=2,
+    ),
 }
 PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
     preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()

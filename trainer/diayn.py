@@ -47,6 +47,7 @@ class Diayn(Metra):
 
         reward = diayn_reward(log_q.detach(), self.prior.dim, discrete)
         info = self.sac_update(b, reward)
-        info.update(phi_loss=disc_loss.detach(), lam=self.log_lambda.exp().detach(), reward=reward.mean(),
-                    w_mean=torch.ones(()))
+        info.update(
+            phi_loss=disc_loss.detach(), lam=self.log_lambda.exp().detach(), reward=reward.mean(), w_mean=torch.ones(())
+        )
         return info

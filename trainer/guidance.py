@@ -124,7 +124,7 @@ class LabelledSets:
                     dim = emb.shape[1] if emb is not None else 1
                     out.append(torch.zeros((0, dim), device=t.device))
                 else:
-                    out.append(emb[start:start + n])
+                    out.append(emb[start : start + n])
                     start += n
             self._cache, self._cache_key = out, key
         return self._cache
@@ -133,7 +133,8 @@ class LabelledSets:
         return {qid: {"obs": s.obs, "label": s.label} for qid, s in self.segments.items()}
 
     def load_state_dict(self, state: dict) -> None:
-        self.segments = {qid: LabelledSegment(np.asarray(v["obs"], np.float32), int(v["label"]))
-                         for qid, v in state.items()}
+        self.segments = {
+            qid: LabelledSegment(np.asarray(v["obs"], np.float32), int(v["label"])) for qid, v in state.items()
+        }
         self.version += 1
         self._tensors = None

@@ -71,8 +71,9 @@ class InstructionClassifier:
         present = [(x, TARGETS[y]) for y, x in enumerate(sets) if x.shape[0] > 0]
         obs = torch.cat([x for x, _ in present]).to(self.device)
         target = torch.cat([torch.full((x.shape[0],), t, device=self.device) for x, t in present])
-        weight = torch.cat([torch.full((x.shape[0],), 1.0 / (len(present) * x.shape[0]), device=self.device)
-                            for x, _ in present])
+        weight = torch.cat(
+            [torch.full((x.shape[0],), 1.0 / (len(present) * x.shape[0]), device=self.device) for x, _ in present]
+        )
         for _ in range(self.steps):
             loss = (F.binary_cross_entropy_with_logits(self.net(obs), target, reduction="none") * weight).sum()
             self.opt.zero_grad(set_to_none=True)
@@ -87,8 +88,12 @@ class InstructionClassifier:
         return torch.sigmoid(self.net(obs))
 
     def state_dict(self) -> dict[str, Any]:
-        return {"net": self.net.state_dict(), "opt": self.opt.state_dict(), "fitted": self.fitted,
-                "last_loss": self.last_loss}
+        return {
+            "net": self.net.state_dict(),
+            "opt": self.opt.state_dict(),
+            "fitted": self.fitted,
+            "last_loss": self.last_loss,
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])

@@ -40,8 +40,7 @@ from trainer.replay import Batch, TrajectoryReplay
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
 
-CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss",
-              "qf_loss", "n_labels")
+CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
 
 
 class TrainingDiverged(RuntimeError):
@@ -68,17 +67,24 @@ class Trainer:
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
         self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
-        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps,
-                                  layout_seed=cfg.seed)
+        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
             self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
         self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
         self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
-        self.agent, self.instruction = build_agent(cfg, self.env.obs_shape, self.env.action_dim, self.prior,
-                                                   self.device)  # the method's learner (+ ψ for DoDont*/DDG*)
-        self.replay = TrajectoryReplay(cfg.replay_capacity, cfg.episode_steps, self.env.obs_shape,
-                                       self.env.action_dim, cfg.skill_dim, self.env.nq, self.env.nv,
-                                       self.env.obs_dtype)
+        self.agent, self.instruction = build_agent(
+            cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
+        )  # the method's learner (+ ψ for DoDont*/DDG*)
+        self.replay = TrajectoryReplay(
+            cfg.replay_capacity,
+            cfg.episode_steps,
+            self.env.obs_shape,
+            self.env.action_dim,
+            cfg.skill_dim,
+            self.env.nq,
+            self.env.nv,
+            self.env.obs_dtype,
+        )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
@@ -121,8 +127,13 @@ class Trainer:
     # ---- feedback (Algorithm 1, lines 4–7) --------------------------------------------------
     def is_feedback_epoch(self) -> bool:
         c = self.cfg
-        return (c.method in LABEL_METHODS and self.epoch >= c.warmup and (self.epoch - c.warmup) % c.feedback_every == 0
-                and len(self.labelled) < c.total_queries and self.replay.count > 0)
+        return (
+            c.method in LABEL_METHODS
+            and self.epoch >= c.warmup
+            and (self.epoch - c.warmup) % c.feedback_every == 0
+            and len(self.labelled) < c.total_queries
+            and self.replay.count > 0
+        )
 
     def make_segments(self) -> list[Segment]:
         c, r = self.cfg, self.replay
@@ -140,18 +151,29 @@ class Trainer:
         labelled = self.normalise(labelled).reshape(-1, d) if len(labelled) else np.zeros((0, d), np.float32)
         windows = windows.reshape(len(windows), c.segment_length, d)
         emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version) if len(self.labelled) else None
-        chosen, scores = select_queries(self.normalise(windows), m, c.query_strategy, labelled, c.knn_k,
-                                        self.rng, phi=phi, labelled_emb=emb)
+        chosen, scores = select_queries(
+            self.normalise(windows), m, c.query_strategy, labelled, c.knn_k, self.rng, phi=phi, labelled_emb=emb
+        )
         segs = []
         for j, idx in enumerate(chosen):
             i, t = slots[idx], starts[idx]
             sl = slice(t, t + c.segment_length)
-            segs.append(Segment(
-                query_id=f"s{self.session}-q{j}", session=self.session, epoch=self.epoch,
-                skill=r.skill[i].copy(), start=int(t), obs=r.obs[i, sl].copy(), xy=r.xy[i, sl].astype(np.float64),
-                pitch=r.pitch[i, sl].astype(np.float64), qpos=r.qpos[i, sl].astype(np.float64),
-                qvel=r.qvel[i, sl].astype(np.float64), score=float(scores[idx]),
-                path_xy=r.xy[i].astype(np.float64)))
+            segs.append(
+                Segment(
+                    query_id=f"s{self.session}-q{j}",
+                    session=self.session,
+                    epoch=self.epoch,
+                    skill=r.skill[i].copy(),
+                    start=int(t),
+                    obs=r.obs[i, sl].copy(),
+                    xy=r.xy[i, sl].astype(np.float64),
+                    pitch=r.pitch[i, sl].astype(np.float64),
+                    qpos=r.qpos[i, sl].astype(np.float64),
+                    qvel=r.qvel[i, sl].astype(np.float64),
+                    score=float(scores[idx]),
+                    path_xy=r.xy[i].astype(np.float64),
+                )
+            )
         return segs
 
     def apply_labels(self, events: list[LabelEvent]) -> None:
@@ -189,8 +211,13 @@ class Trainer:
         def t(x: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(x, dtype=torch.float32, device=self.device)
 
-        return TorchBatch(t(self.normalise(b.obs)), t(self.normalise(b.next_obs)), t(b.action), t(b.skill),
-                          t(self.prior.reward_direction(b.skill)))
+        return TorchBatch(
+            t(self.normalise(b.obs)),
+            t(self.normalise(b.next_obs)),
+            t(b.action),
+            t(b.skill),
+            t(self.prior.reward_direction(b.skill)),
+        )
 
     def train_epoch(self) -> None:
         if self.replay.transitions < self.cfg.start_transitions:
@@ -222,24 +249,39 @@ class Trainer:
         seeds = [c.seed * 1000 + i for i in range(c.eval_trajectories)]
         traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, deterministic=True)
         xy = list(traj.xy.astype(np.float64))
-        metrics = coverage_metrics(xy, list(traj.pitch.astype(np.float64)), self.task,
-                                   bin_size=self.env.metric_bin_size, position_dims=self.env.position_dims)
+        metrics = coverage_metrics(
+            xy,
+            list(traj.pitch.astype(np.float64)),
+            self.task,
+            bin_size=self.env.metric_bin_size,
+            position_dims=self.env.position_dims,
+        )
         d0, d1, d2 = self.labelled.counts()
         record: dict[str, Any] = {
-            "epoch": self.epoch, "env_steps": self.env_steps, **{k: float(v) for k, v in metrics.items()},
-            "n_labels": len(self.labelled), "n_labelled_states": [d0, d1, d2],
-            "lambda": float(self.agent.log_lambda.detach().exp()), "alpha": float(self.agent.log_alpha.detach().exp()),
-            "beta": self.beta(), "wall_s": round(self.wall_s(), 2),
+            "epoch": self.epoch,
+            "env_steps": self.env_steps,
+            **{k: float(v) for k, v in metrics.items()},
+            "n_labels": len(self.labelled),
+            "n_labelled_states": [d0, d1, d2],
+            "lambda": float(self.agent.log_lambda.detach().exp()),
+            "alpha": float(self.agent.log_alpha.detach().exp()),
+            "beta": self.beta(),
+            "wall_s": round(self.wall_s(), 2),
             **{k: v for k, v in self.last_info.items() if k not in ("lam", "alpha")},
         }
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         self.plot(traj, record)
-        np.savez_compressed(self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch,
-                            skill=traj.skill)  # the final skills' paths, for `collie report` figures
+        np.savez_compressed(
+            self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
+        )  # the final skills' paths, for `collie report` figures
         self.feedback.report("metrics", record)
-        rollouts = {"epoch": self.epoch, "skills": traj.skill.tolist(), "xy": np.round(traj.xy[:, ::2], 3).tolist(),
-                    "qpos": np.round(traj.qpos[:, ::2], 4).tolist()}  # the labeling UI's watch mode replays these
+        rollouts = {
+            "epoch": self.epoch,
+            "skills": traj.skill.tolist(),
+            "xy": np.round(traj.xy[:, ::2], 3).tolist(),
+            "qpos": np.round(traj.qpos[:, ::2], 4).tolist(),
+        }  # the labeling UI's watch mode replays these
         w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
         if w is not None:
             rollouts["w"] = np.round(w, 2).tolist()
@@ -258,19 +300,32 @@ class Trainer:
         flat = self.normalise(obs.reshape(-1, *obs.shape[2:]))
         emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version)
         with torch.no_grad():
-            w = torch.cat([guidance_weight(self.agent.phi(torch.as_tensor(chunk, dtype=torch.float32,
-                                                                           device=self.device)), emb)
-                           for chunk in np.array_split(flat, -(-len(flat) // 4096))])
+            w = torch.cat(
+                [
+                    guidance_weight(
+                        self.agent.phi(torch.as_tensor(chunk, dtype=torch.float32, device=self.device)), emb
+                    )
+                    for chunk in np.array_split(flat, -(-len(flat) // 4096))
+                ]
+            )
         return ((1.0 - beta) * w + beta).cpu().numpy().astype(np.float64).reshape(obs.shape[:2])
 
     def plot(self, traj: Trajectories, record: dict[str, Any]) -> None:
         labelled = [(self.segment_xy[q], s.label) for q, s in self.labelled.segments.items() if q in self.segment_xy]
-        title = (f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
-                 f"safe cov {record['safe_coverage']:.0f} · ratio {record['safe_ratio']:.2f}")
+        title = (
+            f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
+            f"safe cov {record['safe_coverage']:.0f} · ratio {record['safe_ratio']:.2f}"
+        )
         path = self.out / "plots" / f"skills_epoch{self.epoch:05d}.png"
-        plot_skill_trajectories(list(traj.xy), self.task, path, skills=traj.skill,
-                                position_dims=self.env.position_dims, title=title,
-                                labelled=labelled)
+        plot_skill_trajectories(
+            list(traj.xy),
+            self.task,
+            path,
+            skills=traj.skill,
+            position_dims=self.env.position_dims,
+            title=title,
+            labelled=labelled,
+        )
         (self.out / "skills_latest.png").write_bytes(path.read_bytes())
 
     # ---- persistence ---------------------------------------------------------------------
@@ -280,11 +335,19 @@ class Trainer:
     def state_dict(self) -> dict[str, Any]:
         rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
         return {
-            "config": self.cfg.to_dict(), "epoch": self.epoch, "env_steps": self.env_steps,
-            "session": self.session, "first_feedback_epoch": self.first_feedback_epoch,
-            "wall_s": self.wall_s(), "agent": self.agent.state_dict(), "replay": self.replay.state_dict(),
-            "labelled": self.labelled.state_dict(), "asked": self.asked, "segment_xy": self.segment_xy,
-            "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+            "config": self.cfg.to_dict(),
+            "epoch": self.epoch,
+            "env_steps": self.env_steps,
+            "session": self.session,
+            "first_feedback_epoch": self.first_feedback_epoch,
+            "wall_s": self.wall_s(),
+            "agent": self.agent.state_dict(),
+            "replay": self.replay.state_dict(),
+            "labelled": self.labelled.state_dict(),
+            "asked": self.asked,
+            "segment_xy": self.segment_xy,
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
             "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
             "python_rng": random.getstate(),
             "teacher_rng": rng_teacher.bit_generator.state if rng_teacher is not None else None,
@@ -362,8 +425,14 @@ class Trainer:
         self.feedback.report("status", {"status": "training", "epoch": self.epoch})
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
-        bar = tqdm(total=self.cfg.epochs, initial=self.epoch, disable=not self.progress, unit="epoch",
-                   dynamic_ncols=True, desc="training")
+        bar = tqdm(
+            total=self.cfg.epochs,
+            initial=self.epoch,
+            disable=not self.progress,
+            unit="epoch",
+            dynamic_ncols=True,
+            desc="training",
+        )
         status, record = "finished", None
         try:
             while self.epoch < self.cfg.epochs:
@@ -382,8 +451,12 @@ class Trainer:
                 self.log_scalars()
                 if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
                     record = self.evaluate()
-                    bar.set_postfix(labels=len(self.labelled), safe_cov=record["safe_coverage"],
-                                    ratio=f"{record['safe_ratio']:.2f}", lam=f"{record['lambda']:.1f}")
+                    bar.set_postfix(
+                        labels=len(self.labelled),
+                        safe_cov=record["safe_coverage"],
+                        ratio=f"{record['safe_ratio']:.2f}",
+                        lam=f"{record['lambda']:.1f}",
+                    )
                 if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
                     self.checkpoint()
                 bar.update(1)

@@ -34,8 +34,9 @@ def lipschitz_latent(obs_dim: int, skill_dim: int, hidden: int, layers: int) -> 
 
 
 class Lsd(Metra):
-    def __init__(self, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, cfg: Config,
-                 device: torch.device) -> None:
+    def __init__(
+        self, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, cfg: Config, device: torch.device
+    ) -> None:
         if is_pixels(obs_shape):
             raise ValueError("LSD's Lipschitz φ (and COLLIE-L2) is for state observations, not pixels")
         super().__init__(obs_shape, action_dim, prior, cfg, device)
@@ -58,6 +59,11 @@ class Lsd(Metra):
 
         reward = objective.detach()  # Eq. 11
         info = self.sac_update(b, reward)
-        info.update(phi_loss=phi_loss.detach(), lam=self.log_lambda.exp().detach(),
-                    constraint=delta.detach().pow(2).sum(-1).mean(), w_mean=w.mean(), reward=reward.mean())
+        info.update(
+            phi_loss=phi_loss.detach(),
+            lam=self.log_lambda.exp().detach(),
+            constraint=delta.detach().pow(2).sum(-1).mean(),
+            w_mean=w.mean(),
+            reward=reward.mean(),
+        )
         return info

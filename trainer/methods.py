@@ -26,8 +26,9 @@ from trainer.skills import SkillPrior
 CLASSIFIER_METHODS = ("dodont", "ddg")
 
 
-def build_agent(cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior,
-                device: torch.device) -> tuple[Metra, InstructionClassifier | None]:
+def build_agent(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> tuple[Metra, InstructionClassifier | None]:
     """The learner for `cfg.method` and, for DoDont*/DDG*, its instruction classifier."""
     if cfg.method == "diayn":
         return Diayn(obs_shape, action_dim, prior, cfg, device), None

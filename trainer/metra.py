@@ -42,8 +42,9 @@ class TorchBatch:
 
 
 class Metra:
-    def __init__(self, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, cfg: Config,
-                 device: torch.device) -> None:
+    def __init__(
+        self, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, cfg: Config, device: torch.device
+    ) -> None:
         """`obs_shape`: the state dimension, or (C, H, W) for pixels (then CNN encoders, per cfg.encoder)."""
         self.cfg, self.prior, self.device = cfg, prior, device
         k, h, n = prior.dim, cfg.hidden, cfg.layers
@@ -54,8 +55,9 @@ class Metra:
         self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"]).to(device)
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.qf_target.requires_grad_(False)
-        self.policy = TanhGaussianPolicy(f + k, action_dim, h, n, enc["policy"],
-                                         detach_encoder=cfg.encoder == "shared").to(device)
+        self.policy = TanhGaussianPolicy(
+            f + k, action_dim, h, n, enc["policy"], detach_encoder=cfg.encoder == "shared"
+        ).to(device)
         self.log_alpha = torch.tensor(np.log(cfg.alpha_init), device=device, requires_grad=True)
         self.log_lambda = torch.tensor(np.log(cfg.lambda_init), device=device, requires_grad=True)
         self.target_entropy = cfg.target_entropy_scale * action_dim
@@ -77,8 +79,12 @@ class Metra:
         if kind == "shared":
             shared = PixelEncoder(shape)
             return {"phi": shared, "qf": shared, "qf_target": PixelEncoder(shape), "policy": shared}
-        return {"phi": PixelEncoder(shape), "qf": PixelEncoder(shape, copies=2),
-                "qf_target": PixelEncoder(shape, copies=2), "policy": PixelEncoder(shape)}
+        return {
+            "phi": PixelEncoder(shape),
+            "qf": PixelEncoder(shape, copies=2),
+            "qf_target": PixelEncoder(shape, copies=2),
+            "policy": PixelEncoder(shape),
+        }
 
     # ---- acting ---------------------------------------------------------------------------
     @torch.inference_mode()
@@ -110,8 +116,14 @@ class Metra:
 
         reward = guided.detach()  # Eq. 11
         info = self.sac_update(b, reward)
-        info.update(phi_loss=phi_loss.detach(), lambda_loss=lambda_loss.detach(), lam=lam,
-                    constraint=delta.detach().pow(2).sum(-1).mean(), w_mean=w.mean(), reward=reward.mean())
+        info.update(
+            phi_loss=phi_loss.detach(),
+            lambda_loss=lambda_loss.detach(),
+            lam=lam,
+            constraint=delta.detach().pow(2).sum(-1).mean(),
+            w_mean=w.mean(),
+            reward=reward.mean(),
+        )
         return info
 
     def sac_update(self, b: TorchBatch, reward: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -145,22 +157,39 @@ class Metra:
         with torch.no_grad():
             for t, p in zip(self.qf_target.parameters(), self.qf.parameters(), strict=True):
                 t.lerp_(p, self.cfg.tau)
-        return dict(qf_loss=qf_loss.detach(), policy_loss=policy_loss.detach(),
-                    alpha=alpha, q=q.detach().mean(), entropy=-logp.detach().mean())
+        return dict(
+            qf_loss=qf_loss.detach(),
+            policy_loss=policy_loss.detach(),
+            alpha=alpha,
+            q=q.detach().mean(),
+            entropy=-logp.detach().mean(),
+        )
 
     # ---- checkpoints ---------------------------------------------------------------------
     def state_dict(self) -> dict:
-        return {name: getattr(self, name).state_dict() for name in
-                ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt", "alpha_opt",
-                 "lambda_opt")} | {"log_alpha": self.log_alpha.detach().clone(),
-                                   "log_lambda": self.log_lambda.detach().clone(),
-                                   "phi_version": self.phi_version}
+        return {
+            name: getattr(self, name).state_dict()
+            for name in (
+                "phi",
+                "qf",
+                "qf_target",
+                "policy",
+                "phi_opt",
+                "qf_opt",
+                "policy_opt",
+                "alpha_opt",
+                "lambda_opt",
+            )
+        } | {
+            "log_alpha": self.log_alpha.detach().clone(),
+            "log_lambda": self.log_lambda.detach().clone(),
+            "phi_version": self.phi_version,
+        }
 
     def load_state_dict(self, state: dict) -> None:
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
             self.log_lambda.copy_(state["log_lambda"])
-        for name in ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt",
-                     "alpha_opt", "lambda_opt"):
+        for name in ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt", "alpha_opt", "lambda_opt"):
             getattr(self, name).load_state_dict(state[name])
         self.phi_version = int(state["phi_version"])

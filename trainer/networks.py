@@ -30,8 +30,9 @@ def mlp(inp: int, hidden: int, layers: int, out: int, act: type[nn.Module] = nn.
 class SkillLatent(nn.Module):
     """φ: S → Z, the Lipschitz-constrained skill latent (Eq. 6's constraint, enforced by Eq. 10)."""
 
-    def __init__(self, obs_dim: int, skill_dim: int, hidden: int, layers: int,
-                 encoder: nn.Module | None = None) -> None:
+    def __init__(
+        self, obs_dim: int, skill_dim: int, hidden: int, layers: int, encoder: nn.Module | None = None
+    ) -> None:
         super().__init__()
         self.encoder = encoder or nn.Identity()
         self.net = mlp(obs_dim, hidden, layers, skill_dim)
@@ -79,8 +80,15 @@ class TanhGaussianPolicy(nn.Module):
     """π(a | s, z): tanh-squashed Gaussian with a tanh trunk (as the reference). `inp` counts encoder
     features + |z|. With `detach_encoder` the policy reads an encoder that others train."""
 
-    def __init__(self, inp: int, action_dim: int, hidden: int, layers: int, encoder: nn.Module | None = None,
-                 detach_encoder: bool = False) -> None:
+    def __init__(
+        self,
+        inp: int,
+        action_dim: int,
+        hidden: int,
+        layers: int,
+        encoder: nn.Module | None = None,
+        detach_encoder: bool = False,
+    ) -> None:
         super().__init__()
         self.encoder = encoder or nn.Identity()
         self.detach_encoder = detach_encoder

@@ -94,23 +94,17 @@ def _shade(ax: Axes, task: Task, x0: float, x1: float, y0: float, y1: float, one
 
 
 def _legend(ax: Axes, shaded: list[int], labels: set[int]) -> None:
-    handles: list[Any] = [
-        Patch(color=CLASS_COLOURS[c], alpha=0.5, label=f"{CLASS_NAMES[c]} region") for c in shaded
-    ]
+    handles: list[Any] = [Patch(color=CLASS_COLOURS[c], alpha=0.5, label=f"{CLASS_NAMES[c]} region") for c in shaded]
     if labels:
         handles += [
-            Line2D(
-                [], [], ls="", marker="o", mfc=CLASS_COLOURS[c], mec="k", label=f"labelled {CLASS_NAMES[c]}"
-            )
+            Line2D([], [], ls="", marker="o", mfc=CLASS_COLOURS[c], mec="k", label=f"labelled {CLASS_NAMES[c]}")
             for c in sorted(labels)
         ]
     if handles:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
 
 
-def _draw_xy(
-    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled
-) -> list[int]:
+def _draw_xy(ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled) -> list[int]:
     points = [t[:, :2] for t in trajs] + [np.asarray(s, dtype=float)[:, :2] for s, _ in labelled]
     x0, x1, y0, y1 = _extent(points, task)
     shaded = _shade(ax, task, x0, x1, y0, y1, one_dim=False)
@@ -153,8 +147,9 @@ def plot_skill_trajectories(
     """x-y paths coloured by skill over the shaded task regions (x over time when
     position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small markers."""
     fig = Figure(figsize=(6, 6) if position_dims == 2 else (7, 4.5))
-    draw_skill_panel(fig.add_subplot(), xy_trajs, task, skills=skills, position_dims=position_dims, title=title,
-                     labelled=labelled)
+    draw_skill_panel(
+        fig.add_subplot(), xy_trajs, task, skills=skills, position_dims=position_dims, title=title, labelled=labelled
+    )
     fig.tight_layout()
     return _save(fig, path)
 

@@ -23,8 +23,17 @@ class Batch:
 
 
 class TrajectoryReplay:
-    def __init__(self, capacity: int, steps: int, obs_shape: int | tuple[int, ...], action_dim: int, skill_dim: int,
-                 nq: int, nv: int, obs_dtype: np.dtype | type = np.float32) -> None:
+    def __init__(
+        self,
+        capacity: int,
+        steps: int,
+        obs_shape: int | tuple[int, ...],
+        action_dim: int,
+        skill_dim: int,
+        nq: int,
+        nv: int,
+        obs_dtype: np.dtype | type = np.float32,
+    ) -> None:
         self.size = max(1, capacity // steps)  # trajectories
         self.steps = steps
         n, t = self.size, steps + 1
@@ -43,8 +52,17 @@ class TrajectoryReplay:
     def transitions(self) -> int:
         return self.count * self.steps
 
-    def add(self, obs: np.ndarray, action: np.ndarray, skill: np.ndarray, xy: np.ndarray,
-            pitch: np.ndarray, qpos: np.ndarray, qvel: np.ndarray, epoch: int) -> np.ndarray:
+    def add(
+        self,
+        obs: np.ndarray,
+        action: np.ndarray,
+        skill: np.ndarray,
+        xy: np.ndarray,
+        pitch: np.ndarray,
+        qpos: np.ndarray,
+        qvel: np.ndarray,
+        epoch: int,
+    ) -> np.ndarray:
         """Store n trajectories (arrays with a leading n axis); returns their slot indices."""
         n = obs.shape[0]
         idx = (self.next + np.arange(n)) % self.size
@@ -59,8 +77,16 @@ class TrajectoryReplay:
     def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
         i = rng.integers(0, self.count, size=batch_size)
         t = rng.integers(0, self.steps, size=batch_size)
-        return Batch(self.obs[i, t], self.obs[i, t + 1], self.action[i, t], self.skill[i],
-                     self.xy[i, t], self.xy[i, t + 1], self.pitch[i, t], self.pitch[i, t + 1])
+        return Batch(
+            self.obs[i, t],
+            self.obs[i, t + 1],
+            self.action[i, t],
+            self.skill[i],
+            self.xy[i, t],
+            self.xy[i, t + 1],
+            self.pitch[i, t],
+            self.pitch[i, t + 1],
+        )
 
     def sample_windows(self, n: int, length: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """n random windows of `length` consecutive states: (trajectory slots, start indices)."""
@@ -70,9 +96,18 @@ class TrajectoryReplay:
 
     def state_dict(self) -> dict[str, np.ndarray | int]:
         keep = slice(0, self.count)
-        return {"obs": self.obs[keep], "action": self.action[keep], "skill": self.skill[keep],
-                "xy": self.xy[keep], "pitch": self.pitch[keep], "qpos": self.qpos[keep],
-                "qvel": self.qvel[keep], "epoch": self.epoch[keep], "next": self.next, "count": self.count}
+        return {
+            "obs": self.obs[keep],
+            "action": self.action[keep],
+            "skill": self.skill[keep],
+            "xy": self.xy[keep],
+            "pitch": self.pitch[keep],
+            "qpos": self.qpos[keep],
+            "qvel": self.qvel[keep],
+            "epoch": self.epoch[keep],
+            "next": self.next,
+            "count": self.count,
+        }
 
     def load_state_dict(self, state: dict) -> None:
         c = int(state["count"])

@@ -34,8 +34,15 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("wall_s", "Wall time per run (s)", 0),
 )
 METHOD_ORDER = ("oracle", "diayn", "lsd", "metra", "ddg", "dodont", "collie")
-DISPLAY = {"oracle": "Oracle", "diayn": "DIAYN", "lsd": "LSD", "metra": "METRA", "ddg": "DDG*",
-           "dodont": "DoDont*", "collie": "COLLIE"}
+DISPLAY = {
+    "oracle": "Oracle",
+    "diayn": "DIAYN",
+    "lsd": "LSD",
+    "metra": "METRA",
+    "ddg": "DDG*",
+    "dodont": "DoDont*",
+    "collie": "COLLIE",
+}
 
 
 @dataclass
@@ -70,8 +77,17 @@ def load_run(folder: Path) -> RunResult:
     sweep = folder / "sweep_run.json"
     variant = json.loads(sweep.read_text()).get("variant", "") if sweep.exists() else ""
     down = folder / "downstream.json"
-    return RunResult(folder, cfg["env"], cfg["task"], cfg["method"], int(cfg["seed"]), summary.get("status", "?"),
-                     summary, variant, json.loads(down.read_text()) if down.exists() else {})
+    return RunResult(
+        folder,
+        cfg["env"],
+        cfg["task"],
+        cfg["method"],
+        int(cfg["seed"]),
+        summary.get("status", "?"),
+        summary,
+        variant,
+        json.loads(down.read_text()) if down.exists() else {},
+    )
 
 
 def find_runs(roots: list[Path]) -> list[RunResult]:
@@ -135,7 +151,8 @@ def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
         for (label, col), g in _group(hi).items():
             cells[(label, col)] = format_cell([r.downstream["hierarchical"]["mean"] for r in g], 2)
             cells[(label, f"{col} (random skills)")] = format_cell(
-                [r.downstream["hierarchical"]["random_skills_mean"] for r in g], 2)
+                [r.downstream["hierarchical"]["random_skills_mean"] for r in g], 2
+            )
         cols = [c for col in columns for c in (col, f"{col} (random skills)")]
         out.append(("Hierarchical Goal return, PPO over frozen skills (Table 4)", _table(rows, cols, cells)))
     return out
@@ -152,10 +169,20 @@ def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
                 values[f"{kind}_{key}"] = [r.downstream[kind][key] for r in g]
         for metric, v in values.items():
             a = np.asarray(v, dtype=float)
-            rows.append({"env": r0.env, "task": r0.task, "method": r0.method, "variant": r0.variant,
-                         "label": r0.label, "metric": metric, "mean": float(a.mean()),
-                         "std": float(a.std(ddof=1)) if len(a) > 1 else math.nan, "n": len(a),
-                         "seeds": " ".join(str(r.seed) for r in g)})
+            rows.append(
+                {
+                    "env": r0.env,
+                    "task": r0.task,
+                    "method": r0.method,
+                    "variant": r0.variant,
+                    "label": r0.label,
+                    "metric": metric,
+                    "mean": float(a.mean()),
+                    "std": float(a.std(ddof=1)) if len(a) > 1 else math.nan,
+                    "n": len(a),
+                    "seeds": " ".join(str(r.seed) for r in g),
+                }
+            )
     return rows
 
 
@@ -168,8 +195,10 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path], out: Path) -> str:
     seeds = sorted({len(g) for g in _group(runs).values()})
-    parts = [f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
-             "Cells: mean ± sample std over seeds of each run's final evaluation."]
+    parts = [
+        f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
+        "Cells: mean ± sample std over seeds of each run's final evaluation."
+    ]
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
     for metric, title, digits in METRICS:
@@ -178,8 +207,10 @@ def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path
     for title, table in downstream_tables(runs):
         parts.append(f"## {title}\n\n{table}")
     if figures:
-        parts.append("## Skills (final evaluation, lowest seed)\n\n"
-                     + "\n".join(f"![{p.stem}]({p.relative_to(out)})" for p in figures))
+        parts.append(
+            "## Skills (final evaluation, lowest seed)\n\n"
+            + "\n".join(f"![{p.stem}]({p.relative_to(out)})" for p in figures)
+        )
     return "\n\n".join(parts) + "\n"
 
 
@@ -195,9 +226,21 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
 
         paths = skill_figures(runs, out / "figures")
     _write_csv(out / "metrics.csv", long_rows(runs))
-    _write_csv(out / "runs.csv", [{"path": str(r.path), "env": r.env, "task": r.task, "method": r.method,
-                                   "variant": r.variant, "seed": r.seed,
-                                   **{m: r.metrics.get(m) for m, _, _ in METRICS}} for r in runs])
+    _write_csv(
+        out / "runs.csv",
+        [
+            {
+                "path": str(r.path),
+                "env": r.env,
+                "task": r.task,
+                "method": r.method,
+                "variant": r.variant,
+                "seed": r.seed,
+                **{m: r.metrics.get(m) for m, _, _ in METRICS},
+            }
+            for r in runs
+        ],
+    )
     (out / "report.md").write_text(markdown(runs, skipped, paths, out))
     return {"markdown": out / "report.md", "metrics_csv": out / "metrics.csv", "runs_csv": out / "runs.csv"}
 

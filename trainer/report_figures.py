@@ -33,8 +33,14 @@ def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
     c = skills.cfg
     env = VectorEnv(c.env, c.eval_trajectories, episode_steps=c.episode_steps, layout_seed=c.seed)
     z = skills.prior.evaluation_skills(c.eval_trajectories, seed=c.seed)
-    traj = rollout(env, skills.agent, z, [c.seed * 1000 + i for i in range(c.eval_trajectories)],
-                   skills.normalise, deterministic=True)
+    traj = rollout(
+        env,
+        skills.agent,
+        z,
+        [c.seed * 1000 + i for i in range(c.eval_trajectories)],
+        skills.normalise,
+        deterministic=True,
+    )
     env.close()
     return traj.xy, traj.skill
 
@@ -56,8 +62,15 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
             task = get_task(task_name, env, layout_seed=run.seed)
             ax = fig.add_subplot(rows, cols, i + 1)
             cov = run.metrics.get("safe_coverage", float("nan"))
-            draw_skill_panel(ax, list(xy), task, skills=skill, position_dims=dims, legend=False,
-                             title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}")
+            draw_skill_panel(
+                ax,
+                list(xy),
+                task,
+                skills=skill,
+                position_dims=dims,
+                legend=False,
+                title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}",
+            )
             ax.tick_params(labelsize=7)
         fig.suptitle(f"{env} {task_name}", fontsize=11)
         fig.tight_layout()

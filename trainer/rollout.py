@@ -35,8 +35,9 @@ class Normaliser:
         return (obs - self.mean) / self.std
 
 
-def rollout(env: VectorEnv, agent: Metra, skills: np.ndarray, seeds: list[int], normalise: Normaliser,
-            deterministic: bool) -> Trajectories:
+def rollout(
+    env: VectorEnv, agent: Metra, skills: np.ndarray, seeds: list[int], normalise: Normaliser, deterministic: bool
+) -> Trajectories:
     """Run one episode per env with skill `skills[i]`; returns the full trajectories."""
     n, t_max = env.num_envs, env.episode_steps
     if skills.shape[0] != n:

@@ -48,13 +48,18 @@ def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, va
     return Path(root) / f"{env}-{task}-{label}-s{seed}"
 
 
-def grid(root: str | Path, env: str, tasks: list[str], methods: list[str], seeds: list[int],
-         **kw: Any) -> list[RunSpec]:
+def grid(
+    root: str | Path, env: str, tasks: list[str], methods: list[str], seeds: list[int], **kw: Any
+) -> list[RunSpec]:
     """Every (task, method, seed) as a RunSpec under `root`, seed by seed (a sweep cut short still
     holds whole comparisons)."""
     variant = kw.get("variant", "")
-    return [RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), **kw)
-            for s in seeds for t in tasks for m in methods]
+    return [
+        RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), **kw)
+        for s in seeds
+        for t in tasks
+        for m in methods
+    ]
 
 
 def is_finished(out: str | Path) -> bool:
@@ -63,9 +68,28 @@ def is_finished(out: str | Path) -> bool:
 
 
 def train_command(spec: RunSpec) -> list[str]:
-    cmd = [sys.executable, "-m", "collie.cli", "train", "--env", spec.env, "--task", spec.task, "--method",
-           spec.method, "--preset", spec.preset, "--seed", str(spec.seed), "--out", spec.out, "--threads", "1",
-           "--no-progress", *spec.flags]
+    cmd = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "train",
+        "--env",
+        spec.env,
+        "--task",
+        spec.task,
+        "--method",
+        spec.method,
+        "--preset",
+        spec.preset,
+        "--seed",
+        str(spec.seed),
+        "--out",
+        spec.out,
+        "--threads",
+        "1",
+        "--no-progress",
+        *spec.flags,
+    ]
     if (Path(spec.out) / "checkpoint.pt").exists():
         cmd.append("--resume")
     return cmd
@@ -92,13 +116,16 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
         _call(train_command(spec), out.with_suffix(".log"))
     if spec.downstream and not downstream_done(out):
-        _call([sys.executable, "-m", "trainer.downstream", str(out), *spec.downstream_flags],
-              out.with_suffix(".downstream.log"))
+        _call(
+            [sys.executable, "-m", "trainer.downstream", str(out), *spec.downstream_flags],
+            out.with_suffix(".downstream.log"),
+        )
     return json.loads((out / "summary.json").read_text())
 
 
-def run_all(specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None
-            ) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+def run_all(
+    specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None
+) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
     """Yield (spec, summary or the exception it raised) as runs end. Local: `jobs` runs at a time,
     each a child process. Ray: one task per run (1 CPU each) on the cluster at `ray_address`;
     the run folders must be on a file system the cluster's nodes share."""
@@ -152,20 +179,36 @@ def run(args: argparse.Namespace) -> int:
     methods, tasks = args.methods.split(","), args.tasks.split(",")
     bad = [m for m in methods if m not in METHODS]
     bad_variant = bool(args.variant) and not args.variant.replace("_", "").isalnum()
-    problem = (f"unknown method(s) {', '.join(bad)}; valid: {', '.join(METHODS)}" if bad
-               else "--seeds must be ≥ 1" if args.seeds < 1
-               else "--variant: letters, digits and _ only" if bad_variant
-               else None)
+    problem = (
+        f"unknown method(s) {', '.join(bad)}; valid: {', '.join(METHODS)}"
+        if bad
+        else "--seeds must be ≥ 1"
+        if args.seeds < 1
+        else "--variant: letters, digits and _ only"
+        if bad_variant
+        else None
+    )
     if problem:
         print(f"collie sweep: error: {problem}", file=sys.stderr)
         return 2
     flags = tuple(f for f in args.train_flags if f != "--")
-    specs = grid(args.out, args.env, tasks, methods, list(range(args.seeds)), preset=args.preset,
-                 variant=args.variant, flags=flags, downstream=args.downstream,
-                 downstream_flags=tuple(shlex.split(args.downstream_flags)))
+    specs = grid(
+        args.out,
+        args.env,
+        tasks,
+        methods,
+        list(range(args.seeds)),
+        preset=args.preset,
+        variant=args.variant,
+        flags=flags,
+        downstream=args.downstream,
+        downstream_flags=tuple(shlex.split(args.downstream_flags)),
+    )
     todo = sum(not is_finished(s.out) for s in specs)
-    print(f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
-          f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}")
+    print(
+        f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
+        f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"
+    )
     failed: list[tuple[RunSpec, Exception]] = []
     try:
         with tqdm(total=len(specs), desc="sweep", unit="run") as bar:

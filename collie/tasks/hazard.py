@@ -21,8 +21,9 @@ START_CLEARANCE = 0.15  # the car starts at the origin, never already inside a h
 HAZARD_ENVS = ("car",)
 
 
-def hazard_layout(layout_seed: int, count: int = HAZARD_COUNT, radius: float = HAZARD_RADIUS,
-                  extent: float = PLACEMENT_EXTENT) -> np.ndarray:
+def hazard_layout(
+    layout_seed: int, count: int = HAZARD_COUNT, radius: float = HAZARD_RADIUS, extent: float = PLACEMENT_EXTENT
+) -> np.ndarray:
     """(count, 2) hazard centres for an experiment seed: uniform, non-overlapping, off the start.
 
     Rejection sampling from the seed's own generator, so the layout depends on nothing else."""

@@ -50,6 +50,7 @@ def get_task(name: str, env: str = "point", layout_seed: int | None = None) -> T
     if name not in _LAYOUT_TASKS:
         return factory(env)
     if layout_seed is None:
-        raise ValueError(f"task {name!r} places its scenery at random per experiment: pass layout_seed "
-                         "(the run's seed)")
+        raise ValueError(
+            f"task {name!r} places its scenery at random per experiment: pass layout_seed (the run's seed)"
+        )
     return factory(env, int(layout_seed))

@@ -18,10 +18,18 @@ def smoke(out, **kw) -> Trainer:
     return Trainer(make_config("smoke", kw.pop("env", "point"), out=str(out), **kw), progress=False)
 
 
-@pytest.mark.parametrize(("method", "extra", "labels"), [
-    ("diayn", {}, 0), ("lsd", {}, 0), ("dodont", {}, 4), ("ddg", {}, 4),
-    ("collie", {"reward_form": "additive"}, 4), ("collie", {"distance": "l2"}, 4), ("collie", {"obs_noise": 0.1}, 4),
-])
+@pytest.mark.parametrize(
+    ("method", "extra", "labels"),
+    [
+        ("diayn", {}, 0),
+        ("lsd", {}, 0),
+        ("dodont", {}, 4),
+        ("ddg", {}, 4),
+        ("collie", {"reward_form": "additive"}, 4),
+        ("collie", {"distance": "l2"}, 4),
+        ("collie", {"obs_noise": 0.1}, 4),
+    ],
+)
 def test_smoke_run(tmp_path, method, extra, labels):
     t = smoke(tmp_path, method=method, task="north", epochs=4, **extra)
     summary = t.run()
@@ -52,8 +60,16 @@ def test_downstream_tasks_on_tiny_runs(tmp_path):
     smoke(tmp_path / "point", method="collie", epochs=2).run()
     zs = run_downstream(tmp_path / "point", trajectories=6)["zero_shot"]
     assert zs["trajectories"] == 6 and zs["best"] >= zs["mean"]
-    smoke(tmp_path / "hc", env="half_cheetah", task="not_flip", method="metra", epochs=1, episode_steps=50,
-          episodes_per_epoch=2, eval_trajectories=2).run()
+    smoke(
+        tmp_path / "hc",
+        env="half_cheetah",
+        task="not_flip",
+        method="metra",
+        epochs=1,
+        episode_steps=50,
+        episodes_per_epoch=2,
+        eval_trajectories=2,
+    ).run()
     hi = run_downstream(tmp_path / "hc", ppo_overrides={"envs": 2})["hierarchical"]
     assert len(hi["train_curve"]) == 2 and np.isfinite(hi["mean"]) and hi["ppo"]["hidden"] == 32  # smoke budget
     stored = json.loads((tmp_path / "hc" / "downstream.json").read_text())

@@ -13,9 +13,19 @@ def fake_run(root, env, task, method, seed, cov, status="finished", variant="", 
     d = root / name
     d.mkdir(parents=True)
     cfg = {"env": env, "task": task, "method": method, "seed": seed}
-    (d / "summary.json").write_text(json.dumps({
-        "status": status, "safe_coverage": cov, "safe_ratio": 0.5 + seed / 10, "composite_coverage": cov,
-        "weighted_composite_coverage": cov + 1, "wall_s": 10.0, "config": cfg}))
+    (d / "summary.json").write_text(
+        json.dumps(
+            {
+                "status": status,
+                "safe_coverage": cov,
+                "safe_ratio": 0.5 + seed / 10,
+                "composite_coverage": cov,
+                "weighted_composite_coverage": cov + 1,
+                "wall_s": 10.0,
+                "config": cfg,
+            }
+        )
+    )
     if variant:
         (d / "sweep_run.json").write_text(json.dumps({"variant": variant}))
     if downstream:
@@ -35,8 +45,9 @@ def test_format_cell_is_mean_and_sample_std():
 def test_report_tables_csv_and_figures(tmp_path):
     runs = tmp_path / "runs"
     for seed, cov in enumerate([100.0, 120.0]):
-        fake_run(runs, "point", "north", "collie", seed, cov, downstream={"zero_shot": {"mean": 10.0 + seed,
-                                                                                        "best": 20.0}})
+        fake_run(
+            runs, "point", "north", "collie", seed, cov, downstream={"zero_shot": {"mean": 10.0 + seed, "best": 20.0}}
+        )
         fake_run(runs, "point", "north", "metra", seed, -cov)
         fake_run(runs, "point", "north", "dodont", seed, 5.0)
     fake_run(runs, "point", "range", "collie", 0, 50.0, variant="additive")

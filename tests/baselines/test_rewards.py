@@ -23,8 +23,9 @@ def batch(n: int = 64, obs_dim: int = 4, skill_dim: int = 2, seed: int = 0) -> T
     g = torch.Generator().manual_seed(seed)
     obs = torch.randn(n, obs_dim, generator=g)
     z = torch.nn.functional.normalize(torch.randn(n, skill_dim, generator=g), dim=1)
-    return TorchBatch(obs, obs + 0.3 * torch.randn(n, obs_dim, generator=g), torch.rand(n, 2, generator=g) * 2 - 1,
-                      z, z)
+    return TorchBatch(
+        obs, obs + 0.3 * torch.randn(n, obs_dim, generator=g), torch.rand(n, 2, generator=g) * 2 - 1, z, z
+    )
 
 
 def cfg(**kw):
@@ -44,8 +45,9 @@ def test_diayn_continuous_reward_is_gaussian_log_likelihood():
     z = torch.tensor([[1.0, 0.0]])
     assert math.isclose(float(skill_log_likelihood(z, z, discrete=False)), -math.log(2 * math.pi), rel_tol=1e-6)
     mean = torch.tensor([[0.0, 0.0]])
-    assert math.isclose(float(diayn_reward(skill_log_likelihood(mean, z, False), 2, False)),
-                        -0.5 - math.log(2 * math.pi), rel_tol=1e-6)
+    assert math.isclose(
+        float(diayn_reward(skill_log_likelihood(mean, z, False), 2, False)), -0.5 - math.log(2 * math.pi), rel_tol=1e-6
+    )
 
 
 def test_diayn_update_uses_the_discriminator_reward_and_learns_it():
@@ -139,8 +141,9 @@ def test_zero_shot_motion_return_on_a_hand_built_path():
 
 
 def test_goal_reward_and_gae():
-    r = goal_reward(np.array([0.0, 10.0, 12.5, 50.0]), np.array([1.0, 12.0, 10.0, 0.0]),
-                    np.array([False, False, False, True]))
+    r = goal_reward(
+        np.array([0.0, 10.0, 12.5, 50.0]), np.array([1.0, 12.0, 10.0, 0.0]), np.array([False, False, False, True])
+    )
     assert r.tolist() == [1.0, 1.0, 1.0, -20.0]
     rewards, values = torch.tensor([[1.0], [0.0], [2.0]]), torch.tensor([[0.5], [1.0], [0.0]])
     gamma, lam = 0.9, 0.8

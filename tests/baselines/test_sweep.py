@@ -45,8 +45,10 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeyp
 def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
     monkeypatch.setattr(sweep.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 1))
     finished(tmp_path / "ok")
-    specs = [RunSpec("point", "north", "metra", 0, str(tmp_path / "bad")),
-             RunSpec("point", "north", "metra", 1, str(tmp_path / "ok"))]
+    specs = [
+        RunSpec("point", "north", "metra", 0, str(tmp_path / "bad")),
+        RunSpec("point", "north", "metra", 1, str(tmp_path / "ok")),
+    ]
     out = {s.out: r for s, r in run_all(specs, jobs=1)}
     assert isinstance(out[specs[0].out], RuntimeError) and "see" in str(out[specs[0].out])
     assert out[specs[1].out]["status"] == "finished"
@@ -55,8 +57,27 @@ def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
 
 
 def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
-    cmd = [sys.executable, "-m", "collie.cli", "sweep", "--tasks", "north", "--methods", "lsd", "--seeds", "1",
-           "--preset", "smoke", "--out", str(tmp_path), "--jobs", "1", "--", "--epochs", "2"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "sweep",
+        "--tasks",
+        "north",
+        "--methods",
+        "lsd",
+        "--seeds",
+        "1",
+        "--preset",
+        "smoke",
+        "--out",
+        str(tmp_path),
+        "--jobs",
+        "1",
+        "--",
+        "--epochs",
+        "2",
+    ]
     first = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
     summary = tmp_path / "point-north-lsd-s0" / "summary.json"

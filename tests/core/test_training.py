@@ -30,8 +30,17 @@ def test_smoke_run_writes_outputs_and_skills_spread(tmp_path):
     assert rec[0]["epoch"] == 0 and rec[-1]["epoch"] == 8
     assert rec[-1]["n_bins"] > rec[0]["n_bins"]  # evaluation coverage above epoch 0's
     assert summary["n_labels"] == 6 and summary["status"] == "finished"
-    for key in ("epoch", "env_steps", "safe_coverage", "safe_ratio", "composite_coverage",
-                "weighted_composite_coverage", "n_labels", "lambda", "wall_s"):
+    for key in (
+        "epoch",
+        "env_steps",
+        "safe_coverage",
+        "safe_ratio",
+        "composite_coverage",
+        "weighted_composite_coverage",
+        "n_labels",
+        "lambda",
+        "wall_s",
+    ):
         assert key in rec[-1] and key in summary
     assert summary["config"]["method"] == "collie"
     for name in ("skills_latest.png", "curves.png", "checkpoint.pt", "config.json"):
@@ -78,10 +87,16 @@ def test_nan_stops_the_run_naming_the_epoch_and_keeps_the_checkpoint(tmp_path):
     assert hashlib.sha256(ckpt.read_bytes()).hexdigest() == digest
 
 
-@pytest.mark.parametrize(("flag", "value", "names"), [
-    ("--env", "mars", "point"), ("--task", "south", "north"), ("--method", "ppo", "collie"),
-    ("--preset", "huge", "smoke"), ("--query-strategy", "random", "entropy"),
-])
+@pytest.mark.parametrize(
+    ("flag", "value", "names"),
+    [
+        ("--env", "mars", "point"),
+        ("--task", "south", "north"),
+        ("--method", "ppo", "collie"),
+        ("--preset", "huge", "smoke"),
+        ("--query-strategy", "random", "entropy"),
+    ],
+)
 def test_cli_bad_names_are_clear_errors(tmp_path, flag, value, names):
     cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(tmp_path), flag, value]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
@@ -90,8 +105,23 @@ def test_cli_bad_names_are_clear_errors(tmp_path, flag, value, names):
 
 
 def test_cli_runs_and_overrides(tmp_path):
-    cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(tmp_path),
-           "--epochs", "3", "--hidden", "16", "--no-progress", "--task", "range"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "train",
+        "--preset",
+        "smoke",
+        "--out",
+        str(tmp_path),
+        "--epochs",
+        "3",
+        "--hidden",
+        "16",
+        "--no-progress",
+        "--task",
+        "range",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     cfg = json.loads((tmp_path / "config.json").read_text())
@@ -102,8 +132,18 @@ def test_cli_runs_and_overrides(tmp_path):
 @pytest.mark.parametrize("env", ["ant", "half_cheetah"])
 def test_smoke_runs_on_locomotion_envs(tmp_path, env):
     task = "not_flip" if env == "half_cheetah" else "hole"
-    summary = smoke(tmp_path, env=env, task=task, epochs=2, episode_steps=20, episodes_per_epoch=2,
-                    eval_trajectories=4, segment_length=5, warmup=1, feedback_every=1).run()
+    summary = smoke(
+        tmp_path,
+        env=env,
+        task=task,
+        epochs=2,
+        episode_steps=20,
+        episodes_per_epoch=2,
+        eval_trajectories=4,
+        segment_length=5,
+        warmup=1,
+        feedback_every=1,
+    ).run()
     assert summary["status"] == "finished" and np.isfinite(summary["safe_coverage"])
 
 
@@ -112,8 +152,9 @@ def test_a_moved_run_folder_resumes_where_it_is_now(tmp_path):
     first = subprocess.run([*train, "--epochs", "2", "--out", str(tmp_path / "was")], capture_output=True, text=True)
     assert first.returncode == 0, first.stderr[-2000:]
     (tmp_path / "was").rename(tmp_path / "now")
-    again = subprocess.run([*train, "--epochs", "4", "--out", str(tmp_path / "now"), "--resume"],
-                           capture_output=True, text=True)
+    again = subprocess.run(
+        [*train, "--epochs", "4", "--out", str(tmp_path / "now"), "--resume"], capture_output=True, text=True
+    )
     assert again.returncode == 0, again.stderr[-2000:]
     summary = json.loads((tmp_path / "now" / "summary.json").read_text())
     assert summary["epoch"] == 4 and summary["config"]["out"] == str(tmp_path / "now")

@@ -24,16 +24,22 @@ OPERATOR = {"Authorization": f"Bearer {TOKENS['operator']}"}
 
 
 def get(live: BackgroundServer, path: str, headers: dict[str, str] | None = None, **params: Any) -> httpx.Response:
-    return httpx.get(f"{live.url}/api/{path}", headers=OPERATOR if headers is None else headers, params=params,
-                     timeout=30)
+    return httpx.get(
+        f"{live.url}/api/{path}", headers=OPERATOR if headers is None else headers, params=params, timeout=30
+    )
 
 
 def north_query(query_id: str, y: float) -> QueryIn:
     """A segment on the line x = 0.5 at height y: inside the north wedge (oracle: neutral) for y ≥ 0.5."""
     h = DIMS.horizon
     return QueryIn(
-        query_id=query_id, start=0, skill=[1.0, 0.0], obs=[[0.0] * DIMS.obs_dim] * h,
-        xy=[[0.5, y + 0.01 * i] for i in range(h)], pitch=None, qpos=[[0.0] * DIMS.nq] * h,
+        query_id=query_id,
+        start=0,
+        skill=[1.0, 0.0],
+        obs=[[0.0] * DIMS.obs_dim] * h,
+        xy=[[0.5, y + 0.01 * i] for i in range(h)],
+        pitch=None,
+        qpos=[[0.0] * DIMS.nq] * h,
         qvel=[[0.0] * DIMS.nv] * h,
     )
 
@@ -174,8 +180,12 @@ def test_runs_list_is_a_long_poll(live: BackgroundServer, trainer: CollieClient,
 
 def test_reading_needs_a_token_and_any_role_may_read(live: BackgroundServer, trainer: CollieClient) -> None:
     run = trainer.create_run(make_run_spec())
-    for path in ("dashboard/runs", f"dashboard/runs/{run.id}", f"dashboard/runs/{run.id}/metrics",
-                 f"dashboard/runs/{run.id}/labeling"):
+    for path in (
+        "dashboard/runs",
+        f"dashboard/runs/{run.id}",
+        f"dashboard/runs/{run.id}/metrics",
+        f"dashboard/runs/{run.id}/labeling",
+    ):
         assert get(live, path, headers={}).status_code == 401
         assert get(live, path, headers={"Authorization": "Bearer not-a-token"}).status_code == 401
         for role in ("operator", "trainer", "labeler"):

@@ -28,9 +28,29 @@ WAIT_MS = 120_000
 def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     out = tmp_path_factory.mktemp("up")
     info = out / "info.json"
-    command = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--teacher", "oracle",
-               "--preset", "smoke", "--port", "0", "--out", str(out), "--info-json", str(info), "--exit-when-done",
-               "--no-label-ui", "--train-args=--epochs 100000 --eval-every 2"]  # long enough to pause; evaluated often
+    command = [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "up",
+        "--env",
+        "point",
+        "--task",
+        "north",
+        "--teacher",
+        "oracle",
+        "--preset",
+        "smoke",
+        "--port",
+        "0",
+        "--out",
+        str(out),
+        "--info-json",
+        str(info),
+        "--exit-when-done",
+        "--no-label-ui",
+        "--train-args=--epochs 100000 --eval-every 2",
+    ]  # long enough to pause; evaluated often
     with open(out / "up.log", "wb") as log:
         proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
@@ -63,9 +83,7 @@ def number(page: Any, selector: str, attribute: str | None = None) -> int:
     return int(value or 0)
 
 
-def test_trajectories_appear_and_update_while_training(
-    stack: dict[str, Any], page: Any, artifacts: Path
-) -> None:
+def test_trajectories_appear_and_update_while_training(stack: dict[str, Any], page: Any, artifacts: Path) -> None:
     assert "token=" not in page.url  # the token leaves the address bar (history, screenshots)
     page.wait_for_function("document.querySelector('#map').dataset.trajectories === '8'")
     first = number(page, "#map", "epoch")

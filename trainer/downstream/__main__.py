@@ -45,13 +45,24 @@ def hierarchical(skills: TrainedSkills, ppo: PpoConfig, seed: int, episodes: int
     rng = np.random.default_rng(seed)
     random_choice = evaluate(env, lambda o: rng.integers(0, env.n_skills, size=len(o)), episodes, 10_000 + seed)
     env.close()
-    return {"mean": float(trained.mean()), "std": float(trained.std()), "episodes": episodes,
-            "random_skills_mean": float(random_choice.mean()), "train_curve": [round(c, 3) for c in curve],
-            "ppo": dataclasses.asdict(ppo), "epoch": skills.epoch}
+    return {
+        "mean": float(trained.mean()),
+        "std": float(trained.std()),
+        "episodes": episodes,
+        "random_skills_mean": float(random_choice.mean()),
+        "train_curve": [round(c, 3) for c in curve],
+        "ppo": dataclasses.asdict(ppo),
+        "epoch": skills.epoch,
+    }
 
 
-def run_downstream(run_dir: str | Path, kind: str = "auto", trajectories: int = 160, seed: int = 0,
-                   ppo_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+def run_downstream(
+    run_dir: str | Path,
+    kind: str = "auto",
+    trajectories: int = 160,
+    seed: int = 0,
+    ppo_overrides: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Evaluate one finished run; returns and stores {kind: results} in RUN_DIR/downstream.json."""
     run_dir = Path(run_dir)
     skills = load_skills(run_dir)
@@ -73,20 +84,29 @@ def run_downstream(run_dir: str | Path, kind: str = "auto", trajectories: int = 
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m trainer.downstream", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m trainer.downstream", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("run_dir")
     p.add_argument("--kind", default="auto", choices=KINDS)
     p.add_argument("--trajectories", type=int, default=160, help="zero-shot: skills sampled")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     for f in dataclasses.fields(PpoConfig):
-        p.add_argument("--ppo-" + f.name.replace("_", "-"), dest=f"ppo_{f.name}", default=None,
-                       type=type(f.default), help=f"PPO {f.name} (default: by the run's preset)")
+        p.add_argument(
+            "--ppo-" + f.name.replace("_", "-"),
+            dest=f"ppo_{f.name}",
+            default=None,
+            type=type(f.default),
+            help=f"PPO {f.name} (default: by the run's preset)",
+        )
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
-    overrides = {f.name: getattr(a, f"ppo_{f.name}") for f in dataclasses.fields(PpoConfig)
-                 if getattr(a, f"ppo_{f.name}") is not None}
+    overrides = {
+        f.name: getattr(a, f"ppo_{f.name}")
+        for f in dataclasses.fields(PpoConfig)
+        if getattr(a, f"ppo_{f.name}") is not None
+    }
     try:
         result = run_downstream(a.run_dir, a.kind, a.trajectories, a.seed, overrides)
     except (ValueError, FileNotFoundError) as exc:

@@ -64,8 +64,9 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, gamma: float, lam: float) -
     return advantages
 
 
-def train_ppo(env: GoalOptions, cfg: PpoConfig, seed: int = 0,
-              log: Callable[[int, float], None] | None = None) -> tuple[ActorCritic, list[float]]:
+def train_ppo(
+    env: GoalOptions, cfg: PpoConfig, seed: int = 0, log: Callable[[int, float], None] | None = None
+) -> tuple[ActorCritic, list[float]]:
     """Train the high-level controller; returns it and the mean episode return of every iteration."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)

@@ -28,8 +28,9 @@ def motion_returns(xy: np.ndarray, classes: np.ndarray, dt: float) -> np.ndarray
     return (SURVIVAL + speed - UNSAFE_PENALTY * unsafe).sum(axis=1)
 
 
-def zero_shot(skills: TrainedSkills, task: Task | None = None, trajectories: int = 160, seed: int = 0,
-              deterministic: bool = False) -> dict[str, Any]:
+def zero_shot(
+    skills: TrainedSkills, task: Task | None = None, trajectories: int = 160, seed: int = 0, deterministic: bool = False
+) -> dict[str, Any]:
     """Average, spread and best return of `trajectories` skills z ~ p(z) (stochastic π by default)."""
     cfg = skills.cfg
     task = task or get_task(cfg.task, cfg.env, layout_seed=cfg.seed)
@@ -45,6 +46,13 @@ def zero_shot(skills: TrainedSkills, task: Task | None = None, trajectories: int
     n, t1 = xy.shape[:2]
     classes = task.classify(xy.reshape(-1, 2), traj.pitch.astype(np.float64).reshape(-1)).reshape(n, t1)
     returns = motion_returns(xy, classes, dt)
-    return {"task": task.name, "trajectories": trajectories, "deterministic": deterministic, "seed": seed,
-            "mean": float(returns.mean()), "std": float(returns.std()), "best": float(returns.max()),
-            "epoch": skills.epoch}
+    return {
+        "task": task.name,
+        "trajectories": trajectories,
+        "deterministic": deterministic,
+        "seed": seed,
+        "mean": float(returns.mean()),
+        "std": float(returns.std()),
+        "best": float(returns.max()),
+        "epoch": skills.epoch,
+    }

@@ -28,23 +28,83 @@ class AntEnv(GymnasiumMujocoEnv):
     position_dims = 2
     asset = "ant.xml"
     # From `python -m trainer.envs.normalizer --env ant` (random-action rollouts; see normalizer.py).
-    obs_mean = np.array([
-        -0.1404, -0.08206, 0.5896, 0.4112, 0.03865, 0.01894, -0.002434, -0.006597, 0.8661,
-        -0.001544, -0.8692, 0.004333, -0.8692, -0.006979, 0.8689, -0.0193, -0.009483, -0.03135,
-        0.04939, 0.01927, -0.02575, -0.004064, 0.07394, 0.0006468, -0.06937, -0.0004222, -0.06846,
-        -0.00172, 0.06574,
-    ], dtype=np.float32)
-    obs_std = np.array([
-        1.598, 1.668, 0.2588, 0.4988, 0.4576, 0.4294, 0.4319, 0.4092, 0.2905, 0.4074, 0.2911, 0.411,
-        0.2916, 0.4115, 0.291, 0.7673, 0.7966, 0.8904, 1.717, 1.707, 1.85, 4.551, 4.161, 4.54, 4.16,
-        4.556, 4.128, 4.577, 4.13,
-    ], dtype=np.float32)
+    obs_mean = np.array(
+        [
+            -0.1404,
+            -0.08206,
+            0.5896,
+            0.4112,
+            0.03865,
+            0.01894,
+            -0.002434,
+            -0.006597,
+            0.8661,
+            -0.001544,
+            -0.8692,
+            0.004333,
+            -0.8692,
+            -0.006979,
+            0.8689,
+            -0.0193,
+            -0.009483,
+            -0.03135,
+            0.04939,
+            0.01927,
+            -0.02575,
+            -0.004064,
+            0.07394,
+            0.0006468,
+            -0.06937,
+            -0.0004222,
+            -0.06846,
+            -0.00172,
+            0.06574,
+        ],
+        dtype=np.float32,
+    )
+    obs_std = np.array(
+        [
+            1.598,
+            1.668,
+            0.2588,
+            0.4988,
+            0.4576,
+            0.4294,
+            0.4319,
+            0.4092,
+            0.2905,
+            0.4074,
+            0.2911,
+            0.411,
+            0.2916,
+            0.4115,
+            0.291,
+            0.7673,
+            0.7966,
+            0.8904,
+            1.717,
+            1.707,
+            1.85,
+            4.551,
+            4.161,
+            4.54,
+            4.16,
+            4.556,
+            4.128,
+            4.577,
+            4.13,
+        ],
+        dtype=np.float32,
+    )
 
     def __init__(self, episode_steps: int = 200, seed: int | None = None) -> None:
         from gymnasium.envs.mujoco.ant_v5 import AntEnv as GymAnt  # heavy import, only when used
 
-        gym_env = GymAnt(exclude_current_positions_from_observation=False,
-                         include_cfrc_ext_in_observation=False, terminate_when_unhealthy=False)
+        gym_env = GymAnt(
+            exclude_current_positions_from_observation=False,
+            include_cfrc_ext_in_observation=False,
+            terminate_when_unhealthy=False,
+        )
         super().__init__(gym_env, episode_steps, seed)
 
     def pitch(self) -> float:

@@ -36,8 +36,9 @@ class SkillEnv(abc.ABC):
             if isinstance(cls.__dict__.get(stats), np.ndarray):
                 cls.__dict__[stats].setflags(write=False)
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, frame_skip: int, episode_steps: int,
-                 seed: int | None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, data: mujoco.MjData, frame_skip: int, episode_steps: int, seed: int | None
+    ) -> None:
         if episode_steps < 1:
             raise ValueError(f"episode_steps must be >= 1, got {episode_steps}")
         self.model = model
@@ -111,8 +112,7 @@ class SkillEnv(abc.ABC):
         return out
 
     def info(self) -> dict[str, Any]:
-        return {"xy": self.xy(), "pitch": self.pitch(), "qpos": self.data.qpos.copy(),
-                "qvel": self.data.qvel.copy()}
+        return {"xy": self.xy(), "pitch": self.pitch(), "qpos": self.data.qpos.copy(), "qvel": self.data.qvel.copy()}
 
     # -- Gymnasium API -----------------------------------------------------------------------
 

@@ -34,9 +34,15 @@ OWN_STATE = 9
 def add_hazards(spec: mujoco.MjSpec, centres: np.ndarray) -> None:
     """Draw hazards as flat, non-colliding discs on the floor (for 3-D views; physics ignores them)."""
     for i, (x, y) in enumerate(centres):
-        spec.worldbody.add_geom(name=f"hazard{i}", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                                size=[HAZARD_RADIUS, 0.001, 0], pos=[x, y, 0.001], contype=0, conaffinity=0,
-                                material="hazard")
+        spec.worldbody.add_geom(
+            name=f"hazard{i}",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            size=[HAZARD_RADIUS, 0.001, 0],
+            pos=[x, y, 0.001],
+            contype=0,
+            conaffinity=0,
+            material="hazard",
+        )
 
 
 class CarEnv(SkillEnv):
@@ -56,8 +62,9 @@ class CarEnv(SkillEnv):
         self.layout_seed = layout_seed
         self.hazards = hazard_layout(layout_seed)
         model = self.load_model(layout_seed)
-        super().__init__(model, mujoco.MjData(model), frame_skip=self.frame_skip, episode_steps=episode_steps,
-                         seed=seed)
+        super().__init__(
+            model, mujoco.MjData(model), frame_skip=self.frame_skip, episode_steps=episode_steps, seed=seed
+        )
         self._rng = np.random.default_rng(seed)
 
     @classmethod
@@ -95,8 +102,7 @@ class CarEnv(SkillEnv):
     def observe_into(self, out: np.ndarray) -> None:
         qpos, qvel = self.data.qpos, self.data.qvel
         yaw = self.yaw()
-        out[:OWN_STATE] = (qpos[0], qpos[1], math.cos(yaw), math.sin(yaw), qvel[0], qvel[1], qvel[5], qvel[6],
-                           qvel[7])
+        out[:OWN_STATE] = (qpos[0], qpos[1], math.cos(yaw), math.sin(yaw), qvel[0], qvel[1], qvel[5], qvel[6], qvel[7])
         pseudo_lidar(qpos[:2], yaw, self.hazards, LIDAR_BINS, out=out[OWN_STATE:])
 
     def observe(self) -> np.ndarray:

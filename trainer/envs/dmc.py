@@ -67,8 +67,12 @@ class DmcPixelEnv(SkillEnv):
             spec = mujoco.MjSpec.from_string(xml, assets)
             add_floor_material(spec, "floor")
             behind, above = cls.camera_offset
-            spec.worldbody.add_camera(name=CAMERA, mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
-                                      pos=[0.0, -behind, above], xyaxes=[1, 0, 0, 0, above, behind])
+            spec.worldbody.add_camera(
+                name=CAMERA,
+                mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
+                pos=[0.0, -behind, above],
+                xyaxes=[1, 0, 0, 0, above, behind],
+            )
             with quiet_compile():
                 spec.compile()  # to_xml needs a compiled spec
             _XML_CACHE[cls.name] = spec.to_xml()
@@ -93,8 +97,13 @@ class DmcPixelEnv(SkillEnv):
         self._camera = shared_camera(self.name, model, CAMERA, self.image_size)
         self._frames = np.zeros((3 * self.frame_stack, self.image_size, self.image_size), np.uint8)
         self._task = self.dmc_task(seed)
-        super().__init__(model, self.physics.data.ptr, frame_skip=self.action_repeat * self.substeps,
-                         episode_steps=episode_steps, seed=seed)
+        super().__init__(
+            model,
+            self.physics.data.ptr,
+            frame_skip=self.action_repeat * self.substeps,
+            episode_steps=episode_steps,
+            seed=seed,
+        )
 
     def _reset_state(self, seed: int | None) -> None:
         if seed is not None:

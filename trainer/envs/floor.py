@@ -44,13 +44,19 @@ def paint_floor(model: mujoco.MjModel, half_extent: float = HALF_EXTENT) -> None
     if h != w or model.tex_nchannel[tex.id] != 3:
         raise ValueError(f"{TEXTURE} must be a square RGB texture, got {w}×{h}×{model.tex_nchannel[tex.id]}")
     start = int(tex.adr[0])
-    model.tex_data[start:start + h * w * 3] = floor_texture(h, half_extent).reshape(-1)
+    model.tex_data[start : start + h * w * 3] = floor_texture(h, half_extent).reshape(-1)
 
 
 def add_floor_material(spec: mujoco.MjSpec, floor_geom: str, half_extent: float = HALF_EXTENT) -> None:
     """Give `floor_geom` a placeholder texture spanning [−L, L]² once, to be painted after compiling."""
-    spec.add_texture(name=TEXTURE, type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_FLAT,
-                     width=TEXTURE_TEXELS, height=TEXTURE_TEXELS, rgb1=[0.5, 0.5, 0.5])
+    spec.add_texture(
+        name=TEXTURE,
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_FLAT,
+        width=TEXTURE_TEXELS,
+        height=TEXTURE_TEXELS,
+        rgb1=[0.5, 0.5, 0.5],
+    )
     material = spec.add_material(name=TEXTURE, texrepeat=[1, 1], texuniform=False)
     material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = TEXTURE
     floor = spec.geom(floor_geom)

@@ -10,8 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def pseudo_lidar(xy: np.ndarray, heading: float, objects: np.ndarray, bins: int = 16,
-                 out: np.ndarray | None = None) -> np.ndarray:
+def pseudo_lidar(
+    xy: np.ndarray, heading: float, objects: np.ndarray, bins: int = 16, out: np.ndarray | None = None
+) -> np.ndarray:
     """(bins,) readings seen from position `xy` (2,) facing `heading` (radians) for objects (m, 2)."""
     out = np.zeros(bins, np.float32) if out is None else out
     out[:] = 0.0

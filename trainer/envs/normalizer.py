@@ -24,8 +24,7 @@ from trainer.envs.registry import ENV_NAMES, make_env
 STD_FLOOR = 1e-3
 
 
-def random_rollout_stats(name: str, episodes: int = 100,
-                         episode_steps: int = 200) -> tuple[np.ndarray, np.ndarray]:
+def random_rollout_stats(name: str, episodes: int = 100, episode_steps: int = 200) -> tuple[np.ndarray, np.ndarray]:
     """(mean, std) of every observation seen in `episodes` random-action episodes."""
     env = make_env(name, episode_steps=episode_steps)
     rng = np.random.default_rng(0)
@@ -41,14 +40,14 @@ def random_rollout_stats(name: str, episodes: int = 100,
 
 def _literal(name: str, values: np.ndarray) -> str:
     """`name = np.array([...])` wrapped to fit the project's line length, ready to paste."""
-    body = textwrap.fill(", ".join(f"{v:.4g}" for v in values), width=96, initial_indent=" " * 4,
-                         subsequent_indent=" " * 4)
+    body = textwrap.fill(
+        ", ".join(f"{v:.4g}" for v in values), width=96, initial_indent=" " * 4, subsequent_indent=" " * 4
+    )
     return f"{name} = np.array([\n{body},\n], dtype=np.float32)"
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", required=True, choices=ENV_NAMES)
     parser.add_argument("--episodes", type=int, default=100)
     args = parser.parse_args()

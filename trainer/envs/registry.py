@@ -44,8 +44,7 @@ def _layout(cls: type[SkillEnv], layout_seed: int | None) -> dict[str, int]:
     return {"layout_seed": layout_seed} if cls.has_layout and layout_seed is not None else {}
 
 
-def make_env(name: str, seed: int | None = None, episode_steps: int = 200,
-             layout_seed: int | None = None) -> SkillEnv:
+def make_env(name: str, seed: int | None = None, episode_steps: int = 200, layout_seed: int | None = None) -> SkillEnv:
     """Build one env; `seed` seeds its first reset() (later resets may pass their own);
     `layout_seed` fixes random scenery for a whole experiment (envs with `has_layout`)."""
     cls = env_class(name)

@@ -28,19 +28,22 @@ class StepBatch:
     qvel: np.ndarray  # (n, nv) float64
 
     @classmethod
-    def empty(cls, n: int, obs_shape: int | tuple[int, ...], nq: int, nv: int,
-              obs_dtype: np.dtype | type = np.float32) -> StepBatch:
+    def empty(
+        cls, n: int, obs_shape: int | tuple[int, ...], nq: int, nv: int, obs_dtype: np.dtype | type = np.float32
+    ) -> StepBatch:
         shape = (obs_shape,) if isinstance(obs_shape, int) else tuple(obs_shape)
-        return cls(np.empty((n, *shape), obs_dtype), np.empty((n, 2)), np.empty(n), np.empty((n, nq)),
-                   np.empty((n, nv)))
+        return cls(
+            np.empty((n, *shape), obs_dtype), np.empty((n, 2)), np.empty(n), np.empty((n, nq)), np.empty((n, nv))
+        )
 
 
 class VectorEnv:
     def __init__(self, name: str, num_envs: int, episode_steps: int = 200, layout_seed: int | None = None) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        self.envs: list[SkillEnv] = [make_env(name, episode_steps=episode_steps, layout_seed=layout_seed)
-                                     for _ in range(num_envs)]
+        self.envs: list[SkillEnv] = [
+            make_env(name, episode_steps=episode_steps, layout_seed=layout_seed) for _ in range(num_envs)
+        ]
         first = self.envs[0]
         self.name = name
         self.num_envs = num_envs
