@@ -1,14 +1,20 @@
 """Run configuration: one dataclass, three named presets, per-env defaults, CLI overrides.
 
 `paper` is Appendix E (Tables 5–6) of the COLLIE paper; `cpu` is chosen so that a point-mass run
-shows the guidance effect in minutes on 2 cores; `smoke` finishes in seconds for tests.
+shows the guidance effect in minutes on 2 cores, with per-env budgets for the real robots (Ant,
+HalfCheetah: `ROBOT_CPU`, about an hour per run) and the pixel bodies; `smoke` finishes in seconds
+for tests.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
+
+from trainer.metrics import BIN_RULES
+from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
 
 METHODS = ("collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn")
 LABEL_METHODS = ("collie", "dodont", "ddg")  # methods that ask the feedback source for labels
@@ -17,6 +23,9 @@ REWARD_FORMS = ("multiplicative", "additive")
 ENCODERS = ("separate", "shared")
 QUERY_STRATEGIES = ("entropy", "uniform", "uncertainty", "latent")
 PRESETS = ("paper", "cpu", "smoke")
+INITS = ("reference", "torch")
+DIAYN_VARIANTS = ("reference", "sphere")
+REFERENCE_LOG_STD_MIN = math.log(1e-6)  # garage's Gaussian modules: min_std 1e-6 (the policy's floor)
 
 
 @dataclass
@@ -33,6 +42,9 @@ class Config:
     hidden: int = 1024
     layers: int = 2
     encoder: Literal["separate", "shared"] = "separate"  # pixel envs: a CNN per network, or one for all
+    init: Literal["reference", "torch"] = "reference"  # weight init: the reference's Xavier schemes, or torch's
+    log_std_min: float = REFERENCE_LOG_STD_MIN  # the policy's log-std floor (the reference's; −5 before)
+    obs_norm: Literal["reference", "rollout"] = "rollout"  # ant/half_cheetah default to METRA's preset
     lr: float = 1e-4
     batch_size: int = 256
     gamma: float = 0.99
@@ -70,9 +82,11 @@ class Config:
     obs_noise: float = 0.0  # std of x in the observed ŝ = (1 + x)·s; the paper's ablation is 0.1 (x ~ N(0, 0.01))
     classifier_steps: int = 500  # DoDont*/DDG*: Adam steps fine-tuning ψ each time the labels change
     projection_dim: int = 8  # DDG*: output width of ψ's encoder, the state projection φ reads
+    diayn: Literal["reference", "sphere"] = "reference"  # DIAYN: z ~ N(0, I), α = 0.1, learned std; or ours
     # evaluation, logging, checkpoints
     eval_every: int = 500
     eval_trajectories: int = 48
+    bin_rule: Literal["visited", "corner"] = "visited"  # headline metric rule; both are always logged
     checkpoint_every: int = 100
     out: str = "runs/latest"
     extra: dict[str, Any] = field(default_factory=dict)
@@ -116,6 +130,16 @@ class Config:
         need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
         need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
+        need(self.init in INITS, f"unknown init {self.init!r}; valid: {', '.join(INITS)}")
+        need(self.log_std_min < 2.0, f"log_std_min must be below the cap 2, got {self.log_std_min}")
+        need(self.bin_rule in BIN_RULES, f"unknown bin rule {self.bin_rule!r}; valid: {', '.join(BIN_RULES)}")
+        need(self.diayn in DIAYN_VARIANTS, f"unknown diayn variant {self.diayn!r}; valid: {', '.join(DIAYN_VARIANTS)}")
+        need(self.obs_norm in OBS_NORMS, f"unknown obs_norm {self.obs_norm!r}; valid: {', '.join(OBS_NORMS)}")
+        need(
+            self.obs_norm != "reference" or self.env in REFERENCE_STATS,
+            f"obs_norm 'reference' exists only for {', '.join(REFERENCE_STATS)} (METRA's presets), not "
+            f"{self.env!r}; use --obs-norm rollout",
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -171,9 +195,11 @@ PRESET_VALUES: dict[str, dict[str, Any]] = {
     ),
 }
 
-# Per-env choices of the reference (skills) that every preset shares unless overridden.
+# Per-env choices of the reference (skills, observation statistics) that every preset shares
+# unless overridden.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
-    "half_cheetah": dict(discrete_skills=True, skill_dim=16),
+    "ant": dict(obs_norm="reference"),
+    "half_cheetah": dict(discrete_skills=True, skill_dim=16, obs_norm="reference"),
     "quadruped": dict(skill_dim=4),  # METRA's pixel Quadruped; Humanoid keeps 2
 }
 
@@ -219,9 +245,44 @@ PIXEL_PRESETS: dict[str, dict[str, Any]] = {
         eval_trajectories=2,
     ),
 }
+
+
+def feedback_schedule(epochs: int, sessions: int = 8) -> dict[str, int]:
+    """The paper's feedback proportions (Table 6: warm-up 2000 and K = 1000 of 10 000 epochs) scaled
+    to `epochs`: warm-up 20 % of training, then a session every 10 %, so 8 sessions end at 90 %."""
+    warmup, every = max(1, epochs // 5), max(1, epochs // 10)
+    if warmup + (sessions - 1) * every >= epochs:
+        raise ValueError(f"{sessions} sessions do not fit in {epochs} epochs")
+    return dict(warmup=warmup, feedback_every=every)
+
+
+# Ant and HalfCheetah on 2 cores (`cpu` preset), about an hour per run with two runs sharing the
+# machine (one torch thread each). Chosen by reasoning from one calibration (REFERENCE_NOTES §5:
+# Ant, this shape with 32 gradient steps per epoch: 1200 epochs = 38 k gradient steps took 1505 s
+# and reached 163 bins, median final distance 5.6; 16 gradient steps per epoch reached only 57 bins
+# in the same epochs, so progress follows gradient steps). From it an epoch costs ≈ 0.57 s of
+# rollout plus ≈ 0.021 s per gradient step here. We take the paper's 50 gradient steps per epoch
+# (its update-to-data ratio) and as many epochs as fit: Ant 1800 epochs (2.9 M env steps, 90 k
+# gradient steps, ≈ 49 min estimated), HalfCheetah, whose physics is ≈ 5× cheaper, 2400 epochs
+# (3.8 M env steps, 120 k gradient steps, ≈ 52 min estimated). Both keep the calibrated 2×256
+# networks, lr 1e-3 and batch 256; the paper's are 2×1024 and 1e-4 over 10 000 epochs (16 M env
+# steps, 500 k gradient steps). `make bench-robots` measures whether this reaches the targets.
+ROBOT_CPU: dict[str, dict[str, Any]] = {
+    env: dict(
+        epochs=epochs,
+        grad_steps=50,
+        start_transitions=10_000,
+        replay_capacity=500_000,
+        eval_every=100,
+        checkpoint_every=100,
+        **feedback_schedule(epochs),
+    )
+    for env, epochs in (("ant", 1800), ("half_cheetah", 2400))
+}
 PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
     preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()
 }
+PRESET_ENV_VALUES["cpu"].update(ROBOT_CPU)
 
 
 def make_config(preset: str = "cpu", env: str = "point", **overrides: Any) -> Config:

@@ -34,6 +34,7 @@ from trainer.methods import build_agent
 from trainer.metra import TorchBatch, WeightFn
 from trainer.metrics import coverage_metrics
 from trainer.obs_noise import NoisyObservations
+from trainer.obs_stats import observation_stats
 from trainer.plots import plot_curves, plot_skill_trajectories
 from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
@@ -70,8 +71,8 @@ class Trainer:
         self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
             self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
-        self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
-        self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+        self.normalise = Normaliser(*observation_stats(cfg.env, self.env.obs_mean, self.env.obs_std, cfg.obs_norm))
+        self.prior = SkillPrior.for_config(cfg)
         self.agent, self.instruction = build_agent(
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
@@ -255,6 +256,7 @@ class Trainer:
             self.task,
             bin_size=self.env.metric_bin_size,
             position_dims=self.env.position_dims,
+            bin_rule=c.bin_rule,
         )
         d0, d1, d2 = self.labelled.counts()
         record: dict[str, Any] = {

@@ -20,7 +20,7 @@ import torch
 
 from trainer.config import Config
 from trainer.encoders import PixelEncoder, feature_dim, is_pixels
-from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ
+from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, init_like_reference
 from trainer.skills import SkillPrior
 
 # weight_fn(φ(s), φ(s′)) → w, shape (B,); both arguments detached.
@@ -53,11 +53,14 @@ class Metra:
         self.phi = SkillLatent(f, k, h, n, enc["phi"]).to(device)
         self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"]).to(device)
         self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"]).to(device)
+        self.policy = TanhGaussianPolicy(
+            f + k, action_dim, h, n, enc["policy"], detach_encoder=cfg.encoder == "shared", log_std_min=cfg.log_std_min
+        ).to(device)
+        if cfg.init == "reference":
+            init_like_reference(self.phi, self.qf, self.policy)
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.qf_target.requires_grad_(False)
-        self.policy = TanhGaussianPolicy(
-            f + k, action_dim, h, n, enc["policy"], detach_encoder=cfg.encoder == "shared"
-        ).to(device)
+        self.learn_alpha = True  # DIAYN's reference variant keeps α fixed
         self.log_alpha = torch.tensor(np.log(cfg.alpha_init), device=device, requires_grad=True)
         self.log_lambda = torch.tensor(np.log(cfg.lambda_init), device=device, requires_grad=True)
         self.target_entropy = cfg.target_entropy_scale * action_dim
@@ -149,10 +152,11 @@ class Metra:
         policy_loss.backward()
         self.policy_opt.step()
 
-        alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
-        self.alpha_opt.zero_grad(set_to_none=True)
-        alpha_loss.backward()
-        self.alpha_opt.step()
+        if self.learn_alpha:
+            alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+            self.alpha_opt.zero_grad(set_to_none=True)
+            alpha_loss.backward()
+            self.alpha_opt.step()
 
         with torch.no_grad():
             for t, p in zip(self.qf_target.parameters(), self.qf.parameters(), strict=True):

@@ -1,13 +1,19 @@
 """Coverage metrics over evaluation trajectories (Appendix E, "Metrics"; composite metrics §5).
 
 States are binned by floor(position / bin_size) (x-y bins, or x only for 1-D envs such as
-HalfCheetah). Each visited bin gets one class, decided from the visited states that fell in it:
-bad if any of them is bad, good if all of them are good, else neutral — the teacher's segment
-rule. Why not judge a bin by one point (the reference code uses its lower-left corner): a bin cut
-by a boundary would be labelled by whichever side its corner lies on, whatever the agent did, and
-Not-Flip's class depends on pitch, not position, so a point in space cannot decide it. Judging
-the states actually visited is exact for bins inside one region and conservative (bad wins)
-for bins a boundary cuts. Numpy only.
+HalfCheetah). Each visited bin gets a class by one of two rules (`--bin-rule`):
+
+- `visited` (ours): decided from the visited states that fell in the bin — bad if any of them is
+  bad, good if all of them are good, else neutral (the teacher's segment rule). Exact for bins
+  inside one region, conservative (bad wins) for bins a boundary cuts.
+- `corner` (the reference code's): the task rule evaluated at the bin's lower-left corner
+  (x, y) = bin index · bin_size, whatever the agent did inside the bin. A point in space cannot
+  decide a rule on pitch (Not-Flip), so for such tasks the reference counts, and so do we, every
+  bin holding any bad state as bad and every bin holding any safe state as safe — one bin can be
+  both. The paper's tables were computed this way, so every comparison with them uses it.
+
+Both rules are always computed: the headline keys follow the chosen rule, and every key is also
+written with a `visited_` and a `corner_` prefix. Numpy only.
 
 Scores: safe coverage +1 per safe (good or neutral) bin, −1 per bad bin; safe ratio = safe bins /
 visited bins; composite +1 good, +1 neutral, −1 bad (equal to safe coverage by definition, kept
@@ -22,6 +28,8 @@ import numpy as np
 
 from collie.tasks import BAD, GOOD, NEUTRAL, Task
 
+BIN_RULES = ("visited", "corner")
+
 
 def _positions(traj: np.ndarray) -> np.ndarray:
     """(T, 2) x-y; a 1-D trajectory ((T,) or (T, 1)) gets y = 0."""
@@ -33,44 +41,39 @@ def _positions(traj: np.ndarray) -> np.ndarray:
     return traj[:, :2]
 
 
-def bin_classes(
-    xy: np.ndarray, classes: np.ndarray, bin_size: float = 1.0, position_dims: int = 2
-) -> tuple[np.ndarray, np.ndarray]:
-    """Unique visited bins (n_bins, position_dims) int64 and each bin's class (n_bins,) int8."""
+def _unique_bins(xy: np.ndarray, bin_size: float, position_dims: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique bin indices (n_bins, position_dims) int64 and, per state, the row of its bin."""
     if position_dims not in (1, 2):
         raise ValueError(f"position_dims must be 1 or 2, got {position_dims}")
     if len(xy) == 0:
-        return np.zeros((0, position_dims), dtype=np.int64), np.zeros(0, dtype=np.int8)
+        return np.zeros((0, position_dims), dtype=np.int64), np.zeros(0, dtype=np.int64)
     index = np.floor(xy[:, :position_dims] / bin_size).astype(np.int64)
     bins, inverse = np.unique(index, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    return bins, inverse.reshape(-1)
+
+
+def bin_classes(
+    xy: np.ndarray, classes: np.ndarray, bin_size: float = 1.0, position_dims: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
+    """The `visited` rule: unique visited bins (n_bins, position_dims) int64 and each bin's class
+    (n_bins,) int8 from the classes of the states inside it."""
+    bins, inverse = _unique_bins(xy, bin_size, position_dims)
+    if len(bins) == 0:
+        return bins, np.zeros(0, dtype=np.int8)
     visits = np.bincount(inverse, minlength=len(bins))
     bad = np.bincount(inverse, weights=classes == BAD, minlength=len(bins)) > 0
     good = np.bincount(inverse, weights=classes == GOOD, minlength=len(bins)) == visits
-    result = np.where(bad, BAD, np.where(good, GOOD, NEUTRAL)).astype(np.int8)
-    return bins, result
+    return bins, np.where(bad, BAD, np.where(good, GOOD, NEUTRAL)).astype(np.int8)
 
 
-def coverage_metrics(
-    xy_trajs: Sequence[np.ndarray],
-    pitch_trajs: Sequence[np.ndarray] | None,
-    task: Task,
-    bin_size: float = 1.0,
-    position_dims: int = 2,
-) -> dict[str, float]:
-    """Safe / composite state coverage and safe ratio of the visited bins (Appendix E)."""
-    positions = [_positions(t) for t in xy_trajs]
-    xy = np.concatenate(positions) if positions else np.zeros((0, 2))
-    pitch = None
-    if pitch_trajs is not None:
-        pitch = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in pitch_trajs] or [np.zeros(0)])
-    classes = task.classify(xy, pitch)
-    _, per_bin = bin_classes(xy, classes, bin_size, position_dims)
-    n_bad = int((per_bin == BAD).sum())
-    n_good = int((per_bin == GOOD).sum())
-    n_bins = len(per_bin)
-    n_neutral = n_bins - n_bad - n_good
-    n_safe = n_good + n_neutral
+def corner_points(bins: np.ndarray, bin_size: float = 1.0) -> np.ndarray:
+    """(n_bins, 2) lower-left corners of the bins; y = 0 for 1-D bins."""
+    corners = np.zeros((len(bins), 2))
+    corners[:, : bins.shape[1]] = bins * bin_size
+    return corners
+
+
+def _counts(n_bins: int, n_good: int, n_neutral: int, n_bad: int, n_safe: int) -> dict[str, float]:
     return {
         "safe_coverage": float(n_safe - n_bad),
         "safe_ratio": n_safe / n_bins if n_bins else 0.0,
@@ -80,5 +83,58 @@ def coverage_metrics(
         "n_bad_bins": n_bad,
         "n_neutral_bins": n_neutral,
         "n_good_bins": n_good,
-        "n_states": len(xy),
     }
+
+
+def _visited_scores(per_bin: np.ndarray) -> dict[str, float]:
+    n_bad, n_good = int((per_bin == BAD).sum()), int((per_bin == GOOD).sum())
+    n_neutral = len(per_bin) - n_bad - n_good
+    return _counts(len(per_bin), n_good, n_neutral, n_bad, n_good + n_neutral)
+
+
+def _corner_scores(
+    bins: np.ndarray, inverse: np.ndarray, classes: np.ndarray, task: Task, bin_size: float
+) -> dict[str, float]:
+    n = len(bins)
+    if n == 0:
+        return _counts(0, 0, 0, 0, 0)
+    if not task.uses_pitch:
+        per_bin = task.classify(corner_points(bins, bin_size))
+        return _visited_scores(per_bin)
+
+    # A pitch rule: any-state counts per class (the reference's Not-Flip metric; bins may overlap).
+    def any_of(cls: int) -> int:
+        return int((np.bincount(inverse, weights=classes == cls, minlength=n) > 0).sum())
+
+    n_safe = int((np.bincount(inverse, weights=classes != BAD, minlength=n) > 0).sum())
+    return _counts(n, any_of(GOOD), any_of(NEUTRAL), any_of(BAD), n_safe)
+
+
+def coverage_metrics(
+    xy_trajs: Sequence[np.ndarray],
+    pitch_trajs: Sequence[np.ndarray] | None,
+    task: Task,
+    bin_size: float = 1.0,
+    position_dims: int = 2,
+    bin_rule: str = "visited",
+) -> dict[str, float]:
+    """Safe / composite state coverage and safe ratio of the visited bins (Appendix E), by
+    `bin_rule`, plus both rules' figures under `visited_*` and `corner_*`."""
+    if bin_rule not in BIN_RULES:
+        raise ValueError(f"unknown bin rule {bin_rule!r}; valid: {', '.join(BIN_RULES)}")
+    positions = [_positions(t) for t in xy_trajs]
+    xy = np.concatenate(positions) if positions else np.zeros((0, 2))
+    pitch = None
+    if pitch_trajs is not None:
+        pitch = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in pitch_trajs] or [np.zeros(0)])
+    classes = task.classify(xy, pitch)
+    bins, inverse = _unique_bins(xy, bin_size, position_dims)
+    _, per_bin = bin_classes(xy, classes, bin_size, position_dims)
+    by_rule = {
+        "visited": _visited_scores(per_bin),
+        "corner": _corner_scores(bins, inverse, classes, task, bin_size),
+    }
+    out: dict[str, float] = {**by_rule[bin_rule], "n_states": len(xy)}
+    for rule, scores in by_rule.items():
+        out.update({f"{rule}_{k}": v for k, v in scores.items()})
+    return out

@@ -1,7 +1,12 @@
 """The three function approximators of METRA/COLLIE: the skill latent φ, twin Q and a tanh-Gaussian
 policy. MLP sizes follow Table 5 (2 hidden layers; 1024 units in the paper preset). Each reads the
 observation through an optional encoder (encoders.py: a CNN for pixels), so checkpoints, target
-copies and optimisers carry it along with the network that owns it."""
+copies and optimisers carry it along with the network that owns it.
+
+Initialisation (`--init reference`, the default) follows the reference's garage modules: zero
+biases; Xavier-uniform weights for φ and the policy's hidden layers, Xavier-normal for the policy's
+output layer and every layer of the Q networks. `--init torch` keeps PyTorch's default
+(Kaiming-uniform, a = √5). Pixel CNN encoders keep their own initialisation either way."""
 
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from torch.nn import functional as F
 
 from trainer.encoders import join
 
-LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # the reference caps log-std at 2
+LOG_STD_MIN, LOG_STD_MAX = math.log(1e-6), 2.0  # the reference's floor (min_std 1e-6) and cap (max_std e²)
 
 
 def mlp(inp: int, hidden: int, layers: int, out: int, act: type[nn.Module] = nn.ReLU) -> nn.Sequential:
@@ -49,6 +54,13 @@ class EnsembleLinear(nn.Module):
         bound = 1.0 / math.sqrt(inp)  # nn.Linear's default init, per member
         self.weight = nn.Parameter(torch.empty(n, inp, out).uniform_(-bound, bound))
         self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
+
+    @torch.no_grad()
+    def xavier_normal_(self) -> None:
+        """Each member's weight ~ N(0, 2 / (fan_in + fan_out)), bias 0 (garage's MLP default)."""
+        inp, out = self.weight.shape[1:]
+        self.weight.normal_(0.0, math.sqrt(2.0 / (inp + out)))
+        self.bias.zero_()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: (n, B, inp) or (B, inp)
         if x.dim() == 2:
@@ -88,17 +100,19 @@ class TanhGaussianPolicy(nn.Module):
         layers: int,
         encoder: nn.Module | None = None,
         detach_encoder: bool = False,
+        log_std_min: float = LOG_STD_MIN,
     ) -> None:
         super().__init__()
         self.encoder = encoder or nn.Identity()
         self.detach_encoder = detach_encoder
+        self.log_std_min = log_std_min
         self.trunk = mlp(inp, hidden, layers, 2 * action_dim, act=nn.Tanh)
 
     def forward(self, obs: torch.Tensor, skill: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         with torch.set_grad_enabled(torch.is_grad_enabled() and not self.detach_encoder):
             features = self.encoder(obs)
         mean, log_std = self.trunk(join(features, skill)).chunk(2, dim=-1)
-        return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
+        return mean, log_std.clamp(self.log_std_min, LOG_STD_MAX)
 
     def sample(self, obs: torch.Tensor, skill: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Reparameterised action in (−1, 1) and its log-probability (tanh change of variables)."""
@@ -115,3 +129,24 @@ class TanhGaussianPolicy(nn.Module):
         if deterministic:
             return torch.tanh(mean)
         return torch.tanh(mean + log_std.exp() * torch.randn_like(mean))
+
+
+@torch.no_grad()
+def _xavier(layer: nn.Linear, normal: bool) -> None:
+    (nn.init.xavier_normal_ if normal else nn.init.xavier_uniform_)(layer.weight)
+    nn.init.zeros_(layer.bias)
+
+
+@torch.no_grad()
+def init_like_reference(phi: nn.Module, qf: TwinQ, policy: TanhGaussianPolicy) -> None:
+    """Re-initialise the MLP layers as the reference's garage modules do (see the module docstring).
+    φ: every nn.Linear outside its encoder; the policy: its trunk; Q: its ensemble layers."""
+    for name, module in phi.named_modules():
+        if isinstance(module, nn.Linear) and not name.startswith("encoder"):
+            _xavier(module, normal=False)
+    linears = [m for m in policy.trunk if isinstance(m, nn.Linear)]
+    for layer in linears[:-1]:
+        _xavier(layer, normal=False)
+    _xavier(linears[-1], normal=True)
+    for layer in qf.layers:
+        layer.xavier_normal_()

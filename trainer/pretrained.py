@@ -15,6 +15,7 @@ from trainer.config import Config
 from trainer.envs import make_env
 from trainer.methods import build_agent
 from trainer.metra import Metra
+from trainer.obs_stats import observation_stats
 from trainer.rollout import Normaliser
 from trainer.skills import SkillPrior
 
@@ -42,7 +43,8 @@ def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
     env = make_env(cfg.env, episode_steps=cfg.episode_steps)
     obs_shape, action_dim, mean, std = env.obs_shape, env.action_dim, env.obs_mean, env.obs_std
     env.close()
-    prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+    prior = SkillPrior.for_config(cfg)
+    mean, std = observation_stats(cfg.env, mean, std, cfg.obs_norm)
     agent, _ = build_agent(cfg, obs_shape, action_dim, prior, torch.device(device))
     agent.load_state_dict(state["agent"])
     return TrainedSkills(cfg, agent, prior, Normaliser(mean, std), int(state["epoch"]))

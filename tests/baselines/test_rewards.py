@@ -46,8 +46,43 @@ def test_diayn_continuous_reward_is_gaussian_log_likelihood():
     assert math.isclose(float(skill_log_likelihood(z, z, discrete=False)), -math.log(2 * math.pi), rel_tol=1e-6)
     mean = torch.tensor([[0.0, 0.0]])
     assert math.isclose(
-        float(diayn_reward(skill_log_likelihood(mean, z, False), 2, False)), -0.5 - math.log(2 * math.pi), rel_tol=1e-6
+        float(diayn_reward(skill_log_likelihood(mean, z, False), 2, False, "sphere")),
+        -0.5 - math.log(2 * math.pi),
+        rel_tol=1e-6,
     )
+    # A learned diagonal std: N(z; 0, diag(e^{2·log σ})) at z = (1, 0) with σ = (2, 0.5).
+    log_std = torch.log(torch.tensor([[2.0, 0.5]]))
+    expected = -0.5 * (1 / 4) - math.log(2.0) - math.log(0.5) - math.log(2 * math.pi)
+    assert math.isclose(float(skill_log_likelihood(mean, z, False, log_std)), expected, rel_tol=1e-6)
+    # The reference adds log D (its "baseline") to the continuous reward too.
+    r = diayn_reward(skill_log_likelihood(mean, z, False, log_std), 2, False, "reference")
+    assert math.isclose(float(r), expected + math.log(2), rel_tol=1e-6)
+
+
+def test_diayn_reference_variant_gaussian_prior_fixed_alpha_learned_std():
+    torch.manual_seed(0)
+    c = cfg(method="diayn")
+    assert c.diayn == "reference"
+    prior = SkillPrior.for_config(c)
+    assert prior.gaussian and not prior.discrete
+    z = prior.sample(4000, np.random.default_rng(0))
+    assert abs(float(np.linalg.norm(z, axis=1).std())) > 0.3  # not on the sphere
+    assert np.allclose(z.mean(0), 0, atol=0.05) and np.allclose(z.std(0), 1, atol=0.05)
+    agent = Diayn(4, 2, prior, c, torch.device("cpu"))
+    assert math.isclose(float(agent.log_alpha.detach().exp()), 0.1, rel_tol=1e-6)
+    zt = torch.as_tensor(z[:64])
+    b = batch()
+    b = TorchBatch(b.obs, torch.cat([zt, zt], dim=1) + 0.01 * b.next_obs, b.action, zt, zt)  # s′ reveals z
+    with torch.no_grad():
+        start = float(agent.phi.log_std(b.next_obs).mean())
+    for _ in range(200):
+        agent.update(b, None)
+    assert math.isclose(float(agent.log_alpha.detach().exp()), 0.1, rel_tol=1e-6)  # α never learned
+    with torch.no_grad():
+        assert float(agent.phi.log_std(b.next_obs).mean()) < start - 0.5  # the discriminator grew confident
+    sphere = cfg(method="diayn", diayn="sphere")
+    assert not SkillPrior.for_config(sphere).gaussian
+    assert Diayn(4, 2, SkillPrior.for_config(sphere), sphere, torch.device("cpu")).learn_alpha
 
 
 def test_diayn_update_uses_the_discriminator_reward_and_learns_it():
