@@ -134,3 +134,54 @@ def test_curves_plot(tmp_path: pathlib.Path) -> None:
     records.append({"epoch": 100, "loss": 1.0})  # keys may be missing from some records
     out = plots.plot_curves(records, ["safe_ratio", "safe_coverage", "loss"], tmp_path / "curves.png")
     assert_real_png(out)
+
+
+# ---- the two bin rules (`--bin-rule`) ------------------------------------------------------------
+
+
+def test_corner_rule_judges_a_bin_at_its_lower_left_corner() -> None:
+    north = get_task("north")
+    # Bin (3,3): corner (3,3) lies on y = |x| (safe), but a visited state (3.9, 3.1) is outside.
+    # Bin (-1,0): corner (-1,0) is outside the wedge (bad), yet the state visited there is inside.
+    # Bin (0,5): inside either way.
+    trajs = [arr([(3.2, 3.5), (3.9, 3.1)]), arr([(-0.2, 0.5)]), arr([(0.5, 5.5)])]
+    m = coverage_metrics(trajs, None, north, bin_rule="corner")
+    assert (m["corner_n_bins"], m["corner_n_bad_bins"], m["corner_n_neutral_bins"]) == (3, 1, 2)
+    assert (m["visited_n_bins"], m["visited_n_bad_bins"], m["visited_n_neutral_bins"]) == (3, 1, 2)
+    # Same counts, different bins: the corner calls (-1,0) bad and (3,3) safe, visiting the reverse.
+    only_33 = coverage_metrics([trajs[0]], None, north)
+    assert (only_33["corner_n_bad_bins"], only_33["visited_n_bad_bins"]) == (0, 1)
+    only_m10 = coverage_metrics([trajs[1]], None, north)
+    assert (only_m10["corner_n_bad_bins"], only_m10["visited_n_bad_bins"]) == (1, 0)
+    # The headline keys follow the chosen rule; the default is `visited`.
+    assert m["safe_coverage"] == m["corner_safe_coverage"] == 2 - 1
+    assert coverage_metrics([trajs[0]], None, north)["safe_coverage"] == only_33["visited_safe_coverage"] == -1
+    assert coverage_metrics([trajs[0]], None, north, bin_rule="corner")["safe_ratio"] == 1.0
+    with pytest.raises(ValueError, match="bin rule"):
+        coverage_metrics(trajs, None, north, bin_rule="centre")
+
+
+def test_corner_rule_good_class_and_one_dimensional_bins() -> None:
+    # Range-North: the corners (0,10) and (-1,10) lie in the wedge and the disc -> good; the corner
+    # (20,0) is 20.6 from the disc's centre (0,5) -> bad.
+    m = coverage_metrics(
+        [arr([(0.5, 10.5), (-0.5, 10.2), (20.5, 0.5)])], None, get_task("range_north"), bin_rule="corner"
+    )
+    assert (m["n_good_bins"], m["n_neutral_bins"], m["n_bad_bins"]) == (2, 0, 1)
+    assert m["weighted_composite_coverage"] == 2 * 2 - 1
+    # HalfCheetah Right: the bin [-1, 0) has corner −1 (bad) under both rules; the corner of [0, 1) is 0.
+    x = np.array([-0.5, 0.5, 1.2, -1.5])
+    c = coverage_metrics([x], None, get_task("right", "half_cheetah"), position_dims=1, bin_rule="corner")
+    assert (c["n_bins"], c["n_bad_bins"], c["n_neutral_bins"]) == (4, 2, 2)
+
+
+def test_corner_rule_on_a_pitch_task_counts_any_state_per_class() -> None:
+    task = get_task("not_flip", "half_cheetah")
+    x = np.array([0.2, 0.7, 1.5, 1.6])
+    pitch = np.array([0.0, 2.0, 3.0, 3.0])  # bin 0: upright and flipped; bin 1: flipped only
+    m = coverage_metrics([x], [pitch], task, position_dims=1)
+    # visited: bin 0 bad (any bad), bin 1 bad.  corner (the reference's Not-Flip metric): bin 0 is
+    # both safe and bad, bin 1 bad — a bin may count on both sides.
+    assert (m["visited_n_bins"], m["visited_n_bad_bins"], m["visited_safe_ratio"]) == (2, 2, 0.0)
+    assert (m["corner_n_bins"], m["corner_n_bad_bins"], m["corner_n_neutral_bins"]) == (2, 2, 1)
+    assert m["corner_safe_coverage"] == 1 - 2 and m["corner_safe_ratio"] == 0.5

@@ -36,12 +36,20 @@ def guidance_weight(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tens
 
 
 def smoothing_beta(epoch: int, first_feedback_epoch: int | None, span: float, k_beta: float) -> float:
-    """β_e of the smoothing w_e = (1 − β_e)·w + β_e (Section 4.5).
+    """β_e of the smoothing w_e = (1 − β_e)·w + β_e (Section 4.5), as the reference code schedules it.
 
-    The paper writes β_e = max(0, 1 − k_β·e/T^e). We count e from the first feedback epoch and take
-    T^e as the feedback span (sessions × K), as the reference code does: with the paper's schedule
-    (warm-up 2000, K 1000, 8 sessions, 10 000 epochs) the two coincide, and guidance never starts
-    before there is a label to guide with. k_β = ∞ → pure GSD, k_β = 0 → pure USD.
+    Ours (the reference's): β_e = 1 until the first feedback epoch e₀, then
+        β_e = max(0, 1 − k_β·(e − e₀)/span),   span = sessions × K,
+    so guidance fades in over span/k_β epochs after the first labels (paper schedule: 8 × 1000 / 5
+    = 1600 epochs, epochs 2000 → 3600). The reference lowers its rate by k_β/(2·span·G) at each of
+    the two reward computations of each of the G gradient steps per epoch (the same slope, but
+    within the epoch); we hold β constant over an epoch.
+    The paper prints β_e = max(0, 1 − k_β·e/T^e), e counted from the start of training and T^e the
+    total epochs. That is *not* the same: with its own numbers (k_β = 5, T^e = 10 000, warm-up
+    2000) β reaches 0 at e = 2000, the epoch of the first labels, so guidance would start at full
+    strength and the smoothing would only act before any label exists, where w ≡ 1 anyway; on a
+    shorter schedule with a proportionally later warm-up it is the same. k_β = ∞ → pure GSD,
+    k_β = 0 → pure USD (as both write).
     """
     if first_feedback_epoch is None or epoch < first_feedback_epoch:
         return 1.0
