@@ -11,6 +11,11 @@ CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out. ± is the
 sample standard deviation over seeds (as the paper's tables); a single seed shows its value alone.
+
+Coverage cells use the reference's corner bin rule (the `corner_*` figures every run logs), as the
+paper's tables do, and where the paper published a cell (`trainer/paper_results.py`: Ant,
+HalfCheetah, Quadruped, Humanoid) its number stands in a "(paper)" column beside ours. A run that
+predates the corner figures shows its headline (visited-rule) value, marked †.
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from trainer.paper_results import paper_cell
+
 METRICS: tuple[tuple[str, str, int], ...] = (
     ("safe_coverage", "Safe state coverage (Table 1)", 2),
     ("safe_ratio", "Safe state ratio (Table 2)", 3),
@@ -33,6 +40,8 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("weighted_composite_coverage", "Weighted composite safe coverage (+2 good, +1 neutral, −1 bad)", 2),
     ("wall_s", "Wall time per run (s)", 0),
 )
+CORNER_METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage")
+VISITED_MARK = "†"  # a cell with a run that logged no corner-rule figures
 METHOD_ORDER = ("oracle", "diayn", "lsd", "metra", "ddg", "dodont", "collie")
 DISPLAY = {
     "oracle": "Oracle",
@@ -125,11 +134,29 @@ def _group(runs: list[RunResult]) -> dict[tuple[str, str], list[RunResult]]:
     return groups
 
 
+def metric_value(r: RunResult, metric: str) -> float:
+    """The run's final `metric`: by the corner bin rule for coverage metrics (as the paper)."""
+    if metric in CORNER_METRICS and f"corner_{metric}" in r.metrics:
+        return r.metrics[f"corner_{metric}"]
+    return r.metrics.get(metric, math.nan)
+
+
 def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
-    """Methods × tasks, each cell mean ± std of the run's final `metric` over seeds."""
+    """Methods × tasks, each cell mean ± std of the run's final `metric` over seeds, with the paper's
+    published cell in a "(paper)" column beside every task it reports."""
     rows, columns = _rows_and_columns(runs)
-    cells = {k: format_cell([r.metrics.get(metric, math.nan) for r in g], digits) for k, g in _group(runs).items()}
-    return _table(rows, columns, cells)
+    cells: dict[tuple[str, str], str] = {}
+    paper_columns: set[str] = set()
+    for (label, col), g in _group(runs).items():
+        cell = format_cell([metric_value(r, metric) for r in g], digits)
+        visited = metric in CORNER_METRICS and any(f"corner_{metric}" not in r.metrics for r in g)
+        cells[(label, col)] = cell + (VISITED_MARK if visited and cell != "–" else "")
+        paper = paper_cell(metric, g[0].env, g[0].task, g[0].method) if not g[0].variant else None
+        if paper is not None:
+            cells[(label, f"{col} (paper)")] = f"{paper[0]:.{digits}f} ± {paper[1]:.{digits}f}"
+            paper_columns.add(col)
+    shown = [c for col in columns for c in ((col, f"{col} (paper)") if col in paper_columns else (col,))]
+    return _table(rows, shown, cells)
 
 
 def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
@@ -163,7 +190,7 @@ def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
     rows = []
     for (_, _), g in sorted(_group(runs).items(), key=lambda kv: (kv[1][0].column, kv[1][0].order())):
         r0 = g[0]
-        values: dict[str, list[float]] = {m: [r.metrics.get(m, math.nan) for r in g] for m, _, _ in METRICS}
+        values: dict[str, list[float]] = {m: [metric_value(r, m) for r in g] for m, _, _ in METRICS}
         for kind, key in (("zero_shot", "mean"), ("zero_shot", "best"), ("hierarchical", "mean")):
             if all(kind in r.downstream for r in g):
                 values[f"{kind}_{key}"] = [r.downstream[kind][key] for r in g]
@@ -197,7 +224,9 @@ def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path
     seeds = sorted({len(g) for g in _group(runs).values()})
     parts = [
         f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
-        "Cells: mean ± sample std over seeds of each run's final evaluation."
+        "Cells: mean ± sample std over seeds of each run's final evaluation; coverage by the reference's "
+        f"corner bin rule (as the paper; {VISITED_MARK}: a run without corner figures, shown by the visited rule). "
+        '"(paper)" columns: the paper\'s published Tables 1–2 at its own budget.'
     ]
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
@@ -236,7 +265,8 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
                 "method": r.method,
                 "variant": r.variant,
                 "seed": r.seed,
-                **{m: r.metrics.get(m) for m, _, _ in METRICS},
+                **{m: metric_value(r, m) for m, _, _ in METRICS},
+                **{f"visited_{m}": r.metrics.get(f"visited_{m}") for m in CORNER_METRICS},
             }
             for r in runs
         ],

@@ -8,24 +8,26 @@ import numpy as np
 from trainer.report import format_cell, write_report
 
 
-def fake_run(root, env, task, method, seed, cov, status="finished", variant="", downstream=None):
+def fake_run(
+    root, env, task, method, seed, cov, status="finished", variant="", downstream=None, corner_cov=None, corner=True
+):
+    """A finished run folder. Its corner-rule figures equal the headline ones unless `corner_cov` is
+    given; `corner=False` writes none (a run from before the corner rule)."""
     name = f"{env}-{task}-{method}{'+' + variant if variant else ''}-s{seed}"
     d = root / name
     d.mkdir(parents=True)
     cfg = {"env": env, "task": task, "method": method, "seed": seed}
-    (d / "summary.json").write_text(
-        json.dumps(
-            {
-                "status": status,
-                "safe_coverage": cov,
-                "safe_ratio": 0.5 + seed / 10,
-                "composite_coverage": cov,
-                "weighted_composite_coverage": cov + 1,
-                "wall_s": 10.0,
-                "config": cfg,
-            }
-        )
-    )
+    scores = {
+        "safe_coverage": cov,
+        "safe_ratio": 0.5 + seed / 10,
+        "composite_coverage": cov,
+        "weighted_composite_coverage": cov + 1,
+    }
+    corners = {f"{rule}_{k}": v for k, v in scores.items() for rule in ("visited", "corner")} if corner else {}
+    if corner and corner_cov is not None:
+        corners["corner_safe_coverage"] = corner_cov
+    summary = {"status": status, **scores, **corners, "wall_s": 10.0, "config": cfg}
+    (d / "summary.json").write_text(json.dumps(summary))
     if variant:
         (d / "sweep_run.json").write_text(json.dumps({"variant": variant}))
     if downstream:
@@ -87,3 +89,22 @@ def test_collie_report_cli(tmp_path, capsys):
     assert "| Oracle | 9.00 |" in capsys.readouterr().out
     assert (tmp_path / "report" / "report.md").exists()
     assert report.run(argparse.Namespace(roots=[str(tmp_path / "nope")], out=None, no_figures=True)) == 2
+
+
+def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
+    runs = tmp_path / "runs"
+    fake_run(runs, "ant", "north", "collie", 0, 900.0, corner_cov=950.0)
+    fake_run(runs, "ant", "north", "collie", 1, 1000.0, corner_cov=1050.0)
+    fake_run(runs, "ant", "north", "metra", 0, -10.0, corner=False)  # predates the corner figures
+    fake_run(runs, "point", "north", "collie", 0, 7.0)
+    md = write_report([runs], tmp_path / "report", figures=False)["markdown"].read_text()
+    table = md.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    lines = table.strip().splitlines()
+    assert lines[0] == "| method | ant north | ant north (paper) | point north |"
+    assert "| METRA | -10.00† | -1425.80 ± 756.14 | – |" in table  # visited value, marked
+    assert "| COLLIE | 1000.00 ± 70.71 | 1333.20 ± 129.10 | 7.00 |" in table  # corner: 950, 1050
+    ratio = md.split("## Safe state ratio (Table 2)")[1].split("##")[0]
+    assert "0.969 ± 0.025" in ratio  # the paper's 96.9 % ± 2.5
+    runs_csv = list(csv.DictReader((tmp_path / "report" / "runs.csv").read_text().splitlines()))
+    row = next(r for r in runs_csv if r["method"] == "collie" and r["env"] == "ant" and r["seed"] == "0")
+    assert float(row["safe_coverage"]) == 950.0 and float(row["visited_safe_coverage"]) == 900.0
