@@ -40,19 +40,21 @@ DISCRIMINATOR_MIN_STD = 1e-6  # garage's Gaussian modules' default min_std
 class GaussianDiscriminator(SkillLatent):
     """q(z | s) = N(μ(s), diag σ(s)²): forward() is μ (what φ-readers use), `log_std()` a second MLP."""
 
-    def __init__(self, obs_dim: int, skill_dim: int, hidden: int, layers: int, xavier: bool) -> None:
-        super().__init__(obs_dim, skill_dim, hidden, layers)
+    def __init__(
+        self, obs_dim: int, skill_dim: int, hidden: int, layers: int, xavier: bool, encoder: nn.Module | None = None
+    ) -> None:
+        super().__init__(obs_dim, skill_dim, hidden, layers, encoder)
         self.log_std_net = mlp(obs_dim, hidden, layers, skill_dim)
         if xavier:
             for module in (*self.net, *self.log_std_net):
-                if isinstance(module, nn.Linear):
+                if isinstance(module, nn.Linear):  # the MLP heads; a pixel encoder keeps its own init
                     nn.init.xavier_uniform_(module.weight)
                     nn.init.zeros_(module.bias)
         else:
             nn.init.zeros_(self.log_std_net[-1].bias)  # σ = 1 at the start either way
 
     def log_std(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.log_std_net(obs).clamp(min=math.log(DISCRIMINATOR_MIN_STD))
+        return self.log_std_net(self.encoder(obs)).clamp(min=math.log(DISCRIMINATOR_MIN_STD))
 
 
 def skill_log_likelihood(
@@ -79,11 +81,10 @@ class Diayn(Metra):
     ) -> None:
         super().__init__(obs_shape, action_dim, prior, cfg, device)
         self.reference = cfg.diayn == "reference"
-        if self.reference:
-            if is_pixels(obs_shape):
-                raise ValueError("DIAYN's reference discriminator is an MLP here: use --diayn sphere for pixels")
+        if self.reference:  # φ's encoder (a CNN for pixels) feeds both heads
+            encoder = self.phi.encoder if is_pixels(obs_shape) else None
             self.phi = GaussianDiscriminator(
-                feature_dim(obs_shape), prior.dim, cfg.hidden, cfg.layers, xavier=cfg.init == "reference"
+                feature_dim(obs_shape), prior.dim, cfg.hidden, cfg.layers, cfg.init == "reference", encoder
             ).to(device)
             self.phi_opt = torch.optim.Adam(self.phi.parameters(), lr=cfg.lr)
             with torch.no_grad():
