@@ -264,7 +264,7 @@ def feedback_schedule(epochs: int, sessions: int = 8) -> dict[str, int]:
 # rollout plus ≈ 0.021 s per gradient step here. We take the paper's 50 gradient steps per epoch
 # (its update-to-data ratio) and as many epochs as fit: Ant 1800 epochs (2.9 M env steps, 90 k
 # gradient steps, ≈ 49 min estimated), HalfCheetah, whose physics is ≈ 5× cheaper, 2400 epochs
-# (3.8 M env steps, 120 k gradient steps, ≈ 52 min estimated). Both keep the calibrated 2×256
+# (3.8 M env steps, 120 k gradient steps, ≈ 50 min estimated). Both keep the calibrated 2×256
 # networks, lr 1e-3 and batch 256; the paper's are 2×1024 and 1e-4 over 10 000 epochs (16 M env
 # steps, 500 k gradient steps). `make bench-robots` measures whether this reaches the targets.
 ROBOT_CPU: dict[str, dict[str, Any]] = {
