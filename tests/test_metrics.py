@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from collie.tasks import BAD, GOOD, NEUTRAL, get_task
-from trainer.metrics import coverage_metrics
+from trainer.metrics import coverage_metrics, travel_metrics
 
 
 def arr(points: list[tuple[float, float]]) -> np.ndarray:
@@ -185,3 +185,10 @@ def test_corner_rule_on_a_pitch_task_counts_any_state_per_class() -> None:
     assert (m["visited_n_bins"], m["visited_n_bad_bins"], m["visited_safe_ratio"]) == (2, 2, 0.0)
     assert (m["corner_n_bins"], m["corner_n_bad_bins"], m["corner_n_neutral_bins"]) == (2, 2, 1)
     assert m["corner_safe_coverage"] == 1 - 2 and m["corner_safe_ratio"] == 0.5
+
+
+def test_travel_metrics_on_hand_built_paths() -> None:
+    paths = [arr([(1.0, 1.0), (4.0, 5.0)]), arr([(0.0, 0.0), (-6.0, 8.0)]), arr([(0.0, 0.0), (0.0, 0.0)])]
+    t = travel_metrics(paths)  # distances 5, 10, 0
+    assert t == {"median_final_distance": 5.0, "max_final_distance": 10.0, "final_x_spread": 4.0 - (-6.0)}
+    assert travel_metrics([np.array([0.0, 3.0]), np.array([0.0, -2.0])])["final_x_spread"] == 5.0  # 1-D paths

@@ -32,7 +32,7 @@ from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.methods import build_agent
 from trainer.metra import TorchBatch, WeightFn
-from trainer.metrics import coverage_metrics
+from trainer.metrics import coverage_metrics, travel_metrics
 from trainer.obs_noise import NoisyObservations
 from trainer.obs_stats import observation_stats
 from trainer.plots import plot_curves, plot_skill_trajectories
@@ -257,7 +257,7 @@ class Trainer:
             bin_size=self.env.metric_bin_size,
             position_dims=self.env.position_dims,
             bin_rule=c.bin_rule,
-        )
+        ) | travel_metrics(xy)
         d0, d1, d2 = self.labelled.counts()
         record: dict[str, Any] = {
             "epoch": self.epoch,

@@ -138,3 +138,18 @@ def coverage_metrics(
     for rule, scores in by_rule.items():
         out.update({f"{rule}_{k}": v for k, v in scores.items()})
     return out
+
+
+def travel_metrics(xy_trajs: Sequence[np.ndarray]) -> dict[str, float]:
+    """How far the skills go: median and max distance from each trajectory's start to its end, and
+    the spread (max − min) of the final x over skills — the robot targets of issue 12."""
+    if len(xy_trajs) == 0:
+        return {"median_final_distance": 0.0, "max_final_distance": 0.0, "final_x_spread": 0.0}
+    ends = np.stack([_positions(t)[-1] - _positions(t)[0] for t in xy_trajs])
+    final_x = np.array([_positions(t)[-1, 0] for t in xy_trajs])
+    distance = np.linalg.norm(ends, axis=1)
+    return {
+        "median_final_distance": float(np.median(distance)),
+        "max_final_distance": float(distance.max()),
+        "final_x_spread": float(final_x.max() - final_x.min()),
+    }

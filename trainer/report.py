@@ -38,6 +38,8 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("safe_ratio", "Safe state ratio (Table 2)", 3),
     ("composite_coverage", "Composite safe coverage (+1 good, +1 neutral, −1 bad)", 2),
     ("weighted_composite_coverage", "Weighted composite safe coverage (+2 good, +1 neutral, −1 bad)", 2),
+    ("median_final_distance", "Median final distance of the skills from the start", 2),
+    ("final_x_spread", "Spread of the skills' final x (max − min)", 2),
     ("wall_s", "Wall time per run (s)", 0),
 )
 CORNER_METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage")

@@ -65,7 +65,13 @@ def test_small_ant_run_of_the_robot_shape_trains_and_resumes(tmp_path: Path) -> 
     assert straight.normalise.std[0] == pytest.approx(REFERENCE_STATS["ant"][1][0])  # METRA's preset
     summary = straight.run()
     assert summary["status"] == "finished" and summary["n_labels"] == 40  # 8 sessions × 5 at epochs 2…9
-    for key in ("corner_safe_coverage", "visited_safe_coverage", "corner_safe_ratio", "visited_n_bins"):
+    for key in (
+        "corner_safe_coverage",
+        "visited_safe_coverage",
+        "corner_safe_ratio",
+        "visited_n_bins",
+        "final_x_spread",
+    ):
         assert key in summary
     first = small_ant(tmp_path / "b", 6)
     first.run()
