@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trainer.config import make_config
+from trainer.config import Config, make_config
 from trainer.envs import make_env
 from trainer.envs.normalizer import STD_FLOOR, random_rollout_stats
 from trainer.obs_stats import REFERENCE_STATS, observation_stats
@@ -84,3 +84,12 @@ def test_which_statistics_a_run_gets() -> None:
     assert m is REFERENCE_STATS["half_cheetah"][0] and s is REFERENCE_STATS["half_cheetah"][1]
     m, s = observation_stats("half_cheetah", env.obs_mean, env.obs_std, "rollout")
     assert m is env.obs_mean and s is env.obs_std
+
+
+def test_a_saved_run_from_before_these_options_keeps_what_it_ran_with() -> None:
+    saved = make_config("cpu", "ant").to_dict()
+    assert Config.from_stored(saved) == make_config("cpu", "ant")
+    for key in ("init", "log_std_min", "diayn", "obs_norm", "bin_rule"):
+        saved.pop(key)
+    old = Config.from_stored({**saved, "a_key_from_the_future": 1})
+    assert (old.obs_norm, old.init, old.log_std_min, old.diayn) == ("rollout", "torch", -5.0, "sphere")

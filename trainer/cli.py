@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
                 stored = json.loads(saved.read_text())
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-                cfg = Config(**stored)
+                cfg = Config.from_stored(stored)
         from trainer.loop import Trainer
 
         feedback = http_feedback(args, cfg) if args.api else None

@@ -144,10 +144,22 @@ class Config:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    @classmethod
+    def from_stored(cls, stored: dict[str, Any]) -> Config:
+        """A run's saved config.json: keys this version does not know are dropped, and options the
+        run predates take the value it ran with (`FIRST_VERSION`), not today's default."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{**FIRST_VERSION, **{k: v for k, v in stored.items() if k in known}})
+
     @property
     def n_sessions(self) -> int:
         return -(-self.total_queries // self.queries_per_session)
 
+
+# What runs saved before these options existed ran with (they wrote no such key).
+FIRST_VERSION: dict[str, Any] = dict(
+    init="torch", log_std_min=-5.0, diayn="sphere", obs_norm="rollout", bin_rule="visited"
+)
 
 PRESET_VALUES: dict[str, dict[str, Any]] = {
     "paper": {},  # the dataclass defaults are the paper's values

@@ -3,7 +3,6 @@ its learner (π, φ, Q) from `checkpoint.pt`, the skill prior and the observatio
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,10 +29,9 @@ class TrainedSkills:
 
 
 def run_config(run_dir: str | Path) -> Config:
-    """The run's own config.json (keys this version does not know are ignored)."""
-    stored = json.loads((Path(run_dir) / "config.json").read_text())
-    known = {f.name for f in dataclasses.fields(Config)}
-    return Config(**{k: v for k, v in stored.items() if k in known})
+    """The run's own config.json (keys this version does not know are ignored, options the run
+    predates take the value it ran with)."""
+    return Config.from_stored(json.loads((Path(run_dir) / "config.json").read_text()))
 
 
 def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
