@@ -22,10 +22,12 @@ def upgrade() -> None:
     with op.batch_alter_table("runs", schema=None) as batch_op:
         batch_op.add_column(sa.Column("redundancy", sa.Integer(), server_default="1", nullable=False))
         batch_op.add_column(sa.Column("gold_rate", sa.Float(), server_default="0", nullable=False))
-    with op.batch_alter_table("queries", schema=None) as batch_op:
-        batch_op.add_column(sa.Column("gold_of", sa.Integer(), nullable=True))
-        batch_op.add_column(sa.Column("gold_answer", sa.Integer(), nullable=True))
-        batch_op.create_foreign_key("fk_queries_gold_of", "queries", ["gold_of"], ["id"])
+    if op.get_bind().dialect.name == "sqlite":
+        # ADD COLUMN … REFERENCES in place: a batch copy of `queries` would trip the foreign keys onto it
+        op.execute("ALTER TABLE queries ADD COLUMN gold_of INTEGER REFERENCES queries (id)")
+    else:
+        op.add_column("queries", sa.Column("gold_of", sa.Integer(), sa.ForeignKey("queries.id"), nullable=True))
+    op.add_column("queries", sa.Column("gold_answer", sa.Integer(), nullable=True))
     op.create_table(
         "label_votes",
         sa.Column("query_pk", sa.Integer(), nullable=False),
@@ -46,10 +48,8 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     op.drop_table("label_votes")
-    with op.batch_alter_table("queries", schema=None) as batch_op:
-        batch_op.drop_constraint("fk_queries_gold_of", type_="foreignkey")
-        batch_op.drop_column("gold_answer")
-        batch_op.drop_column("gold_of")
+    op.drop_column("queries", "gold_answer")
+    op.drop_column("queries", "gold_of")  # SQLite ≥ 3.35 drops a column in place
     with op.batch_alter_table("runs", schema=None) as batch_op:
         batch_op.drop_column("gold_rate")
         batch_op.drop_column("redundancy")
