@@ -178,7 +178,8 @@ def test_gold_segments_are_served_scored_and_kept_from_the_trainer(
         timeout=30,
     ).json()
     stats = {s["name"]: s for s in view["labeling"]["labelers"]}
-    assert (stats["gold-b"]["gold_answered"], stats["gold-b"]["gold_accuracy"], stats["gold-b"]["labels"]) == (2, 0.5, 1)
+    gold_b = stats["gold-b"]
+    assert (gold_b["gold_answered"], gold_b["gold_accuracy"], gold_b["labels"]) == (2, 0.5, 1)
     assert (stats["gold-a"]["gold_answered"], stats["gold-a"]["labels"]) == (0, 3)
     assert view["labeling"]["gold_rate"] == 0.5
 
