@@ -242,3 +242,23 @@ def test_a_0002_database_keeps_its_labels_as_votes(tmp_path: Path) -> None:
         assert conn.execute(text("SELECT * FROM label_votes")).all() == [(1, 1, 2, 1)]
         assert conn.execute(text("SELECT redundancy, gold_rate FROM runs")).one() == (1, 0.0)
     db.dispose()
+
+
+def test_label_counts_leave_out_undone_labels(
+    live: BackgroundServer, trainer: CollieClient, new_labeler: Labelers
+) -> None:
+    run = trainer.create_run(make_run_spec())
+    trainer.post_session(run.id, make_session(0, 3))
+    me = new_labeler("count-undo")
+    for value in (2, 0, 1):
+        claim = me.claim(run.id)
+        me.submit(run.id, claim.query.query_id, value)
+    me.undo(run.id, "0-2")  # withdrawn: it comes back to me under a lease, unlabelled
+    me.submit(run.id, "0-0", 1)  # a revision
+    stats = httpx.get(
+        f"{live.url}/api/dashboard/runs/{run.id}/labeling",
+        headers={"Authorization": f"Bearer {TOKENS['operator']}"},
+        timeout=30,
+    ).json()["labeling"]
+    [mine] = stats["labelers"]
+    assert (mine["labels"], stats["n_labels"], len(me.label_events(run.id))) == (2, 2, 5)
