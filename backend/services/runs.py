@@ -61,13 +61,17 @@ def _counts(conn: Connection, run_ids: list[int] | None) -> dict[int, QueueCount
     """Queue sizes per run; a leased query whose lease ran out counts as pending. Gold copies are
     no query of the run's (services/gold.py)."""
     expired = (Query.status == "leased") & (Query.lease_expires_at < time.time())
-    stmt = select(
-        Query.run_id,
-        func.sum(case(((Query.status == "pending") | expired, 1), else_=0)),
-        func.sum(case(((Query.status == "leased") & ~expired, 1), else_=0)),
-        func.sum(case((Query.status == "labelled", 1), else_=0)),
-        func.sum(case((Query.status == "retired", 1), else_=0)),
-    ).where(Query.gold_of.is_(None)).group_by(Query.run_id)
+    stmt = (
+        select(
+            Query.run_id,
+            func.sum(case(((Query.status == "pending") | expired, 1), else_=0)),
+            func.sum(case(((Query.status == "leased") & ~expired, 1), else_=0)),
+            func.sum(case((Query.status == "labelled", 1), else_=0)),
+            func.sum(case((Query.status == "retired", 1), else_=0)),
+        )
+        .where(Query.gold_of.is_(None))
+        .group_by(Query.run_id)
+    )
     if run_ids is not None:
         stmt = stmt.where(Query.run_id.in_(run_ids))
     return {
