@@ -262,3 +262,18 @@ def test_label_counts_leave_out_undone_labels(
     ).json()["labeling"]
     [mine] = stats["labelers"]
     assert (mine["labels"], stats["n_labels"], len(me.label_events(run.id))) == (2, 2, 5)
+
+
+def test_a_skipped_gold_segment_is_not_served_again(trainer: CollieClient, new_labeler: Labelers) -> None:
+    run = trainer.create_run(make_run_spec(task="north").model_copy(update={"gold_rate": 0.5}))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    first = new_labeler("gold-skip-a")
+    assert first.claim(run.id).query.query_id == "0-0"  # the first session: nothing earlier, no gold
+    first.submit(run.id, "0-0", 1)
+    trainer.post_session(run.id, north_session(1, [1.0]))
+    me = new_labeler("gold-skip-b")
+    gold = me.claim(run.id)
+    assert gold.query.query_id != "1-0" and gold.query.xy == trainer.query(run.id, "0-0").xy
+    assert me.skip(run.id, gold.query.query_id).query_status == "retired"
+    assert me.claim(run.id).query.query_id == "1-0"  # 0-0 was served to me once: no gold left to serve
+    assert trainer.run(run.id).queue.model_dump() == {"pending": 0, "leased": 1, "labelled": 1, "retired": 0}

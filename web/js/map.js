@@ -3,7 +3,7 @@
 // are drawn in x-y; 1-D ones (HalfCheetah: y is always 0) as x over time.
 
 import { plot } from "./plotly.js";
-import { CLASS_COLOURS, FILL, regionShapes, undrawn } from "./regions.js";
+import { CLASS_COLOURS, FILL, regionPath, regionShapes, undrawn } from "./regions.js";
 
 const LABEL_NAMES = ["bad", "neutral", "good"];
 const LABEL_SYMBOLS = ["x", "circle", "diamond"];
@@ -112,7 +112,9 @@ export class SkillMap {
         {}, "lines"), line: { color: byW ? "#888" : skillColour([1, 0], 0, 1), width: 2 } });
     }
     if (this.task && !this.oneD) {
-      const classes = new Set([this.task.background, ...this.task.regions.map((r) => r.desirability)]);
+      const box = { x0: -1, x1: 1, y0: -1, y1: 1 }; // only whether a region is drawn at all matters here
+      const drawn = this.task.regions.filter((r) => regionPath(r, box, false) != null);
+      const classes = new Set([this.task.background, ...drawn.map((r) => r.desirability)]);
       for (const c of [0, 1, 2]) {
         if (classes.has(c)) entries.push(entry(`${LABEL_NAMES[c]} region`, { symbol: "square", size: 12, color: FILL[c], line: { width: 1, color: "#999" } }));
       }
