@@ -41,6 +41,8 @@ class Run(Base):
     n_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     epochs_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     feedback_timeout_s: Mapped[float | None] = mapped_column(Float, nullable=True)  # None: wait for every label
+    redundancy: Mapped[int] = mapped_column(Integer, default=1, server_default="1")  # labels per query (r)
+    gold_rate: Mapped[float] = mapped_column(Float, default=0.0, server_default="0")  # share of a labeler's queue
     last_event_id: Mapped[int] = mapped_column(Integer)
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)
@@ -65,6 +67,10 @@ class Query(Base):
     label: Mapped[int | None] = mapped_column(Integer, nullable=True)
     label_event_id: Mapped[int | None] = mapped_column(Integer, nullable=True)
     created_at: Mapped[float] = mapped_column(Float)
+    # A gold copy (services/gold.py): the query it re-serves and the task rule's answer. Gold rows
+    # are one labeler's, never claimable by others, never on the trainer's stream or pages.
+    gold_of: Mapped[int | None] = mapped_column(ForeignKey("queries.id"), nullable=True)
+    gold_answer: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
     __table_args__ = (
         UniqueConstraint("run_id", "query_id", name="uq_queries_run_query"),
@@ -102,6 +108,18 @@ class LabelEvent(Base):
         Index("ix_label_events_query", "query_pk", "id"),
         Index("ix_label_events_run", "run_id", "id"),
     )
+
+
+class LabelVote(Base):
+    """Each labeler's current label of a query (a cache of the label events, like Query.label): one
+    row per (query, labeler), replaced by a revision, deleted by an undo. The effective label is the
+    consensus of these once a run's redundancy is reached (services/consensus.py)."""
+
+    __tablename__ = "label_votes"
+    query_pk: Mapped[int] = mapped_column(ForeignKey("queries.id"), primary_key=True)
+    labeler_id: Mapped[int] = mapped_column(ForeignKey("principals.id"), primary_key=True)
+    value: Mapped[int] = mapped_column(Integer)
+    event_id: Mapped[int] = mapped_column(ForeignKey("label_events.id"))
 
 
 class StreamEvent(Base):

@@ -10,6 +10,8 @@ Measures, in one run:
   4× (target 30 fps), and the server's work per update against the 33 ms a 30 fps frame allows
   (what holds on a busy machine); the browser's own frame rate is printed too, but on a machine
   without a GPU it measures software WebGL, not the UI;
+- the same with redundancy 2 and three labelers labelling at once (one tab each, their keys
+  pressed together; target median ≤ 200 ms);
 - UI overhead per label: the median wait above, as a share of the ≈ 3.6 s per label the
   literature reports: a labeler exceeds 1000 labels / h when their own time per label stays
   under 3.6 s minus this wait.
@@ -108,6 +110,31 @@ def label_latency(stack: Stack, browser: object, n: int, think_s: float) -> tupl
     return in_page, server
 
 
+def redundant_latency(stack: Stack, browser: object, n: int, think_s: float, tabs: int = 3) -> list[float]:
+    """Redundancy 2, `tabs` labelers at once (one tab each, keys pressed together): every tab's
+    in-page key → next segment ms over n rounds."""
+    run = stack.post_run("ant", 2 * n + 2 * tabs, seed=13)  # 2 labels a query: enough for tabs × n labels
+    stack.operator.set_quality(run.id, redundancy=2)
+    app = stack.ui(run.id, min_dwell_s=0.05)
+    pages: list[Page] = [
+        open_labeler(browser, app.labeler_url(stack.new_labeler(f"redundant-{i}")))  # type: ignore[arg-type]
+        for i in range(tabs)
+    ]
+    current = [wait_segment(page, timeout_s=60) for page in pages]
+    for page in pages:
+        page.evaluate(TIMING_JS)
+    for i in range(n):
+        time.sleep(think_s)
+        for page in pages:  # the labelers press at about the same moment: their claims meet at the service
+            page.keyboard.press("123"[i % 3])
+        current = [wait_segment(page, shown, timeout_s=30) for page, shown in zip(pages, current, strict=True)]
+    time.sleep(0.2)
+    latencies = [float(x) for page in pages for x in page.evaluate("window.__lat")]
+    for page in pages:
+        page.context.close()
+    return latencies
+
+
 def replay_rates(stack: Stack, browser: object, seconds: float) -> dict[str, float]:
     run = stack.post_run("ant", 1, seed=12)
     app = stack.ui(run.id)
@@ -142,6 +169,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack, chromium() as browser:
         builds = scene_builds(stack, browser, list(ENV_NAMES))
         in_page, server = label_latency(stack, browser, args.labels, args.think_s)
+        redundant = redundant_latency(stack, browser, args.labels, args.think_s)
         rates = replay_rates(stack, browser, args.fps_s)
         renderer = browser.version
 
@@ -155,6 +183,8 @@ def main() -> int:
     row("in page, median", pct(in_page, 50), "ms", "≤ 300 ms", pct(in_page, 50) / 300)
     row("in page, p95", pct(in_page, 95), "ms", "≤ 300 ms", pct(in_page, 95) / 300)
     row("server share (key → frame flushed), median", pct(server, 50), "ms", "(info)")
+    row("redundancy 2, three labelers at once, median", pct(redundant, 50), "ms", "≤ 200 ms", pct(redundant, 50) / 200)
+    row("redundancy 2, three labelers at once, p95", pct(redundant, 95), "ms", "(info)")
     print("replay rate for ant (pose updates per second):")
     for name, rate in rates.items():
         if "work" in name:

@@ -34,6 +34,7 @@ from collie.schemas import (
     Me,
     MetricsIn,
     MetricsRead,
+    QualitySettings,
     QueryRead,
     QuerySummary,
     Released,
@@ -174,6 +175,12 @@ class CollieClient:
         """The trainer continues after timeout_s seconds of a session with what arrived (None: waits
         for every label); applies to the session it is waiting on now."""
         return self._post(RunRead, f"/runs/{run_id}/feedback-policy", FeedbackPolicy(timeout_s=timeout_s))
+
+    def set_quality(self, run_id: int, redundancy: int = 1, gold_rate: float = 0.0) -> RunRead:
+        """Labeler quality control (operator): labels from distinct labelers per query, and the
+        share of each labeler's segments that are gold."""
+        body = QualitySettings(redundancy=redundancy, gold_rate=gold_rate)
+        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/quality", body).content)
 
     # ---------------------------------------------------------------- queries
 

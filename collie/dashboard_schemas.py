@@ -15,6 +15,7 @@ DEFAULT_HISTORY_POINTS = 1000
 MAX_LABELLED_SEGMENTS = 400  # newest labelled segments drawn on the map
 MAX_LABELLED_POINTS = 4000  # their states, thinned evenly within each segment to fit
 LABEL_RATE_WINDOW_S = 300.0  # labels per minute are counted over the last five minutes
+MAX_DISAGREEMENTS = 100  # newest queries where labelers or the oracle disagree, listed with their paths
 
 
 class Read(Wire):
@@ -70,10 +71,25 @@ class LabelledSegment(Read):
 
 class LabelerStats(Read):
     name: str
-    labels: int = Field(description="label submissions (revisions included; skips and undos not)")
+    labels: int = Field(description="queries they hold a label on now (a revision replaces, an undo withdraws)")
     skips: int
     median_s: float | None = Field(description="median seconds per label, of those that reported it")
     agreement: float | None = Field(description="share of their labels the task rule agrees with")
+    alpha: float | None = Field(default=None, description="Krippendorff's α of their labels against the others'")
+    shared: int = Field(default=0, description="queries they labelled that another labeler labelled too")
+    gold_answered: int = Field(default=0, description="gold segments they labelled")
+    gold_accuracy: float | None = Field(default=None, description="share of gold segments they labelled right")
+
+
+class Disagreement(Read):
+    """A query whose labelers disagree, or whose label the oracle disagrees with."""
+
+    query_id: str
+    session: int
+    labels: dict[str, LabelValue] = Field(description="labeler → their current label")
+    effective: LabelValue | None = Field(description="null until the run's redundancy is reached")
+    oracle: LabelValue | None
+    xy: list[list[float]]
 
 
 class LabelingStats(Read):
@@ -85,6 +101,12 @@ class LabelingStats(Read):
     labelers: list[LabelerStats]
     agreement: float | None = Field(description="effective labels the oracle agrees with (share)")
     judged: int = Field(description="effective labels the oracle could judge")
+    redundancy: int = Field(default=1, description="labels from distinct labelers before a query counts")
+    gold_rate: float = Field(default=0.0, description="share of each labeler's segments that are gold")
+    alpha: float | None = Field(default=None, description="Krippendorff's α (nominal) between labelers")
+    alpha_queries: int = Field(default=0, description="queries with two labels or more (α's units)")
+    n_disagreements: int = 0
+    disagreements: list[Disagreement] = Field(default_factory=list, max_length=MAX_DISAGREEMENTS)
 
 
 class LabelingView(Read):

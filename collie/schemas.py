@@ -40,6 +40,11 @@ Matrix = list[list[FiniteFloat]]
 MAX_FEEDBACK_TIMEOUT_S = 7 * 86_400
 # how long the trainer waits for a session's labels before it continues with what arrived
 FeedbackTimeout = Annotated[float, Field(gt=0, le=MAX_FEEDBACK_TIMEOUT_S, allow_inf_nan=False)]
+MAX_REDUNDANCY = 10
+# labels from distinct labelers each query needs before it counts (the effective label: docs/service.md)
+Redundancy = Annotated[int, Field(ge=1, le=MAX_REDUNDANCY)]
+# share of a labeler's segments that are gold (segments whose answer the task rule knows); 0: none
+GoldRate = Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)]
 
 MAX_CONFIG_BYTES = 64 * 1024
 MAX_EXTRA_BYTES = 16 * 1024
@@ -99,6 +104,8 @@ class RunCreate(Wire):
     feedback_timeout_s: FeedbackTimeout | None = Field(
         default=None, description="seconds the trainer waits for a session's labels; null: every label"
     )
+    redundancy: Redundancy = Field(default=1, description="labels from distinct labelers per query")
+    gold_rate: GoldRate = Field(default=0.0, description="share of each labeler's segments that are gold")
 
     @field_validator("config")
     @classmethod
@@ -132,6 +139,16 @@ class RunRead(Wire):
     created_at: datetime
     updated_at: datetime
     feedback_timeout_s: float | None = Field(default=None, description="null: the trainer waits for every label")
+    redundancy: int = Field(default=1, description="labels from distinct labelers before a query counts")
+    gold_rate: float = Field(default=0.0, description="share of each labeler's segments that are gold")
+
+
+class QualitySettings(Wire):
+    """An operator's labeler quality control for a run. Redundancy applies to labels submitted from
+    then on (a query already counted stays counted); gold_rate to the segments served from then on."""
+
+    redundancy: Redundancy = 1
+    gold_rate: GoldRate = 0.0
 
 
 class FeedbackPolicy(Wire):

@@ -8,15 +8,17 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 
-from backend.routes import dashboard
+from backend.routes import dashboard, quality
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 
 
 def install(app: FastAPI, web_dir: Path | None = None) -> None:
-    """Add the dashboard API, then serve `web_dir` (default: the repository's web/) at / — last,
-    since a mount at / answers every path the routes before it did not."""
+    """Add the dashboard API (and the run quality settings it edits), then serve `web_dir`
+    (default: the repository's web/) at / — last, since a mount at / answers every path the
+    routes before it did not."""
     app.include_router(dashboard.router, prefix="/api")
+    app.include_router(quality.router, prefix="/api")  # the quality panel's one write
     directory = web_dir or WEB_DIR
     if (directory / "index.html").is_file():
         app.mount("/", StaticFiles(directory=directory, html=True), name="web")

@@ -1,4 +1,5 @@
-"""A run's labels as JSON or CSV: every label event, or the effective label per query."""
+"""A run's labels as JSON or CSV: every label event, or the effective label per query, each value
+with its name beside it (stored 0 bad, 1 neutral, 2 good; the labeling keys are 1, 2, 3)."""
 
 from __future__ import annotations
 
@@ -17,21 +18,30 @@ EVENT_FIELDS = (
     "labeler",
     "kind",
     "value",
+    "value_name",
     "seconds",
     "client_request_id",
     "revises_event_id",
     "created_at",
 )
-EFFECTIVE_FIELDS = ("query_id", "session", "label", "event_id", "labeler", "seconds", "labelled_at")
+EFFECTIVE_FIELDS = ("query_id", "session", "label", "label_name", "event_id", "labeler", "seconds", "labelled_at")
+LABEL_NAMES = ("bad", "neutral", "good")  # by stored value
+
+
+def name_of(value: int | None) -> str | None:
+    return None if value is None else LABEL_NAMES[value]
 
 
 def rows(conn: Connection, run_id: int, effective: bool) -> list[dict[str, object]]:
+    """Records in the field order of EFFECTIVE_FIELDS / EVENT_FIELDS."""
     if effective:
-        return [e.model_dump(mode="json", include=set(EFFECTIVE_FIELDS)) for e in labels.effective_labels(conn, run_id)]
+        found = [e.model_dump(mode="json") for e in labels.effective_labels(conn, run_id)]
+        return [{k: name_of(e["label"]) if k == "label_name" else e[k] for k in EFFECTIVE_FIELDS} for e in found]
     result: list[dict[str, object]] = []
     after = 0
     while batch := labels.list_events(conn, run_id, after, 10_000):
-        result += [e.model_dump(mode="json", include=set(EVENT_FIELDS)) for e in batch]
+        dumped = [e.model_dump(mode="json") for e in batch]
+        result += [{k: name_of(e["value"]) if k == "value_name" else e[k] for k in EVENT_FIELDS} for e in dumped]
         after = batch[-1].id
     return result
 

@@ -1,6 +1,9 @@
 """The dashboard's labeling panel and labelled states: queue health, labels per minute, per-labeler
-counts and median seconds per label, and agreement with the oracle — the task rule applied exactly
-(collie.teacher.segment_label, no noise band) — where the run's task can judge.
+counts (current labels: revisions replace, undos withdraw) and median seconds per label, agreement
+with the oracle — the task rule applied exactly (collie.teacher.segment_label, no noise band) —
+where the run's task can judge, inter-labeler agreement (Krippendorff's α, services/agreement.py)
+on queries with two labels or more, gold accuracy, and the queries where labelers or the oracle
+disagree.
 
 A segment's frames never change once stored, so each is decoded once per process (SegmentCache):
 a refresh reads only ids, labels and label events."""
@@ -19,12 +22,14 @@ from typing import Any
 import numpy as np
 from sqlalchemy import Connection, select
 
-from backend.models import LabelEvent, Principal, Query, QueryData
-from backend.services import runs
+from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData
+from backend.services import agreement, runs
 from collie.dashboard_schemas import (
     LABEL_RATE_WINDOW_S,
+    MAX_DISAGREEMENTS,
     MAX_LABELLED_POINTS,
     MAX_LABELLED_SEGMENTS,
+    Disagreement,
     LabelerStats,
     LabelingStats,
     LabelingView,
@@ -93,62 +98,146 @@ def share(hits: int, judged: int) -> float | None:
     return hits / judged if judged else None
 
 
-def labeler_stats(events: list[Any], oracle: dict[int, int | None]) -> list[LabelerStats]:
-    by_name: dict[str, list[Any]] = {}
-    for e in events:
-        by_name.setdefault(e.name, []).append(e)
+@dataclass(frozen=True)
+class Vote:
+    """A labeler's current label of a query (models.LabelVote), with what the panel needs of both."""
+
+    query_pk: int
+    query_id: str
+    session: int
+    name: str
+    value: int
+    seconds: float | None
+    effective: int | None  # the query's effective label (None until it counts)
+    gold_answer: int | None  # a gold copy's answer (None for the run's own queries)
+
+
+def labeler_stats(events: list[Any], votes: list[Vote], oracle: dict[int, int | None]) -> list[LabelerStats]:
+    """Per labeler: their current labels (revisions replace, undos withdraw), skips, pace, agreement
+    with the oracle, their α against the other labelers, and their gold accuracy."""
+    real = [v for v in votes if v.gold_answer is None]
+    units = units_of(real)
+    names = sorted({e.name for e in events} | {v.name for v in votes})
     result = []
-    for name, mine in sorted(by_name.items()):
-        labels = [e for e in mine if e.kind == "label"]
-        seconds = [e.seconds for e in labels if e.seconds is not None]
-        judged = [e for e in labels if oracle.get(e.query_pk) is not None]
+    for name in names:
+        mine = [v for v in real if v.name == name]
+        gold = [v for v in votes if v.name == name and v.gold_answer is not None]
+        seconds = [v.seconds for v in mine if v.seconds is not None]
+        judged = [v for v in mine if oracle.get(v.query_pk) is not None]
         result.append(
             LabelerStats(
                 name=name,
-                labels=len(labels),
-                skips=sum(e.kind == "skip" for e in mine),
+                labels=len(mine),
+                skips=sum(e.kind == "skip" and e.name == name and not e.gold for e in events),
                 median_s=statistics.median(seconds) if seconds else None,
-                agreement=share(sum(e.value == oracle[e.query_pk] for e in judged), len(judged)),
+                agreement=share(sum(v.value == oracle[v.query_pk] for v in judged), len(judged)),
+                alpha=agreement.coder_alpha(list(units.values()), name),
+                shared=sum(1 for u in units.values() if name in u and len(u) >= 2),
+                gold_answered=len(gold),
+                gold_accuracy=share(sum(v.value == v.gold_answer for v in gold), len(gold)),
             )
         )
     return result
+
+
+def units_of(votes: list[Vote]) -> dict[int, dict[str, int]]:
+    """Reliability data for Krippendorff's α: query → labeler → label."""
+    units: dict[int, dict[str, int]] = {}
+    for v in votes:
+        units.setdefault(v.query_pk, {})[v.name] = v.value
+    return units
+
+
+def disagreements(votes: list[Vote], oracle: dict[int, int | None], segments: dict[int, SegmentInfo]) -> list[Any]:
+    """The run's queries whose labelers disagree among themselves, or whose effective label (a lone
+    label while it does not count yet) the oracle disagrees with; newest first."""
+    by_query: dict[int, list[Vote]] = {}
+    for v in votes:
+        if v.gold_answer is None:
+            by_query.setdefault(v.query_pk, []).append(v)
+    found = []
+    for pk in sorted(by_query, reverse=True):
+        mine = by_query[pk]
+        values = {v.value for v in mine}
+        verdict = mine[0].effective if mine[0].effective is not None else (mine[0].value if len(mine) == 1 else None)
+        rule = oracle.get(pk)
+        if len(values) < 2 and (rule is None or verdict is None or verdict == rule):
+            continue
+        found.append(
+            Disagreement(
+                query_id=mine[0].query_id,
+                session=mine[0].session,
+                labels={v.name: v.value for v in mine},  # type: ignore[misc]
+                effective=mine[0].effective,  # type: ignore[arg-type]
+                oracle=rule,  # type: ignore[arg-type]
+                xy=thinned(segments[pk].xy, MAX_LABELLED_POINTS // MAX_DISAGREEMENTS) if pk in segments else [],
+            )
+        )
+    return found
+
+
+_VOTES = (
+    select(
+        LabelVote.query_pk,
+        LabelVote.value,
+        Query.query_id,
+        Query.session,
+        Query.label.label("effective"),
+        Query.gold_answer,
+        Principal.name,
+        LabelEvent.seconds,
+    )
+    .join(Query, Query.id == LabelVote.query_pk)
+    .join(Principal, Principal.id == LabelVote.labeler_id)
+    .join(LabelEvent, LabelEvent.id == LabelVote.event_id)
+)
 
 
 def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> LabelingView:
     """The labeling panel and the newest labelled segments (bounded) of `run` (a runs row)."""
     labelled = conn.execute(
         select(Query.id, Query.query_id, Query.session, Query.label)
-        .where(Query.run_id == run.id, Query.status == "labelled", Query.label.is_not(None))
+        .where(Query.run_id == run.id, Query.status == "labelled", Query.label.is_not(None), Query.gold_of.is_(None))
         .order_by(Query.label_event_id.desc())
     ).all()
     events = conn.execute(
         select(
             LabelEvent.query_pk,
             LabelEvent.kind,
-            LabelEvent.value,
-            LabelEvent.seconds,
             LabelEvent.created_at,
             Principal.name,
+            Query.gold_of.is_not(None).label("gold"),
         )
         .join(Principal, Principal.id == LabelEvent.labeler_id)
+        .join(Query, Query.id == LabelEvent.query_pk)
         .where(LabelEvent.run_id == run.id)
     ).all()
-    segments = cache.get_many(conn, [q.id for q in labelled] + [e.query_pk for e in events], task)
+    votes = [Vote(**r._mapping) for r in conn.execute(_VOTES.where(Query.run_id == run.id))]
+    real_pks = {v.query_pk for v in votes if v.gold_answer is None}
+    segments = cache.get_many(conn, [q.id for q in labelled] + sorted(real_pks), task)
     oracle = {pk: s.oracle for pk, s in segments.items()}
     shown = labelled[:MAX_LABELLED_SEGMENTS]
     per_segment = max(2, MAX_LABELLED_POINTS // max(1, len(shown)))
     judged = [q for q in labelled if oracle.get(q.id) is not None]
-    label_times = [e.created_at for e in events if e.kind == "label"]
+    label_times = [e.created_at for e in events if e.kind == "label" and not e.gold]
     recent = sum(t >= time.time() - LABEL_RATE_WINDOW_S for t in label_times)
+    units = list(units_of([v for v in votes if v.gold_answer is None]).values())
+    disagreeing = disagreements(votes, oracle, segments)
     stats = LabelingStats(
         queue=runs.get(conn, run.id).queue,
         n_labels=run.n_labels,
         n_total=run.n_total,
         labels_per_min=recent / (LABEL_RATE_WINDOW_S / 60.0),
         last_label_at=max(label_times) if label_times else None,
-        labelers=labeler_stats(events, oracle),
+        labelers=labeler_stats(events, votes, oracle),
         agreement=share(sum(q.label == oracle[q.id] for q in judged), len(judged)),
         judged=len(judged),
+        redundancy=run.redundancy,
+        gold_rate=run.gold_rate,
+        alpha=agreement.alpha(units),
+        alpha_queries=sum(len(u) >= 2 for u in units),
+        n_disagreements=len(disagreeing),
+        disagreements=disagreeing[:MAX_DISAGREEMENTS],
     )
     return LabelingView(
         labeling=stats,

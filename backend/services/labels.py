@@ -1,40 +1,32 @@
-"""Label events and the effective-label rule.
+"""Label events and the effective label.
 
 Events are append-only: `label` (0 bad, 1 neutral, 2 good), `skip` (not a label: the lease is
-released and the query returns to the pool) and `undo`. The effective label of a query is the value
-of its latest `label` event, unless an `undo` came after it (then it has none). Who may write:
-- label: the holder of the live lease; the query's last labeler again (a revision); or the last
-  lease holder after the lease ran out, as long as nobody else has claimed the query since;
-- undo: the labeler of the effective label (the query comes back to them under a fresh lease, to
-  relabel at once) or an operator (the query returns to the pool);
+released and the query returns to the pool) and `undo`. Each labeler's current label of a query is
+kept as a vote (models.LabelVote); the effective label follows services/consensus.py: once the
+run's redundancy r of distinct labelers voted, the majority, ties to the safer label. Until then a
+labelled query goes back to the pool for the next labeler (never one who voted on it: leases.py)
+and nothing reaches the stream: the trainer hears a query once it counts, then only changes of its
+effective label. Who may write:
+- label: the holder of the live lease; a labeler with a vote on the query (a revision); or the
+  last lease holder after the lease ran out, as long as nobody else has claimed the query since;
+- undo: a labeler withdraws their own vote (the query comes back to them under a fresh lease, to
+  relabel at once); an operator without a vote withdraws every vote (the query returns to the pool);
 - every submission is idempotent by (labeler, client_request_id): a repeat returns the first answer.
+Gold copies (services/gold.py) take labels the same way with r = 1, but never touch the stream.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
 from typing import Any
 
-from sqlalchemy import Connection, bindparam, insert, select, update
+from sqlalchemy import Connection, bindparam, delete, insert, select, update
 
-from backend.models import LabelEvent, Principal, Query, Run
-from backend.services import events, runs
+from backend.models import LabelEvent, LabelVote, Principal, Query, Run
+from backend.services import consensus, events, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
-
-
-def effective_label(history: Iterable[tuple[str, int | None]]) -> int | None:
-    """The rule, on a query's (kind, value) events in order."""
-    current: int | None = None
-    for kind, value in history:
-        if kind == "label":
-            current = value
-        elif kind == "undo":
-            current = None
-    return current
-
 
 _EVENT_COLUMNS = (
     LabelEvent.id,
@@ -61,11 +53,11 @@ _LOOKUP = (
         Query.label_event_id,
         Query.lease_owner_id,
         Query.lease_expires_at,
-        LabelEvent.labeler_id.label("labelled_by"),
+        Query.gold_of,
         Run.status.label("run_status"),
+        Run.redundancy,
     )
     .join(Run, Run.id == Query.run_id)
-    .outerjoin(LabelEvent, LabelEvent.id == Query.label_event_id)
     .where(Query.run_id == bindparam("run"), Query.query_id == bindparam("query_id"))
 )
 _SEEN = (
@@ -74,6 +66,13 @@ _SEEN = (
     .where(LabelEvent.labeler_id == bindparam("me"), LabelEvent.client_request_id == bindparam("request_id"))
 )
 _INSERT_EVENT = insert(LabelEvent).returning(LabelEvent.id)
+_MY_VOTE = select(LabelVote.event_id, LabelVote.value).where(
+    LabelVote.query_pk == bindparam("pk"), LabelVote.labeler_id == bindparam("me")
+)
+_VOTES = select(LabelVote.value, LabelVote.event_id).where(LabelVote.query_pk == bindparam("pk"))
+_DROP_MY_VOTE = delete(LabelVote).where(LabelVote.query_pk == bindparam("pk"), LabelVote.labeler_id == bindparam("me"))
+_DROP_VOTES = delete(LabelVote).where(LabelVote.query_pk == bindparam("pk"))
+_INSERT_VOTE = insert(LabelVote)
 _SET_QUERY = update(Query).where(Query.id == bindparam("pk"))  # SET from the parameters given
 
 
@@ -123,6 +122,7 @@ def _record(
     seconds: float | None,
     request_id: str,
     now: float,
+    revises: int | None,
 ) -> LabelEventRead:
     event = {
         "run_id": run_id,
@@ -132,7 +132,7 @@ def _record(
         "value": value,
         "seconds": seconds,
         "client_request_id": request_id,
-        "revises_event_id": q.label_event_id,
+        "revises_event_id": revises,
         "created_at": now,
     }
     event_id = conn.execute(_INSERT_EVENT, event).scalar_one()
@@ -146,9 +146,20 @@ def _record(
         value=value,  # type: ignore[arg-type]
         seconds=seconds,
         client_request_id=request_id,
-        revises_event_id=q.label_event_id,
+        revises_event_id=revises,
         created_at=now,  # type: ignore[arg-type]
     )
+
+
+def _announce(
+    conn: Connection, run_id: int, q: Any, caller: Caller, kind: str, event_id: int, label: int | None, now: float
+) -> None:
+    """Tell the stream (the trainer) that the query's effective label changed; gold stays off it."""
+    if q.gold_of is not None:
+        return
+    data = {"query_id": q.query_id, "session": q.session, "event_id": event_id, "labeler": caller.name, "label": label}
+    delta = int(label is not None) - int(q.label is not None)
+    events.append(conn, run_id, kind, data, now, labels_delta=delta)  # type: ignore[arg-type]
 
 
 def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> LabelAck:
@@ -159,35 +170,48 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
     q = _query(conn, run_id, body.query_id)
     now = time.time()
     live = q.status == "leased" and q.lease_expires_at > now
-    if live and q.lease_owner_id != caller.id:
-        raise Conflict(f"query '{body.query_id}' is leased to someone else")
+    holder = live and q.lease_owner_id == caller.id
     if kind == "skip":
-        if not live:
-            raise Conflict(f"you hold no lease on query '{body.query_id}'")
-        event = _record(conn, run_id, q, caller, kind, None, body.seconds, body.client_request_id, now)
+        if not holder:
+            raise Conflict(
+                f"query '{body.query_id}' is leased to someone else"
+                if live
+                else f"you hold no lease on query '{body.query_id}'"
+            )
+        event = _record(conn, run_id, q, caller, kind, None, body.seconds, body.client_request_id, now, None)
+        if q.gold_of is not None:  # a skipped gold copy is not served again (it stays its labeler's)
+            conn.execute(_SET_QUERY, {"pk": q.id, "status": "retired", "lease_expires_at": None})
+            return LabelAck(event=event, label=None, query_status="retired", duplicate=False)
         conn.execute(_SET_QUERY, {"pk": q.id, "status": "pending", "lease_owner_id": None, "lease_expires_at": None})
         return LabelAck(event=event, label=q.label, query_status="pending", duplicate=False)
-    late = q.status in ("leased", "pending") and q.lease_owner_id == caller.id  # lease ran out, nobody took it
-    revision = q.status == "labelled" and q.labelled_by == caller.id
-    if not (live or late or revision):
+    mine = conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first()
+    late = not live and q.status in ("leased", "pending") and q.lease_owner_id == caller.id  # nobody took it since
+    revision = mine is not None and q.status != "retired"
+    if not (holder or late or revision):
+        if live:
+            raise Conflict(f"query '{body.query_id}' is leased to someone else")
         reason = {"labelled": "was labelled by someone else", "retired": "was withdrawn by the trainer"}.get(
             q.status, "is not claimed by you"
         )
         raise Conflict(f"query '{body.query_id}' {reason}; claim a query before labelling it")
-    event = _record(conn, run_id, q, caller, kind, value, body.seconds, body.client_request_id, now)
-    conn.execute(
-        _SET_QUERY,
-        {"pk": q.id, "status": "labelled", "label": value, "label_event_id": event.id, "lease_expires_at": None},
-    )
-    data = {
-        "query_id": body.query_id,
-        "session": q.session,
-        "event_id": event.id,
-        "labeler": caller.name,
-        "label": value,
-    }
-    events.append(conn, run_id, "label", data, now, labels_delta=int(q.label is None))
-    return LabelAck(event=event, label=value, query_status="labelled", duplicate=False)  # type: ignore[arg-type]
+    revises = mine.event_id if mine is not None else None
+    event = _record(conn, run_id, q, caller, kind, value, body.seconds, body.client_request_id, now, revises)
+    conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": caller.id})
+    conn.execute(_INSERT_VOTE, {"query_pk": q.id, "labeler_id": caller.id, "value": value, "event_id": event.id})
+    votes = conn.execute(_VOTES, {"pk": q.id}).scalars().all()
+    label = consensus.effective(votes, 1 if q.gold_of is not None else q.redundancy)
+    if label is not None:
+        change = {"status": "labelled", "label": label, "label_event_id": event.id, "lease_expires_at": None}
+        status = "labelled"
+        _announce(conn, run_id, q, caller, "label", event.id, label, now)
+    elif holder or late:  # more labels needed: back to the pool, for labelers who have not voted
+        change = {"status": "pending", "lease_owner_id": None, "lease_expires_at": None}
+        status = "pending"
+    else:  # a revision while another labeler holds the query: their lease stands
+        change, status = {}, q.status
+    if change:
+        conn.execute(_SET_QUERY, {"pk": q.id, **change})
+    return LabelAck(event=event, label=label, query_status=status, duplicate=False)  # type: ignore[arg-type]
 
 
 def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease_s: float) -> LabelAck:
@@ -195,16 +219,31 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     if repeat is not None:
         return repeat
     q = _query(conn, run_id, body.query_id)
-    if q.status != "labelled":
-        raise Conflict(f"query '{body.query_id}' has no label to undo")
-    own = q.labelled_by == caller.id
-    if not own and caller.role != "operator":
-        raise Conflict(f"query '{body.query_id}' was labelled by someone else")
     now = time.time()
-    event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now)
-    # Your own label comes back to you under a fresh lease, to relabel at once; an operator's undo
-    # returns the query to the pool.
-    status, owner, expires = ("leased", caller.id, now + lease_s) if own else ("pending", None, None)
+    mine = conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first()
+    votes = conn.execute(_VOTES, {"pk": q.id}).all()
+    if q.status == "retired" or not votes:
+        raise Conflict(f"query '{body.query_id}' has no label to undo")
+    live_other = q.status == "leased" and q.lease_expires_at > now and q.lease_owner_id != caller.id
+    if mine is not None:
+        if live_other:
+            raise Conflict(
+                f"query '{body.query_id}' is held by another labeler now; label it again instead (a revision)"
+            )
+        revises = mine.event_id
+        conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": caller.id})
+        # your own label comes back to you under a fresh lease, to relabel at once
+        status, owner, expires = "leased", caller.id, now + lease_s
+    elif caller.role == "operator":
+        revises = q.label_event_id if q.label_event_id is not None else max(v.event_id for v in votes)
+        conn.execute(_DROP_VOTES, {"pk": q.id})
+        # the query returns to the pool (a lease another labeler holds now stands)
+        keep = live_other or q.gold_of is not None  # a gold copy stays its labeler's
+        status = "leased" if live_other else "pending"
+        owner, expires = (q.lease_owner_id, q.lease_expires_at) if keep else (None, None)
+    else:
+        raise Conflict(f"query '{body.query_id}' was labelled by someone else")
+    event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)
     change = {
         "status": status,
         "lease_owner_id": owner,
@@ -213,37 +252,43 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         "label_event_id": None,
     }
     conn.execute(_SET_QUERY, {"pk": q.id, **change})
-    data = {
-        "query_id": body.query_id,
-        "session": q.session,
-        "event_id": event.id,
-        "labeler": caller.name,
-        "label": None,
-    }
-    events.append(conn, run_id, "withdrawn", data, now, labels_delta=-1)
+    if q.label is not None:
+        _announce(conn, run_id, q, caller, "withdrawn", event.id, None, now)
     return LabelAck(event=event, label=None, query_status=status, duplicate=False)  # type: ignore[arg-type]
 
 
 def list_events(conn: Connection, run_id: int, after: int, limit: int) -> list[LabelEventRead]:
+    """The run's label events in order (those of gold copies excepted: they are no query's labels)."""
     runs.row(conn, run_id)
     rows = conn.execute(
-        _event_select().where(LabelEvent.run_id == run_id, LabelEvent.id > after).order_by(LabelEvent.id).limit(limit)
+        _event_select()
+        .where(LabelEvent.run_id == run_id, LabelEvent.id > after, Query.gold_of.is_(None))
+        .order_by(LabelEvent.id)
+        .limit(limit)
     )
     return [_event_read(r) for r in rows]
 
 
 def effective_labels(conn: Connection, run_id: int) -> list[EffectiveLabel]:
-    """Recomputed from the append-only events with `effective_label` (not from the cached column)."""
-    runs.row(conn, run_id)
+    """Recomputed from the append-only events with services/consensus.py (not from the cached
+    columns); the event given is the latest label of a labeler whose vote stands."""
+    run = runs.row(conn, run_id)
     by_query: dict[str, list[Any]] = {}
-    for row in conn.execute(_event_select().where(LabelEvent.run_id == run_id).order_by(LabelEvent.id)):
+    rows = conn.execute(
+        _event_select()
+        .add_columns(Principal.role)
+        .where(LabelEvent.run_id == run_id, Query.gold_of.is_(None))
+        .order_by(LabelEvent.id)
+    )
+    for row in rows:
         by_query.setdefault(row.query_id, []).append(row)
     result = []
-    for rows in by_query.values():
-        value = effective_label((r.kind, r.value) for r in rows)
+    for history in by_query.values():
+        votes = consensus.replay((r.kind, r.labeler_id, r.value, r.role) for r in history)
+        value = consensus.effective(votes.values(), run.redundancy)
         if value is None:
             continue
-        last = next(r for r in reversed(rows) if r.kind == "label")
+        last = next(r for r in reversed(history) if r.kind == "label" and r.labeler_id in votes)
         result.append(
             EffectiveLabel(
                 query_id=last.query_id,

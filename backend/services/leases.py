@@ -2,8 +2,10 @@
 be pending), so two labelers never hold the same query, on SQLite or PostgreSQL alike. Expired
 leases go back to the pool at the next claim in their run (keeping their last holder, who may
 still hand in a late label while nobody else has the query). Queries a labeler skipped come to
-them last. A labeler may hold up to MAX_HOLD queries (the one on screen and the next, preloaded);
-a claim renews every lease they hold. Statements are built once: this is the hottest path of the
+them last; a query they voted on never comes to them again (redundancy: r distinct labelers), and
+gold copies (services/gold.py) are never in the pool: a due one is served to its labeler instead.
+A labeler may hold up to MAX_HOLD queries (the one on screen and the next, preloaded); a claim
+renews every lease they hold. Statements are built once: this is the hottest path of the
 service."""
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ from typing import Any
 from sqlalchemy import Connection, Update, bindparam, exists, select, update
 from sqlalchemy.orm import aliased
 
-from backend.models import LabelEvent, Query, QueryData, Run
+from backend.models import LabelEvent, LabelVote, Query, QueryData, Run
+from backend.services import gold
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import FINISHED, QueryStatus
@@ -58,7 +61,10 @@ _RELEASE = (
 def _take(avoid_skipped: bool) -> Update:
     """Lease the oldest pending query (by session, then posting order) to the caller."""
     pool = aliased(Query)
-    oldest = select(pool.id).where(pool.run_id == bindparam("run"), pool.status == "pending")
+    voted = exists().where(LabelVote.query_pk == pool.id, LabelVote.labeler_id == bindparam("me"))
+    oldest = select(pool.id).where(
+        pool.run_id == bindparam("run"), pool.status == "pending", pool.gold_of.is_(None), ~voted
+    )
     if avoid_skipped:
         skipped = exists().where(
             LabelEvent.query_pk == pool.id, LabelEvent.labeler_id == bindparam("me"), LabelEvent.kind == "skip"
@@ -87,6 +93,9 @@ def claim(conn: Connection, run_id: int, caller: Caller, lease_s: float, hold: i
     row = held[hold - 1] if len(held) >= hold else None
     # PostgreSQL: a concurrent claim may win our candidate (the re-checked WHERE then fails); try again.
     attempts = 1 if conn.dialect.name == "sqlite" else 4
+    if row is None and (gold_pk := gold.serve_if_due(conn, run_id, caller, now + lease_s)) is not None:
+        row = conn.execute(select(*_RETURNED).where(Query.id == gold_pk)).one()
+        held.append(row)
     for take in [*_TAKE] * attempts:
         if row is not None:
             break

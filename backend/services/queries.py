@@ -162,7 +162,7 @@ def list_queries(
 ) -> list[QuerySummary]:
     runs.row(conn, run_id)
     now = time.time()
-    stmt = summary_select().where(Query.run_id == run_id)
+    stmt = summary_select().where(Query.run_id == run_id, Query.gold_of.is_(None))  # gold copies: services/gold.py
     if session is not None:
         stmt = stmt.where(Query.session == session)
     if status == "pending":
@@ -181,7 +181,7 @@ def labelled_page(conn: Connection, run_id: int, cursor: int, limit: int) -> Lab
     now = time.time()
     rows = conn.execute(
         full_select()
-        .where(Query.run_id == run_id, Query.label.is_not(None), Query.id > cursor)
+        .where(Query.run_id == run_id, Query.label.is_not(None), Query.gold_of.is_(None), Query.id > cursor)
         .order_by(Query.id)
         .limit(limit)
     ).all()

@@ -1,5 +1,6 @@
 """Runs: created by a trainer, status reported by the trainer, control (run / pause / stop) and the
-feedback timeout policy set by an operator. Every change goes on the run's stream."""
+feedback timeout policy and the labeler quality control (redundancy, gold rate) set by an operator.
+Every change but the last goes on the run's stream (the trainer does not need it)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,16 @@ from backend.models import Query, Run
 from backend.services import events
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, Control, FeedbackPolicy, QueueCounts, RunCreate, RunRead, StatusUpdate
+from collie.schemas import (
+    FINISHED,
+    Control,
+    FeedbackPolicy,
+    QualitySettings,
+    QueueCounts,
+    RunCreate,
+    RunRead,
+    StatusUpdate,
+)
 
 _CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "stop": "stop"}
 
@@ -34,6 +44,8 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
             n_total=spec.n_total,
             epochs_total=spec.epochs_total,
             feedback_timeout_s=spec.feedback_timeout_s,
+            redundancy=spec.redundancy,
+            gold_rate=spec.gold_rate,
             last_event_id=0,
             created_by=caller.id,
             created_at=now,
@@ -46,15 +58,20 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
 
 
 def _counts(conn: Connection, run_ids: list[int] | None) -> dict[int, QueueCounts]:
-    """Queue sizes per run; a leased query whose lease ran out counts as pending."""
+    """Queue sizes per run; a leased query whose lease ran out counts as pending. Gold copies are
+    no query of the run's (services/gold.py)."""
     expired = (Query.status == "leased") & (Query.lease_expires_at < time.time())
-    stmt = select(
-        Query.run_id,
-        func.sum(case(((Query.status == "pending") | expired, 1), else_=0)),
-        func.sum(case(((Query.status == "leased") & ~expired, 1), else_=0)),
-        func.sum(case((Query.status == "labelled", 1), else_=0)),
-        func.sum(case((Query.status == "retired", 1), else_=0)),
-    ).group_by(Query.run_id)
+    stmt = (
+        select(
+            Query.run_id,
+            func.sum(case(((Query.status == "pending") | expired, 1), else_=0)),
+            func.sum(case(((Query.status == "leased") & ~expired, 1), else_=0)),
+            func.sum(case((Query.status == "labelled", 1), else_=0)),
+            func.sum(case((Query.status == "retired", 1), else_=0)),
+        )
+        .where(Query.gold_of.is_(None))
+        .group_by(Query.run_id)
+    )
     if run_ids is not None:
         stmt = stmt.where(Query.run_id.in_(run_ids))
     return {
@@ -84,6 +101,8 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         created_at=row.created_at,
         updated_at=row.updated_at,
         feedback_timeout_s=row.feedback_timeout_s,
+        redundancy=row.redundancy,
+        gold_rate=row.gold_rate,
     )
 
 
@@ -151,4 +170,16 @@ def set_feedback_policy(conn: Connection, run_id: int, policy: FeedbackPolicy) -
     # always on the stream, also when the column already says so: a trainer restarted with another
     # --feedback-timeout on an existing run still hears the operator's word
     events.append(conn, run_id, "policy", {"timeout_s": policy.timeout_s}, now)
+    return get(conn, run_id)
+
+
+def set_quality(conn: Connection, run_id: int, settings: QualitySettings) -> RunRead:
+    current = row(conn, run_id)
+    if current.status in FINISHED:
+        raise Conflict(f"run {run_id} is {current.status}")
+    conn.execute(
+        update(Run)
+        .where(Run.id == run_id)
+        .values(redundancy=settings.redundancy, gold_rate=settings.gold_rate, updated_at=time.time())
+    )
     return get(conn, run_id)

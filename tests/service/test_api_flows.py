@@ -180,9 +180,14 @@ def test_export_json_and_csv(labeler: CollieClient, trainer: CollieClient, run: 
         ("0-1", "undo", None),
     ]
     effective = list(csv.DictReader(io.StringIO(trainer.export(run.id, "csv", effective=True))))
-    assert [(r["query_id"], r["label"], r["seconds"]) for r in effective] == [("0-0", "2", "1.25")]
+    assert [(r["query_id"], r["label"], r["label_name"], r["seconds"]) for r in effective] == [
+        ("0-0", "2", "good", "1.25")
+    ]
     rows = list(csv.DictReader(io.StringIO(trainer.export(run.id, "csv"))))
     assert len(rows) == 3 and rows[0]["labeler"] == "labeler"
+    assert [(r["value"], r["value_name"]) for r in rows] == [("2", "good"), ("0", "bad"), ("", "")]
+    assert [e["value_name"] for e in events] == ["good", "bad", None]
+    assert list(rows[0])[5:7] == ["value", "value_name"]  # the name beside its value
 
 
 def test_rollouts_and_metrics_are_bounded(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:

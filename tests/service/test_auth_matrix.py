@@ -27,6 +27,7 @@ POLICY: dict[tuple[str, str], str] = {
     ("POST", "/api/runs/{run_id}/resume"): OPERATOR,
     ("POST", "/api/runs/{run_id}/stop"): OPERATOR,
     ("POST", "/api/runs/{run_id}/feedback-policy"): OPERATOR,
+    ("PUT", "/api/runs/{run_id}/quality"): OPERATOR,
     ("POST", "/api/runs/{run_id}/sessions"): TRAINER,
     ("POST", "/api/runs/{run_id}/retire"): TRAINER,
     ("GET", "/api/runs/{run_id}/queries"): ANY,

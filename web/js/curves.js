@@ -5,22 +5,23 @@
 import { plot } from "./plotly.js";
 
 const PANELS = [
-  { title: "safe coverage", keys: ["safe_coverage"] },
-  { title: "safe ratio", keys: ["safe_ratio"] },
-  { title: "composite coverage", keys: ["composite_coverage", "weighted_composite_coverage"] },
-  { title: "λ (Lagrange multiplier)", keys: ["lambda"] },
-  { title: "α (entropy)", keys: ["alpha"], log: true },
-  { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss") },
-  { title: "epochs / min", keys: ["epochs_per_min"] },
-  { title: "labels", keys: ["n_labels"] },
+  { title: "safe coverage", keys: ["safe_coverage"], help: "x-y area the skills reach without entering a bad region (the paper's Table 1)" },
+  { title: "safe ratio", keys: ["safe_ratio"], help: "share of evaluation states that are not in a bad region" },
+  { title: "composite coverage", keys: ["composite_coverage", "weighted_composite_coverage"], help: "coverage that credits desirable regions (weighted: by their class)" },
+  { title: "λ (Lagrange multiplier)", keys: ["lambda"], help: "METRA's multiplier of its distance constraint" },
+  { title: "α (entropy)", keys: ["alpha"], log: true, help: "SAC's entropy temperature (log scale)" },
+  { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss"), help: "training losses of the representation φ, the critics and the policy" },
+  { title: "epochs / min", keys: ["epochs_per_min"], help: "training speed, wall clock between evaluations (pauses included)" },
+  { title: "labels", keys: ["n_labels"], help: "labels the trainer has used so far" },
 ];
 const COLUMNS = 2;
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
 
 export class Curves {
-  constructor(element, note, maxPoints) {
+  constructor(element, note, maxPoints, help = null) {
     this.element = element;
     this.note = note;
+    this.help = help;
     this.maxPoints = maxPoints;
     this.history = { epochs: [], created_at: [], series: {}, n_stored: 0, stride: 1 };
   }
@@ -85,12 +86,17 @@ export class Curves {
       }));
       layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined };
       layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
+      // the panel's legend: each series' name in its line's colour
+      const legend = panel.names.map((n, i) => `<span style="color:${PALETTE[i % PALETTE.length]}">━ ${n}</span>`).join("  ");
       layout.annotations.push({
-        text: `<b>${panel.title}</b>${panel.names.length > 1 ? ` · ${panel.names.join(", ")}` : ""}`, showarrow: false,
+        text: `<b>${panel.title}</b>  ${legend}`, showarrow: false,
         xref: `x${axis} domain`, yref: `y${axis} domain`, x: 0, y: 1.02, xanchor: "left", yanchor: "bottom",
         font: { size: 12 },
       });
     });
+    if (this.help) {
+      this.help.innerHTML = panels.map((p) => `<li><b>${p.title}</b>: ${p.help}</li>`).join("");
+    }
     this.note.textContent = h.n_stored ? `${h.n_stored} evaluations${h.stride > 1 ? `, every ${h.stride}th shown` : ""}` : "no evaluations yet";
     return plot(this.element, traces, layout).then(() => {
       this.element.dataset.points = String(h.epochs.length);

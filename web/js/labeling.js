@@ -1,25 +1,103 @@
-// The labeling panel: queue health, pace, per-labeler counts and median seconds per label, and
-// agreement with the oracle (the task rule, exact) where the task can judge.
+// The labeling panel: queue health, pace, per-labeler counts and median seconds per label,
+// agreement with the oracle (the task rule, exact) where the task can judge, agreement between
+// labelers (Krippendorff's α), gold accuracy — each with a one-line explanation — and the list of
+// queries where labelers or the oracle disagree, each with its path drawn over the task's regions.
 
 import { ago, escapeHtml, num, of, percent } from "./format.js";
+import { CLASS_COLOURS, FILL, regionPath } from "./regions.js";
+
+export const LABEL_NAMES = ["bad", "neutral", "good"];
+
+const labelTag = (v) => (v == null ? '<span class="muted">—</span>'
+  : `<span class="label-tag" style="--c:${CLASS_COLOURS[v]}">${LABEL_NAMES[v]}</span>`);
+
+const COLUMN_HELP = [
+  ["labels", "queries they hold a label on now: a revision replaces their label, an undo withdraws it"],
+  ["skips", "segments they passed on (not labels)"],
+  ["median", "median seconds per label"],
+  ["oracle agrees", "share of their labels the task rule gives too"],
+  ["α", "Krippendorff's α of their labels against the other labelers' on the same queries"],
+  ["gold", "gold segments (the rule knows the answer, never sent to the trainer) they labelled right / labelled"],
+];
 
 export function renderLabeling(element, view) {
   const s = view.labeling;
-  const rows = s.labelers.map((l) => `<tr>
-      <td>${escapeHtml(l.name)}</td><td>${l.labels}</td><td>${l.skips}</td>
+  const rows = s.labelers.map((l) => `<tr data-labeler="${escapeHtml(l.name)}">
+      <td>${escapeHtml(l.name)}</td><td class="labels">${l.labels}</td><td>${l.skips}</td>
       <td>${l.median_s == null ? "—" : `${num(l.median_s, 1)} s`}</td><td>${percent(l.agreement)}</td>
+      <td>${l.alpha == null ? "—" : num(l.alpha, 2)}</td>
+      <td>${l.gold_answered ? `${percent(l.gold_accuracy)} of ${l.gold_answered}` : "—"}</td>
     </tr>`).join("");
+  const quality = `${s.redundancy === 1 ? "1 label per query" : `${s.redundancy} labels per query from distinct labelers`}${
+    s.gold_rate ? ` · ${percent(s.gold_rate)} gold` : ""}`;
   element.innerHTML = `
     <dl>
       <dt>queue</dt>
       <dd><span id="q-pending">${s.queue.pending}</span> pending · <span id="q-leased">${s.queue.leased}</span> leased ·
-          <span id="q-labelled">${s.queue.labelled}</span> labelled${s.queue.retired ? ` · ${s.queue.retired} retired` : ""}</dd>
-      <dt>labels</dt><dd>${of(s.n_labels, s.n_total)}</dd>
-      <dt>pace</dt><dd>${num(s.labels_per_min, 1)} labels / min (last 5 min)</dd>
-      <dt>last label</dt><dd data-time="${s.last_label_at ?? ""}" class="since">${ago(s.last_label_at)}</dd>
+          <span id="q-labelled">${s.queue.labelled}</span> labelled${s.queue.retired ? ` · ${s.queue.retired} retired` : ""}
+          <p class="explain">pending: waiting for a labeler · leased: on a labeler's screen now · labelled: counted${s.queue.retired ? " · retired: withdrawn by the trainer" : ""}</p></dd>
+      <dt>labels</dt><dd id="m-labels">${of(s.n_labels, s.n_total)}
+          <p class="explain">queries whose label counts (the trainer has it)${s.n_total == null ? "" : " / the run's label budget"}</p></dd>
+      <dt>quality</dt><dd id="m-quality">${quality}
+          <p class="explain">a query counts once its labels are in: the majority, a tie going to the safer label (bad, then neutral)</p></dd>
+      <dt>pace</dt><dd>${num(s.labels_per_min, 1)} labels / min
+          <p class="explain">labels submitted in the last 5 minutes, per minute</p></dd>
+      <dt>last label</dt><dd><span data-time="${s.last_label_at ?? ""}" class="since">${ago(s.last_label_at)}</span>
+          <p class="explain">when the latest label arrived</p></dd>
       <dt>oracle agrees</dt>
-      <dd>${s.judged ? `${percent(s.agreement)} of ${s.judged} labels` : "nothing to judge yet"}</dd>
+      <dd id="m-oracle">${s.judged ? `${percent(s.agreement)} of ${s.judged} labels` : "nothing to judge yet"}
+          <p class="explain">share of counted labels the task rule gives too, where the rule can judge</p></dd>
+      <dt>labelers agree</dt>
+      <dd id="m-alpha">${s.alpha == null ? (s.alpha_queries ? "α undefined (every label the same)" : "no query with two labels yet")
+        : `α = ${num(s.alpha, 2)} on ${s.alpha_queries} queries`}
+          <p class="explain">Krippendorff's α on queries with two labels or more: 1 full agreement, 0 what chance gives, below 0 worse</p></dd>
     </dl>
-    ${rows ? `<table><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th></tr></thead>
-      <tbody>${rows}</tbody></table>` : '<p class="muted">no labelers yet</p>'}`;
+    ${rows ? `<table id="labelers-stats"><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th><th>α</th><th>gold</th></tr></thead>
+      <tbody>${rows}</tbody></table>
+      <ul class="explain-list">${COLUMN_HELP.map(([k, v]) => `<li><b>${k}</b>: ${v}</li>`).join("")}</ul>`
+    : '<p class="muted">no labelers yet</p>'}`;
+}
+
+// A small path view of one segment in data coordinates (y up), over the task's regions.
+export function pathSvg(xy, task, size = [132, 88]) {
+  if (!xy.length) return '<span class="muted">no path</span>';
+  const xs = xy.map((p) => p[0]);
+  const ys = xy.map((p) => p[1]);
+  const [w, h] = size;
+  const span = Math.max(0.5, Math.max(...xs) - Math.min(...xs), (Math.max(...ys) - Math.min(...ys)) * (w / h));
+  const cx = (Math.max(...xs) + Math.min(...xs)) / 2;
+  const cy = (Math.max(...ys) + Math.min(...ys)) / 2;
+  const scale = w / (1.6 * span);
+  const view = { x0: cx - w / (2 * scale), x1: cx + w / (2 * scale), y0: cy - h / (2 * scale), y1: cy + h / (2 * scale) };
+  const box = { x0: view.x0 - span, x1: view.x1 + span, y0: view.y0 - span, y1: view.y1 + span };
+  const regions = task ? [
+    `<rect x="${box.x0}" y="${box.y0}" width="${box.x1 - box.x0}" height="${box.y1 - box.y0}" fill="${FILL[task.background]}"/>`,
+    ...task.regions.map((r) => regionPath(r, box, false)).map((d, i) => (d
+      ? `<path d="${d}" fill="${FILL[task.regions[i].desirability]}" fill-rule="evenodd"/>` : "")),
+  ].join("") : "";
+  const points = xy.map(([x, y]) => `${x},${y}`).join(" ");
+  const [sx, sy] = xy[0];
+  const [ex, ey] = xy[xy.length - 1];
+  const dot = (x, y, r, fill) => `<circle cx="${x}" cy="${y}" r="${r / scale}" fill="${fill}"/>`;
+  return `<svg class="path-view" width="${w}" height="${h}" viewBox="0 0 ${w} ${h}" role="img" aria-label="path of the segment">
+    <g transform="matrix(${scale} 0 0 ${-scale} ${-view.x0 * scale} ${view.y1 * scale})">${regions}
+      <polyline points="${points}" fill="none" stroke="#1d2330" stroke-width="1.6" vector-effect="non-scaling-stroke"/>
+      ${dot(sx, sy, 3.2, "#1d2330")}${dot(ex, ey, 3.2, "#2563eb")}
+    </g></svg>`;
+}
+
+export function renderDisagreements(element, count, view, task) {
+  const s = view.labeling;
+  count.textContent = s.n_disagreements ? `(${s.n_disagreements}${s.n_disagreements > s.disagreements.length ? `, newest ${s.disagreements.length} shown` : ""})` : "";
+  if (!s.disagreements.length) {
+    element.innerHTML = '<p class="muted">none: every labelled query has agreeing labels</p>';
+    return;
+  }
+  element.innerHTML = `<table><thead><tr><th>query</th><th>session</th><th>labels</th><th>counts as</th><th>oracle</th><th>path</th></tr></thead><tbody>
+    ${s.disagreements.map((d) => `<tr data-query="${escapeHtml(d.query_id)}">
+      <td>${escapeHtml(d.query_id)}</td><td>${d.session}</td>
+      <td>${Object.entries(d.labels).map(([who, v]) => `${escapeHtml(who)} ${labelTag(v)}`).join("<br>")}</td>
+      <td>${d.effective == null ? '<span class="muted">not yet</span>' : labelTag(d.effective)}</td>
+      <td>${labelTag(d.oracle)}</td><td>${pathSvg(d.xy, task)}</td></tr>`).join("")}
+  </tbody></table>`;
 }

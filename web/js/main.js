@@ -2,6 +2,7 @@
 // Open as {service}/?token=OPERATOR_TOKEN (optionally &ui=LABELING_UI_URL for the 3-D watch link).
 
 import { api, setToken, takeTokenFromUrl, token } from "./api.js";
+import { LabelerPanel } from "./labelers.js";
 import { renderRuns, tickTimes } from "./runs.js";
 import { RunPage } from "./run.js";
 
@@ -67,12 +68,14 @@ async function followRuns(generation) {
 function start() {
   started += 1;
   followRuns(started);
+  labelers.load();
   if (selectedRun() != null) openSelected(); // a linked run loads beside the list, not after it
 }
 
 takeTokenFromUrl();
 const ui = new URL(window.location.href).searchParams.get("ui");
 if (ui) sessionStorage.setItem("collie-ui", ui);
+const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie-ui"));
 
 runsBody.addEventListener("click", (event) => {
   const row = event.target.closest("tr[data-run-id]");

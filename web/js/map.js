@@ -3,9 +3,10 @@
 // are drawn in x-y; 1-D ones (HalfCheetah: y is always 0) as x over time.
 
 import { plot } from "./plotly.js";
-import { CLASS_COLOURS, regionShapes, undrawn } from "./regions.js";
+import { CLASS_COLOURS, FILL, regionPath, regionShapes, undrawn } from "./regions.js";
 
 const LABEL_NAMES = ["bad", "neutral", "good"];
+const LABEL_SYMBOLS = ["x", "circle", "diamond"];
 const W_SCALE = [[0, CLASS_COLOURS[0]], [0.5, CLASS_COLOURS[1]], [1, CLASS_COLOURS[2]]]; // w ∈ [0, 2]
 
 // One colour per skill: its direction for 2-D skills (as METRA's plots), else its index.
@@ -95,15 +96,36 @@ export class SkillMap {
       return {
         type: "scatter", mode: "markers", x, y, name: `labelled ${LABEL_NAMES[label]} (${segments.length})`,
         visible: segments.length ? true : "legendonly", hoverinfo: "name",
-        marker: { size: 7, symbol: "x", color: CLASS_COLOURS[label], line: { width: 1, color: "#222" } },
+        // large and each class its own shape: bad and neutral must be told apart at a glance
+        marker: { size: 11, symbol: LABEL_SYMBOLS[label], color: CLASS_COLOURS[label], line: { width: 1.2, color: "#222" } },
       };
     });
+  }
+
+  // Legend-only entries (no data): what the lines and the shading mean.
+  legendTraces(rollouts) {
+    const entry = (name, marker, mode = "markers") => ({ type: "scatter", mode, x: [null], y: [null], name, hoverinfo: "skip", marker, legendgroup: name });
+    const entries = [];
+    if (rollouts.length) {
+      const byW = this.colourBy === "w" && rollouts.some((r) => Array.isArray(r.extra?.w));
+      entries.push({ ...entry(byW ? "trajectories, coloured by w(s)" : `evaluation trajectories (${rollouts.length}), one colour per skill`,
+        {}, "lines"), line: { color: byW ? "#888" : skillColour([1, 0], 0, 1), width: 2 } });
+    }
+    if (this.task && !this.oneD) {
+      const box = { x0: -1, x1: 1, y0: -1, y1: 1 }; // only whether a region is drawn at all matters here
+      const drawn = this.task.regions.filter((r) => regionPath(r, box, false) != null);
+      const classes = new Set([this.task.background, ...drawn.map((r) => r.desirability)]);
+      for (const c of [0, 1, 2]) {
+        if (classes.has(c)) entries.push(entry(`${LABEL_NAMES[c]} region`, { symbol: "square", size: 12, color: FILL[c], line: { width: 1, color: "#999" } }));
+      }
+    }
+    return entries;
   }
 
   render() {
     const rollouts = this.rollouts?.rollouts ?? [];
     const view = bounds([...rollouts.map((r) => r.xy), ...(this.oneD ? [] : this.labelled.map((s) => s.xy))], this.oneD);
-    const traces = [...this.trajectoryTraces(rollouts), ...this.labelledTraces()];
+    const traces = [...this.trajectoryTraces(rollouts), ...this.labelledTraces(), ...this.legendTraces(rollouts)];
     const layout = {
       margin: { l: 45, r: 10, t: 10, b: 40 },
       xaxis: { range: view.x, title: { text: "x" }, zeroline: false },

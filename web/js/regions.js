@@ -3,7 +3,7 @@
 // then each region is painted over it in order (later wins), as the task rule decides.
 
 export const CLASS_COLOURS = ["#d62728", "#2ca02c", "#e6b800"]; // bad, neutral, good
-const FILL = ["#f9d9d9", "#d9efd9", "#fbefb8"]; // opaque, so a region replaces what is under it
+export const FILL = ["#f9d9d9", "#d9efd9", "#fbefb8"]; // opaque, so a region replaces what is under it
 const CIRCLE_STEPS = 96;
 
 const point = ([x, y]) => `${x.toFixed(4)},${y.toFixed(4)}`;
@@ -20,7 +20,7 @@ function circle([cx, cy], r) {
 
 // The SVG path of a region within `box` = {x0, x1, y0, y1} (already larger than the view), or
 // null when it has no x-y shape (pitch) or no meaning in a 1-D view (`oneD`: only half-planes).
-function regionPath(region, box, oneD) {
+export function regionPath(region, box, oneD) {
   const { x0, x1, y0, y1 } = box;
   const everything = polygon([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]);
   switch (region.kind) {

@@ -5,8 +5,9 @@ import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
 import { STATUS_TEXT, coalesce } from "./format.js";
-import { renderLabeling } from "./labeling.js";
+import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
+import { QualityForm } from "./quality.js";
 
 const MAX_POINTS = 500; // per curve: about one per pixel column of a panel
 const LABELING_REFRESH_MS = 5000; // lease changes are not on the stream
@@ -16,8 +17,12 @@ export class RunPage {
     this.root = root;
     this.onConnection = onConnection;
     this.map = new SkillMap(root.querySelector("#map"), root.querySelector("#map-note"));
-    this.curves = new Curves(root.querySelector("#curves"), root.querySelector("#curves-note"), MAX_POINTS);
+    this.curves = new Curves(root.querySelector("#curves"), root.querySelector("#curves-note"), MAX_POINTS, root.querySelector("#curves-help"));
     this.controls = new Controls(root, (run) => this.showRun(run));
+    this.quality = new QualityForm(root, (run) => {
+      this.showRun(run);
+      this.refreshLabeling();
+    });
     this.colourBy = root.querySelector("#colour-by");
     this.colourBy.addEventListener("change", () => this.map.set({ colourBy: this.colourBy.value }));
     this.refreshLabeling = coalesce(() => this.loadLabeling().catch(() => this.onConnection("down")), 300);
@@ -42,8 +47,9 @@ export class RunPage {
     this.run = page.run;
     this.root.querySelector("#run-title").textContent = `Run #${runId} · ${page.run.env} ${page.run.task} · ${page.run.method}`;
     this.setWatchLink(watchUrl, runId);
+    this.task = page.task;
     this.showRun(page.run);
-    renderLabeling(this.root.querySelector("#labeling-body"), page);
+    this.renderLabeling(page);
     await Promise.all([
       this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
       this.curves.load(page.metrics),
@@ -94,6 +100,12 @@ export class RunPage {
     this.root.querySelector("#run-epochs-total").textContent = run.epochs_total == null ? "" : ` / ${run.epochs_total}`;
     this.seeEpoch(run.epoch);
     this.controls.show(run);
+    this.quality.show(run);
+  }
+
+  renderLabeling(view) {
+    renderLabeling(this.root.querySelector("#labeling-body"), view);
+    renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task);
   }
 
   seeEpoch(epoch) {
@@ -129,7 +141,7 @@ export class RunPage {
     if (runId == null) return;
     const view = await api(`dashboard/runs/${runId}/labeling`);
     if (runId !== this.runId) return;
-    renderLabeling(this.root.querySelector("#labeling-body"), view);
+    this.renderLabeling(view);
     this.root.querySelector("#run-labels").textContent = view.labeling.n_labels;
     this.run = { ...this.run, n_labels: view.labeling.n_labels, queue: view.labeling.queue };
     await this.map.set({ labelled: view.labelled });

@@ -1,0 +1,141 @@
+"""The dashboard for the people who run labeling, in Debian's Chromium against a live service:
+labeler management (create → a one-time token and a labeler link, list, revoke), the labeling
+panel's counts (revisions are no labels), agreement and explanations, the list of disagreements
+with their paths, the run's quality settings, and the legends of the charts."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from service.conftest import DIMS, TOKENS, make_run_spec, make_session
+
+from backend.server import BackgroundServer
+from collie.client import ApiError, CollieClient
+from collie.schemas import MetricsIn, Rollout, RolloutsIn, RunRead
+
+WAIT_MS = 30_000
+UI = "http://labeling.example:8080/"
+
+
+@pytest.fixture(scope="module")
+def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -> RunRead:
+    """A north run with redundancy 2, labelled by two labelers who disagree on 0-1 (and the oracle
+    on 0-2), with a revision; metrics and rollouts for the charts."""
+    created = trainer.create_run(make_run_spec(task="north").model_copy(update={"redundancy": 2}))
+    post = make_session(0, 3)
+    for q, y in zip(post.queries, [1.0, 1.0, -3.0], strict=True):  # oracle: neutral, neutral, bad
+        q.xy = [[0.5, y + 0.05 * i] for i in range(DIMS.horizon)]
+    trainer.post_session(created.id, post)
+    plan = {"web-a": {"0-0": 1, "0-1": 1, "0-2": 2}, "web-b": {"0-0": 1, "0-1": 0, "0-2": 2}}
+    for name, answers in plan.items():
+        with CollieClient(live.url, operator.create_labeler(name).token) as client:
+            for _ in range(3):
+                claim = client.claim(created.id)
+                client.submit(created.id, claim.query.query_id, answers[claim.query.query_id])  # type: ignore[arg-type]
+            if name == "web-a":
+                client.submit(created.id, "0-0", 2)  # two revisions: still one label of web-a's
+                client.submit(created.id, "0-0", 1)
+    for epoch in (2, 4):
+        values = {"safe_ratio": 0.5, "phi_loss": 1.0 / epoch, "qf_loss": 2.0 / epoch, "n_labels": 3.0}
+        trainer.post_metrics(created.id, MetricsIn(epoch=epoch, values=values))
+    trainer.post_rollouts(created.id, RolloutsIn(epoch=4, rollouts=[Rollout(skill=[1.0, 0.0], xy=[[0, 0], [1, 1]])]))
+    return created
+
+
+@pytest.fixture(scope="module")
+def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    context.grant_permissions(["clipboard-read", "clipboard-write"], origin=live.url)
+    page = context.new_page()
+    page.set_default_timeout(WAIT_MS)
+    page.goto(f"{live.url}/?token={TOKENS['operator']}&ui={UI}#run={run.id}")
+    page.wait_for_selector("#labelers-stats")
+    yield page
+    context.close()
+
+
+def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: BackgroundServer) -> None:
+    page.fill("#labeler-name", "alice-web")
+    page.click("#labeler-create")
+    page.wait_for_selector("#labeler-created:not([hidden])")
+    token = page.input_value("#created-token")
+    assert page.input_value("#created-link") == f"{UI}?token={token}"
+    page.click("#copy-link")
+    assert page.evaluate("navigator.clipboard.readText()") == f"{UI}?token={token}"
+    with CollieClient(live.url, token) as alice:
+        assert alice.me().name == "alice-web"  # a real token of a labeler
+        page.wait_for_selector('#labelers-body tr[data-labeler="alice-web"]')
+        page.fill("#labeler-name", "alice-web")
+        page.click("#labeler-create")
+        page.wait_for_function("document.querySelector('#labeler-message').textContent.includes('taken')")
+        button = page.locator('#labelers-body tr[data-labeler="alice-web"] button')
+        button.click()
+        assert button.text_content() == "Confirm revoke"  # one click only arms it
+        alice.me()
+        button.click()
+        page.wait_for_selector('#labelers-body tr.revoked[data-labeler="alice-web"]')
+        assert page.is_hidden("#labeler-created")
+        with pytest.raises(ApiError) as refused:
+            alice.me()
+        assert refused.value.status == 401
+
+
+def test_the_panel_counts_labels_not_revisions_and_explains_each_metric(page: Any) -> None:
+    counts = page.eval_on_selector_all(
+        "#labelers-stats tbody tr", "rows => rows.map(r => [r.dataset.labeler, r.querySelector('.labels').textContent])"
+    )
+    assert counts == [["web-a", "3"], ["web-b", "3"]]  # web-a sent 5 label events
+    assert page.text_content("#m-quality").startswith("2 labels per query from distinct labelers")
+    # units {1,1}, {1,0}, {2,2}: n = 6, n_0 = 1, n_1 = 3, n_2 = 2; α = 1 − 5 · 2 / (36 − 14) = 6/11
+    assert page.text_content("#m-alpha").startswith("α = 0.55 on 3 queries")
+    explained = page.eval_on_selector_all("#labeling-body dd", "dds => dds.map(d => !!d.querySelector('.explain'))")
+    assert explained and all(explained)  # every metric has its line
+    help_terms = page.eval_on_selector_all("#labeling-body .explain-list b", "bs => bs.map(b => b.textContent)")
+    assert help_terms == ["labels", "skips", "median", "oracle agrees", "α", "gold"]
+
+
+def test_disagreements_are_listed_with_their_paths(page: Any) -> None:
+    rows = page.eval_on_selector_all("#disagreements-body tr[data-query]", "rows => rows.map(r => r.dataset.query)")
+    assert rows == ["0-2", "0-1"]  # 0-2: both said good, the rule says bad; 0-1: neutral vs bad
+    row = page.locator('#disagreements-body tr[data-query="0-1"]')
+    assert "web-a neutral" in row.text_content() and "web-b bad" in row.text_content()
+    points = row.locator("svg.path-view polyline").get_attribute("points")
+    assert len(points.split()) == DIMS.horizon
+    assert row.locator("svg.path-view path").count() >= 1  # the task's regions under the path
+    assert "(2)" in page.text_content("#disagreements-count")
+
+
+def test_the_quality_settings_are_set_from_the_panel(page: Any, trainer: CollieClient, run: RunRead) -> None:
+    assert page.input_value("#quality-redundancy") == "2"
+    page.fill("#quality-redundancy", "3")
+    page.fill("#quality-gold", "10")
+    page.click("#quality-apply")
+    page.wait_for_function("document.querySelector('#quality').dataset.redundancy === '3'")
+    changed = trainer.run(run.id)
+    assert (changed.redundancy, changed.gold_rate) == (3, 0.1)
+    page.fill("#quality-redundancy", "0")
+    page.click("#quality-apply")
+    page.wait_for_function("document.querySelector('#quality-message').textContent.includes('greater than or equal')")
+    assert trainer.run(run.id).redundancy == 3
+
+
+def test_the_charts_have_legends_and_labelled_states_are_large(page: Any, artifacts: Any) -> None:
+    page.wait_for_function("document.querySelector('#curves').dataset.points === '2'")
+    titles = page.eval_on_selector_all("#curves .annotation-text", "ts => ts.map(t => t.textContent)")
+    losses = next(t for t in titles if t.startswith("losses"))
+    assert "phi_loss" in losses and "qf_loss" in losses
+    helped = page.eval_on_selector_all("#curves-help li b", "bs => bs.map(b => b.textContent)")
+    assert "losses" in helped and "safe ratio" in helped
+    page.wait_for_function("document.querySelector('#map').dataset.labelled === '3'")
+    legend = page.eval_on_selector_all("#map .legendtext", "ts => ts.map(t => t.textContent)")
+    assert any(t.startswith("evaluation trajectories") for t in legend)
+    assert {"bad region", "neutral region"} <= set(legend)
+    markers = page.evaluate(
+        "document.querySelector('#map').data.filter(t => t.name.startsWith('labelled'))"
+        ".map(t => [t.marker.size, t.marker.symbol])"
+    )
+    assert all(size >= 10 for size, _ in markers)
+    assert len({symbol for _, symbol in markers}) == 3  # bad, neutral, good: three shapes
+    page.screenshot(path=str(artifacts / "dashboard-quality.png"), full_page=True)
