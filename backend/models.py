@@ -41,6 +41,9 @@ class Run(Base):
     n_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     epochs_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     feedback_timeout_s: Mapped[float | None] = mapped_column(Float, nullable=True)  # None: wait for every label
+    # the run's rule (collie.task_schemas.TaskDefinition JSON), or a person's instruction for a run without one
+    task_definition: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    instruction: Mapped[str | None] = mapped_column(Text, nullable=True)
     last_event_id: Mapped[int] = mapped_column(Integer)
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)

@@ -7,6 +7,7 @@ a refresh reads only ids, labels and label events."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import statistics
 import threading
@@ -114,6 +115,26 @@ def labeler_stats(events: list[Any], oracle: dict[int, int | None]) -> list[Labe
     return result
 
 
+def between_labelers(events: list[Any]) -> tuple[float | None, int]:
+    """Agreement between labelers, which needs no rule: over the queries that two or more distinct
+    labelers hold a label on now (each one's latest label, unless undone), the share of labeler
+    pairs that gave the same label; and how many such queries there are. `events` in id order."""
+    latest: dict[tuple[int, str], int | None] = {}
+    for e in events:
+        if e.kind in ("label", "undo"):
+            latest[(e.query_pk, e.name)] = e.value if e.kind == "label" else None
+    per_query: dict[int, list[int]] = {}
+    for (pk, _), value in latest.items():
+        if value is not None:
+            per_query.setdefault(pk, []).append(value)
+    same = pairs = 0
+    shared = [values for values in per_query.values() if len(values) >= 2]
+    for values in shared:
+        for a, b in itertools.combinations(values, 2):
+            same, pairs = same + (a == b), pairs + 1
+    return share(same, pairs), len(shared)
+
+
 def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> LabelingView:
     """The labeling panel and the newest labelled segments (bounded) of `run` (a runs row)."""
     labelled = conn.execute(
@@ -132,6 +153,7 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
         )
         .join(Principal, Principal.id == LabelEvent.labeler_id)
         .where(LabelEvent.run_id == run.id)
+        .order_by(LabelEvent.id)
     ).all()
     segments = cache.get_many(conn, [q.id for q in labelled] + [e.query_pk for e in events], task)
     oracle = {pk: s.oracle for pk, s in segments.items()}
@@ -140,6 +162,7 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
     judged = [q for q in labelled if oracle.get(q.id) is not None]
     label_times = [e.created_at for e in events if e.kind == "label"]
     recent = sum(t >= time.time() - LABEL_RATE_WINDOW_S for t in label_times)
+    pairwise, shared = between_labelers(events)
     stats = LabelingStats(
         queue=runs.get(conn, run.id).queue,
         n_labels=run.n_labels,
@@ -149,6 +172,8 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
         labelers=labeler_stats(events, oracle),
         agreement=share(sum(q.label == oracle[q.id] for q in judged), len(judged)),
         judged=len(judged),
+        between_labelers=pairwise,
+        shared_queries=shared,
     )
     return LabelingView(
         labeling=stats,
