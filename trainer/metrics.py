@@ -12,6 +12,9 @@ for bins a boundary cuts. Numpy only.
 Scores: safe coverage +1 per safe (good or neutral) bin, −1 per bad bin; safe ratio = safe bins /
 visited bins; composite +1 good, +1 neutral, −1 bad (equal to safe coverage by definition, kept
 under the paper's name); weighted composite +2 good, +1 neutral, −1 bad.
+
+A run without a rule (only an instruction) gets only what needs none: the visited bins (state
+coverage, n_bins) and n_states; the rule's scores are left out, not zeroed.
 """
 
 from __future__ import annotations
@@ -54,16 +57,20 @@ def bin_classes(
 def coverage_metrics(
     xy_trajs: Sequence[np.ndarray],
     pitch_trajs: Sequence[np.ndarray] | None,
-    task: Task,
+    task: Task | None,
     bin_size: float = 1.0,
     position_dims: int = 2,
 ) -> dict[str, float]:
-    """Safe / composite state coverage and safe ratio of the visited bins (Appendix E)."""
+    """Safe / composite state coverage and safe ratio of the visited bins (Appendix E); with no
+    rule (`task` None), only the visited bins and states."""
     positions = [_positions(t) for t in xy_trajs]
     xy = np.concatenate(positions) if positions else np.zeros((0, 2))
     pitch = None
     if pitch_trajs is not None:
         pitch = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in pitch_trajs] or [np.zeros(0)])
+    if task is None:
+        bins, _ = bin_classes(xy, np.full(len(xy), NEUTRAL, np.int8), bin_size, position_dims)
+        return {"n_bins": len(bins), "n_states": len(xy)}
     classes = task.classify(xy, pitch)
     _, per_bin = bin_classes(xy, classes, bin_size, position_dims)
     n_bad = int((per_bin == BAD).sum())

@@ -57,11 +57,11 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
-def _extent(points: list[np.ndarray], task: Task) -> tuple[float, float, float, float]:
+def _extent(points: list[np.ndarray], task: Task | None) -> tuple[float, float, float, float]:
     """Box around the trajectories, the origin and the task's finite shapes, padded."""
     boxes = [np.array([[0.0, 0.0], [0.0, 0.0]])]
     boxes += [np.array([p.min(axis=0), p.max(axis=0)]) for p in points if len(p)]
-    for r in task.regions:
+    for r in task.regions if task is not None else ():
         if isinstance(r, Disc):  # OutsideDisc too: its edge is what matters
             c = np.asarray(r.centre)
             boxes.append(np.array([c - r.radius, c + r.radius]))
@@ -71,9 +71,9 @@ def _extent(points: list[np.ndarray], task: Task) -> tuple[float, float, float, 
     return lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad
 
 
-def _shade(ax: Axes, task: Task, x0: float, x1: float, y0: float, y1: float, one_dim: bool) -> list[int]:
-    """Shade each class's area (x only when one_dim); returns the classes shown."""
-    if task.uses_pitch:  # class is not a function of position: nothing to shade
+def _shade(ax: Axes, task: Task | None, x0: float, x1: float, y0: float, y1: float, one_dim: bool) -> list[int]:
+    """Shade each class's area (x only when one_dim); returns the classes shown. No rule: nothing."""
+    if task is None or task.uses_pitch:  # no rule, or class is not a function of position: nothing to shade
         return []
     xs = np.linspace(x0, x1, _GRID)
     if one_dim:
@@ -104,7 +104,9 @@ def _legend(ax: Axes, shaded: list[int], labels: set[int]) -> None:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
 
 
-def _draw_xy(ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled) -> list[int]:
+def _draw_xy(
+    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
+) -> list[int]:
     points = [t[:, :2] for t in trajs] + [np.asarray(s, dtype=float)[:, :2] for s, _ in labelled]
     x0, x1, y0, y1 = _extent(points, task)
     shaded = _shade(ax, task, x0, x1, y0, y1, one_dim=False)
@@ -119,7 +121,7 @@ def _draw_xy(ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task,
 
 
 def _draw_x_over_time(
-    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled
+    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
 ) -> list[int]:
     xs = [t[:, 0] for t in trajs]
     x0, x1, _, _ = _extent([np.stack([x, np.zeros_like(x)], axis=1) for x in xs], task)
@@ -136,7 +138,7 @@ def _draw_x_over_time(
 
 def plot_skill_trajectories(
     xy_trajs: Sequence[np.ndarray],
-    task: Task,
+    task: Task | None,
     path: str | pathlib.Path,
     *,
     skills: np.ndarray | None = None,
@@ -144,8 +146,9 @@ def plot_skill_trajectories(
     title: str = "",
     labelled: Sequence[tuple[np.ndarray, int]] | None = None,
 ) -> pathlib.Path:
-    """x-y paths coloured by skill over the shaded task regions (x over time when
-    position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small markers."""
+    """x-y paths coloured by skill over the shaded task regions (none for a run without a rule; x
+    over time when position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small
+    markers coloured by the label given."""
     fig = Figure(figsize=(6, 6) if position_dims == 2 else (7, 4.5))
     draw_skill_panel(
         fig.add_subplot(), xy_trajs, task, skills=skills, position_dims=position_dims, title=title, labelled=labelled
@@ -157,7 +160,7 @@ def plot_skill_trajectories(
 def draw_skill_panel(
     ax: Axes,
     xy_trajs: Sequence[np.ndarray],
-    task: Task,
+    task: Task | None,
     *,
     skills: np.ndarray | None = None,
     position_dims: int = 2,
@@ -173,7 +176,7 @@ def draw_skill_panel(
     labelled = list(labelled or [])
     draw = _draw_xy if position_dims == 2 else _draw_x_over_time
     shaded = draw(ax, trajs, colours, task, labelled)
-    ax.set_title(title or task.name, fontsize=10)
+    ax.set_title(title or (task.name if task is not None else "no task rule"), fontsize=10)
     if legend:
         _legend(ax, shaded, {int(label) for _, label in labelled})
 
