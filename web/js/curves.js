@@ -13,6 +13,10 @@ const PANELS = [
   { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss") },
   { title: "epochs / min", keys: ["epochs_per_min"] },
   { title: "labels", keys: ["n_labels"] },
+  // rule-free: what a run without a task rule (an instruction) still measures
+  { title: "state coverage (visited bins)", keys: ["n_bins"] },
+  { title: "labels per class", keys: ["n_labels_bad", "n_labels_neutral", "n_labels_good"] },
+  { title: "guidance w(s) over evaluations", keys: ["w_mean", "w_min", "w_max"] },
 ];
 const COLUMNS = 2;
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];

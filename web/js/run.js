@@ -43,7 +43,11 @@ export class RunPage {
     this.root.querySelector("#run-title").textContent = `Run #${runId} · ${page.run.env} ${page.run.task} · ${page.run.method}`;
     this.setWatchLink(watchUrl, runId);
     this.showRun(page.run);
-    renderLabeling(this.root.querySelector("#labeling-body"), page);
+    const rule = this.root.querySelector("#run-rule"); // the instruction (no rule) or the rule's own words
+    rule.textContent = page.run.instruction != null ? `Instruction (no task rule): ${page.run.instruction}`
+      : page.run.task_definition ? page.run.task_definition.description : "";
+    rule.hidden = !rule.textContent;
+    renderLabeling(this.root.querySelector("#labeling-body"), page, page.run.instruction != null);
     await Promise.all([
       this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
       this.curves.load(page.metrics),
@@ -129,7 +133,7 @@ export class RunPage {
     if (runId == null) return;
     const view = await api(`dashboard/runs/${runId}/labeling`);
     if (runId !== this.runId) return;
-    renderLabeling(this.root.querySelector("#labeling-body"), view);
+    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
     this.root.querySelector("#run-labels").textContent = view.labeling.n_labels;
     this.run = { ...this.run, n_labels: view.labeling.n_labels, queue: view.labeling.queue };
     await this.map.set({ labelled: view.labelled });
