@@ -179,3 +179,21 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
     assert {s["query_id"]: s["label"] for s in page["labelled"]} == given
     assert any("w" in r["extra"] for r in page["rollouts"]["rollouts"])  # the map can colour by w(s)
     assert run_task(run) is None and rule_text(run, None)[:2] == ("Instruction", instruction)
+
+
+def test_a_resumed_run_keeps_its_rule_when_the_file_was_edited(tmp_path: Path) -> None:
+    spec, out = tmp_path / "east_wedge.toml", tmp_path / "run"
+    spec.write_text(SPEC)
+    common = ("train", "--task-file", str(spec), "--preset", "smoke", "--out", str(out), "--no-progress")
+    first = cli(*common, "--epochs", "4")
+    assert first.returncode == 0, first.stderr[-2000:]
+    spec.write_text(SPEC.replace('desirability = "bad"', 'desirability = "good"'))
+    again = cli(*common, "--resume", "--epochs", "6")
+    assert again.returncode == 0, again.stderr[-2000:]
+    stored = TaskDefinition.model_validate(json.loads((out / "task.json").read_text())["definition"])
+    assert stored.regions[0].desirability == 0  # still the rule the run started with
+    last = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
+    final = np.load(out / "eval_latest.npz")
+    assert last["epoch"] == 6
+    again_metrics = coverage_metrics(list(final["xy"]), list(final["pitch"]), from_definition(stored))
+    assert last["safe_coverage"] == again_metrics["safe_coverage"] and last["n_good_bins"] == 0
