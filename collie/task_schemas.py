@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator,
 CLASS_OF_NAME = {"bad": 0, "neutral": 1, "good": 2}
 MAX_REGIONS = 64
 MAX_POLYGON_VERTICES = 256
+MAX_TOTAL_VERTICES = 1024  # a run's definition travels in every RunRead: keep it a few kB
 MAX_TEXT = 2000
 MAX_INSTRUCTION = 2000
 
@@ -81,6 +82,14 @@ class PolygonSpec(RegionBase):
     kind: Literal["polygon"]
     vertices: list[Point] = Field(min_length=3, max_length=MAX_POLYGON_VERTICES, description="[x, y] in order")
 
+    @field_validator("vertices")
+    @classmethod
+    def _some_area(cls, v: list[list[float]]) -> list[list[float]]:
+        twice_area = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(v, v[1:] + v[:1], strict=True))  # shoelace
+        if twice_area == 0:
+            raise ValueError("the polygon's vertices enclose no area (all on one line)")
+        return v
+
 
 RegionSpec = Annotated[
     DiscSpec | OutsideDiscSpec | WedgeNorthSpec | HalfPlaneSpec | PitchLimitSpec | PolygonSpec,
@@ -117,6 +126,9 @@ class TaskDefinition(Spec):
 
     @model_validator(mode="after")
     def _unique_names(self) -> TaskDefinition:
+        vertices = sum(len(r.vertices) for r in self.regions if isinstance(r, PolygonSpec))
+        if vertices > MAX_TOTAL_VERTICES:
+            raise ValueError(f"the polygons have {vertices} vertices in all, at most {MAX_TOTAL_VERTICES}")
         seen: dict[str, int] = {}
         for i, region in enumerate(self.regions):
             if region.name is None:
