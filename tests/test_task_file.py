@@ -151,7 +151,7 @@ BAD_SPECS = [
     ),
     (
         'description = "d"\n[[regions]]\nkind = "polygon"\ndesirability = 0\nvertices = [[0, 0], [1, 1], [2, 2]]\n',
-        "regions",
+        "regions[0].vertices",
         "no area",
     ),
     (
