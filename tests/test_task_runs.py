@@ -171,6 +171,7 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
     for key in RULE_METRICS:
         assert all(key not in r for r in records) and key not in summary and key not in series, key
     assert json.loads((out / "task.json").read_text()) == {"definition": None, "instruction": instruction}
+    assert (out / "skills_latest.png").stat().st_size and (out / "guidance_latest.png").stat().st_size  # the maps
 
     # The dashboard: the instruction, no regions, no oracle verdicts, and the map's labelled states.
     assert page["task"] is None and page["task_error"] is None and page["run"]["instruction"] == instruction

@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     )
     print(json.dumps({k: summary.get(k) for k in keys}))
     print(
-        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
-        f"plots/, tb/, checkpoint.pt)"
+        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, task.json, skills_latest.png, guidance_latest.png, "
+        f"curves.png, plots/, tb/, checkpoint.pt)"
     )
     return 0 if summary.get("status") in ("finished", "stopped") else 1

@@ -33,7 +33,7 @@ from trainer.methods import build_agent
 from trainer.metra import TorchBatch, WeightFn
 from trainer.metrics import coverage_metrics
 from trainer.obs_noise import NoisyObservations
-from trainer.plots import plot_curves, plot_skill_trajectories
+from trainer.plots import plot_curves, plot_guidance_map, plot_skill_trajectories
 from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
 from trainer.rollout import Normaliser, Trajectories, rollout
@@ -281,7 +281,7 @@ class Trainer:
         }
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
-        self.plot(traj, record)
+        self.plot(traj, record, w)
         np.savez_compressed(
             self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
         )  # the final skills' paths, for `collie report` figures
@@ -332,7 +332,7 @@ class Trainer:
             )
         return ((1.0 - beta) * w + beta).cpu().numpy().astype(np.float64).reshape(obs.shape[:2])
 
-    def plot(self, traj: Trajectories, record: dict[str, Any]) -> None:
+    def plot(self, traj: Trajectories, record: dict[str, Any], w: np.ndarray | None = None) -> None:
         labelled = [(self.segment_xy[q], s.label) for q, s in self.labelled.segments.items() if q in self.segment_xy]
         title = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
         if "safe_coverage" in record:
@@ -350,6 +350,11 @@ class Trainer:
             labelled=labelled,
         )
         (self.out / "skills_latest.png").write_bytes(path.read_bytes())
+        if w is not None and self.env.position_dims == 2:  # the map coloured by w(s) (needs no rule)
+            guidance = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · w(s)"
+            xy = list(traj.xy[:, ::2])  # the states w was computed at
+            out = self.out / "guidance_latest.png"
+            plot_guidance_map(xy, w, out, task=self.task, title=guidance, labelled=labelled)
 
     # ---- persistence ---------------------------------------------------------------------
     def wall_s(self) -> float:

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import ListedColormap
+from matplotlib.colors import LinearSegmentedColormap, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -179,6 +179,42 @@ def draw_skill_panel(
     ax.set_title(title or (task.name if task is not None else "no task rule"), fontsize=10)
     if legend:
         _legend(ax, shaded, {int(label) for _, label in labelled})
+
+
+def plot_guidance_map(
+    xy_trajs: Sequence[np.ndarray],
+    w: np.ndarray,
+    path: str | pathlib.Path,
+    *,
+    task: Task | None = None,
+    title: str = "",
+    labelled: Sequence[tuple[np.ndarray, int]] | None = None,
+) -> pathlib.Path:
+    """The evaluation paths coloured by the guidance w(s) ∈ [0, 2] at their states (`w`: one row
+    per path, at the same points), and the labelled states by the label given: a map that needs
+    no rule (the task's regions are shaded under it only when the run has one)."""
+    trajs = [np.asarray(t, dtype=float).reshape(len(t), -1)[:, :2] for t in xy_trajs]
+    labelled = list(labelled or [])
+    fig = Figure(figsize=(6.6, 6))
+    ax = fig.add_subplot()
+    x0, x1, y0, y1 = _extent(trajs + [np.asarray(s, float)[:, :2] for s, _ in labelled], task)
+    _shade(ax, task, x0, x1, y0, y1, one_dim=False)
+    cmap = LinearSegmentedColormap.from_list("w", [CLASS_COLOURS[BAD], CLASS_COLOURS[NEUTRAL], CLASS_COLOURS[GOOD]])
+    points = None
+    for t, wt in zip(trajs, w, strict=True):
+        ax.plot(t[:, 0], t[:, 1], color="0.7", lw=0.6, zorder=1)
+        points = ax.scatter(t[:, 0], t[:, 1], c=np.asarray(wt)[: len(t)], cmap=cmap, vmin=0, vmax=2, s=6, zorder=2)
+    for states, label in labelled:
+        st = np.asarray(states, dtype=float)
+        ax.scatter(st[:, 0], st[:, 1], s=14, marker="x", c=CLASS_COLOURS[label], linewidths=0.8, zorder=3)
+    if points is not None:
+        fig.colorbar(points, ax=ax, label="w(s)", shrink=0.8)
+    ax.set(xlim=(x0, x1), ylim=(y0, y1), xlabel="x", ylabel="y")
+    ax.set_aspect("equal")
+    ax.set_title(title or "guidance w(s)", fontsize=10)
+    _legend(ax, [], {int(label) for _, label in labelled})
+    fig.tight_layout()
+    return _save(fig, path)
 
 
 def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Path) -> pathlib.Path:
