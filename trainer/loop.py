@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from trainer.checkpoint import load_checkpoint, save_checkpoint
-from trainer.config import LABEL_METHODS, Config
+from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
@@ -65,6 +65,8 @@ class Trainer:
         # seed places random scenery (car hazards). A run on the service passes the one it holds.
         self.rule = rule or choose_rule(cfg)
         self.task = self.rule.task
+        if self.task is None and cfg.method in RULE_METHODS:  # e.g. a service run that holds only an instruction
+            raise ValueError(f"method {cfg.method!r} trains on a task rule, and this run has none (an instruction)")
         if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
             raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
