@@ -245,3 +245,11 @@ def test_a_run_has_a_rule_or_an_instruction_not_both() -> None:
         RunCreate(env="point", task="x", method="collie", dims=dims, task_definition=definition, instruction="be nice")
     with pytest.raises(ValidationError):
         RunCreate(env="point", task="x", method="collie", dims=dims, instruction="")
+
+
+def test_the_spec_file_in_the_docs_loads(tmp_path: Path) -> None:
+    docs = (Path(__file__).parents[1] / "docs" / "tasks.md").read_text()
+    block = docs.split("```toml\n", 1)[1].split("```", 1)[0]
+    task = from_definition(load_task_file(write(tmp_path, "charger.toml", block)))
+    xy = np.array([[0.0, 0.0], [5.0, 5.0], [6.0, 0.0], [20.0, 0.0]])
+    assert task.name == "charger" and task.classify(xy).tolist() == [GOOD, NEUTRAL, BAD, BAD]
