@@ -107,6 +107,9 @@ def task_flags(args: argparse.Namespace) -> list[str]:
         return ["--instruction", args.instruction]
     flags = ["--task", args.task] if args.task is not None else []
     if args.task_file is not None:
+        from collie.tasks.task_file import load_task_file
+
+        load_task_file(args.task_file, args.task, args.env, args.seed)  # a bad file fails here, before anything starts
         return [*flags, "--task-file", str(args.task_file.resolve())]
     return flags or ["--task", "north"]
 

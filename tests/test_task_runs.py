@@ -198,3 +198,13 @@ def test_a_resumed_run_keeps_its_rule_when_the_file_was_edited(tmp_path: Path) -
     assert last["epoch"] == 6
     again_metrics = coverage_metrics(list(final["xy"]), list(final["pitch"]), from_definition(stored))
     assert last["safe_coverage"] == again_metrics["safe_coverage"] and last["n_good_bins"] == 0
+
+
+def test_collie_up_refuses_a_bad_task_file_and_an_oracle_for_an_instruction_before_starting(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('description = "d"\n[[regions]]\nkind = "circle"\ndesirability = 0\n')
+    proc = cli("up", "--task-file", str(bad), "--out", str(tmp_path / "a"), "--port", "0", timeout=60)
+    assert proc.returncode == 2 and f"task file {bad}: regions[0].kind: unknown region kind 'circle'" in proc.stderr
+    proc = cli("up", "--instruction", "stay west", "--teacher", "oracle", "--out", str(tmp_path / "b"), timeout=60)
+    assert proc.returncode == 2 and "--teacher oracle labels by a task rule" in proc.stderr
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # nothing was started
