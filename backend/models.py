@@ -43,6 +43,9 @@ class Run(Base):
     feedback_timeout_s: Mapped[float | None] = mapped_column(Float, nullable=True)  # None: wait for every label
     redundancy: Mapped[int] = mapped_column(Integer, default=1, server_default="1")  # labels per query (r)
     gold_rate: Mapped[float] = mapped_column(Float, default=0.0, server_default="0")  # share of a labeler's queue
+    # the run's rule (collie.task_schemas.TaskDefinition JSON), or a person's instruction for a run without one
+    task_definition: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    instruction: Mapped[str | None] = mapped_column(Text, nullable=True)
     last_event_id: Mapped[int] = mapped_column(Integer)
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)

@@ -107,6 +107,10 @@ class LabelingStats(Read):
     alpha_queries: int = Field(default=0, description="queries with two labels or more (α's units)")
     n_disagreements: int = 0
     disagreements: list[Disagreement] = Field(default_factory=list, max_length=MAX_DISAGREEMENTS)
+    between_labelers: float | None = Field(
+        default=None, description="agreement between labelers (needs no rule): agreeing pairs on shared queries"
+    )
+    shared_queries: int = Field(default=0, description="queries two or more distinct labelers label now")
 
 
 class LabelingView(Read):
@@ -120,7 +124,9 @@ class RunDashboard(LabelingView):
     ?after=last_event_id to follow it without a gap."""
 
     run: RunRead
-    task: dict[str, Any] | None = Field(description="collie.tasks Task.to_dict(), for shading regions")
+    task: dict[str, Any] | None = Field(
+        description="collie.tasks Task.to_dict() of the run's stored rule, for shading regions; null without a rule"
+    )
     task_error: str | None
     rollouts: RolloutsRead | None
     metrics: MetricHistory

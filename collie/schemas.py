@@ -19,6 +19,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
+from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
+
 LabelValue = Literal[0, 1, 2]  # 0 bad, 1 neutral, 2 good
 Submission = Literal[0, 1, 2, "skip"]
 Role = Literal["operator", "trainer", "labeler"]
@@ -106,6 +108,16 @@ class RunCreate(Wire):
     )
     redundancy: Redundancy = Field(default=1, description="labels from distinct labelers per query")
     gold_rate: GoldRate = Field(default=0.0, description="share of each labeler's segments that are gold")
+    task_definition: TaskDefinition | None = Field(default=None, description="the run's rule, judged by every client")
+    instruction: str | None = Field(
+        default=None, min_length=1, max_length=MAX_INSTRUCTION, description="intent in words, for a run without a rule"
+    )
+
+    @model_validator(mode="after")
+    def _rule_or_instruction(self) -> RunCreate:
+        if self.task_definition is not None and self.instruction is not None:
+            raise ValueError("a run has a task_definition (a rule) or an instruction (no rule), not both")
+        return self
 
     @field_validator("config")
     @classmethod
@@ -141,6 +153,8 @@ class RunRead(Wire):
     feedback_timeout_s: float | None = Field(default=None, description="null: the trainer waits for every label")
     redundancy: int = Field(default=1, description="labels from distinct labelers before a query counts")
     gold_rate: float = Field(default=0.0, description="share of each labeler's segments that are gold")
+    task_definition: TaskDefinition | None = Field(default=None, description="the run's rule as stored")
+    instruction: str | None = Field(default=None, description="a run without a rule: the labelers' instruction")
 
 
 class QualitySettings(Wire):

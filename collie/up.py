@@ -23,7 +23,9 @@ PROCESS_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # stop order: 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point")
-    p.add_argument("--task", default="north")
+    p.add_argument("--task", default=None, help="a built-in task (default north), or one a --task-file registers")
+    p.add_argument("--task-file", type=Path, default=None, help="a task rule from a TOML/JSON/Python file")
+    p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words")
     p.add_argument("--method", default="collie")
     p.add_argument("--preset", default="cpu")
     p.add_argument("--seed", type=int, default=0)
@@ -95,8 +97,36 @@ def wait_for(path: Path, proc: subprocess.Popen, what: str, timeout_s: float = 1
     raise TimeoutError(f"{what} was not ready after {timeout_s:.0f} s")
 
 
+def task_flags(args: argparse.Namespace) -> list[str]:
+    """The trainer's rule flags; refuses what cannot run (ValueError)."""
+    if args.instruction is not None:
+        if args.task is not None or args.task_file is not None:
+            raise ValueError("--instruction is for a run without a rule: drop --task and --task-file")
+        if args.teacher == "oracle":
+            raise ValueError("--teacher oracle labels by a task rule, and an --instruction run has none")
+        return ["--instruction", args.instruction]
+    flags = ["--task", args.task] if args.task is not None else []
+    if args.task_file is not None:
+        from collie.tasks.task_file import load_task_file
+
+        load_task_file(args.task_file, args.task, args.env, args.seed)  # a bad file fails here, before anything starts
+        return [*flags, "--task-file", str(args.task_file.resolve())]
+    return flags or ["--task", "north"]
+
+
+def run_name(args: argparse.Namespace) -> str:
+    if args.instruction is not None:
+        return "instruction"
+    return args.task or (args.task_file.stem if args.task_file is not None else "north")
+
+
 def run(args: argparse.Namespace) -> int:
-    out = args.out or Path(f"runs/up-{args.env}-{args.task}")
+    try:
+        args.task_flags = task_flags(args)
+    except ValueError as exc:
+        print(f"collie up: error: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")
     out.mkdir(parents=True, exist_ok=True)
     db = args.db or out / "collie.db"
     stack = Stack(out)
@@ -141,8 +171,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         "train",
         "--env",
         args.env,
-        "--task",
-        args.task,
+        *args.task_flags,
         "--method",
         args.method,
         "--preset",
@@ -194,7 +223,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         dashboard += "&ui=" + quote(labeler_url.split("?")[0], safe="")
     urls = {"api": api, "labeling_ui": labeler_url, "dashboard": dashboard}
     write_info(args.info_json, urls, run_id, tokens)
-    print(f"collie up: run {run_id} · {args.env} {args.task} {args.method} ({args.preset})")
+    print(f"collie up: run {run_id} · {args.env} {run_name(args)} {args.method} ({args.preset})")
     print(f"  service   {api}   (API docs {api}/docs)")
     if labeler_url:
         print(f"  label     {labeler_url}")

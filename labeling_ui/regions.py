@@ -46,6 +46,9 @@ def region_outline(region: dict[str, Any]) -> np.ndarray | None:
         ax, ay = region.get("apex", (0.0, 0.0))
         d = REGION_EXTENT
         return densify(on_floor(np.array([[ax - d, ay + d], [ax, ay], [ax + d, ay + d]])))
+    if kind == "polygon":  # closed: back to the first vertex
+        vertices = np.asarray(region["vertices"], dtype=np.float64)
+        return densify(on_floor(np.vstack([vertices, vertices[:1]])))
     if kind in ("halfplane_left", "halfplane_right"):
         x0 = region.get("x0", 0.0)
         return densify(on_floor(np.array([[x0, -REGION_EXTENT], [x0, REGION_EXTENT]])))

@@ -25,7 +25,7 @@ import viser
 
 from collie.client import new_request_id
 from collie.schemas import MAX_HOLD, QueryRead, RunRead
-from collie.tasks import Task, get_task
+from collie.tasks import Task
 from labeling_ui.browser import read_token, read_watch, remember_token
 from labeling_ui.inset import render_inset
 from labeling_ui.keys import bind_keys
@@ -33,6 +33,7 @@ from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import Panels, SegmentInfo
 from labeling_ui.playback import Player
 from labeling_ui.regions import tint_grid, tint_meshes
+from labeling_ui.rule import rule_text, run_task
 from labeling_ui.scene import ReplayScene
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
 from labeling_ui.watch import SkillWatch
@@ -107,7 +108,7 @@ class LabelerSession:
         self._retry: Action | None = None
         self._down_since: float | None = None
         self._closed = threading.Event()
-        self._tasks: dict[tuple[str, str, object], Task | None] = {}
+        self._tasks: dict[int, Task | None] = {}  # run id → its rule as the service holds it
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
         self._watcher = threading.Thread(target=self._watch, name=f"collie-watch-{client.client_id}", daemon=True)
 
@@ -411,10 +412,7 @@ class LabelerSession:
         # what follows is context, sent after the first frame is out
         if poser is not None:
             self.show_floor(run, task, np.asarray(query.xy, float))
-        if task is not None:
-            self.panels.show_task(task.name, task.description, task.meaning)
-        else:
-            self.panels.show_task(run.task, f"Unknown task '{run.task}' for {run.env}: judge by its name.", {})
+        self.panels.show_task(*rule_text(run, task))
         self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
         self._show_progress()
         self._preload()
@@ -437,20 +435,17 @@ class LabelerSession:
         """The task's regions on the floor around the segment, recomputed only when the segment
         leaves the area they cover (centres snap to a coarse grid)."""
         cx, cy = np.round(xy.mean(axis=0) / FLOOR_SNAP) * FLOOR_SNAP
-        key = (run.task, run.env, cx, cy)
+        key = (run.id, run.env, cx, cy)
         if key == self.scene.floor_key:
             return
         tint = tint_meshes(task, cx, cy, FLOOR_HALF_WIDTH)
         self.scene.set_floor(key, task.to_dict() if task else None, tint, tint_grid(cx, cy, FLOOR_HALF_WIDTH))
 
     def task_of(self, run: RunRead) -> Task | None:
-        key = (run.task, run.env, run.config.get("seed"))
-        if key not in self._tasks:
-            try:
-                self._tasks[key] = get_task(run.task, run.env, layout_seed=run.config.get("seed"))
-            except ValueError:
-                self._tasks[key] = None
-        return self._tasks[key]
+        """The run's rule from the service's copy (fixed for the run's life, so cached by run id)."""
+        if run.id not in self._tasks:
+            self._tasks[run.id] = run_task(run)
+        return self._tasks[run.id]
 
     def _show_progress(self) -> None:
         if self.link is not None and self.shown is not None:

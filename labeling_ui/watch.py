@@ -17,6 +17,7 @@ from collie.schemas import RolloutsRead, RunRead
 from labeling_ui.inset import render_inset
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import skill_text
+from labeling_ui.rule import rule_text
 
 if TYPE_CHECKING:
     from labeling_ui.session import LabelerSession
@@ -115,8 +116,7 @@ class SkillWatch:
             session.client.flush()
             task = session.task_of(run)
             session.show_floor(run, task, xy)
-            if task is not None:
-                session.panels.show_task(task.name, task.description, task.meaning)
+            session.panels.show_task(*rule_text(run, task))
             session.panels.show_inset(render_inset(task, xy, None))
 
     def _set_auto(self, on: bool) -> None:

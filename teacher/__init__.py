@@ -13,18 +13,26 @@ import numpy as np
 
 from collie.client import ApiError, CollieClient, Unreachable, new_request_id
 from collie.schemas import FINISHED, QueryRead
-from collie.tasks import get_task
+from collie.tasks import task_for_run
 from collie.teacher import OracleTeacher
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 
+class NoRule(ValueError):
+    """The run has no task rule (only a person's instruction): there is nothing to label it by."""
+
+
 def oracle_for(client: CollieClient, run_id: int, noise_band: float, seed: int) -> OracleTeacher:
-    """The teacher for the run's task, env and scenery (the run's seed places random layouts)."""
+    """The teacher for the run's rule as the service holds it (never a local file or registry)."""
     run = client.run(run_id)
-    layout_seed = run.config.get("seed")
-    task = get_task(run.task, run.env, layout_seed=layout_seed if isinstance(layout_seed, int) else None)
+    task = task_for_run(run)
+    if task is None:
+        raise NoRule(
+            f"run {run_id} has no task rule, only an instruction ({run.instruction!r}): the oracle labels by a rule, "
+            "so people must label this run"
+        )
     return OracleTeacher(task, noise_band=noise_band, seed=seed)
 
 

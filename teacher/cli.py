@@ -52,7 +52,11 @@ def run(args: argparse.Namespace) -> int:
         except (ApiError, Unreachable) as exc:
             print(f"collie teacher: {exc}", file=sys.stderr)
             return 1
-        oracle = oracle_for(client, args.run, args.noise_band, args.seed)
+        try:
+            oracle = oracle_for(client, args.run, args.noise_band, args.seed)
+        except ValueError as exc:  # NoRule, or a stored rule this version cannot read
+            print(f"collie teacher: error: {exc}", file=sys.stderr)
+            return 2
         loop = TeacherLoop(client, args.run, oracle, rate=args.rate)
         try:
             n = loop.run(until_done=args.until_done)

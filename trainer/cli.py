@@ -11,16 +11,23 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trainer.config import LABEL_METHODS, METHODS, PRESETS, Config, make_config
+from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
     from trainer.feedback.http import HttpFeedback
 
-MAIN_ARGS = ("env", "task", "method", "preset", "seed", "out")
+MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point", help="point, ant, half_cheetah, …")
-    p.add_argument("--task", default="north", help="north, right, range, hole, not_flip, range_north, hole_north")
+    p.add_argument(
+        "--task", default=None, help="north (default), right, range, hole, not_flip, range_north, hole_north"
+    )
+    p.add_argument(
+        "--task-file", default=None, help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)"
+    )
+    p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words (needs --api)")
     p.add_argument("--method", default="collie", help=f"one of: {', '.join(METHODS)}")
     p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
     p.add_argument("--seed", type=int, default=0)
@@ -63,14 +70,21 @@ def config_from_args(args: argparse.Namespace) -> Config:
         for f in dataclasses.fields(Config)
         if f.name not in ("env", "preset", "extra")
     }
-    out = args.out or f"runs/{args.env}-{args.task}-{args.method}-s{args.seed}"
-    overrides["out"] = out
+    if args.instruction is not None and args.task is not None:
+        raise ValueError("--instruction is for a run without a rule: drop --task (or drop --instruction)")
+    if args.instruction is not None:
+        overrides["task"] = INSTRUCTION_TASK
+    elif args.task_file is not None and args.task is None:
+        overrides["task"] = ""  # the file names its task
+    name = overrides["task"] or (Path(args.task_file).stem if args.task_file else "north")
+    overrides["out"] = args.out or f"runs/{args.env}-{name}-{args.method}-s{args.seed}"
     return make_config(args.preset, args.env, **overrides)
 
 
-def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
+def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple[HttpFeedback, RunRule]:
     """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
-    (a restarted trainer rebuilds D0/D1/D2 from it), else create a run and remember it."""
+    (a restarted trainer rebuilds D0/D1/D2 from it; it follows the rule the service holds), else
+    create a run with `rule` and remember it."""
     from collie.schemas import MAX_FEEDBACK_TIMEOUT_S, EnvDims, RunCreate
     from trainer.envs import make_env
     from trainer.feedback.http import HttpFeedback
@@ -86,7 +100,13 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, args.token, int(run_id), **kwargs)
+        held = source.client.run(source.run_id)
+        rule = from_stored(held.task_definition, held.instruction)
+        if rule.task is None and rule.instruction is None:
+            raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")
     else:
+        if rule.task is not None and rule.definition is None:
+            raise ValueError(f"task {cfg.task!r} is a rule function: only a task painted from regions can travel")
         env = make_env(cfg.env, episode_steps=cfg.episode_steps)
         dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length, skill_dim=cfg.skill_dim)
         env.close()
@@ -99,11 +119,13 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
             n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0,
             epochs_total=cfg.epochs,
             feedback_timeout_s=args.feedback_timeout,
+            task_definition=rule.definition,
+            instruction=rule.instruction,
         )
         source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
-    return source
+    return source, rule
 
 
 def run(args: argparse.Namespace) -> int:
@@ -122,8 +144,14 @@ def run(args: argparse.Namespace) -> int:
                 cfg = Config.from_stored(stored)
         from trainer.loop import Trainer
 
-        feedback = http_feedback(args, cfg) if args.api else None
-        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress)
+        # a resumed run keeps the rule it started with, whatever its file says now
+        rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)
+        if rule.definition is not None:
+            cfg.task = rule.definition.name
+        feedback = None
+        if args.api:
+            feedback, rule = http_feedback(args, cfg, rule)
+        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, rule=rule)
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
@@ -134,13 +162,14 @@ def run(args: argparse.Namespace) -> int:
         "safe_ratio",
         "composite_coverage",
         "weighted_composite_coverage",
+        "n_bins",
         "n_labels",
         "wall_s",
         "status",
     )
     print(json.dumps({k: summary.get(k) for k in keys}))
     print(
-        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
-        f"plots/, tb/, checkpoint.pt)"
+        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, task.json, skills_latest.png, guidance_latest.png, "
+        f"curves.png, plots/, tb/, checkpoint.pt)"
     )
     return 0 if summary.get("status") in ("finished", "stopped") else 1

@@ -18,6 +18,7 @@ from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
 
 METHODS = ("collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn")
 LABEL_METHODS = ("collie", "dodont", "ddg")  # methods that ask the feedback source for labels
+RULE_METHODS = ("oracle",)  # methods that read the task rule itself (impossible without one)
 DISTANCES = ("temporal", "l2")
 REWARD_FORMS = ("multiplicative", "additive")
 ENCODERS = ("separate", "shared")
@@ -33,6 +34,8 @@ class Config:
     # what to run
     env: str = "point"
     task: str = "north"
+    task_file: str = ""  # a task rule from a file (docs/tasks.md); its task's name becomes `task`
+    instruction: str = ""  # no rule: people label by this intent (task "instruction"); docs/tasks.md
     method: Literal["collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn"] = "collie"
     preset: str = "cpu"
     seed: int = 0
@@ -97,6 +100,12 @@ class Config:
                 raise ValueError(msg)
 
         need(self.method in METHODS, f"unknown method {self.method!r}; valid: {', '.join(METHODS)}")
+        need(not (self.instruction and self.task_file), "give --instruction (no rule) or --task-file, not both")
+        need(
+            not (self.instruction and self.method in RULE_METHODS),
+            f"method {self.method!r} trains on a task rule, and a run with only an --instruction has none; "
+            f"use one that learns from people's labels: {', '.join(LABEL_METHODS)}",
+        )
         need(
             self.query_strategy in QUERY_STRATEGIES,
             f"unknown query strategy {self.query_strategy!r}; valid: {', '.join(QUERY_STRATEGIES)}",

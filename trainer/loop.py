@@ -23,9 +23,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from collie.tasks import get_task
 from trainer.checkpoint import load_checkpoint, save_checkpoint
-from trainer.config import LABEL_METHODS, Config
+from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
@@ -35,13 +34,15 @@ from trainer.metra import TorchBatch, WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
 from trainer.obs_noise import NoisyObservations
 from trainer.obs_stats import observation_stats
-from trainer.plots import plot_curves, plot_skill_trajectories
+from trainer.plots import plot_curves, plot_guidance_map, plot_skill_trajectories
 from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
+from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 
 CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
+CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
 
 
 class TrainingDiverged(RuntimeError):
@@ -55,12 +56,20 @@ def pick_device(name: str) -> torch.device:
 
 
 class Trainer:
-    def __init__(self, cfg: Config, feedback: FeedbackSource | None = None, progress: bool = True) -> None:
+    def __init__(
+        self, cfg: Config, feedback: FeedbackSource | None = None, progress: bool = True, rule: RunRule | None = None
+    ) -> None:
         cfg.validate()
         self.cfg, self.progress = cfg, progress
         self.out = Path(cfg.out)
-        # Fails early with the list of task names; the seed places random scenery (car hazards).
-        self.task = get_task(cfg.task, cfg.env, layout_seed=cfg.seed)
+        # The rule (None with only an instruction): fails early with the list of task names; the
+        # seed places random scenery (car hazards). A run on the service passes the one it holds.
+        self.rule = rule or choose_rule(cfg)
+        self.task = self.rule.task
+        if self.task is None and cfg.method in RULE_METHODS:  # e.g. a service run that holds only an instruction
+            raise ValueError(f"method {cfg.method!r} trains on a task rule, and this run has none (an instruction)")
+        if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
+            raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
         if cfg.threads > 0:
             torch.set_num_threads(cfg.threads)
@@ -250,7 +259,7 @@ class Trainer:
         seeds = [c.seed * 1000 + i for i in range(c.eval_trajectories)]
         traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, deterministic=True)
         xy = list(traj.xy.astype(np.float64))
-        metrics = coverage_metrics(
+        metrics = coverage_metrics(  # with no rule: only the rule-free ones (visited bins, states)
             xy,
             list(traj.pitch.astype(np.float64)),
             self.task,
@@ -259,12 +268,15 @@ class Trainer:
             bin_rule=c.bin_rule,
         ) | travel_metrics(xy)
         d0, d1, d2 = self.labelled.counts()
+        w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
         record: dict[str, Any] = {
             "epoch": self.epoch,
             "env_steps": self.env_steps,
             **{k: float(v) for k, v in metrics.items()},
             "n_labels": len(self.labelled),
             "n_labelled_states": [d0, d1, d2],
+            **self.labels_per_class(),
+            **self.guidance_summary(w),
             "lambda": float(self.agent.log_lambda.detach().exp()),
             "alpha": float(self.agent.log_alpha.detach().exp()),
             "beta": self.beta(),
@@ -273,7 +285,7 @@ class Trainer:
         }
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
-        self.plot(traj, record)
+        self.plot(traj, record, w)
         np.savez_compressed(
             self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
         )  # the final skills' paths, for `collie report` figures
@@ -284,11 +296,23 @@ class Trainer:
             "xy": np.round(traj.xy[:, ::2], 3).tolist(),
             "qpos": np.round(traj.qpos[:, ::2], 4).tolist(),
         }  # the labeling UI's watch mode replays these
-        w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
         if w is not None:
             rollouts["w"] = np.round(w, 2).tolist()
         self.feedback.report("rollouts", rollouts)
         return record
+
+    def labels_per_class(self) -> dict[str, int]:
+        """Labelled segments per class (a rule-free metric, as is n_labels)."""
+        counts = dict.fromkeys((0, 1, 2), 0)
+        for segment in self.labelled.segments.values():
+            counts[int(segment.label)] += 1
+        return {f"n_labels_{name}": counts[c] for c, name in ((0, "bad"), (1, "neutral"), (2, "good"))}
+
+    def guidance_summary(self, w: np.ndarray | None) -> dict[str, float]:
+        """w(s) over the evaluation rollouts (rule-free): mean, min, max; nothing while w ≡ 1."""
+        if w is None or w.size == 0:
+            return {}
+        return {"w_mean": float(w.mean()), "w_min": float(w.min()), "w_max": float(w.max())}
 
     def guidance_along(self, obs: np.ndarray) -> np.ndarray | None:
         """w_e(s) = (1 − β_e)·w(s) + β_e (Eq. 8, smoothed as in Section 4.5) at states `obs`
@@ -312,12 +336,13 @@ class Trainer:
             )
         return ((1.0 - beta) * w + beta).cpu().numpy().astype(np.float64).reshape(obs.shape[:2])
 
-    def plot(self, traj: Trajectories, record: dict[str, Any]) -> None:
+    def plot(self, traj: Trajectories, record: dict[str, Any], w: np.ndarray | None = None) -> None:
         labelled = [(self.segment_xy[q], s.label) for q, s in self.labelled.segments.items() if q in self.segment_xy]
-        title = (
-            f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
-            f"safe cov {record['safe_coverage']:.0f} · ratio {record['safe_ratio']:.2f}"
-        )
+        title = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · "
+        if "safe_coverage" in record:
+            title += f"safe cov {record['safe_coverage']:.0f} · ratio {record['safe_ratio']:.2f}"
+        else:  # no rule: what needs none
+            title += f"{record['n_bins']} bins visited · {record['n_labels']} labels"
         path = self.out / "plots" / f"skills_epoch{self.epoch:05d}.png"
         plot_skill_trajectories(
             list(traj.xy),
@@ -329,6 +354,11 @@ class Trainer:
             labelled=labelled,
         )
         (self.out / "skills_latest.png").write_bytes(path.read_bytes())
+        if w is not None and self.env.position_dims == 2:  # the map coloured by w(s) (needs no rule)
+            guidance = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · w(s)"
+            xy = list(traj.xy[:, ::2])  # the states w was computed at
+            out = self.out / "guidance_latest.png"
+            plot_guidance_map(xy, w, out, task=self.task, title=guidance, labelled=labelled)
 
     # ---- persistence ---------------------------------------------------------------------
     def wall_s(self) -> float:
@@ -422,6 +452,7 @@ class Trainer:
         else:
             (self.out / "metrics.jsonl").write_text("")
         (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
+        (self.out / TASK_JSON).write_text(json.dumps(self.rule.to_json(), indent=2))
         self.rebuild_from_source()
         self._writer = self._tensorboard()
         self.feedback.report("status", {"status": "training", "epoch": self.epoch})
@@ -455,8 +486,8 @@ class Trainer:
                     record = self.evaluate()
                     bar.set_postfix(
                         labels=len(self.labelled),
-                        safe_cov=record["safe_coverage"],
-                        ratio=f"{record['safe_ratio']:.2f}",
+                        safe_cov=record.get("safe_coverage", "-"),  # absent without a rule
+                        bins=record["n_bins"],
                         lam=f"{record['lambda']:.1f}",
                     )
                 if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:

@@ -18,6 +18,9 @@ written with a `visited_` and a `corner_` prefix. Numpy only.
 Scores: safe coverage +1 per safe (good or neutral) bin, −1 per bad bin; safe ratio = safe bins /
 visited bins; composite +1 good, +1 neutral, −1 bad (equal to safe coverage by definition, kept
 under the paper's name); weighted composite +2 good, +1 neutral, −1 bad.
+
+A run without a rule (only an instruction) gets only what needs none: the visited bins (state
+coverage, n_bins) and n_states; the rule's scores are left out, not zeroed.
 """
 
 from __future__ import annotations
@@ -113,13 +116,14 @@ def _corner_scores(
 def coverage_metrics(
     xy_trajs: Sequence[np.ndarray],
     pitch_trajs: Sequence[np.ndarray] | None,
-    task: Task,
+    task: Task | None,
     bin_size: float = 1.0,
     position_dims: int = 2,
     bin_rule: str = "visited",
 ) -> dict[str, float]:
     """Safe / composite state coverage and safe ratio of the visited bins (Appendix E), by
-    `bin_rule`, plus both rules' figures under `visited_*` and `corner_*`."""
+    `bin_rule`, plus both rules' figures under `visited_*` and `corner_*`; with no rule (`task`
+    None), only the visited bins and states."""
     if bin_rule not in BIN_RULES:
         raise ValueError(f"unknown bin rule {bin_rule!r}; valid: {', '.join(BIN_RULES)}")
     positions = [_positions(t) for t in xy_trajs]
@@ -127,6 +131,9 @@ def coverage_metrics(
     pitch = None
     if pitch_trajs is not None:
         pitch = np.concatenate([np.asarray(p, dtype=float).reshape(-1) for p in pitch_trajs] or [np.zeros(0)])
+    if task is None:
+        bins, _ = _unique_bins(xy, bin_size, position_dims)
+        return {"n_bins": len(bins), "n_states": len(xy)}
     classes = task.classify(xy, pitch)
     bins, inverse = _unique_bins(xy, bin_size, position_dims)
     _, per_bin = bin_classes(xy, classes, bin_size, position_dims)

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import ListedColormap
+from matplotlib.colors import LinearSegmentedColormap, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -57,11 +57,11 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
-def _extent(points: list[np.ndarray], task: Task) -> tuple[float, float, float, float]:
+def _extent(points: list[np.ndarray], task: Task | None) -> tuple[float, float, float, float]:
     """Box around the trajectories, the origin and the task's finite shapes, padded."""
     boxes = [np.array([[0.0, 0.0], [0.0, 0.0]])]
     boxes += [np.array([p.min(axis=0), p.max(axis=0)]) for p in points if len(p)]
-    for r in task.regions:
+    for r in task.regions if task is not None else ():
         if isinstance(r, Disc):  # OutsideDisc too: its edge is what matters
             c = np.asarray(r.centre)
             boxes.append(np.array([c - r.radius, c + r.radius]))
@@ -71,9 +71,9 @@ def _extent(points: list[np.ndarray], task: Task) -> tuple[float, float, float, 
     return lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad
 
 
-def _shade(ax: Axes, task: Task, x0: float, x1: float, y0: float, y1: float, one_dim: bool) -> list[int]:
-    """Shade each class's area (x only when one_dim); returns the classes shown."""
-    if task.uses_pitch:  # class is not a function of position: nothing to shade
+def _shade(ax: Axes, task: Task | None, x0: float, x1: float, y0: float, y1: float, one_dim: bool) -> list[int]:
+    """Shade each class's area (x only when one_dim); returns the classes shown. No rule: nothing."""
+    if task is None or task.uses_pitch:  # no rule, or class is not a function of position: nothing to shade
         return []
     xs = np.linspace(x0, x1, _GRID)
     if one_dim:
@@ -104,7 +104,9 @@ def _legend(ax: Axes, shaded: list[int], labels: set[int]) -> None:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
 
 
-def _draw_xy(ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled) -> list[int]:
+def _draw_xy(
+    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
+) -> list[int]:
     points = [t[:, :2] for t in trajs] + [np.asarray(s, dtype=float)[:, :2] for s, _ in labelled]
     x0, x1, y0, y1 = _extent(points, task)
     shaded = _shade(ax, task, x0, x1, y0, y1, one_dim=False)
@@ -119,7 +121,7 @@ def _draw_xy(ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task,
 
 
 def _draw_x_over_time(
-    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task, labelled: Labelled
+    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
 ) -> list[int]:
     xs = [t[:, 0] for t in trajs]
     x0, x1, _, _ = _extent([np.stack([x, np.zeros_like(x)], axis=1) for x in xs], task)
@@ -136,7 +138,7 @@ def _draw_x_over_time(
 
 def plot_skill_trajectories(
     xy_trajs: Sequence[np.ndarray],
-    task: Task,
+    task: Task | None,
     path: str | pathlib.Path,
     *,
     skills: np.ndarray | None = None,
@@ -144,8 +146,9 @@ def plot_skill_trajectories(
     title: str = "",
     labelled: Sequence[tuple[np.ndarray, int]] | None = None,
 ) -> pathlib.Path:
-    """x-y paths coloured by skill over the shaded task regions (x over time when
-    position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small markers."""
+    """x-y paths coloured by skill over the shaded task regions (none for a run without a rule; x
+    over time when position_dims == 1); `labelled` = (states (H, 2), label) pairs drawn as small
+    markers coloured by the label given."""
     fig = Figure(figsize=(6, 6) if position_dims == 2 else (7, 4.5))
     draw_skill_panel(
         fig.add_subplot(), xy_trajs, task, skills=skills, position_dims=position_dims, title=title, labelled=labelled
@@ -157,7 +160,7 @@ def plot_skill_trajectories(
 def draw_skill_panel(
     ax: Axes,
     xy_trajs: Sequence[np.ndarray],
-    task: Task,
+    task: Task | None,
     *,
     skills: np.ndarray | None = None,
     position_dims: int = 2,
@@ -173,9 +176,45 @@ def draw_skill_panel(
     labelled = list(labelled or [])
     draw = _draw_xy if position_dims == 2 else _draw_x_over_time
     shaded = draw(ax, trajs, colours, task, labelled)
-    ax.set_title(title or task.name, fontsize=10)
+    ax.set_title(title or (task.name if task is not None else "no task rule"), fontsize=10)
     if legend:
         _legend(ax, shaded, {int(label) for _, label in labelled})
+
+
+def plot_guidance_map(
+    xy_trajs: Sequence[np.ndarray],
+    w: np.ndarray,
+    path: str | pathlib.Path,
+    *,
+    task: Task | None = None,
+    title: str = "",
+    labelled: Sequence[tuple[np.ndarray, int]] | None = None,
+) -> pathlib.Path:
+    """The evaluation paths coloured by the guidance w(s) ∈ [0, 2] at their states (`w`: one row
+    per path, at the same points), and the labelled states by the label given: a map that needs
+    no rule (the task's regions are shaded under it only when the run has one)."""
+    trajs = [np.asarray(t, dtype=float).reshape(len(t), -1)[:, :2] for t in xy_trajs]
+    labelled = list(labelled or [])
+    fig = Figure(figsize=(6.6, 6))
+    ax = fig.add_subplot()
+    x0, x1, y0, y1 = _extent(trajs + [np.asarray(s, float)[:, :2] for s, _ in labelled], task)
+    _shade(ax, task, x0, x1, y0, y1, one_dim=False)
+    cmap = LinearSegmentedColormap.from_list("w", [CLASS_COLOURS[BAD], CLASS_COLOURS[NEUTRAL], CLASS_COLOURS[GOOD]])
+    points = None
+    for t, wt in zip(trajs, w, strict=True):
+        ax.plot(t[:, 0], t[:, 1], color="0.7", lw=0.6, zorder=1)
+        points = ax.scatter(t[:, 0], t[:, 1], c=np.asarray(wt)[: len(t)], cmap=cmap, vmin=0, vmax=2, s=6, zorder=2)
+    for states, label in labelled:
+        st = np.asarray(states, dtype=float)
+        ax.scatter(st[:, 0], st[:, 1], s=14, marker="x", c=CLASS_COLOURS[label], linewidths=0.8, zorder=3)
+    if points is not None:
+        fig.colorbar(points, ax=ax, label="w(s)", shrink=0.8)
+    ax.set(xlim=(x0, x1), ylim=(y0, y1), xlabel="x", ylabel="y")
+    ax.set_aspect("equal")
+    ax.set_title(title or "guidance w(s)", fontsize=10)
+    _legend(ax, [], {int(label) for _, label in labelled})
+    fig.tight_layout()
+    return _save(fig, path)
 
 
 def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Path) -> pathlib.Path:

@@ -12,8 +12,8 @@ from backend.models import LabelEvent, Metrics, Rollouts, StreamEvent
 from backend.services import label_stats, runs, telemetry
 from backend.services.label_stats import SegmentCache
 from collie.dashboard_schemas import MetricHistory, RunDashboard, RunSummary
-from collie.schemas import RolloutsRead
-from collie.tasks import get_task
+from collie.schemas import RolloutsRead, RunRead
+from collie.tasks import Task, task_for_run
 
 
 def last_label_times(conn: Connection, run_ids: list[int]) -> dict[int, float]:
@@ -89,11 +89,11 @@ def latest_rollouts(conn: Connection, run_id: int) -> RolloutsRead | None:
     return None if row is None else telemetry.read_rollouts(row, states=False)
 
 
-def task_of(run: Any) -> tuple[Any, str | None]:
-    """The run's task (with its scenery for tasks placed per seed), or why there is none."""
-    seed = run.config.get("seed") if isinstance(run.config, dict) else None
+def task_of(run: RunRead) -> tuple[Task | None, str | None]:
+    """The run's rule as stored with it, or why there is none (None, None: a run with only an
+    instruction, which has no rule by design)."""
     try:
-        return get_task(run.task, run.env, layout_seed=seed if isinstance(seed, int) else None), None
+        return task_for_run(run), None
     except (ValueError, KeyError) as exc:
         return None, str(exc)
 
@@ -102,7 +102,7 @@ def run_page(conn: Connection, run_id: int, max_points: int, cache: SegmentCache
     """The whole run page from one read transaction (a consistent snapshot up to last_event_id)."""
     row = runs.row(conn, run_id)
     run = runs.get(conn, run_id)
-    task, task_error = task_of(row)
+    task, task_error = task_of(run)
     view = label_stats.view(conn, row, task, cache)
     return RunDashboard(
         run=run,
@@ -117,4 +117,4 @@ def run_page(conn: Connection, run_id: int, max_points: int, cache: SegmentCache
 
 def labeling_view(conn: Connection, run_id: int, cache: SegmentCache) -> Any:
     row = runs.row(conn, run_id)
-    return label_stats.view(conn, row, task_of(row)[0], cache)
+    return label_stats.view(conn, row, task_of(runs.get(conn, run_id))[0], cache)

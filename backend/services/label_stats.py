@@ -10,6 +10,7 @@ a refresh reads only ids, labels and label events."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import statistics
 import threading
@@ -191,6 +192,20 @@ _VOTES = (
     .join(Principal, Principal.id == LabelVote.labeler_id)
     .join(LabelEvent, LabelEvent.id == LabelVote.event_id)
 )
+def between_labelers(votes: list[Vote]) -> tuple[float | None, int]:
+    """Agreement between labelers, which needs no rule: over the queries that two or more distinct
+    labelers hold a label on now (each one's current vote; gold copies left out), the share of
+    labeler pairs that gave the same label; and how many such queries there are."""
+    per_query: dict[int, list[int]] = {}
+    for v in votes:
+        if v.gold_answer is None:
+            per_query.setdefault(v.query_pk, []).append(v.value)
+    same = pairs = 0
+    shared = [values for values in per_query.values() if len(values) >= 2]
+    for values in shared:
+        for a, b in itertools.combinations(values, 2):
+            same, pairs = same + (a == b), pairs + 1
+    return share(same, pairs), len(shared)
 
 
 def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> LabelingView:
@@ -211,6 +226,7 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
         .join(Principal, Principal.id == LabelEvent.labeler_id)
         .join(Query, Query.id == LabelEvent.query_pk)
         .where(LabelEvent.run_id == run.id)
+        .order_by(LabelEvent.id)
     ).all()
     votes = [Vote(**r._mapping) for r in conn.execute(_VOTES.where(Query.run_id == run.id))]
     real_pks = {v.query_pk for v in votes if v.gold_answer is None}
@@ -223,6 +239,7 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
     recent = sum(t >= time.time() - LABEL_RATE_WINDOW_S for t in label_times)
     units = list(units_of([v for v in votes if v.gold_answer is None]).values())
     disagreeing = disagreements(votes, oracle, segments)
+    pairwise, shared = between_labelers(votes)
     stats = LabelingStats(
         queue=runs.get(conn, run.id).queue,
         n_labels=run.n_labels,
@@ -238,6 +255,8 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
         alpha_queries=sum(len(u) >= 2 for u in units),
         n_disagreements=len(disagreeing),
         disagreements=disagreeing[:MAX_DISAGREEMENTS],
+        between_labelers=pairwise,
+        shared_queries=shared,
     )
     return LabelingView(
         labeling=stats,

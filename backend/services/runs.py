@@ -23,8 +23,24 @@ from collie.schemas import (
     RunRead,
     StatusUpdate,
 )
+from collie.tasks import get_task, to_definition
 
 _CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "stop": "stop"}
+
+
+def stored_definition(spec: RunCreate) -> dict[str, Any] | None:
+    """The rule the run keeps: the one posted, else the built-in task of that name (package code,
+    not a user's file); None for an instruction-only run or a name no built-in has."""
+    if spec.task_definition is not None:
+        return spec.task_definition.to_json()
+    if spec.instruction is not None:
+        return None
+    seed = spec.config.get("seed")
+    try:
+        task = get_task(spec.task, spec.env, layout_seed=seed if isinstance(seed, int) else None)
+        return to_definition(task, source="builtin").to_json()
+    except ValueError:  # an unknown name: the run has no rule the clients can judge by
+        return None
 
 
 def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
@@ -46,6 +62,8 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
             feedback_timeout_s=spec.feedback_timeout_s,
             redundancy=spec.redundancy,
             gold_rate=spec.gold_rate,
+            task_definition=stored_definition(spec),
+            instruction=spec.instruction,
             last_event_id=0,
             created_by=caller.id,
             created_at=now,
@@ -103,6 +121,8 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         feedback_timeout_s=row.feedback_timeout_s,
         redundancy=row.redundancy,
         gold_rate=row.gold_rate,
+        task_definition=row.task_definition,
+        instruction=row.instruction,
     )
 
 

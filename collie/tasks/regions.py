@@ -155,3 +155,41 @@ class PitchBeyond(Region):
 
     def params(self) -> dict[str, Any]:
         return {"limit": float(self.limit)}
+
+
+@dataclass(frozen=True)
+class Polygon(Region):
+    """Inside: the even-odd interior of the closed polygon through `vertices` (x-y, in order)."""
+
+    vertices: tuple[tuple[float, float], ...]
+    KIND: ClassVar[str] = "polygon"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "vertices", tuple((float(x), float(y)) for x, y in self.vertices))
+        if len(self.vertices) < 3:
+            raise ValueError(f"a polygon needs at least 3 vertices, got {len(self.vertices)}")
+        if _twice_area(np.asarray(self.vertices)) == 0:
+            raise ValueError("the polygon's vertices enclose no area (all on one line)")
+
+    def signed_distance(self, xy: np.ndarray, pitch: np.ndarray | None) -> np.ndarray:
+        px, py = xy[:, 0], xy[:, 1]
+        nearest = np.full(len(xy), np.inf)
+        inside = np.zeros(len(xy), dtype=bool)
+        v = np.asarray(self.vertices)
+        for (ax, ay), (bx, by) in zip(v, np.roll(v, -1, axis=0), strict=True):  # one edge at a time: O(N) memory
+            ex, ey = bx - ax, by - ay
+            t = np.clip(((px - ax) * ex + (py - ay) * ey) / (ex * ex + ey * ey or 1.0), 0.0, 1.0)
+            nearest = np.minimum(nearest, np.hypot(px - (ax + t * ex), py - (ay + t * ey)))
+            straddles = (ay > py) != (by > py)  # the edge crosses the horizontal ray from the point
+            x_cross = ax + (py - ay) * ex / np.where(straddles, ey, 1.0)
+            inside ^= straddles & (px < x_cross)
+        return np.where(inside, -nearest, nearest)
+
+    def params(self) -> dict[str, Any]:
+        return {"vertices": [_xy_pair(p) for p in self.vertices]}
+
+
+def _twice_area(v: np.ndarray) -> float:
+    """Shoelace formula; 0 for vertices on one line."""
+    return float(np.dot(v[:, 0], np.roll(v[:, 1], -1)) - np.dot(v[:, 1], np.roll(v[:, 0], -1)))

@@ -13,6 +13,10 @@ const PANELS = [
   { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss"), help: "training losses of the representation φ, the critics and the policy" },
   { title: "epochs / min", keys: ["epochs_per_min"], help: "training speed, wall clock between evaluations (pauses included)" },
   { title: "labels", keys: ["n_labels"], help: "labels the trainer has used so far" },
+  // rule-free: what a run without a task rule (an instruction) still measures
+  { title: "state coverage (visited bins)", keys: ["n_bins"], help: "bins the evaluation states visit (needs no rule)" },
+  { title: "labels per class", keys: ["n_labels_bad", "n_labels_neutral", "n_labels_good"], help: "labels the trainer holds, by class" },
+  { title: "guidance w(s) over evaluations", keys: ["w_mean", "w_min", "w_max"], help: "the guidance weight (Eq. 8) along the evaluation rollouts" },
 ];
 const COLUMNS = 2;
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];

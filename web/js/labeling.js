@@ -20,7 +20,8 @@ const COLUMN_HELP = [
   ["gold", "gold segments (the rule knows the answer, never sent to the trainer) they labelled right / labelled"],
 ];
 
-export function renderLabeling(element, view) {
+// `ruleless`: the run has no task rule (only an instruction), so there is no oracle to agree with.
+export function renderLabeling(element, view, ruleless = false) {
   const s = view.labeling;
   const rows = s.labelers.map((l) => `<tr data-labeler="${escapeHtml(l.name)}">
       <td>${escapeHtml(l.name)}</td><td class="labels">${l.labels}</td><td>${l.skips}</td>
@@ -45,12 +46,15 @@ export function renderLabeling(element, view) {
       <dt>last label</dt><dd><span data-time="${s.last_label_at ?? ""}" class="since">${ago(s.last_label_at)}</span>
           <p class="explain">when the latest label arrived</p></dd>
       <dt>oracle agrees</dt>
-      <dd id="m-oracle">${s.judged ? `${percent(s.agreement)} of ${s.judged} labels` : "nothing to judge yet"}
+      <dd id="m-oracle">${ruleless ? "no task rule (instruction only)" : s.judged ? `${percent(s.agreement)} of ${s.judged} labels` : "nothing to judge yet"}
           <p class="explain">share of counted labels the task rule gives too, where the rule can judge</p></dd>
       <dt>labelers agree</dt>
       <dd id="m-alpha">${s.alpha == null ? (s.alpha_queries ? "α undefined (every label the same)" : "no query with two labels yet")
         : `α = ${num(s.alpha, 2)} on ${s.alpha_queries} queries`}
           <p class="explain">Krippendorff's α on queries with two labels or more: 1 full agreement, 0 what chance gives, below 0 worse</p></dd>
+      <dt>labeler pairs agree</dt>
+      <dd id="between-labelers">${s.shared_queries ? `${percent(s.between_labelers)} on ${s.shared_queries} shared segments` : "no segment labelled by two yet"}
+          <p class="explain">share of labeler pairs that gave the same label (needs no rule)</p></dd>
     </dl>
     ${rows ? `<table id="labelers-stats"><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th><th>α</th><th>gold</th></tr></thead>
       <tbody>${rows}</tbody></table>

@@ -32,6 +32,8 @@ export function regionPath(region, box, oneD) {
       return oneD ? null : circle(region.centre, region.radius);
     case "outside_disc":
       return oneD ? null : everything + circle(region.centre, region.radius); // even-odd: a hole
+    case "polygon":
+      return oneD ? null : polygon(region.vertices);
     case "wedge_north": {
       if (oneD) return null;
       const [ax, ay] = region.apex;

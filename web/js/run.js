@@ -49,6 +49,10 @@ export class RunPage {
     this.setWatchLink(watchUrl, runId);
     this.task = page.task;
     this.showRun(page.run);
+    const rule = this.root.querySelector("#run-rule"); // the instruction (no rule) or the rule's own words
+    rule.textContent = page.run.instruction != null ? `Instruction (no task rule): ${page.run.instruction}`
+      : page.run.task_definition ? page.run.task_definition.description : "";
+    rule.hidden = !rule.textContent;
     this.renderLabeling(page);
     await Promise.all([
       this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
@@ -104,7 +108,7 @@ export class RunPage {
   }
 
   renderLabeling(view) {
-    renderLabeling(this.root.querySelector("#labeling-body"), view);
+    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
     renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task);
   }
 

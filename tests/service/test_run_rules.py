@@ -1,0 +1,86 @@
+"""A run's rule on the service: stored as posted (or the built-in's, by name), or only an
+instruction; a malformed definition is refused; a database from before definitions upgrades and
+its runs are still judged by their built-in task."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import httpx
+from alembic import command
+from sqlalchemy import text
+
+from backend.db import Database
+from backend.main import create_app
+from backend.migrate import alembic_config, upgrade
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.task_schemas import TaskDefinition
+from collie.tasks import get_task, task_for_run, to_definition
+
+from .conftest import DIMS, TOKENS, make_run_spec, settings_for
+
+POLYGON = {
+    "name": "pit",
+    "description": "Keep out of the pit.",
+    "regions": [{"kind": "polygon", "desirability": 0, "vertices": [[0, 0], [2, 0], [0, 2]]}],
+}
+
+
+def test_a_builtin_name_stores_its_definition(trainer: CollieClient, labeler: CollieClient) -> None:
+    run = trainer.create_run(make_run_spec(task="range"))
+    assert run.task_definition == to_definition(get_task("range", "point"), source="builtin")
+    seen = labeler.run(run.id)  # every client reads the same stored copy
+    assert seen.task_definition == run.task_definition and seen.instruction is None
+    unknown = trainer.create_run(make_run_spec(task="no_such_task"))
+    assert unknown.task_definition is None and unknown.instruction is None
+
+
+def test_a_posted_definition_or_an_instruction_is_kept_as_posted(trainer: CollieClient) -> None:
+    definition = TaskDefinition.model_validate(POLYGON)
+    run = trainer.create_run(make_run_spec(task="pit").model_copy(update={"task_definition": definition}))
+    assert run.task_definition == definition and task_for_run(run).regions[0].kind == "polygon"  # type: ignore[union-attr]
+    words = trainer.create_run(make_run_spec(task="instruction").model_copy(update={"instruction": "stay west"}))
+    assert words.instruction == "stay west" and words.task_definition is None and task_for_run(words) is None
+    listed = {r.id: r for r in trainer.runs()}
+    assert listed[run.id].task_definition == definition and listed[words.id].instruction == "stay west"
+
+
+def test_a_malformed_definition_is_refused(live: BackgroundServer) -> None:
+    body = make_run_spec().model_dump(mode="json")
+    headers = {"Authorization": f"Bearer {TOKENS['trainer']}"}
+    for broken in (
+        {**POLYGON, "regions": [{"kind": "circle", "desirability": 0}]},
+        {**POLYGON, "regions": [{"kind": "polygon", "desirability": 0, "vertices": [[0, 0], [1, 1], [2, 2]]}]},
+        {"name": "x", "regions": []},
+    ):
+        response = httpx.post(f"{live.url}/api/runs", json={**body, "task_definition": broken}, headers=headers)
+        assert response.status_code == 422, response.text
+    both = {**body, "task_definition": POLYGON, "instruction": "stay west"}
+    assert httpx.post(f"{live.url}/api/runs", json=both, headers=headers).status_code == 422
+
+
+def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path: Path) -> None:
+    path = tmp_path / "old.db"
+    db = Database(f"sqlite:///{path}")
+    config = alembic_config(db.url)
+    with db.engine.begin() as conn:
+        config.attributes["connection"] = conn
+        command.upgrade(config, "0002")
+        conn.execute(
+            text("INSERT INTO principals (id, name, role, token_sha256, created_at) VALUES (1, 'o', 'trainer', 'x', 0)")
+        )
+        conn.execute(
+            text(
+                "INSERT INTO runs (id, env, task, method, config, dims, status, control, epoch, n_labels,"
+                " last_event_id, created_by, created_at, updated_at) VALUES (1, 'point', 'hole', 'collie', '{}',"
+                " :dims, 'training', 'run', 0, 0, 0, 1, 0, 0)"
+            ),
+            {"dims": DIMS.model_dump_json()},
+        )
+    upgrade(db.engine)
+    db.dispose()
+    with BackgroundServer(create_app(settings_for(path))) as server, CollieClient(server.url, TOKENS["labeler"]) as c:
+        old = c.run(1)
+    assert old.task_definition is None and old.instruction is None
+    assert task_for_run(old).to_dict() == get_task("hole", "point").to_dict()  # type: ignore[union-attr]
