@@ -120,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
                 cfg = Config(**stored)
+        from trainer.threads import apply_openmp_env, resolve_threads
+
+        apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer
 
         feedback = http_feedback(args, cfg) if args.api else None

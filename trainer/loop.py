@@ -39,6 +39,7 @@ from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
+from trainer.threads import resolve_threads
 
 CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
 
@@ -61,13 +62,13 @@ class Trainer:
         # Fails early with the list of task names; the seed places random scenery (car hazards).
         self.task = get_task(cfg.task, cfg.env, layout_seed=cfg.seed)
         self.device = pick_device(cfg.device)
-        if cfg.threads > 0:
-            torch.set_num_threads(cfg.threads)
+        torch.set_num_threads(resolve_threads(cfg.threads, cfg.hidden))  # fair share on a busy machine
         self.rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
-        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
-        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
+        vec = dict(episode_steps=cfg.episode_steps, layout_seed=cfg.seed, physics_threads=cfg.physics_threads or None)
+        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, **vec)
+        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, **vec)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
             self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
         self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
