@@ -8,7 +8,11 @@
         for each gradient step: w_e(s) (Eq. 8 + smoothing), then φ, λ and π            (lines 9–13)
 
 The loop talks to one `FeedbackSource` and does not know who labels. It evaluates every
-`eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints.
+`eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints:
+networks, optimisers, RNG and labelled sets in checkpoint.pt, the replay as append-only chunks
+(trainer/replay_log.py). SIGTERM or SIGINT stops the run at the end of the current epoch (at
+once while it waits for labels or a pause) and writes a final checkpoint; `--resume` continues
+exactly from it.
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ from __future__ import annotations
 import json
 import math
 import random
+import signal
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -37,6 +43,7 @@ from trainer.obs_noise import NoisyObservations
 from trainer.plots import plot_curves, plot_skill_trajectories
 from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
+from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
 from trainer.threads import resolve_threads
@@ -86,6 +93,7 @@ class Trainer:
             self.env.nv,
             self.env.obs_dtype,
         )
+        self.replay_log = ReplayLog(self.out / "replay", self.replay)
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
@@ -95,6 +103,8 @@ class Trainer:
         self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
+        self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
+        self._waiting = False  # blocked on labels or a pause: a signal stops at once
 
     # ---- guidance -------------------------------------------------------------------------
     def beta(self) -> float:
@@ -186,7 +196,11 @@ class Trainer:
         segments = self.make_segments()
         for s in segments:
             self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
-        events = self.feedback.collect(self.session, self.epoch, segments)
+        self._waiting = True
+        try:
+            events = self.feedback.collect(self.session, self.epoch, segments)
+        finally:
+            self._waiting = False
         self.apply_labels(events)
         if self.first_feedback_epoch is None:
             self.first_feedback_epoch = self.epoch
@@ -343,7 +357,6 @@ class Trainer:
             "first_feedback_epoch": self.first_feedback_epoch,
             "wall_s": self.wall_s(),
             "agent": self.agent.state_dict(),
-            "replay": self.replay.state_dict(),
             "labelled": self.labelled.state_dict(),
             "asked": self.asked,
             "segment_xy": self.segment_xy,
@@ -360,7 +373,10 @@ class Trainer:
         self.epoch, self.env_steps, self.session = s["epoch"], s["env_steps"], s["session"]
         self.first_feedback_epoch, self.wall_before = s["first_feedback_epoch"], s["wall_s"]
         self.agent.load_state_dict(s["agent"])
-        self.replay.load_state_dict(s["replay"])
+        if "chunks" in s["replay"]:
+            self.replay_log.restore(s["replay"])
+        else:  # a checkpoint from before the replay log held the whole replay
+            self.replay.load_state_dict(s["replay"])
         self.labelled.load_state_dict(s["labelled"])
         self.asked, self.segment_xy, self.last_info = s["asked"], s["segment_xy"], s["last_info"]
         if self.instruction is not None and s.get("instruction") is not None:
@@ -375,7 +391,23 @@ class Trainer:
             rng_teacher.bit_generator.state = s["teacher_rng"]
 
     def checkpoint(self) -> None:
-        save_checkpoint(self.out / "checkpoint.pt", self.state_dict())
+        """checkpoint.pt without the replay, whose new trajectories go to one more chunk first."""
+        state = self.state_dict()
+        state["replay"] = self.replay_log.flush()
+        save_checkpoint(self.out / "checkpoint.pt", state)
+        self.replay_log.prune()
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        if self._signalled is not None:  # a second signal: stop now, without a checkpoint
+            raise KeyboardInterrupt
+        self._signalled = signum
+        if self._waiting:
+            raise StopRequested(f"stopped by signal {signal.Signals(signum).name}")
+
+    def _install_signal_handlers(self) -> dict[int, Any]:
+        if threading.current_thread() is not threading.main_thread():
+            return {}  # signals reach only the main thread; an embedded trainer keeps its host's handlers
+        return {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
 
     def resume(self) -> None:
         state = load_checkpoint(self.out / "checkpoint.pt")
@@ -404,9 +436,13 @@ class Trainer:
         if wish == "pause":
             self.feedback.report("status", {"status": "paused", "epoch": self.epoch})
             bar.set_description("paused")
-            while wish == "pause":
-                time.sleep(0.5)
-                wish = self.feedback.control()
+            self._waiting = True
+            try:
+                while wish == "pause":
+                    time.sleep(0.5)
+                    wish = self.feedback.control()
+            finally:
+                self._waiting = False
             if wish != "stop":
                 self.feedback.report("status", {"status": "training", "epoch": self.epoch})
         return wish != "stop"
@@ -435,6 +471,7 @@ class Trainer:
             desc="training",
         )
         status, record = "finished", None
+        previous_handlers = self._install_signal_handlers()
         try:
             while self.epoch < self.cfg.epochs:
                 if not self.wait_while_paused(bar):
@@ -462,9 +499,14 @@ class Trainer:
                     self.checkpoint()
                 bar.update(1)
                 self.report_progress()
+                if self._signalled is not None:
+                    status = "stopped"
+                    break
         except StopRequested:
             status = "stopped"
         finally:
+            for sig, handler in previous_handlers.items():
+                signal.signal(sig, handler)
             bar.close()
             if self._writer is not None:
                 self._writer.close()
