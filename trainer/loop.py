@@ -32,17 +32,18 @@ import torch
 from collie.tasks import get_task
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, Config
+from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.methods import build_agent
-from trainer.metra import TorchBatch, WeightFn
+from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics
 from trainer.obs_noise import NoisyObservations
 from trainer.plots import plot_curves, plot_skill_trajectories
 from trainer.query import select_queries
-from trainer.replay import Batch, TrajectoryReplay
+from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
@@ -94,6 +95,18 @@ class Trainer:
             self.env.obs_dtype,
         )
         self.replay_log = ReplayLog(self.out / "replay", self.replay)
+        task = self.task
+
+        def rule(xy: np.ndarray, pitch: np.ndarray) -> np.ndarray:  # g(s) per stored state, for the Oracle
+            return task.classify(xy.reshape(-1, 2), pitch.reshape(-1)).reshape(pitch.shape)
+
+        self.device_replay = DeviceReplay(
+            self.replay,
+            self.normalise,
+            self.prior.reward_direction,
+            self.device,
+            rule=rule if cfg.method == "oracle" else None,
+        )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
@@ -111,18 +124,17 @@ class Trainer:
         span = self.cfg.n_sessions * self.cfg.feedback_every
         return smoothing_beta(self.epoch, self.first_feedback_epoch, span, self.cfg.k_beta)
 
-    def weight_fn(self, batch: Batch) -> WeightFn | None:
+    def weight_fn(self, sampled: DeviceBatch) -> WeightFn | None:
         """w for this batch: METRA/LSD/DIAYN/DDG* 1, Oracle the task rule g(s), DoDont* 2ψ(s),
-        COLLIE Eq. 8 smoothed."""
+        COLLIE Eq. 8 smoothed. Everything stays on the device."""
         at_next = self.cfg.w_at == "next"
         if self.cfg.method in ("metra", "lsd", "diayn", "ddg"):
             return None
-        if self.cfg.method == "dodont":
-            obs = self.normalise(batch.next_obs if at_next else batch.obs)
-            return dodont_weight(self.instruction, obs, self.device)
+        b = sampled.batch
+        if self.cfg.method == "dodont":  # ψ reads the batch's own normalised tensors
+            return dodont_weight(self.instruction, b.next_obs if at_next else b.obs, self.device)
         if self.cfg.method == "oracle":
-            xy, pitch = (batch.next_xy, batch.next_pitch) if at_next else (batch.xy, batch.pitch)
-            g = torch.as_tensor(self.task.classify(xy, pitch), dtype=torch.float32, device=self.device)
+            g = sampled.next_rule if at_next else sampled.rule
             return lambda _s, _n: g
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:
@@ -222,30 +234,18 @@ class Trainer:
                 self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
 
     # ---- learning (Algorithm 1, lines 9–13) -----------------------------------------------
-    def to_torch(self, b: Batch) -> TorchBatch:
-        def t(x: np.ndarray) -> torch.Tensor:
-            return torch.as_tensor(x, dtype=torch.float32, device=self.device)
-
-        return TorchBatch(
-            t(self.normalise(b.obs)),
-            t(self.normalise(b.next_obs)),
-            t(b.action),
-            t(b.skill),
-            t(self.prior.reward_direction(b.skill)),
-        )
-
     def train_epoch(self) -> None:
         if self.replay.transitions < self.cfg.start_transitions:
             return
         if self.instruction is not None:  # DoDont*/DDG*: fine-tune ψ when the labelled set changed
             self.instruction.refresh(self.labelled)
         sums: dict[str, torch.Tensor] = {}
-        for _ in range(self.cfg.grad_steps):
-            batch = self.replay.sample(self.cfg.batch_size, self.rng)
-            info = self.agent.update(self.to_torch(batch), self.weight_fn(batch))
+        i, t = self.replay.sample_indices(self.cfg.grad_steps, self.cfg.batch_size, self.rng)
+        for sampled in self.device_replay.batches(i, t):  # no host sync inside the loop
+            info = self.agent.update(sampled.batch, self.weight_fn(sampled))
             for k, v in info.items():
                 sums[k] = sums.get(k, 0.0) + v
-        means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}
+        means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}  # read once per epoch
         bad = [k for k, v in means.items() if not math.isfinite(v)]
         if bad:
             self.diverged(f"non-finite {', '.join(bad)}")
@@ -377,6 +377,7 @@ class Trainer:
             self.replay_log.restore(s["replay"])
         else:  # a checkpoint from before the replay log held the whole replay
             self.replay.load_state_dict(s["replay"])
+        self.device_replay.sync(np.arange(self.replay.count))
         self.labelled.load_state_dict(s["labelled"])
         self.asked, self.segment_xy, self.last_info = s["asked"], s["segment_xy"], s["last_info"]
         if self.instruction is not None and s.get("instruction") is not None:
@@ -427,7 +428,10 @@ class Trainer:
             self.diverged("non-finite action")
         if not np.isfinite(traj.obs).all():
             self.diverged("non-finite observation")
-        self.replay.add(traj.obs, traj.action, traj.skill, traj.xy, traj.pitch, traj.qpos, traj.qvel, self.epoch)
+        slots = self.replay.add(
+            traj.obs, traj.action, traj.skill, traj.xy, traj.pitch, traj.qpos, traj.qvel, self.epoch
+        )
+        self.device_replay.sync(slots)
         self.env_steps += n * self.cfg.episode_steps
 
     def wait_while_paused(self, bar: Any) -> bool:
