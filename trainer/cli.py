@@ -146,4 +146,4 @@ def run(args: argparse.Namespace) -> int:
         f"run folder: {cfg.out}  (metrics.jsonl, summary.json, skills_latest.png, curves.png, "
         f"plots/, tb/, checkpoint.pt)"
     )
-    return 0 if summary.get("status") in ("finished", "stopped") else 1
+    return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1

@@ -10,9 +10,9 @@
 The loop talks to one `FeedbackSource` and does not know who labels. It evaluates every
 `eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints:
 networks, optimisers, RNG and labelled sets in checkpoint.pt, the replay as append-only chunks
-(trainer/replay_log.py). SIGTERM or SIGINT stops the run at the end of the current epoch (at
-once while it waits for labels or a pause) and writes a final checkpoint; `--resume` continues
-exactly from it.
+(trainer/replay_log.py). SIGTERM or SIGINT ends the process at the end of the current epoch (at
+once while it waits for labels or a pause) with a final checkpoint and status "interrupted",
+which is not reported to the feedback source (the run is not over); `--resume` continues exactly.
 """
 
 from __future__ import annotations
@@ -514,7 +514,9 @@ class Trainer:
             bar.close()
             if self._writer is not None:
                 self._writer.close()
-        if status == "stopped":
+        if status == "stopped" and self._signalled is not None:
+            status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
+        if status in ("stopped", "interrupted"):
             self.checkpoint()
         return self.finish(status, record)
 
@@ -533,7 +535,8 @@ class Trainer:
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
-        self.feedback.report("status", {"status": status, "epoch": self.epoch})
+        if status != "interrupted":  # an interrupted run is not over for the service
+            self.feedback.report("status", {"status": status, "epoch": self.epoch})
         return summary
 
     def _tensorboard(self) -> Any:

@@ -96,7 +96,7 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=120) == 0, proc.stderr.read() if proc.stderr else ""
     summary = json.loads((stopped / "summary.json").read_text())
-    assert summary["status"] == "stopped" and 4 <= summary["epochs_done"] < 40
+    assert summary["status"] == "interrupted" and 4 <= summary["epochs_done"] < 40
     assert torch.load(stopped / "checkpoint.pt", weights_only=False)["epoch"] == summary["epochs_done"]
 
     b = Trainer(make_config("smoke", "point", out=str(stopped), **common), progress=False)
