@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -55,11 +55,20 @@ test: $(STAMP) lint
 # `make bench-guidance FIRST_VERSION_FLAGS=` measures today's defaults instead.
 FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere
 
+# Every bench-* also writes its figures to runs/bench/<name>.json (benchmarks/record.py).
 bench-guidance: $(STAMP)
 	$(PY) benchmarks/bench_guidance.py -- $(FIRST_VERSION_FLAGS)
 
 bench-update: $(STAMP)
 	$(PY) benchmarks/bench_update.py
+
+# A point run alone and beside one busy process (trainer/threads.py's defaults hold their share).
+bench-contention: $(STAMP)
+	$(PY) benchmarks/bench_contention.py
+
+# The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
+bench-gpu: $(STAMP)
+	$(PY) benchmarks/bench_gpu.py
 
 bench-service: $(STAMP)
 	$(PY) benchmarks/bench_service.py

@@ -9,6 +9,8 @@ Measured:
   Beside it, in the same run: the service's answer for that page (thinned history) against the
   plain /metrics?limit=10000 a page without thinning would have to read.
 Bounded: fixed counts; everything on 127.0.0.1. Prints figures and ratios to the targets.
+JSON (runs/bench/dashboard.json): live_p50_ms_<kind>, live_max_ms_<kind> (kind: metrics, rollouts),
+cold_load_median_ms, cold_load_max_ms, page_answer_ms, page_answer_bytes, full_answer_ms, full_answer_bytes.
 """
 
 from __future__ import annotations
@@ -193,6 +195,7 @@ def answer(api: str, path: str) -> tuple[float, int]:
 def main() -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from chromium import chromium
+    from record import record
 
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory() as tmp:
@@ -226,6 +229,20 @@ def main() -> int:
         f"  the run page's answer: {page_bytes / 1e3:.0f} kB in {page_s * 1000:.0f} ms; all {EPOCHS} rows "
         f"(/metrics?limit=10000): {full_bytes / 1e6:.1f} MB in {full_s * 1000:.0f} ms "
         f"→ {full_bytes / page_bytes:.0f}× fewer bytes, {full_s / page_s:.1f}× faster"
+    )
+    figures = {f"live_p50_ms_{k}": statistics.median(ms) for k, ms in live.items()}
+    figures |= {f"live_max_ms_{k}": max(ms) for k, ms in live.items()}
+    record(
+        "dashboard",
+        figures
+        | {
+            "cold_load_median_ms": load,
+            "cold_load_max_ms": max(loads),
+            "page_answer_ms": 1000 * page_s,
+            "page_answer_bytes": page_bytes,
+            "full_answer_ms": 1000 * full_s,
+            "full_answer_bytes": full_bytes,
+        },
     )
     return 0
 

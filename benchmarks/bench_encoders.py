@@ -13,6 +13,9 @@
 
     python benchmarks/bench_encoders.py --steps 150 --batch 32      # CPU, ≈ 15 min on 2 busy cores
     python benchmarks/bench_encoders.py --steps 2000 --batch 256     # a GPU
+
+JSON (runs/bench/encoders.json): per kind (separate, shared) steps_per_s, train_s, final_losses,
+probe_r2_untrained, probe_r2_policy, probe_r2_qf; and shared_over_separate_speed.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import time
 
 import numpy as np
 import torch
+from record import record
 
 from trainer.config import make_config
 from trainer.envs import VectorEnv
@@ -161,6 +165,7 @@ def main() -> None:
         )
     print(f"shared / separate speed: {sh['steps_per_s'] / sep['steps_per_s']:.2f}×")
     print(json.dumps(report))
+    record("encoders", {**report, "shared_over_separate_speed": sh["steps_per_s"] / sep["steps_per_s"]})
 
 
 if __name__ == "__main__":

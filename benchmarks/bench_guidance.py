@@ -6,6 +6,8 @@ next to the runs.
 
 Expected (issue 2): on North, COLLIE's safe ratio ≥ 0.90 while METRA's stays ≤ 0.5; COLLIE's safe
 coverage above METRA's on every task; each run ≤ 10 minutes.
+JSON (runs/bench/guidance.json): `<task>/<method>` → {<metric>_mean, <metric>_std, seeds} for the
+metrics safe_coverage, safe_ratio, composite_coverage, weighted_composite_coverage, wall_s.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import platform
 from pathlib import Path
 
 import numpy as np
+from record import record
 from tqdm import tqdm
 
 from trainer.sweep import grid, run_all
@@ -80,6 +83,14 @@ def main() -> None:
             print(f"{t}: COLLIE safe coverage {c:.0f} vs METRA {m:.0f} → {'above' if c > m else 'NOT above'}")
     walls = [r["wall_s"] for rs in results.values() for r in rs]
     print(f"wall time per run: max {max(walls):.0f} s (goal ≤ 600 s)")
+    figures: dict[str, dict[str, float]] = {}
+    for (task, method), runs in results.items():
+        cell: dict[str, float] = {"seeds": len(runs)}
+        for m in METRICS:
+            values = [float(r[m]) for r in runs if m in r]
+            cell[f"{m}_mean"], cell[f"{m}_std"] = float(np.mean(values)), float(np.std(values))
+        figures[f"{task}/{method}"] = cell
+    record("guidance", figures)
 
 
 if __name__ == "__main__":

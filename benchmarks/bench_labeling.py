@@ -17,11 +17,14 @@ Measures, in one run:
   under 3.6 s minus this wait.
 
 Needs Debian's chromium (`apt-get install -y chromium`) and `pip install playwright`.
+JSON (runs/bench/labeling.json): one key per printed row, its name in snake case with the unit
+(e.g. `in_page_median_ms`, `ant_scene_build_ms`, `server_updates_at_1x_fps`).
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import statistics
 import sys
 import tempfile
@@ -33,6 +36,7 @@ from playwright.sync_api import Page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from chromium import chromium
+from record import record
 from ui.page import open_labeler, wait_segment
 from ui.stack import Stack, real_stack
 
@@ -65,7 +69,11 @@ def pct(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
 
+FIGURES: dict[str, float] = {}  # every printed row, for runs/bench/labeling.json
+
+
 def row(name: str, value: float, unit: str, target: str, ratio: float | None = None) -> None:
+    FIGURES[re.sub(r"[^a-z0-9]+", "_", f"{name} {unit}".lower()).strip("_")] = value
     ratio_text = f"{ratio:6.2f}×" if ratio is not None else "       "
     print(f"  {name:<44} {value:9.1f} {unit:<8} {ratio_text}  target {target}")
 
@@ -197,6 +205,7 @@ def main() -> int:
     print("UI overhead per label:")
     row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
     row("own time per label that still makes 1000 / h", HUMAN_S - wait_s, "s", "(info)")
+    record("labeling", FIGURES)
     return 0
 
 

@@ -5,6 +5,8 @@ multisampling off; coarse tessellation; a 2 m floor grid). Mesa's renderer is pi
 thread (LP_NUM_THREADS=1) and so is the process (os.sched_setaffinity), so the figure is per
 core. For context it also prints physics alone, rendering alone, and dm_control's own 64×64
 render at its default settings (what one gets without these choices).
+JSON (runs/bench/pixels.json): per env, agent_steps_per_s, physics_agent_steps_per_s, renders_per_s,
+dm_control_default_renders_per_s.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import time
 
 import mujoco
 import numpy as np
+from record import record
 
 from trainer.envs import make_env, raw_step_rate
 
@@ -75,6 +78,7 @@ def main() -> None:
             f"{r['renders_per_s']:6.0f}/s   dm_control default render {r['dm_control_default_renders_per_s']:4.0f}/s"
         )
     print(json.dumps(results))
+    record("pixels", results)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,9 @@ Measured, each in its own server process (uvicorn, SQLite file in WAL mode):
   trainer/feedback/http.py, in its own process): p50/p99.
 Targets: ≥ 1000 labels/s with p99 ≤ 20 ms; stream p99 ≤ 50 ms; 1000 queries claimable ≤ 1 s.
 Bounded: fixed durations and counts; everything runs on 127.0.0.1.
+JSON (runs/bench/service.json): baseline_rps, baseline_p50_ms, baseline_p99_ms, label_rps, label_p50_ms,
+label_p99_ms, claim_p99_ms, stream_p50_ms, stream_p99_ms, post_1000_s, stream_missing,
+baseline_cpu_ms, label_cpu_ms, targets_met.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import httpx
 import numpy as np
 from fastapi import FastAPI
 from pydantic import BaseModel
+from record import record
 from sqlalchemy import Float, Integer, String, create_engine, event
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
@@ -457,6 +461,25 @@ def measure(
         and missing == 0
     )
     print("targets (≥1000/s, p99 ≤ 20 ms, stream p99 ≤ 50 ms, post ≤ 1 s):", "met" if ok else "NOT met")
+    record(
+        "service",
+        {
+            "baseline_rps": base["rps"],
+            "baseline_p50_ms": base["p50"],
+            "baseline_p99_ms": base["p99"],
+            "label_rps": labels["rps"],
+            "label_p50_ms": labels["p50"],
+            "label_p99_ms": labels["p99"],
+            "claim_p99_ms": labels["claim_p99"],
+            "stream_p50_ms": percentile(stream, 50),
+            "stream_p99_ms": percentile(stream, 99),
+            "post_1000_s": post_s,
+            "stream_missing": missing,
+            "baseline_cpu_ms": base["cpu_ms"],
+            "label_cpu_ms": labels["cpu_ms"],
+            "targets_met": bool(ok),
+        },
+    )
     trainer.close()
     operator.close()
     return 0

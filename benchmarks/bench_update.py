@@ -1,28 +1,49 @@
-"""make bench-update: the cost of COLLIE's gradient step and of vectorised rollouts, as ratios
-measured in one run (machines are noisy; absolute numbers are printed for context only).
+"""make bench-update: the trainer's inner costs as ratios measured in one run (machines are noisy;
+absolute numbers are printed for context only). JSON: runs/bench/update.json.
 
-1. Gradient steps/s of the full paper-size update (φ + λ + SAC + w with 800 labelled states,
-   2×1024 MLPs, batch 256) beside a plain SAC update of the same networks. Goal: ≤ 1.3× SAC's cost.
-2. Rollout env steps/s (8 episodes stepped together, one policy call per step, paper-size policy)
-   beside the raw env step rate of the same env. Goal: ≥ 70 %.
+1. Update cost: gradient steps/s of the full paper-size update (φ + λ + SAC + w with 800
+   labelled states, 2×1024 MLPs, batch 256) beside a plain SAC update of the same networks.
+   Keys `full_steps_per_s`, `sac_steps_per_s`, `cost_ratio` (goal ≤ 1.3).
+2. Update FLOP rate: the FLOPs of one full update (counted by torch's FlopCounterMode, forward and
+   backward; key `update_gflop_<h>`) times its steps/s, ÷ this machine's rate for a (256 × h)·(h × h)
+   matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
+   `flop_fraction_<h>` (goal ≥ 0.6).
+3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (physics overlapped with the
+   policy as the trainer runs it) ÷ a single-thread raw `mj_step` loop over the same model, and
+   the same rollout with serial physics. Keys `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`,
+   `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9).
+4. Device data path: 32 batches gathered, normalised and made tensors by the device path
+   (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
+   Key `device_sampling_ratio` (≤ 1: costs nothing on the CPU).
+5. Checkpoints: a periodic checkpoint of an Ant `cpu` run (replay holding 200 trajectories, 25
+   epochs of new ones since the last checkpoint). Keys `checkpoint_s` (goal < 1), `checkpoint_mb`
+   (bytes written, goal < 50), `replay_mb` (the whole replay, what a checkpoint used to rewrite).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
+import mujoco
 import numpy as np
 import torch
+from record import record
+from torch.utils.flop_counter import FlopCounterMode
 
 from trainer.config import make_config
-from trainer.envs import VectorEnv, raw_step_rate
+from trainer.device_replay import DeviceReplay
+from trainer.envs import VectorEnv, make_env
 from trainer.guidance import LabelledSets, guidance_weight
+from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
+from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
+from trainer.threads import resolve_threads
 
 
 def timed(fn: Callable[[], None], steps: int) -> float:
@@ -32,10 +53,9 @@ def timed(fn: Callable[[], None], steps: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
-    env = VectorEnv(env_name, 1)
-    cfg = make_config("paper", env_name)
-    dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+def update_setup(env_name: str, hidden: int, dev: torch.device) -> tuple[Metra, Callable[[], None], Callable[[], None]]:
+    env = make_env(env_name)
+    cfg = make_config("paper", env_name, hidden=hidden)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
     agent = Metra(env.obs_dim, env.action_dim, prior, cfg, dev)
     rng = np.random.default_rng(0)
@@ -67,6 +87,12 @@ def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
     def plain_sac() -> None:
         agent.sac_update(batches[next(it) % 8], torch.randn(b, device=dev))
 
+    return agent, full, plain_sac
+
+
+def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
+    dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    _, full, plain_sac = update_setup(env_name, 1024, dev)
     timed(full, 3), timed(plain_sac, 3)  # warm-up
     full_rates, sac_rates = [], []
     for _ in range(rounds):  # interleaved, so both see the same machine load
@@ -76,45 +102,181 @@ def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
     return {"full_steps_per_s": full_r, "sac_steps_per_s": sac_r, "cost_ratio": sac_r / full_r}
 
 
+def bench_flops(env_name: str, steps: int, rounds: int) -> dict[str, float]:
+    """One thread, CPU: the update's FLOP rate against a plain matmul of the same width."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    out: dict[str, float] = {}
+    try:
+        for h in (256, 1024):
+            _, full, _ = update_setup(env_name, h, torch.device("cpu"))
+            with FlopCounterMode(display=False) as counter:
+                full()
+            flop = counter.get_total_flops()
+            a, w = torch.randn(256, h), torch.randn(h, h)
+            mm_rate, up_rate = [], []
+            for _ in range(rounds):
+                mm_rate.append(timed(lambda a=a, w=w: torch.mm(a, w), 20) * 2 * 256 * h * h)
+                up_rate.append(timed(full, steps) * flop)
+            out[f"update_gflop_{h}"] = flop / 1e9
+            out[f"update_gflops_{h}"] = float(np.median(up_rate)) / 1e9
+            out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
+            out[f"flop_fraction_{h}"] = out[f"update_gflops_{h}"] / out[f"matmul_gflops_{h}"]
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
+def raw_mj_step_rate(env_name: str, steps: int, seed: int) -> float:
+    """Env steps/s of one thread looping mj_step over one env's model (random controls)."""
+    env = make_env(env_name, seed=seed)
+    env.reset()
+    controls = np.random.default_rng(seed).uniform(-1, 1, size=(steps, env.action_dim))
+    m, d, skip = env.model, env.data, env.frame_skip
+    start = time.perf_counter()
+    for u in controls:
+        d.ctrl[:] = u
+        mujoco.mj_step(m, d, nstep=skip)
+    return steps / (time.perf_counter() - start)
+
+
 def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
-    cfg = make_config("paper", env_name)
-    env = VectorEnv(env_name, cfg.episodes_per_epoch)
+    cfg = make_config("cpu", env_name)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
-    agent = Metra(env.obs_dim, env.action_dim, prior, cfg, torch.device("cpu"))
-    norm = Normaliser(env.obs_mean, env.obs_std)
+    overlapped, serial = VectorEnv(env_name, cfg.episodes_per_epoch), VectorEnv(env_name, 8, physics_threads=1)
+    agent = Metra(overlapped.obs_dim, overlapped.action_dim, prior, cfg, torch.device("cpu"))
+    norm = Normaliser(overlapped.obs_mean, overlapped.obs_std)
     rng = np.random.default_rng(0)
-    roll, raw = [], []
-    for r in range(rounds):
-        skills = prior.sample(env.num_envs, rng)
+    n = 8 * overlapped.episode_steps
+    rates: dict[str, list[float]] = {"overlapped": [], "serial": [], "raw": []}
+    for r in range(rounds):  # interleaved
+        skills = prior.sample(8, rng)
+        for kind, env in (("overlapped", overlapped), ("serial", serial)):
+            start = time.perf_counter()
+            rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False)
+            rates[kind].append(n / (time.perf_counter() - start))
+        rates["raw"].append(raw_mj_step_rate(env_name, n, r))
+    med = {k: float(np.median(v)) for k, v in rates.items()}
+    overlapped.close()
+    return {
+        f"rollout_steps_per_s_{env_name}": med["overlapped"],
+        f"raw_steps_per_s_{env_name}": med["raw"],
+        f"rollout_fraction_{env_name}": med["overlapped"] / med["raw"],
+        f"rollout_fraction_serial_{env_name}": med["serial"] / med["raw"],
+        f"physics_threads_{env_name}": overlapped.physics_threads,
+    }
+
+
+def bench_sampling(rounds: int) -> dict[str, float]:
+    cfg = make_config("cpu", "ant")
+    env = make_env("ant")
+    r = TrajectoryReplay(cfg.replay_capacity, 200, env.obs_shape, env.action_dim, cfg.skill_dim, env.nq, env.nv)
+    rng = np.random.default_rng(0)
+    r.obs[:] = rng.normal(size=r.obs.shape)
+    r.count = r.size
+    norm, prior, cpu = (
+        Normaliser(env.obs_mean, env.obs_std),
+        SkillPrior(cfg.skill_dim, cfg.discrete_skills),
+        torch.device("cpu"),
+    )
+    device = DeviceReplay(r, norm, prior.reward_direction, cpu)
+
+    def t(x: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=torch.float32)
+
+    def host() -> None:  # the path the trainer took before
+        for _ in range(cfg.grad_steps):
+            b = r.sample(cfg.batch_size, rng)
+            TorchBatch(t(norm(b.obs)), t(norm(b.next_obs)), t(b.action), t(b.skill), t(prior.reward_direction(b.skill)))
+
+    def on_device() -> None:
+        for _ in device.batches(*r.sample_indices(cfg.grad_steps, cfg.batch_size, rng)):
+            pass
+
+    host_r, dev_r = [], []
+    for _ in range(rounds):
+        host_r.append(timed(host, 5))
+        dev_r.append(timed(on_device, 5))
+    return {"device_sampling_ratio": float(np.median(host_r) / np.median(dev_r))}
+
+
+def bench_checkpoint() -> dict[str, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = make_config("cpu", "ant", out=tmp)
+        trainer = Trainer(cfg, progress=False)
+        trainer._t0 = time.perf_counter()
+        r, rng = trainer.replay, np.random.default_rng(0)
+        n, t = cfg.episodes_per_epoch, cfg.episode_steps + 1
+
+        def epoch(e: int) -> None:
+            r.add(
+                rng.normal(size=(n, t, *r.obs.shape[2:])),
+                rng.normal(size=(n, t - 1, r.action.shape[2])),
+                rng.normal(size=(n, r.skill.shape[1])),
+                rng.normal(size=(n, t, 2)),
+                rng.normal(size=(n, t)),
+                rng.normal(size=(n, t, r.qpos.shape[2])),
+                rng.normal(size=(n, t, r.qvel.shape[2])),
+                e,
+            )
+
+        for e in range(cfg.checkpoint_every):
+            epoch(e)
+        trainer.checkpoint()
+        before = {f: f.stat().st_mtime_ns for f in Path(tmp).rglob("*") if f.is_file()}
+        for e in range(cfg.checkpoint_every):
+            epoch(cfg.checkpoint_every + e)
         start = time.perf_counter()
-        rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False)
-        roll.append(env.num_envs * env.episode_steps / (time.perf_counter() - start))
-        raw.append(raw_step_rate(env_name, steps=env.num_envs * env.episode_steps, seed=r))
-    roll_r, raw_r = float(np.median(roll)), float(np.median(raw))
-    return {"rollout_steps_per_s": roll_r, "raw_steps_per_s": raw_r, "rollout_fraction": roll_r / raw_r}
+        trainer.checkpoint()
+        spent = time.perf_counter() - start
+        written = [f for f in Path(tmp).rglob("*") if f.is_file() and before.get(f) != f.stat().st_mtime_ns]
+        replay_bytes = sum(getattr(r, k)[: r.count].nbytes for k in FIELDS)
+        return {
+            "checkpoint_s": spent,
+            "checkpoint_mb": sum(f.stat().st_size for f in written) / 1e6,
+            "replay_mb": replay_bytes / 1e6,
+        }
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="ant")
+    p.add_argument("--env", default="ant", help="env of the update benchmarks")
     p.add_argument("--steps", type=int, default=10, help="gradient steps per timed block")
     p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = the trainer's default policy)")
     a = p.parse_args()
-    print(
-        f"torch {torch.__version__}, {torch.get_num_threads()} threads, "
-        f"device {'cuda' if torch.cuda.is_available() else 'cpu'}"
-    )
+    torch.set_num_threads(resolve_threads(a.threads, 1024))
+    dev = "cuda" if torch.cuda.is_available() else "cpu"
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}")
     u = bench_update(a.env, a.steps, a.rounds)
     print(f"update  ({a.env}, 2×1024, batch 256, 800 labelled states)")
     print(f"  full COLLIE step  {u['full_steps_per_s']:8.1f} steps/s")
     print(f"  plain SAC step    {u['sac_steps_per_s']:8.1f} steps/s")
     print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×)")
-    r = bench_rollout(a.env, a.rounds)
-    print(f"rollout ({a.env}, 8 episodes × 200 steps, paper-size policy)")
-    print(f"  vectorised rollout {r['rollout_steps_per_s']:8.0f} env steps/s")
-    print(f"  raw env stepping   {r['raw_steps_per_s']:8.0f} env steps/s")
-    print(f"  fraction           {100 * r['rollout_fraction']:8.0f} %   (goal ≥ 70 %)")
-    print(json.dumps({"env": a.env, **u, **r}))
+    f = bench_flops(a.env, a.steps, a.rounds)
+    for h in (256, 1024):
+        print(
+            f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
+            f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
+            "(goal ≥ 60 %)"
+        )
+    r: dict[str, float] = {}
+    for env_name in ("ant", "half_cheetah"):
+        r |= bench_rollout(env_name, a.rounds)
+        print(
+            f"rollout ({env_name}, 8 episodes × 200 steps, cpu-preset policy, "
+            f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
+            f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
+            f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %; goal ≥ 90 %)"
+        )
+    s = bench_sampling(a.rounds)
+    print(f"device data path on the CPU: {s['device_sampling_ratio']:.2f}× the host path's time (goal ≤ 1)")
+    c = bench_checkpoint()
+    print(
+        f"periodic checkpoint (ant, cpu preset): {c['checkpoint_s']:.2f} s, {c['checkpoint_mb']:.1f} MB written "
+        f"(goal < 1 s, < 50 MB; the whole replay is {c['replay_mb']:.0f} MB)"
+    )
+    record("update", {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **u, **f, **r, **s, **c})
 
 
 if __name__ == "__main__":

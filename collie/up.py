@@ -189,7 +189,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         str(args.noise_band),
         *args.train_args.split(),
     ]
-    trainer = stack.start("trainer", [*train, "--resume"] if resume else train)
+    # OpenMP threads that sleep while idle (trainer/threads.py); `collie train` picks the thread count
+    trainer = stack.start("trainer", [*train, "--resume"] if resume else train, {"OMP_WAIT_POLICY": "PASSIVE"})
     run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
     if args.teacher == "oracle":
         teach = [

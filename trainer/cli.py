@@ -142,6 +142,9 @@ def run(args: argparse.Namespace) -> int:
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
                 cfg = Config.from_stored(stored)
+        from trainer.threads import apply_openmp_env, resolve_threads
+
+        apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer
 
         # a resumed run keeps the rule it started with, whatever its file says now
@@ -172,4 +175,4 @@ def run(args: argparse.Namespace) -> int:
         f"run folder: {cfg.out}  (metrics.jsonl, summary.json, task.json, skills_latest.png, guidance_latest.png, "
         f"curves.png, plots/, tb/, checkpoint.pt)"
     )
-    return 0 if summary.get("status") in ("finished", "stopped") else 1
+    return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1

@@ -40,7 +40,8 @@ class Config:
     preset: str = "cpu"
     seed: int = 0
     device: str = "auto"  # auto → cuda when available
-    threads: int = 0  # torch intra-op threads; 0 = torch's default
+    threads: int = 0  # torch intra-op threads; 0 = auto (trainer/threads.py: 1 on ≤ 4 cores or small nets)
+    physics_threads: int = 0  # rollout physics threads; 0 = auto (trainer/envs/vector.py), 1 = serial
     # networks and optimisation (Table 5)
     hidden: int = 1024
     layers: int = 2
@@ -138,6 +139,7 @@ class Config:
         )
         need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
         need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
+        need(self.physics_threads >= 0, f"physics_threads must be ≥ 0, got {self.physics_threads}")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
         need(self.init in INITS, f"unknown init {self.init!r}; valid: {', '.join(INITS)}")
         need(self.log_std_min < 2.0, f"log_std_min must be below the cap 2, got {self.log_std_min}")

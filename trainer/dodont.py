@@ -21,8 +21,11 @@ from trainer.metra import WeightFn
 WEIGHT_SCALE = 2.0  # ψ ∈ (0, 1) → w ∈ (0, 2), the range of Eq. 8
 
 
-def dodont_weight(classifier: InstructionClassifier, obs: np.ndarray, device: torch.device) -> WeightFn | None:
-    """w = 2·ψ(s) for the batch's normalised states (s′ by default: `--w-at`); None before any label."""
+def dodont_weight(
+    classifier: InstructionClassifier, obs: np.ndarray | torch.Tensor, device: torch.device
+) -> WeightFn | None:
+    """w = 2·ψ(s) for the batch's normalised states (s′ by default: `--w-at`); None before any label.
+    A float32 tensor already on `device` (the batch's own) is used as it is."""
     if not classifier.trained:
         return None
     w = WEIGHT_SCALE * classifier.prob(torch.as_tensor(obs, dtype=torch.float32, device=device))

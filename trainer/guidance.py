@@ -27,12 +27,23 @@ def class_distances(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tens
     return torch.stack(cols, dim=1)
 
 
+_LABEL_VECTORS: dict[tuple[torch.dtype, torch.device], torch.Tensor] = {}
+
+
+def label_vector(dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """[0, 1, 2]ᵀ on `device`, uploaded once (not at every gradient step)."""
+    key = (dtype, device)
+    if key not in _LABEL_VECTORS:
+        _LABEL_VECTORS[key] = torch.tensor(LABEL_VALUES, dtype=dtype, device=device)
+    return _LABEL_VECTORS[key]
+
+
 def guidance_weight(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tensor:
     """w(s) = softmax([−d_φ(s, D_i)]_{i=0..2}) · [0, 1, 2]ᵀ (Eq. 8); 1 when nothing is labelled."""
     if all(emb.shape[0] == 0 for emb in labelled):
         return torch.ones(z.shape[0], dtype=z.dtype, device=z.device)
     probs = torch.softmax(-class_distances(z, labelled), dim=1)
-    return probs @ torch.tensor(LABEL_VALUES, dtype=z.dtype, device=z.device)
+    return probs @ label_vector(z.dtype, z.device)
 
 
 def smoothing_beta(epoch: int, first_feedback_epoch: int | None, span: float, k_beta: float) -> float:

@@ -8,7 +8,11 @@
         for each gradient step: w_e(s) (Eq. 8 + smoothing), then φ, λ and π            (lines 9–13)
 
 The loop talks to one `FeedbackSource` and does not know who labels. It evaluates every
-`eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints.
+`eval_every` epochs, writes metrics.jsonl, plots, TensorBoard scalars and atomic checkpoints:
+networks, optimisers, RNG and labelled sets in checkpoint.pt, the replay as append-only chunks
+(trainer/replay_log.py). SIGTERM or SIGINT ends the process at the end of the current epoch (at
+once while it waits for labels or a pause) with a final checkpoint and status "interrupted",
+which is not reported to the feedback source (the run is not over); `--resume` continues exactly.
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ from __future__ import annotations
 import json
 import math
 import random
+import signal
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -25,21 +31,24 @@ import torch
 
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
+from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.methods import build_agent
-from trainer.metra import TorchBatch, WeightFn
+from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
 from trainer.obs_noise import NoisyObservations
 from trainer.obs_stats import observation_stats
 from trainer.plots import plot_curves, plot_guidance_map, plot_skill_trajectories
 from trainer.query import select_queries
-from trainer.replay import Batch, TrajectoryReplay
+from trainer.replay import TrajectoryReplay
+from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
+from trainer.threads import resolve_threads
 
 CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
@@ -71,13 +80,13 @@ class Trainer:
         if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
             raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
-        if cfg.threads > 0:
-            torch.set_num_threads(cfg.threads)
+        torch.set_num_threads(resolve_threads(cfg.threads, cfg.hidden))  # fair share on a busy machine
         self.rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
-        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
-        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
+        vec = dict(episode_steps=cfg.episode_steps, layout_seed=cfg.seed, physics_threads=cfg.physics_threads or None)
+        self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, **vec)
+        self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, **vec)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
             self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
         self.normalise = Normaliser(*observation_stats(cfg.env, self.env.obs_mean, self.env.obs_std, cfg.obs_norm))
@@ -95,6 +104,19 @@ class Trainer:
             self.env.nv,
             self.env.obs_dtype,
         )
+        self.replay_log = ReplayLog(self.out / "replay", self.replay)
+        task = self.task
+
+        def rule(xy: np.ndarray, pitch: np.ndarray) -> np.ndarray:  # g(s) per stored state, for the Oracle
+            return task.classify(xy.reshape(-1, 2), pitch.reshape(-1)).reshape(pitch.shape)
+
+        self.device_replay = DeviceReplay(
+            self.replay,
+            self.normalise,
+            self.prior.reward_direction,
+            self.device,
+            rule=rule if cfg.method == "oracle" else None,
+        )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
@@ -104,24 +126,25 @@ class Trainer:
         self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
+        self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
+        self._waiting = False  # blocked on labels or a pause: a signal stops at once
 
     # ---- guidance -------------------------------------------------------------------------
     def beta(self) -> float:
         span = self.cfg.n_sessions * self.cfg.feedback_every
         return smoothing_beta(self.epoch, self.first_feedback_epoch, span, self.cfg.k_beta)
 
-    def weight_fn(self, batch: Batch) -> WeightFn | None:
+    def weight_fn(self, sampled: DeviceBatch) -> WeightFn | None:
         """w for this batch: METRA/LSD/DIAYN/DDG* 1, Oracle the task rule g(s), DoDont* 2ψ(s),
-        COLLIE Eq. 8 smoothed."""
+        COLLIE Eq. 8 smoothed. Everything stays on the device."""
         at_next = self.cfg.w_at == "next"
         if self.cfg.method in ("metra", "lsd", "diayn", "ddg"):
             return None
-        if self.cfg.method == "dodont":
-            obs = self.normalise(batch.next_obs if at_next else batch.obs)
-            return dodont_weight(self.instruction, obs, self.device)
+        b = sampled.batch
+        if self.cfg.method == "dodont":  # ψ reads the batch's own normalised tensors
+            return dodont_weight(self.instruction, b.next_obs if at_next else b.obs, self.device)
         if self.cfg.method == "oracle":
-            xy, pitch = (batch.next_xy, batch.next_pitch) if at_next else (batch.xy, batch.pitch)
-            g = torch.as_tensor(self.task.classify(xy, pitch), dtype=torch.float32, device=self.device)
+            g = sampled.next_rule if at_next else sampled.rule
             return lambda _s, _n: g
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:
@@ -195,7 +218,11 @@ class Trainer:
         segments = self.make_segments()
         for s in segments:
             self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
-        events = self.feedback.collect(self.session, self.epoch, segments)
+        self._waiting = True
+        try:
+            events = self.feedback.collect(self.session, self.epoch, segments)
+        finally:
+            self._waiting = False
         self.apply_labels(events)
         if self.first_feedback_epoch is None:
             self.first_feedback_epoch = self.epoch
@@ -217,30 +244,18 @@ class Trainer:
                 self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
 
     # ---- learning (Algorithm 1, lines 9–13) -----------------------------------------------
-    def to_torch(self, b: Batch) -> TorchBatch:
-        def t(x: np.ndarray) -> torch.Tensor:
-            return torch.as_tensor(x, dtype=torch.float32, device=self.device)
-
-        return TorchBatch(
-            t(self.normalise(b.obs)),
-            t(self.normalise(b.next_obs)),
-            t(b.action),
-            t(b.skill),
-            t(self.prior.reward_direction(b.skill)),
-        )
-
     def train_epoch(self) -> None:
         if self.replay.transitions < self.cfg.start_transitions:
             return
         if self.instruction is not None:  # DoDont*/DDG*: fine-tune ψ when the labelled set changed
             self.instruction.refresh(self.labelled)
         sums: dict[str, torch.Tensor] = {}
-        for _ in range(self.cfg.grad_steps):
-            batch = self.replay.sample(self.cfg.batch_size, self.rng)
-            info = self.agent.update(self.to_torch(batch), self.weight_fn(batch))
+        i, t = self.replay.sample_indices(self.cfg.grad_steps, self.cfg.batch_size, self.rng)
+        for sampled in self.device_replay.batches(i, t):  # no host sync inside the loop
+            info = self.agent.update(sampled.batch, self.weight_fn(sampled))
             for k, v in info.items():
                 sums[k] = sums.get(k, 0.0) + v
-        means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}
+        means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}  # read once per epoch
         bad = [k for k, v in means.items() if not math.isfinite(v)]
         if bad:
             self.diverged(f"non-finite {', '.join(bad)}")
@@ -374,7 +389,6 @@ class Trainer:
             "first_feedback_epoch": self.first_feedback_epoch,
             "wall_s": self.wall_s(),
             "agent": self.agent.state_dict(),
-            "replay": self.replay.state_dict(),
             "labelled": self.labelled.state_dict(),
             "asked": self.asked,
             "segment_xy": self.segment_xy,
@@ -391,7 +405,11 @@ class Trainer:
         self.epoch, self.env_steps, self.session = s["epoch"], s["env_steps"], s["session"]
         self.first_feedback_epoch, self.wall_before = s["first_feedback_epoch"], s["wall_s"]
         self.agent.load_state_dict(s["agent"])
-        self.replay.load_state_dict(s["replay"])
+        if "chunks" in s["replay"]:
+            self.replay_log.restore(s["replay"])
+        else:  # a checkpoint from before the replay log held the whole replay
+            self.replay.load_state_dict(s["replay"])
+        self.device_replay.sync(np.arange(self.replay.count))
         self.labelled.load_state_dict(s["labelled"])
         self.asked, self.segment_xy, self.last_info = s["asked"], s["segment_xy"], s["last_info"]
         if self.instruction is not None and s.get("instruction") is not None:
@@ -406,7 +424,23 @@ class Trainer:
             rng_teacher.bit_generator.state = s["teacher_rng"]
 
     def checkpoint(self) -> None:
-        save_checkpoint(self.out / "checkpoint.pt", self.state_dict())
+        """checkpoint.pt without the replay, whose new trajectories go to one more chunk first."""
+        state = self.state_dict()
+        state["replay"] = self.replay_log.flush()
+        save_checkpoint(self.out / "checkpoint.pt", state)
+        self.replay_log.prune()
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        if self._signalled is not None:  # a second signal: stop now, without a checkpoint
+            raise KeyboardInterrupt
+        self._signalled = signum
+        if self._waiting:
+            raise StopRequested(f"stopped by signal {signal.Signals(signum).name}")
+
+    def _install_signal_handlers(self) -> dict[int, Any]:
+        if threading.current_thread() is not threading.main_thread():
+            return {}  # signals reach only the main thread; an embedded trainer keeps its host's handlers
+        return {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
 
     def resume(self) -> None:
         state = load_checkpoint(self.out / "checkpoint.pt")
@@ -426,7 +460,10 @@ class Trainer:
             self.diverged("non-finite action")
         if not np.isfinite(traj.obs).all():
             self.diverged("non-finite observation")
-        self.replay.add(traj.obs, traj.action, traj.skill, traj.xy, traj.pitch, traj.qpos, traj.qvel, self.epoch)
+        slots = self.replay.add(
+            traj.obs, traj.action, traj.skill, traj.xy, traj.pitch, traj.qpos, traj.qvel, self.epoch
+        )
+        self.device_replay.sync(slots)
         self.env_steps += n * self.cfg.episode_steps
 
     def wait_while_paused(self, bar: Any) -> bool:
@@ -435,9 +472,13 @@ class Trainer:
         if wish == "pause":
             self.feedback.report("status", {"status": "paused", "epoch": self.epoch})
             bar.set_description("paused")
-            while wish == "pause":
-                time.sleep(0.5)
-                wish = self.feedback.control()
+            self._waiting = True
+            try:
+                while wish == "pause":
+                    time.sleep(0.5)
+                    wish = self.feedback.control()
+            finally:
+                self._waiting = False
             if wish != "stop":
                 self.feedback.report("status", {"status": "training", "epoch": self.epoch})
         return wish != "stop"
@@ -467,6 +508,7 @@ class Trainer:
             desc="training",
         )
         status, record = "finished", None
+        previous_handlers = self._install_signal_handlers()
         try:
             while self.epoch < self.cfg.epochs:
                 if not self.wait_while_paused(bar):
@@ -494,13 +536,20 @@ class Trainer:
                     self.checkpoint()
                 bar.update(1)
                 self.report_progress()
+                if self._signalled is not None:
+                    status = "stopped"
+                    break
         except StopRequested:
             status = "stopped"
         finally:
+            for sig, handler in previous_handlers.items():
+                signal.signal(sig, handler)
             bar.close()
             if self._writer is not None:
                 self._writer.close()
-        if status == "stopped":
+        if status == "stopped" and self._signalled is not None:
+            status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
+        if status in ("stopped", "interrupted"):
             self.checkpoint()
         return self.finish(status, record)
 
@@ -519,7 +568,8 @@ class Trainer:
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
-        self.feedback.report("status", {"status": status, "epoch": self.epoch})
+        if status != "interrupted":  # an interrupted run is not over for the service
+            self.feedback.report("status", {"status": status, "epoch": self.epoch})
         return summary
 
     def _tensorboard(self) -> Any:

@@ -1,7 +1,8 @@
 """Replay buffer B of whole trajectories. States are stored once per trajectory (T + 1 of them),
 so s and s′ are not duplicated, and a segment σ = (s_t … s_{t+H−1}) is a slice. Raw observations
 are stored in the env's dtype (pixel frame stacks as uint8, 4× smaller than float32);
-normalisation happens when a batch is drawn."""
+normalisation happens when a batch is drawn. `dirty` marks the slots written since the replay log
+(trainer/replay_log.py) last saved them, so a checkpoint writes only what changed."""
 
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ class Batch:
     next_xy: np.ndarray  # (B, 2) of s′
     pitch: np.ndarray  # (B,) of s
     next_pitch: np.ndarray  # (B,) of s′
+
+
+FIELDS = ("obs", "action", "skill", "xy", "pitch", "qpos", "qvel", "epoch")  # the per-trajectory arrays
 
 
 class TrajectoryReplay:
@@ -46,6 +50,7 @@ class TrajectoryReplay:
         self.qpos = np.zeros((n, t, nq), np.float32)
         self.qvel = np.zeros((n, t, nv), np.float32)
         self.epoch = np.zeros(n, np.int64)
+        self.dirty = np.zeros(n, bool)  # written since the last save
         self.next, self.count = 0, 0
 
     @property
@@ -70,13 +75,26 @@ class TrajectoryReplay:
         self.xy[idx], self.pitch[idx] = xy, pitch
         self.qpos[idx], self.qvel[idx] = qpos, qvel
         self.epoch[idx] = epoch
+        self.dirty[idx] = True
         self.next = int((self.next + n) % self.size)
         self.count = min(self.size, self.count + n)
         return idx
 
+    def sample_indices(self, steps: int, batch_size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Trajectory slots and times (steps, batch_size) of `steps` batches: the same draws as
+        `steps` calls of `sample`, made at once so that a device can gather them all."""
+        i, t = np.empty((steps, batch_size), np.int64), np.empty((steps, batch_size), np.int64)
+        for k in range(steps):
+            i[k] = rng.integers(0, self.count, size=batch_size)
+            t[k] = rng.integers(0, self.steps, size=batch_size)
+        return i, t
+
     def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
-        i = rng.integers(0, self.count, size=batch_size)
-        t = rng.integers(0, self.steps, size=batch_size)
+        i, t = (x[0] for x in self.sample_indices(1, batch_size, rng))
+        return self.gather(i, t)
+
+    def gather(self, i: np.ndarray, t: np.ndarray) -> Batch:
+        """The transitions (s_t, a_t, s_t+1) of trajectory slots i at times t."""
         return Batch(
             self.obs[i, t],
             self.obs[i, t + 1],
@@ -95,22 +113,13 @@ class TrajectoryReplay:
         return i, t
 
     def state_dict(self) -> dict[str, np.ndarray | int]:
+        """Every stored trajectory at once (the replay log saves only what changed)."""
         keep = slice(0, self.count)
-        return {
-            "obs": self.obs[keep],
-            "action": self.action[keep],
-            "skill": self.skill[keep],
-            "xy": self.xy[keep],
-            "pitch": self.pitch[keep],
-            "qpos": self.qpos[keep],
-            "qvel": self.qvel[keep],
-            "epoch": self.epoch[keep],
-            "next": self.next,
-            "count": self.count,
-        }
+        return {key: getattr(self, key)[keep] for key in FIELDS} | {"next": self.next, "count": self.count}
 
     def load_state_dict(self, state: dict) -> None:
         c = int(state["count"])
-        for key in ("obs", "action", "skill", "xy", "pitch", "qpos", "qvel", "epoch"):
+        for key in FIELDS:
             getattr(self, key)[:c] = state[key]
         self.next, self.count = int(state["next"]), c
+        self.dirty[:c] = True

@@ -1,8 +1,14 @@
-"""Collecting trajectories: all episodes of an epoch step together and the policy runs once per
-step for the whole batch (Algorithm 1, line 3)."""
+"""Collecting trajectories: all episodes of an epoch step together (Algorithm 1, line 3).
+
+When the VectorEnv has more than one physics thread, its envs form groups and the loop is a
+pipeline: the policy acts for group g while the physics of the other groups runs in C on the
+worker threads (mj_step releases the GIL), so a second core carries physics. Each env's
+trajectory depends only on its seed and its own actions, so the groups change no observation;
+the policy's noise is drawn per group, in a fixed order, so a run stays deterministic per seed."""
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,14 +60,31 @@ def rollout(
 
     store(0, env.reset(seeds))
     z = torch.as_tensor(skills, dtype=torch.float32, device=agent.device)
+
+    def act(rows: slice, t: int) -> np.ndarray:
+        o = torch.as_tensor(normalise(obs[rows, t]), device=agent.device)
+        action[rows, t] = agent.act(o, z[rows], deterministic).cpu().numpy()
+        return action[rows, t]
+
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # batch-of-8 forwards: extra threads only add sync cost (10–80× on a busy CPU)
     try:
-        for t in range(t_max):
-            o = torch.as_tensor(normalise(obs[:, t]), device=agent.device)
-            a = agent.act(o, z, deterministic).cpu().numpy()
-            action[:, t] = a
-            store(t + 1, env.step(a))
+        if isinstance(env, VectorEnv) and env.physics_threads > 1:
+            views = [StepBatch(obs[:, t], xy[:, t], pitch[:, t], qpos[:, t], qvel[:, t]) for t in range(t_max + 1)]
+            pending: list[Future | None] = [None] * len(env.groups)
+            try:
+                for t in range(t_max):
+                    for g, rows in enumerate(env.groups):
+                        if pending[g] is not None:
+                            pending[g].result()  # group g's state at t is in `obs`
+                        pending[g] = env.submit(env.step_rows, rows, act(rows, t), views[t + 1])
+            finally:
+                for f in pending:
+                    if f is not None:
+                        f.result()
+        else:  # one thread (pixel envs, wrappers such as NoisyObservations)
+            for t in range(t_max):
+                store(t + 1, env.step(act(slice(None), t)))
     finally:
         torch.set_num_threads(threads)
     return Trajectories(obs, action, skills.astype(np.float32), xy, pitch, qpos, qvel)

@@ -192,6 +192,8 @@ _VOTES = (
     .join(Principal, Principal.id == LabelVote.labeler_id)
     .join(LabelEvent, LabelEvent.id == LabelVote.event_id)
 )
+
+
 def between_labelers(votes: list[Vote]) -> tuple[float | None, int]:
     """Agreement between labelers, which needs no rule: over the queries that two or more distinct
     labelers hold a label on now (each one's current vote; gold copies left out), the share of

@@ -4,11 +4,19 @@ All episodes have the same length and never end early, so there is no auto-reset
 resets every env at the start of an epoch with seeds it chooses, which makes rollouts
 reproducible (same seeds and actions ⇒ same observations). One tight loop over the envs writes
 straight into the batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
+
+`mj_step` releases the GIL, so `step_rows` may run for disjoint groups of envs in the worker
+threads of `submit`: the trainer's rollout steps one group's physics while the policy acts for
+the next (trainer/rollout.py). Each env owns its MjData, so the result does not depend on the
+order or the threads. Pixel envs render through one shared GL context and stay on one thread.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,10 +45,31 @@ class StepBatch:
         )
 
 
+# Envs whose physics outweighs the threads' hand-over cost (Ant's step is ≈ 5× HalfCheetah's and
+# ≈ 30× the point's); `make bench-update` prints `rollout_fraction_<env>` for both ways.
+OVERLAP_BY_DEFAULT = frozenset({"ant"})
+
+
+def default_physics_threads(name: str, num_envs: int) -> int:
+    """Physics worker threads: 2 (the policy needs the rest of a 2-core machine) for heavy physics, else 1."""
+    return max(1, min(2, os.cpu_count() or 1, num_envs)) if name in OVERLAP_BY_DEFAULT else 1
+
+
 class VectorEnv:
-    def __init__(self, name: str, num_envs: int, episode_steps: int = 200, layout_seed: int | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        num_envs: int,
+        episode_steps: int = 200,
+        layout_seed: int | None = None,
+        physics_threads: int | None = None,
+    ) -> None:
+        """`physics_threads`: groups of envs stepped in parallel by `rollout` (None = the default
+        above; 1 = serial, as `step`; pixel envs are always serial)."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if physics_threads is not None and physics_threads < 1:
+            raise ValueError(f"physics_threads must be >= 1, got {physics_threads}")
         self.envs: list[SkillEnv] = [
             make_env(name, episode_steps=episode_steps, layout_seed=layout_seed) for _ in range(num_envs)
         ]
@@ -53,7 +82,17 @@ class VectorEnv:
         self.metric_bin_size = first.metric_bin_size
         self.position_dims, self.nq, self.nv = first.position_dims, first.nq, first.nv
         self.obs_mean, self.obs_std = first.obs_mean, first.obs_std
-        self.t = -1  # steps taken in the current episodes; -1 before the first reset
+        pixels = len(self.obs_shape) > 1
+        threads = default_physics_threads(name, num_envs) if physics_threads is None else physics_threads
+        self.physics_threads = 1 if pixels else min(threads, num_envs)
+        bounds = np.linspace(0, num_envs, self.physics_threads + 1).round().astype(int)
+        self.groups = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
+        self._pool: ThreadPoolExecutor | None = None
+
+    @property
+    def t(self) -> int:
+        """Steps taken in the current episodes; -1 before the first reset."""
+        return self.envs[0].t
 
     @property
     def truncated(self) -> bool:
@@ -64,7 +103,6 @@ class VectorEnv:
             raise ValueError(f"need {self.num_envs} seeds, got {len(seeds)}")
         for env, seed in zip(self.envs, seeds, strict=True):
             env.reset(seed=int(seed))
-        self.t = 0
         return self._collect(None)
 
     def step(self, actions: np.ndarray, out: StepBatch | None = None) -> StepBatch:
@@ -74,12 +112,24 @@ class VectorEnv:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
         for env, action in zip(self.envs, actions, strict=True):
             env.advance(action)
-        self.t += 1
         return self._collect(out)
 
-    def _collect(self, out: StepBatch | None) -> StepBatch:
+    def step_rows(self, rows: slice, actions: np.ndarray, out: StepBatch) -> None:
+        """Step the envs `rows` once with `actions` (one row each) and write their new state into
+        the same rows of `out`. Safe in parallel for disjoint rows (see the module docstring)."""
+        for env, action in zip(self.envs[rows], actions, strict=True):
+            env.advance(action)
+        self._collect(out, rows)
+
+    def submit(self, fn: Callable[..., None], *args: object) -> Future:
+        """Run fn(*args) on one of `physics_threads` worker threads."""
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.physics_threads, thread_name_prefix=f"physics-{self.name}")
+        return self._pool.submit(fn, *args)
+
+    def _collect(self, out: StepBatch | None, rows: slice = slice(None)) -> StepBatch:
         b = out if out is not None else StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
-        for i, env in enumerate(self.envs):
+        for i, env in zip(range(self.num_envs)[rows], self.envs[rows], strict=True):
             env.observe_into(b.obs[i])
             env.xy_into(b.xy[i])
             b.pitch[i] = env.pitch()
@@ -88,5 +138,8 @@ class VectorEnv:
         return b
 
     def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
         for env in self.envs:
             env.close()

@@ -1,0 +1,100 @@
+"""make bench-gpu: the `paper` preset on a CUDA GPU, Ant and pixel Quadruped, a few epochs each.
+
+Per env: updates/s (gradient steps of METRA's update; COLLIE's adds the w(s) term, whose cost
+`make bench-update` gives as `cost_ratio`), env steps/s of the training rollouts, the seconds of one
+48-episode evaluation, peak GPU memory, and the projected wall time of a full paper run
+(Ant 10 000 epochs, Quadruped 5 000): epochs × (rollout + update time per epoch) plus
+(epochs / eval_every) evaluations. Without CUDA it prints `no CUDA device` and exits 0
+(`--device cpu --preset smoke` runs the same code on the CPU, as the test suite does).
+JSON (runs/bench/gpu.json): per env updates_per_s, env_steps_per_s, eval_s, peak_gpu_mb,
+epoch_s, projected_hours, epochs_full, grad_steps; plus device.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import torch
+from record import record
+
+from trainer.config import make_config
+from trainer.loop import Trainer
+
+
+def sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def bench_env(env: str, preset: str, device: str, epochs: int) -> dict[str, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        full = make_config(preset, env)
+        per_epoch = full.episodes_per_epoch * full.episode_steps
+        cfg = make_config(preset, env, method="metra", out=tmp, device=device, start_transitions=per_epoch)
+        t = Trainer(cfg, progress=False)
+        t._t0 = time.perf_counter()
+        dev = t.device
+        if dev.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(dev)
+        t.epoch += 1
+        t.collect_epoch()
+        t.train_epoch()  # warm-up: allocator, cuDNN autotuning
+        sync(dev)
+        collect_s = train_s = 0.0
+        for _ in range(epochs):
+            t.epoch += 1
+            start = time.perf_counter()
+            t.collect_epoch()
+            mid = time.perf_counter()
+            t.train_epoch()
+            sync(dev)
+            collect_s, train_s = collect_s + mid - start, train_s + time.perf_counter() - mid
+        start = time.perf_counter()
+        t.evaluate()
+        eval_s = time.perf_counter() - start
+        epoch_s = (collect_s + train_s) / epochs
+        return {
+            "updates_per_s": epochs * cfg.grad_steps / train_s,
+            "env_steps_per_s": epochs * per_epoch / collect_s,
+            "eval_s": eval_s,
+            "epoch_s": epoch_s,
+            "peak_gpu_mb": torch.cuda.max_memory_allocated(dev) / 1e6 if dev.type == "cuda" else 0.0,
+            "epochs_full": full.epochs,
+            "grad_steps": cfg.grad_steps,
+            "projected_hours": (full.epochs * epoch_s + full.epochs / full.eval_every * eval_s) / 3600,
+        }
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--envs", default="ant,quadruped")
+    p.add_argument("--epochs", type=int, default=5, help="timed epochs per env (after one warm-up epoch)")
+    p.add_argument("--preset", default="paper")
+    p.add_argument("--device", default="cuda")
+    a = p.parse_args()
+    if a.device == "cuda" and not torch.cuda.is_available():
+        print("no CUDA device")
+        return 0
+    name = torch.cuda.get_device_name() if a.device == "cuda" else "cpu"
+    print(f"bench-gpu on {name}, preset {a.preset}, {a.epochs} timed epochs per env")
+    figures: dict[str, object] = {"device": name, "preset": a.preset}
+    for env in a.envs.split(","):
+        r = bench_env(env, a.preset, a.device, a.epochs)
+        figures[env] = r
+        print(
+            f"  {env:10s} {r['updates_per_s']:8.1f} updates/s  {r['env_steps_per_s']:8.0f} env steps/s  "
+            f"eval {r['eval_s']:6.1f} s  peak {r['peak_gpu_mb']:8.0f} MB  → a full run of {r['epochs_full']} "
+            f"epochs ≈ {r['projected_hours']:.1f} h"
+        )
+    record("gpu", figures)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

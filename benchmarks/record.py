@@ -1,0 +1,45 @@
+"""Every benchmark's final figures as JSON, so runs can be compared: runs/bench/<name>.json.
+
+The file holds the figures a benchmark's docstring names, plus where and when they were measured
+(commit, host's core count, load average, torch version when loaded). Each run overwrites it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+BENCH_DIR = Path(os.environ.get("COLLIE_BENCH_DIR", "runs/bench"))
+
+
+def _commit() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return out.stdout.strip() or None
+
+
+def record(name: str, figures: dict[str, Any]) -> Path:
+    """Write `figures` (JSON-serialisable) to runs/bench/<name>.json and say where."""
+    torch = sys.modules.get("torch")
+    meta = {
+        "bench": name,
+        "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "commit": _commit(),
+        "cores": os.cpu_count(),
+        "load_average_1m": round(os.getloadavg()[0], 2),
+        "python": platform.python_version(),
+        "torch": getattr(torch, "__version__", None),
+    }
+    BENCH_DIR.mkdir(parents=True, exist_ok=True)
+    path = BENCH_DIR / f"{name}.json"
+    path.write_text(json.dumps({"meta": meta, "figures": figures}, indent=2, default=float))
+    print(f"figures written to {path}")
+    return path

@@ -1,0 +1,32 @@
+"""`make bench-gpu` without a GPU says so and succeeds; its code path runs on the CPU and writes
+runs/bench/gpu.json."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_gpu.py"
+
+
+def bench(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "COLLIE_BENCH_DIR": str(tmp_path), "PYTHONPATH": str(BENCH.parents[1])}
+    return subprocess.run([sys.executable, str(BENCH), *args], capture_output=True, text=True, env=env, timeout=600)
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="a CUDA device is present")
+def test_without_cuda_it_says_so_and_exits_0(tmp_path):
+    proc = bench(tmp_path)
+    assert proc.returncode == 0 and proc.stdout.strip() == "no CUDA device"
+    assert not (tmp_path / "gpu.json").exists()
+
+
+def test_its_code_path_runs_on_the_cpu(tmp_path):
+    proc = bench(tmp_path, "--device", "cpu", "--preset", "smoke", "--epochs", "1", "--envs", "ant")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    figures = json.loads((tmp_path / "gpu.json").read_text())["figures"]["ant"]
+    assert figures["updates_per_s"] > 0 and figures["env_steps_per_s"] > 0 and figures["projected_hours"] > 0

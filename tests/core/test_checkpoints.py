@@ -1,0 +1,111 @@
+"""Cheap checkpoints: checkpoint.pt without the replay, the replay as append-only chunks that a
+resume rebuilds exactly, and SIGTERM writing a final checkpoint that `--resume` continues exactly."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from trainer.config import make_config
+from trainer.loop import Trainer
+from trainer.replay import FIELDS, TrajectoryReplay
+from trainer.replay_log import ReplayLog
+
+
+def replay(size: int = 5) -> TrajectoryReplay:
+    return TrajectoryReplay(size * 10, 10, 3, 2, 2, 2, 2)
+
+
+def add(r: TrajectoryReplay, n: int, rng: np.random.Generator, epoch: int) -> None:
+    t = r.steps + 1
+    r.add(
+        rng.normal(size=(n, t, 3)),
+        rng.normal(size=(n, t - 1, 2)),
+        rng.normal(size=(n, 2)),
+        rng.normal(size=(n, t, 2)),
+        rng.normal(size=(n, t)),
+        rng.normal(size=(n, t, 2)),
+        rng.normal(size=(n, t, 2)),
+        epoch,
+    )
+
+
+def test_replay_log_writes_only_new_trajectories_and_restores_exactly(tmp_path):
+    r, rng = replay(), np.random.default_rng(0)
+    log = ReplayLog(tmp_path, r)
+    add(r, 3, rng, 1)
+    first = log.flush()
+    log.prune()
+    assert first["chunks"] == [0] and len(np.load(log.path(0))["slots"]) == 3
+    add(r, 4, rng, 2)  # wraps the ring of 5: slots 3, 4, 0, 1
+    record = log.flush()
+    log.prune()
+    assert record["chunks"] == [0, 1] and len(np.load(log.path(1))["slots"]) == 4  # slot 2 still from chunk 0
+    add(r, 1, rng, 3)  # slot 2: chunk 0 is now dead
+    record = log.flush()
+    log.prune()
+    assert record["chunks"] == [1, 2] and not log.path(0).exists()
+    add(r, 2, rng, 4)  # written after the last checkpoint (a crash before the next one): not restored
+    log.flush()
+
+    fresh = replay()
+    ReplayLog(tmp_path, fresh).restore(record)
+    assert (fresh.next, fresh.count) == (3, 5)
+    r_at_record = replay()
+    log_b = ReplayLog(tmp_path / "b", r_at_record)
+    rng = np.random.default_rng(0)
+    for n, e in ((3, 1), (4, 2), (1, 3)):
+        add(r_at_record, n, rng, e)
+    for key in FIELDS:
+        np.testing.assert_array_equal(getattr(fresh, key), getattr(r_at_record, key))
+    assert log_b.flush()["count"] == 5
+
+
+def test_checkpoint_holds_no_replay_and_stays_small(tmp_path):
+    cfg = make_config("smoke", "ant", out=str(tmp_path), epochs=4, episode_steps=20, segment_length=5)
+    t = Trainer(cfg, progress=False)
+    t.run()
+    ckpt = torch.load(tmp_path / "checkpoint.pt", weights_only=False)
+    assert set(ckpt["replay"]) == {"chunks", "next", "count", "next_chunk"}
+    replay_bytes = sum(getattr(t.replay, k)[: t.replay.count].nbytes for k in FIELDS)
+    chunk_bytes = sum(f.stat().st_size for f in (tmp_path / "replay").glob("*.npz"))
+    assert replay_bytes <= chunk_bytes < 1.2 * replay_bytes + 64_000  # each trajectory written once
+    assert (tmp_path / "checkpoint.pt").stat().st_size < 2_000_000  # networks + optimisers of 2×64 nets
+
+
+def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_path):
+    straight, stopped = tmp_path / "straight", tmp_path / "stopped"
+    common = dict(epochs=40, noise_band=2.0, checkpoint_every=1000, eval_every=4)
+    a = Trainer(make_config("smoke", "point", out=str(straight), **common), progress=False)
+    a.run()
+
+    cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(stopped), "--no-progress"]
+    cmd += [f"--{k.replace('_', '-')}={v}" for k, v in common.items()]
+    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": str(Path.cwd())}, stderr=subprocess.PIPE, text=True)
+    metrics = stopped / "metrics.jsonl"
+    deadline = time.monotonic() + 300
+    while not (metrics.exists() and len(metrics.read_text().splitlines()) >= 2):  # epoch 0 and epoch 4
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=120) == 0, proc.stderr.read() if proc.stderr else ""
+    summary = json.loads((stopped / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and 4 <= summary["epochs_done"] < 40
+    assert torch.load(stopped / "checkpoint.pt", weights_only=False)["epoch"] == summary["epochs_done"]
+
+    b = Trainer(make_config("smoke", "point", out=str(stopped), **common), progress=False)
+    b.run(resume=True)
+    for p, q in zip(a.agent.policy.parameters(), b.agent.policy.parameters(), strict=True):
+        assert torch.equal(p, q)
+    for p, q in zip(a.agent.phi.parameters(), b.agent.phi.parameters(), strict=True):
+        assert torch.equal(p, q)
+    rows = [json.loads(ln) for ln in (straight / "metrics.jsonl").read_text().splitlines()]
+    resumed = [json.loads(ln) for ln in (stopped / "metrics.jsonl").read_text().splitlines()]
+    strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+    assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in resumed]
