@@ -41,6 +41,7 @@ class Run(Base):
     n_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     epochs_total: Mapped[int | None] = mapped_column(Integer, nullable=True)
     feedback_timeout_s: Mapped[float | None] = mapped_column(Float, nullable=True)  # None: wait for every label
+    instructions: Mapped[str] = mapped_column(Text, default="", server_default="")  # an operator's, for labelers
     last_event_id: Mapped[int] = mapped_column(Integer)
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)

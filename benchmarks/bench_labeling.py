@@ -92,7 +92,7 @@ def scene_builds(stack: Stack, browser: object, envs: list[str]) -> dict[str, tu
 def label_latency(stack: Stack, browser: object, n: int, think_s: float) -> tuple[list[float], list[float]]:
     """Label n ant segments by key: (in-page key → next segment ms, server key → first frame ms)."""
     run = stack.post_run("ant", n + 1, seed=11)
-    app = stack.ui(run.id, min_dwell_s=0.05)
+    app = stack.ui(run.id, min_dwell_s=0.05, min_played=0.0)
     page: Page = open_labeler(browser, app.labeler_url(stack.new_labeler("latency")))  # type: ignore[arg-type]
     current = wait_segment(page, timeout_s=60)
     page.evaluate(TIMING_JS)

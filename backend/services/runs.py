@@ -12,7 +12,16 @@ from backend.models import Query, Run
 from backend.services import events
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, Control, FeedbackPolicy, QueueCounts, RunCreate, RunRead, StatusUpdate
+from collie.schemas import (
+    FINISHED,
+    Control,
+    FeedbackPolicy,
+    QueueCounts,
+    RunCreate,
+    RunInstructions,
+    RunRead,
+    StatusUpdate,
+)
 
 _CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "stop": "stop"}
 
@@ -84,6 +93,7 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         created_at=row.created_at,
         updated_at=row.updated_at,
         feedback_timeout_s=row.feedback_timeout_s,
+        instructions=row.instructions or "",
     )
 
 
@@ -135,6 +145,14 @@ def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(control=wanted, updated_at=now))
         events.append(conn, run_id, "control", {"control": wanted}, now)
+    return get(conn, run_id)
+
+
+def set_instructions(conn: Connection, run_id: int, body: RunInstructions) -> RunRead:
+    """An operator's instructions for the run's labelers (not on the stream: nothing the trainer
+    reads; open tabs show them with their next segment)."""
+    row(conn, run_id)
+    conn.execute(update(Run).where(Run.id == run_id).values(instructions=body.text.strip(), updated_at=time.time()))
     return get(conn, run_id)
 
 
