@@ -23,7 +23,7 @@ class LabelingApp:
         self.server.gui.set_panel_label("collie labeling")
         # the replayed robot always sits at the origin (the world moves under it)
         self.server.initial_camera.up = (0.0, 0.0, 1.0)
-        self.server.initial_camera.position = (-2.0, -6.0, 3.6)
+        self.server.initial_camera.position = (0.0, -6.0, 3.6)  # from due south: north up, as in the inset
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
         self._closing: list[LabelerSession] = []  # closed tabs still in their grace period

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 KEYMAP = (
     "**Keys** · **1** bad · **2** neutral · **3** good · **S** skip (not a label) · **U** undo the last "
-    "label · **Space** replay · **P** play / pause · **← →** one frame"
+    "label · **Space** replay · **P** play / pause · **← →** one frame · **V** reset the view"
 )
 LABEL_NAMES = {0: "bad", 1: "neutral", 2: "good"}
 MIXED_RULE = (
@@ -57,6 +57,7 @@ class Actions(Protocol):
     def set_speed(self, speed: float) -> None: ...
     def set_loop(self, loop: bool) -> None: ...
     def set_shadows(self, on: bool) -> None: ...
+    def reset_view(self) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -127,6 +128,8 @@ class Panels:
             self.speed_now = gui.add_markdown("Speed **1×**")
             self.loop = gui.add_checkbox("Loop", initial_value=True)
             self.shadows = gui.add_checkbox("Shadows", initial_value=False, hint="off: faster on slow graphics")
+            reset = gui.add_button("Reset view (north up)", icon=viser.Icon.COMPASS, hint="key V")
+        reset.on_click(lambda _: actions.reset_view())
         self.play.on_click(lambda _: actions.toggle_play())
         again.on_click(lambda _: actions.replay())
         steps.on_click(lambda _: actions.step(-1 if steps.value.startswith("◀") else 1))

@@ -238,6 +238,9 @@ class LabelerSession:
     def set_shadows(self, on: bool) -> None:
         self.scene.set_shadows(on)
 
+    def reset_view(self) -> None:
+        self.scene.aim_camera()
+
     def _render(self, position: float) -> None:
         self.scene.show(position)
         self.state.frame_drawn(position)  # the player thread is its only writer
