@@ -16,6 +16,7 @@ import numpy as np
 import viser
 
 from collie.tasks import Task
+from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB, css
 from labeling_ui.inset import SIZE
 from labeling_ui.playback import SPEEDS
 from labeling_ui.service import MyLabel, Progress
@@ -33,10 +34,10 @@ MIXED_RULE = (
     "every state is good, else neutral."
 )
 LEGEND = (
-    "**Path colours** (3D and inset): <span style='color:#e62878'>■</span> played so far · "
-    "<span style='color:#ff961e'>■</span> to come · <span style='color:#5a5a5a'>■</span> the trajectory "
-    "before the segment. Floor: <span style='color:#dc322f'>■</span> bad area, "
-    "<span style='color:#28aa50'>■</span> good area. **N** arrow: north (up in the inset)."
+    f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
+    f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
+    f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
+    "red bad area, green good area. The blue **N** arrow points north (up in the inset)."
 )
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 

@@ -21,16 +21,13 @@ import viser
 from mjviser import ViserMujocoScene
 from mjviser.conversions import is_fixed_body
 
+from labeling_ui.colours import EARLIER_RGB, NORTH_RGB, PLAYED_RGB, TO_COME_RGB
 from labeling_ui.models import Poser, replay_model, robot_size
 from labeling_ui.regions import FLOOR_Z, edge_rgb, on_floor, region_outline
 
 OVERLAY = "/fixed_bodies/collie"
 COMPASS = "/collie_north"  # outside the world frame: it stays with the followed robot
-# the path colours, the same in the inset (inset.py) and in the legend (panels.py)
-SEGMENT_RGB = (255, 150, 30)  # the segment, still to come
-TRAIL_RGB = (230, 40, 120)  # the part already played
-EARLIER_RGB = (90, 90, 90)  # the trajectory before the segment
-NORTH_RGB = (40, 90, 220)
+SEGMENT_RGB, TRAIL_RGB = TO_COME_RGB, PLAYED_RGB
 GRID_RGB = (120, 95, 95)
 Tint = list[tuple[tuple[int, int, int], np.ndarray, np.ndarray]]
 
