@@ -96,6 +96,7 @@ class TabState:
     token: str | None = None
     who: str | None = None  # the signed-in labeler's name, as the service says
     role: str | None = None
+    was: str | None = None  # who this tab was last signed in as (a sign-out does not forget it)
     shown: Segment | None = None
     ahead: list[Segment] = field(default_factory=list)  # claimed and prepared, shown next
     held: set[Key] = field(default_factory=set)  # leases this tab holds
@@ -113,12 +114,13 @@ class TabState:
     def accepted(self, name: str, role: str) -> str | None:
         """The service took the token. Returns the previous name when this tab's identity changed
         (the page says so, loudly), else None."""
-        before = self.who
-        self.who, self.role = name, role
+        before = self.who or self.was
+        self.who, self.role, self.was = name, role, name
         self.phase = Phase.WATCHING if self.watch_run is not None else Phase.WAITING
         return before if before is not None and before != name else None
 
     def signed_out(self) -> None:
+        self.was = self.who or self.was
         self.forget()
         self.token = self.who = self.role = None
         self.phase = Phase.SIGNED_OUT

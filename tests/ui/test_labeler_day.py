@@ -82,6 +82,7 @@ def test_a_change_of_identity_in_one_tab_is_loud(stack: Stack, browser: Browser)
     page.get_by_role("textbox").first.fill(stack.new_labeler("dave"))
     page.get_by_role("button", name="Sign in").click()
     wait_text(page, "signed in as dave")
+    wait_text(page, "This tab was signed in as cara")
     context.close()  # type: ignore[attr-defined]
 
 

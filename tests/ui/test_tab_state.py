@@ -51,6 +51,10 @@ def test_sign_in_then_a_change_of_identity_is_reported() -> None:
     assert state.accepted("operator", "operator") == "ann"  # the page says so, loudly
     state.signed_out()
     assert (state.phase, state.who, state.token) == (Phase.SIGNED_OUT, None, None)
+    state.use_token("t3")
+    assert state.accepted("bob", "labeler") == "operator"  # signing out and in as another is loud too
+    state.use_token("t4")
+    assert state.accepted("bob", "labeler") is None
 
 
 def test_watch_mode_is_its_own_phase() -> None:
