@@ -258,11 +258,11 @@ class LabelerSession:
             target = self.state.waiting_on
             self._idle(target[0] if target else None)
         else:
-            action = self._next_action(self.config.lease_s / 3)
-            if action is None:
+            waited = self._next_action(self.config.lease_s / 3)
+            if waited is None:
                 self._renew()
             else:
-                self._handle(action)
+                self._handle(waited)
 
     def _idle(self, run_id: int | None) -> None:
         """Nothing to label: the run's latest skills play in 3D; a stream event wakes us."""

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Literal
+from typing import Any
 
-from collie.schemas import MAX_HOLD, QueryRead, RunRead
+from collie.schemas import MAX_HOLD, QueryRead, RunRead, Submission
 
 Key = tuple[int, str]  # (run id, query id)
 
@@ -64,7 +64,7 @@ class Submit:
     """Send this label (0/1/2) or "skip" for this segment; `seconds` from its first frame to the key."""
 
     segment: Segment
-    value: int | Literal["skip"]
+    value: Submission
     seconds: float
     request_id: str
 
@@ -208,7 +208,7 @@ class TabState:
 
     # ---------------------------------------------------------------- keys
 
-    def press(self, value: int | Literal["skip"], now: float, request_id: str) -> Decision:
+    def press(self, value: Submission, now: float, request_id: str) -> Decision:
         """A label or skip key at `now`, against the segment on screen at that moment."""
         shown = self.shown
         if shown is None or self.phase != Phase.SHOWING or shown.appeared is None:
