@@ -22,7 +22,6 @@ import viser
 
 from collie.client import new_request_id
 from collie.schemas import FINISHED, MAX_HOLD, QueryRead, RunRead
-from collie.tasks import Task, get_task
 from labeling_ui.actions import (
     Action,
     Close,
@@ -37,12 +36,9 @@ from labeling_ui.actions import (
 )
 from labeling_ui.browser import load_prefs, read_identity, remember_token, save_prefs
 from labeling_ui.inset import render_inset
-from labeling_ui.keys import bind_keys
 from labeling_ui.models import ModelError, Poser, replay_model
-from labeling_ui.panels import Panels, SegmentInfo
-from labeling_ui.playback import Player
-from labeling_ui.regions import tint_grid, tint_meshes
-from labeling_ui.scene import ReplayScene
+from labeling_ui.panels import SegmentInfo
+from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, MyLabel, Rejected, ServiceDown, ServiceLink
 from labeling_ui.tab import Key, Phase, Refusal, Rules, Segment, Submit, TabState, Withdraw
 from labeling_ui.waiting import forecast, waiting_text
@@ -50,8 +46,6 @@ from labeling_ui.watch import SkillShow
 
 log = logging.getLogger(__name__)
 
-FLOOR_HALF_WIDTH = 20.0  # the region tint on the 3D floor spans this far around the segment...
-FLOOR_SNAP = 10.0  # ...whose centre snaps to this grid, so nearby segments share one tint
 POLL_S = 0.25  # the worker's tick while idle (skills auto-advance, stream wake-ups)
 
 
@@ -69,10 +63,9 @@ class LabelerSession:
         self.on_show = on_show  # the app tells this labeler's other tabs that this one took a segment
         self.state = TabState(Rules(config.min_dwell_s, config.min_played))
         self._lock = threading.Lock()  # guards self.state across the GUI, worker and app threads
-        self.panels = Panels(client, self)
-        bind_keys(client, self)
-        self.scene = ReplayScene(client)
-        self.player = Player(self._render, self.panels.show_frame, fps=config.fps)
+        # the player thread is frame_drawn's only writer
+        self.screen = TabScreen(client, self, config.fps, self.state.frame_drawn)
+        self.panels, self.scene, self.player = self.screen.panels, self.screen.scene, self.screen.player
         self.link: ServiceLink | None = None
         self.stream_link: ServiceLink | None = None
         self.timings: list[dict[str, float | str]] = []  # key → next first frame, for benchmarks
@@ -85,7 +78,6 @@ class LabelerSession:
         self._stream: tuple[int, int] | None = None  # (run, after) the stream waiter long-polls
         self._grace = True
         self._closed = threading.Event()
-        self._tasks: dict[tuple[str, str, object], Task | None] = {}
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
         self._waiter = threading.Thread(
             target=self._await_stream, name=f"collie-stream-{client.client_id}", daemon=True
@@ -190,10 +182,6 @@ class LabelerSession:
     def reset_view(self) -> None:
         self.scene.aim_camera()
 
-    def _render(self, position: float) -> None:
-        self.scene.show(position)
-        self.state.frame_drawn(position)  # the player thread is its only writer
-
     def _save_prefs(self) -> None:
         if self.state.who is not None and self.state.phase != Phase.WATCHING:
             save_prefs(self.client, self.state.who, {"speed": self.player.speed, "loop": self.player.loop})
@@ -268,7 +256,8 @@ class LabelerSession:
         """Nothing to label: the run's latest skills play in 3D; a stream event wakes us."""
         if run_id is not None and self.link is not None:
             if self._skills is None or self._skills.run_id != run_id:
-                self._skills = SkillShow(self, run_id, watch=self.state.phase == Phase.WATCHING)
+                watching = self.state.phase == Phase.WATCHING
+                self._skills = SkillShow(self.screen, run_id, self.config.fps, self.watch_stream if watching else None)
                 self._skills.reload(self.link)
             self._skills.tick()
         action = self._next_action(POLL_S)
@@ -442,7 +431,7 @@ class LabelerSession:
         """A claimed segment made ready to show: its model compiled and its frames checked."""
         with self._lock:
             self.state.claimed(Segment(run, query, None))
-        task = self.task_of(run)
+        task = self.screen.task_of(run)
         classes = (0, 1, 2) if task is None or task.can_be_good else (0, 1)
         try:
             poser = Poser(replay_model(run.env), np.asarray(query.qpos, float))
@@ -461,7 +450,7 @@ class LabelerSession:
         self._skills = None
         self._stream = None
         self.player.fps = self.config.fps
-        task = self.task_of(run)
+        task = self.screen.task_of(run)
         info = SegmentInfo(
             query.query_id, run.id, run.env, run.task, run.method, query.epoch, query.session, query.start,
             query.skill, len(query.qpos), segment.revising,
@@ -483,8 +472,8 @@ class LabelerSession:
         self.on_show(self, segment.key)
         # what follows is context, sent after the first frame is out
         if poser is not None:
-            self.show_floor(run, task, np.asarray(query.xy, float))
-        self.show_task(run, task)
+            self.screen.show_floor(run, task, np.asarray(query.xy, float))
+        self.screen.show_task(run, task)
         self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
         self._preload()
         self._show_progress()
@@ -507,31 +496,6 @@ class LabelerSession:
             with self._lock:
                 self.state.preloaded(segment)
 
-    def show_floor(self, run: RunRead, task: Task | None, xy: np.ndarray) -> None:
-        """The task's regions on the floor around the segment, recomputed only when the segment
-        leaves the area they cover (centres snap to a coarse grid)."""
-        cx, cy = np.round(xy.mean(axis=0) / FLOOR_SNAP) * FLOOR_SNAP
-        key = (run.task, run.env, cx, cy)
-        if key == self.scene.floor_key:
-            return
-        tint = tint_meshes(task, cx, cy, FLOOR_HALF_WIDTH)
-        self.scene.set_floor(key, task.to_dict() if task else None, tint, tint_grid(cx, cy, FLOOR_HALF_WIDTH))
-
-    def show_task(self, run: RunRead, task: Task | None) -> None:
-        if task is not None:
-            self.panels.show_task(task, run.instructions)
-        else:
-            self.panels.show_unknown_task(run.task, run.env, run.instructions)
-
-    def task_of(self, run: RunRead) -> Task | None:
-        key = (run.task, run.env, run.config.get("seed"))
-        if key not in self._tasks:
-            try:
-                self._tasks[key] = get_task(run.task, run.env, layout_seed=run.config.get("seed"))
-            except ValueError:
-                self._tasks[key] = None
-        return self._tasks[key]
-
     def _show_progress(self) -> None:
         shown = self.state.shown
         if self.link is not None and shown is not None:
@@ -543,7 +507,7 @@ class LabelerSession:
     def _load_mine(self, run: RunRead) -> None:
         assert self.link is not None
         self.mine = self.link.my_labels(run.id)
-        task = self.task_of(run)
+        task = self.screen.task_of(run)
         self.panels.show_mine(self.mine, lambda label: render_inset(task, np.asarray(label.xy, float), None))
 
     def _renew(self) -> None:
@@ -688,37 +652,3 @@ class LabelerSession:
             if page.last_id > target[1] and self._stream == target:
                 self._stream = (target[0], page.last_id)
                 self._actions.put(Wake(frozenset(e.kind for e in page.events)))
-
-    # ---------------------------------------------------------------- watch mode's screen
-
-    def show_skill(self, run: RunRead, poser: Poser, xy: np.ndarray, fps: float, status: str, detail: str) -> None:
-        """Replay one evaluation skill (watch mode, or while waiting for work)."""
-        self.scene.load(run.env)
-        watching = self.state.phase == Phase.WATCHING
-        self.player.fps = fps
-        with self.client.atomic():
-            self.scene.set_segment(poser, None)
-            self.player.load(poser.n_frames)
-            if watching:
-                self.panels.show_watch(status, detail, poser.n_frames)
-            else:
-                self.panels.show_skills_while_waiting(detail, poser.n_frames)
-        self.client.flush()
-        task = self.task_of(run)
-        self.show_floor(run, task, xy)
-        self.show_task(run, task)
-        self.panels.show_inset(render_inset(task, xy, None))
-
-    def show_notice(self, message: str) -> None:
-        self.player.unload()
-        self.scene.hide()
-        if self.state.phase == Phase.WATCHING:
-            self.panels.show_message(message)
-
-    def replay_finished(self) -> bool:
-        p = self.player
-        return p.n_frames > 1 and not p.playing and p.position >= p.n_frames - 1
-
-    def set_replay_loop(self, loop: bool) -> None:
-        self.player.loop = loop
-        self.panels.loop.value = loop

@@ -3,12 +3,14 @@ posted with it, one after another: watch mode (`?watch=RUN`, the dashboard's "wa
 link), and the waiting screen's 3D view while nothing is claimable. Nothing is claimed or labelled;
 a newer evaluation replaces the skills as it arrives.
 
-Driven by the tab's worker (reload on a stream wake-up, tick while idle); it reaches the tab only
-through the session's methods (show_skill, show_notice, replay_finished, set_replay_loop).
+Driven by the tab's worker (reload on a stream wake-up, tick while idle); it draws through the
+tab's screen methods (show_skill, show_notice, replay_finished, set_replay_loop) and never
+touches the session's state.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,33 +21,40 @@ from labeling_ui.panels import skill_text
 from labeling_ui.service import ServiceLink
 
 if TYPE_CHECKING:
-    from labeling_ui.session import LabelerSession
+    from labeling_ui.screen import TabScreen
 
 STATE_STRIDE = 2  # env steps between two posted states (trainer/loop.py thins rollouts by 2)
 
 
 class SkillShow:
-    def __init__(self, session: LabelerSession, run_id: int, watch: bool) -> None:
-        self.session = session
+    def __init__(
+        self, screen: TabScreen, run_id: int, fps: float, watch_stream: Callable[[int, int], None] | None
+    ) -> None:
+        """`watch_stream(run, after)`: watch mode (its own controls; the tab wakes on the run's
+        stream); None: the waiting screen's view (the tab already waits on that stream)."""
+        self.screen = screen
         self.run_id = run_id
-        self.watch = watch  # watch mode (its own controls) or the waiting screen's view
+        self.fps = fps / STATE_STRIDE
+        self.watch_stream = watch_stream
+        self.watch = watch_stream is not None
         self.rollouts: RolloutsRead | None = None
         self.run: RunRead | None = None
         self.index = 0
         self.auto = True  # the next skill when one ends
-        if watch:
-            session.panels.add_skill_controls(self)
+        if self.watch:
+            screen.panels.add_skill_controls(self)
 
     def reload(self, link: ServiceLink) -> None:
         """Fetch the latest evaluation; show it if it is new."""
         run = link.run(self.run_id)
-        if self.watch:
-            self.session.watch_stream(run.id, run.last_event_id)
+        if self.watch_stream is not None:
+            self.watch_stream(run.id, run.last_event_id)
         latest = link.latest_rollouts(self.run_id)
         if latest is None or not any(r.qpos for r in latest.rollouts):
-            self.session.show_notice(
+            self.screen.show_notice(
                 f"🎥 **No evaluation to replay yet** for run {run.id} ({run.env}, {run.task}, {run.status}, "
-                f"epoch {run.epoch}).  \nThe skills appear here by themselves after the next evaluation."
+                f"epoch {run.epoch}).  \nThe skills appear here by themselves after the next evaluation.",
+                self.watch,
             )
             return
         self.run = run
@@ -55,12 +64,12 @@ class SkillShow:
         self.show(self.index)
 
     def tick(self) -> None:
-        if self.auto and self.rollouts is not None and self.session.replay_finished():
+        if self.auto and self.rollouts is not None and self.screen.replay_finished():
             self.show(self.index + 1)
 
     def set_auto(self, on: bool) -> None:
         self.auto = on
-        self.session.set_replay_loop(not on)
+        self.screen.set_replay_loop(not on)
 
     def show(self, index: int) -> None:
         """Replay skill `index` (wrapping around) of the latest evaluation."""
@@ -72,16 +81,17 @@ class SkillShow:
         try:
             poser = Poser(replay_model(run.env), np.asarray(rollout.qpos, float))
         except ModelError as exc:
-            self.session.show_notice(f"⚠️ **Run {run.id}'s skills cannot be replayed**: {exc}")
+            self.screen.show_notice(f"⚠️ **Run {run.id}'s skills cannot be replayed**: {exc}", self.watch)
             return
-        self.session.set_replay_loop(not self.auto)
+        self.screen.set_replay_loop(not self.auto)
         where = f"**{self.index + 1} / {len(skills)}** · evaluation at epoch {epoch}"
-        self.session.show_skill(
+        self.screen.show_skill(
             run,
             poser,
             np.asarray(rollout.xy, float),
-            self.session.config.fps / STATE_STRIDE,
+            self.fps,
             f"Watching run {run.id}: skill **{self.index + 1} / {len(skills)}**",
             f"Skill {where}  \nz = {skill_text(rollout.skill)}  \n"
             f"**run** {run.id} · {run.env} · {run.method} · **states** {poser.n_frames}, every {STATE_STRIDE} steps",
+            self.watch,
         )
