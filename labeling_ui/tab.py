@@ -182,6 +182,8 @@ class TabState:
         lost meanwhile are dropped and returned (the one on screen first)."""
         lost = []
         for segment in ([self.shown] if self.shown else []) + list(self.ahead):
+            if segment.revising:
+                continue  # a revision of one's own label holds no lease
             if segment.run.id == run_id and segment.query.query_id not in still:
                 lost.append(segment)
                 self.held.discard(segment.key)

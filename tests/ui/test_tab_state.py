@@ -160,6 +160,7 @@ def test_a_revision_needs_no_lease() -> None:
     state.accepted("ann", "labeler")
     state.present(seg, 0.0)
     state.held.discard(seg.key)
+    assert state.leases(1, set()) == [] and state.shown is seg  # a lease renewal does not drop it
     assert isinstance(state.press(2, 1.0, "r"), Submit)
 
 
