@@ -69,6 +69,7 @@ class LabelerSession:
         self.link: ServiceLink | None = None
         self.stream_link: ServiceLink | None = None
         self.timings: list[dict[str, float | str]] = []  # key → next first frame, for benchmarks
+        self._loop = True  # the labeler's loop setting (the skills between segments use their own)
         self.mine: list[MyLabel] = []  # this labeler's labels in the shown run, newest first (the service's)
         self._skills: SkillShow | None = None
         self._actions: queue.Queue[Action] = queue.Queue()
@@ -174,7 +175,9 @@ class LabelerSession:
 
     def set_loop(self, loop: bool) -> None:
         self.player.loop = loop
-        self._save_prefs()
+        if self.state.phase == Phase.SHOWING:
+            self._loop = loop
+            self._save_prefs()
 
     def set_shadows(self, on: bool) -> None:
         self.scene.set_shadows(on)
@@ -184,7 +187,7 @@ class LabelerSession:
 
     def _save_prefs(self) -> None:
         if self.state.who is not None and self.state.phase != Phase.WATCHING:
-            save_prefs(self.client, self.state.who, {"speed": self.player.speed, "loop": self.player.loop})
+            save_prefs(self.client, self.state.who, {"speed": self.player.speed, "loop": self._loop})
 
     # ---------------------------------------------------------------- the worker
 
@@ -334,7 +337,7 @@ class LabelerSession:
         if isinstance(speed, int | float):
             self.player.set_speed(float(speed))
         if isinstance(loop, bool):
-            self.player.loop = loop
+            self._loop = self.player.loop = loop
             self.panels.loop.value = loop
         self.panels.show_speed(self.player.speed)
         if self.state.phase == Phase.WAITING:
@@ -450,6 +453,9 @@ class LabelerSession:
         self._skills = None
         self._stream = None
         self.player.fps = self.config.fps
+        if self.player.loop != self._loop:  # the skills shown while waiting may have changed it
+            self.player.loop = self._loop
+            self.panels.loop.value = self._loop
         task = self.screen.task_of(run)
         info = SegmentInfo(
             query.query_id, run.id, run.env, run.task, run.method, query.epoch, query.session, query.start,
