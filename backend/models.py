@@ -46,6 +46,7 @@ class Run(Base):
     # the run's rule (collie.task_schemas.TaskDefinition JSON), or a person's instruction for a run without one
     task_definition: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     instruction: Mapped[str | None] = mapped_column(Text, nullable=True)
+    instructions: Mapped[str] = mapped_column(Text, default="", server_default="")  # an operator's, for labelers
     last_event_id: Mapped[int] = mapped_column(Integer)
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)

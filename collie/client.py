@@ -34,6 +34,7 @@ from collie.schemas import (
     Me,
     MetricsIn,
     MetricsRead,
+    MyLabel,
     QualitySettings,
     QueryRead,
     QuerySummary,
@@ -44,6 +45,7 @@ from collie.schemas import (
     RolloutsIn,
     RolloutsRead,
     RunCreate,
+    RunInstructions,
     RunRead,
     RunStatus,
     SessionPost,
@@ -182,6 +184,11 @@ class CollieClient:
         body = QualitySettings(redundancy=redundancy, gold_rate=gold_rate)
         return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/quality", body).content)
 
+    def set_instructions(self, run_id: int, text: str) -> RunRead:
+        """An operator's free-text instructions for the run's labelers ("" clears them)."""
+        body = RunInstructions(text=text)
+        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/instructions", body).content)
+
     # ---------------------------------------------------------------- queries
 
     def post_session(self, run_id: int, session: SessionPost) -> SessionPosted:
@@ -261,6 +268,10 @@ class CollieClient:
 
     def label_events(self, run_id: int, after: int = 0, limit: int = 1000) -> list[LabelEventRead]:
         return self._list(LabelEventRead, f"/runs/{run_id}/labels", after=after, limit=limit)
+
+    def my_labels(self, run_id: int) -> list[MyLabel]:
+        """The caller's labels in the run, newest first (a labeler's review panel)."""
+        return self._list(MyLabel, f"/runs/{run_id}/labels/mine")
 
     def effective_labels(self, run_id: int) -> list[EffectiveLabel]:
         return self._list(EffectiveLabel, f"/runs/{run_id}/labels/effective")

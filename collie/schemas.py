@@ -155,6 +155,7 @@ class RunRead(Wire):
     gold_rate: float = Field(default=0.0, description="share of each labeler's segments that are gold")
     task_definition: TaskDefinition | None = Field(default=None, description="the run's rule as stored")
     instruction: str | None = Field(default=None, description="a run without a rule: the labelers' instruction")
+    instructions: str = Field(default="", description="an operator's instructions for the run's labelers")
 
 
 class QualitySettings(Wire):
@@ -163,6 +164,15 @@ class QualitySettings(Wire):
 
     redundancy: Redundancy = 1
     gold_rate: GoldRate = 0.0
+
+
+MAX_INSTRUCTIONS = 4000  # characters of an operator's free-text instructions for a run's labelers
+
+
+class RunInstructions(Wire):
+    """An operator's free-text instructions for a run's labelers, shown with the task (empty: none)."""
+
+    text: str = Field(max_length=MAX_INSTRUCTIONS)
 
 
 class FeedbackPolicy(Wire):
@@ -381,6 +391,22 @@ class LabelAck(Wire):
     query_status: QueryStatus
     duplicate: bool = Field(description="true when this client_request_id was seen before")
     next: ClaimRead | None = Field(default=None, description="with ?next=true: the labeler's next query, if any")
+
+
+class MyLabel(Wire):
+    """One query the caller labelled in a run (GET /runs/{id}/labels/mine): their latest label of it."""
+
+    model_config = ConfigDict(strict=False)
+
+    run_id: int
+    query_id: str
+    session: int
+    label: LabelValue = Field(description="the caller's latest label of the query")
+    event_id: int
+    labelled_at: datetime
+    revisions: int = Field(description="the caller's label events on the query beyond the first")
+    in_effect: bool = Field(description="false once undone, or relabelled by someone else")
+    xy: list[list[float]] = Field(description="the segment's x-y, for a small inset")
 
 
 class EffectiveLabel(Wire):

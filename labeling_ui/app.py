@@ -23,9 +23,10 @@ class LabelingApp:
         self.server.gui.set_panel_label("collie labeling")
         # the replayed robot always sits at the origin (the world moves under it)
         self.server.initial_camera.up = (0.0, 0.0, 1.0)
-        self.server.initial_camera.position = (-2.0, -6.0, 3.6)
+        self.server.initial_camera.position = (0.0, -6.0, 3.6)  # from due south: north up, as in the inset
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
+        self._closing: list[LabelerSession] = []  # closed tabs still in their grace period
         self._lock = threading.Lock()
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
@@ -50,25 +51,28 @@ class LabelingApp:
         return f"{self.url}?token={quote(token, safe='')}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        session = LabelerSession(client, self.config, self._held_elsewhere)
+        session = LabelerSession(client, self.config, self._shown_in)
         with self._lock:
             self.sessions[client.client_id] = session
         session.start()
 
-    def _held_elsewhere(self, closing: LabelerSession, run_id: int, query_id: str) -> bool:
-        """Whether another open tab of the same labeler shows or preloads this query (a reload picked
-        it up: the service keeps a labeler's claims per labeler, so that tab holds the same lease)."""
+    def _shown_in(self, showing: LabelerSession, key: tuple[int, str]) -> None:
+        """`showing` put (run, query) on screen: the other tabs of the same labeler (open ones, and
+        closed ones still in their grace period) must no longer label or release it. The service
+        keeps a labeler's claims per labeler, so every such tab holds the same lease; the newest
+        tab to show a segment is the one that labels it."""
         with self._lock:
-            others = [s for s in self.sessions.values() if s is not closing and s.token == closing.token]
-        return any(
-            (item.run.id, item.query.query_id) == (run_id, query_id)
-            for s in others
-            for item in [*([s.shown] if s.shown is not None else []), *s.ahead]
-        )
+            self._closing = [s for s in self._closing if not s.finished]
+            others = [s for s in [*self.sessions.values(), *self._closing] if s is not showing]
+        for other in others:
+            if other.who is not None and other.who == showing.who and key in other.on_screen_or_held():
+                other.taken_over(key)
 
     def _disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
             session = self.sessions.pop(client.client_id, None)
+            if session is not None:
+                self._closing.append(session)
         if session is not None:
             session.close()
 

@@ -1,61 +1,95 @@
-"""The labeler's token in the browser: from the labeler URL (`?token=…`) or the sign-in field, kept
-in the page's localStorage so a reload stays signed in. `?watch=RUN` (the dashboard's "watch
-skills in 3D" link) asks for watch mode instead of labeling; it stays in the address bar.
+"""Who a tab is: the labeler's token, kept in the tab's own sessionStorage, never shared by tabs.
 
-viser does not pass the page URL to the server, so a one-line script (viser's RunJavascript
-message, the channel viser itself uses to ship plotly.js) moves the token from the URL into
-localStorage and drops it from the address bar; the server then reads it back with viser's public
-localStorage API.
+A token comes from the labeler URL (`?token=…`, which signs in only the tab it opens) or the
+sign-in field. sessionStorage belongs to one tab (it survives a reload of that tab; another tab,
+or a link opened in one, has its own), so an operator link opened beside a labeler's tab, or a
+wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` asks for watch mode.
+
+viser does not pass the page URL to the server and reads only localStorage, so a script (viser's
+RunJavascript message, the channel viser itself uses to ship plotly.js) moves the token from the
+URL into sessionStorage, drops it from the address bar, and hands it to the server under a key
+unique to this connection, which the server deletes as soon as it has read it.
 """
 
 from __future__ import annotations
 
 import json
+import secrets
+from dataclasses import dataclass
 
 import viser
 from viser import _messages
 
 TOKEN_KEY = "collie-token"
-WATCH_KEY = "collie-watch"
+LEGACY_KEY = "viser-user:collie-token"  # where earlier versions kept it, shared by every tab
 _STORAGE_PREFIX = "viser-user:"  # what viser's client puts before keys written via its API
 
-_TOKEN_FROM_URL = """
+_HANDOFF = """
 const url = new URL(window.location.href);
 const token = url.searchParams.get("token");
 if (token !== null) {
-  localStorage.setItem(%s, token);
+  sessionStorage.setItem(%(key)s, token);
   url.searchParams.delete("token");
   window.history.replaceState(null, document.title, url.toString());
 }
-const watch = url.searchParams.get("watch");
-if (watch !== null) localStorage.setItem(%s, watch); else localStorage.removeItem(%s);
+localStorage.removeItem(%(legacy)s);
+localStorage.setItem(%(handoff)s, JSON.stringify({
+  token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch")
+}));
 """
 
 
-def read_token(client: viser.ClientHandle, timeout_s: float = 30.0) -> str | None:
-    """The token given in the URL, else the one remembered from before, else None."""
-    watch = json.dumps(_STORAGE_PREFIX + WATCH_KEY)
-    script = _TOKEN_FROM_URL % (json.dumps(_STORAGE_PREFIX + TOKEN_KEY), watch, watch)
-    client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=script))
-    try:
-        token = client.local_storage.get_item(TOKEN_KEY, timeout=timeout_s)
-    except (RuntimeError, TimeoutError):
-        return None
-    return token or None
+@dataclass(frozen=True)
+class TabIdentity:
+    token: str | None
+    watch: int | None  # ?watch=RUN: replay that run's skills instead of labeling
 
 
-def read_watch(client: viser.ClientHandle, timeout_s: float = 10.0) -> int | None:
-    """The run to watch (`?watch=RUN` in the URL; read after read_token, which moves it into the
-    page's storage), else None: label."""
+def _run(client: viser.ClientHandle, source: str) -> None:
+    client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=source))
+
+
+def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIdentity:
+    """This tab's token (from its URL, else from before a reload) and the run to watch."""
+    handoff = f"collie-handoff-{secrets.token_hex(8)}"
+    script = _HANDOFF % {
+        "key": json.dumps(TOKEN_KEY),
+        "legacy": json.dumps(LEGACY_KEY),
+        "handoff": json.dumps(_STORAGE_PREFIX + handoff),
+    }
+    _run(client, script)
     try:
-        value = client.local_storage.get_item(WATCH_KEY, timeout=timeout_s)
+        raw = client.local_storage.get_item(handoff, timeout=timeout_s)
     except (RuntimeError, TimeoutError):
-        return None
-    return int(value) if value and value.strip().isdigit() else None
+        return TabIdentity(None, None)
+    finally:
+        client.local_storage.remove_item(handoff)
+    try:
+        found = json.loads(raw) if raw else {}
+    except json.JSONDecodeError:
+        found = {}
+    watch = found.get("watch")
+    return TabIdentity(found.get("token") or None, int(watch) if isinstance(watch, str) and watch.isdigit() else None)
 
 
 def remember_token(client: viser.ClientHandle, token: str | None) -> None:
+    """Keep (or forget) the token in this tab only."""
+    key = json.dumps(TOKEN_KEY)
     if token:
-        client.local_storage.set_item(TOKEN_KEY, token)
+        _run(client, f"sessionStorage.setItem({key}, {json.dumps(token)});")
     else:
-        client.local_storage.remove_item(TOKEN_KEY)
+        _run(client, f"sessionStorage.removeItem({key});")
+
+
+def load_prefs(client: viser.ClientHandle, who: str, timeout_s: float = 10.0) -> dict[str, object]:
+    """A labeler's replay preferences (speed, loop), kept per labeler in this browser."""
+    try:
+        raw = client.local_storage.get_item(f"collie-prefs-{who}", timeout=timeout_s)
+        found = json.loads(raw) if raw else {}
+    except (RuntimeError, TimeoutError, json.JSONDecodeError):
+        return {}
+    return found if isinstance(found, dict) else {}
+
+
+def save_prefs(client: viser.ClientHandle, who: str, prefs: dict[str, object]) -> None:
+    client.local_storage.set_item(f"collie-prefs-{who}", json.dumps(prefs))

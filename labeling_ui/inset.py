@@ -8,14 +8,13 @@ import itertools
 import numpy as np
 
 from collie.tasks import Task
+from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB
 
 SIZE = 240  # pixels, square
 CLASS_RGB = {0: (248, 200, 200), 1: (232, 234, 238), 2: (200, 238, 206)}
 AXIS_RGB = (200, 200, 205)
-EARLIER_RGB = (110, 110, 110)
-SEGMENT_RGB = (255, 140, 0)
+SEGMENT_RGB, HEAD_RGB = TO_COME_RGB, PLAYED_RGB  # the 3D view's colours (colours.py)
 START_RGB = (30, 30, 30)
-HEAD_RGB = (230, 40, 120)
 MIN_HALF_WIDTH = 4.0  # world units; a short segment still shows its surroundings
 
 

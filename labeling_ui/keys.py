@@ -21,6 +21,7 @@ def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
         ("P", "Play / pause", actions.toggle_play),
         ("arrowleft", "Previous frame", lambda: actions.step(-1)),
         ("arrowright", "Next frame", lambda: actions.step(1)),
+        ("V", "Reset the view: north up", actions.reset_view),
     ]
     for key, label, do in bindings:
         command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]

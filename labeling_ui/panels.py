@@ -7,21 +7,40 @@ Panels only draw and forward clicks; what a click does is the session's business
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from datetime import datetime
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import viser
 
+from collie.tasks import Task
+from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB, css
 from labeling_ui.inset import SIZE
 from labeling_ui.playback import SPEEDS
-from labeling_ui.service import Progress
+from labeling_ui.rule import INSTRUCTION_MEANING
+from labeling_ui.service import MyLabel, Progress
+
+if TYPE_CHECKING:
+    from labeling_ui.watch import SkillShow
 
 KEYMAP = (
     "**Keys** · **1** bad · **2** neutral · **3** good · **S** skip (not a label) · **U** undo the last "
-    "label · **Space** replay · **P** play / pause · **← →** one frame"
+    "label · **Space** replay · **P** play / pause · **← →** one frame · **V** reset the view"
 )
 LABEL_NAMES = {0: "bad", 1: "neutral", 2: "good"}
+MIXED_RULE = (
+    "**A segment with states of different kinds:** it is **bad** if any state is bad, **good** only if "
+    "every state is good, else neutral."
+)
+LEGEND = (
+    f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
+    f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
+    f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
+    "red bad area, green good area. The blue **N** arrow points north (up in the inset)."
+)
+MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
 
 class Actions(Protocol):
@@ -32,6 +51,7 @@ class Actions(Protocol):
     def label(self, value: int) -> None: ...
     def skip(self) -> None: ...
     def undo(self) -> None: ...
+    def relabel(self, query_id: str) -> None: ...
     def replay(self) -> None: ...
     def toggle_play(self) -> None: ...
     def step(self, frames: int) -> None: ...
@@ -39,6 +59,7 @@ class Actions(Protocol):
     def set_speed(self, speed: float) -> None: ...
     def set_loop(self, loop: bool) -> None: ...
     def set_shadows(self, on: bool) -> None: ...
+    def reset_view(self) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -55,6 +76,7 @@ class SegmentInfo:
     start: int
     skill: list[float]
     n_frames: int
+    revising: bool = False
 
 
 def skill_text(skill: list[float]) -> str:
@@ -73,7 +95,7 @@ class Panels:
         main.dock_right()
         main.set_width(360)
 
-        self.title = gui.add_markdown("**collie · labeling**")
+        self.title = gui.add_markdown("**collie · labeling** — not signed in")
         self.status = gui.add_markdown("Connecting…")
 
         with gui.add_folder("Sign in", visible=False) as self.login:
@@ -105,8 +127,11 @@ class Panels:
             steps = gui.add_button_group("Step", options=["◀ frame", "frame ▶"], hint="keys ← →")
             self.frame = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0)
             self.speed = gui.add_button_group("Speed", options=[f"{s:g}×" for s in SPEEDS])
+            self.speed_now = gui.add_markdown("Speed **1×**")
             self.loop = gui.add_checkbox("Loop", initial_value=True)
             self.shadows = gui.add_checkbox("Shadows", initial_value=False, hint="off: faster on slow graphics")
+            reset = gui.add_button("Reset view (north up)", icon=viser.Icon.COMPASS, hint="key V")
+        reset.on_click(lambda _: actions.reset_view())
         self.play.on_click(lambda _: actions.toggle_play())
         again.on_click(lambda _: actions.replay())
         steps.on_click(lambda _: actions.step(-1 if steps.value.startswith("◀") else 1))
@@ -115,6 +140,16 @@ class Panels:
         self.loop.on_update(lambda e: e.client is not None and actions.set_loop(bool(self.loop.value)))
         self.shadows.on_update(lambda e: e.client is not None and actions.set_shadows(bool(self.shadows.value)))
 
+        with gui.add_folder("My labels", expand_by_default=False, visible=False) as self.mine_folder:
+            self.mine_list = gui.add_markdown("")
+            self.mine_pick = gui.add_dropdown("Segment", options=["—"], initial_value="—")
+            self.mine_inset = gui.add_image(np.full((SIZE // 2, SIZE // 2, 3), 255, np.uint8), label="its path")
+            replay_mine = gui.add_button("Replay and relabel", icon=viser.Icon.REPEAT, hint="a new label revises yours")
+        replay_mine.on_click(lambda _: self.mine_pick.value != "—" and actions.relabel(self.mine_pick.value))
+        self.mine_pick.on_update(lambda _: self._show_mine_inset())
+        self._mine: list[MyLabel] = []
+        self._mine_inset: Callable[[MyLabel], np.ndarray] | None = None
+
         with gui.add_folder("Account", expand_by_default=False, visible=False) as self.account:
             sign_out = gui.add_button("Sign out", color="gray")
         sign_out.on_click(lambda _: actions.sign_out())
@@ -122,9 +157,12 @@ class Panels:
         self.context_panel = gui.add_panel(visible=False)
         with self.context_panel.add_tab("Context", viser.Icon.INFO_CIRCLE):
             self.task = gui.add_markdown("")
+            self.rule = gui.add_markdown(MIXED_RULE)
+            self.instructions = gui.add_markdown("")
             self.inset = gui.add_image(
                 np.full((SIZE, SIZE, 3), 255, np.uint8), label="top-down, north up", format="png"
             )
+            gui.add_markdown(LEGEND)
             self.segment = gui.add_markdown("")
         self.context_panel.dock_left()
         self.context_panel.set_width(300)
@@ -138,28 +176,53 @@ class Panels:
             self.labeling.visible = labeling
             self.replay.visible = replay
             self.account.visible = not login
+            self.mine_folder.visible = not login and bool(self._mine)
             self.context_panel.visible = replay
 
     def show_login(self, message: str) -> None:
         self._screen(message, login=True)
 
-    def show_message(self, message: str) -> None:
-        """A state with no segment (connecting, unreachable, waiting): only undo stays offered."""
+    def show_message(self, message: str, keep_replay: bool = False) -> None:
+        """A state with no segment (connecting, unreachable, waiting): only undo stays offered;
+        `keep_replay`: the evaluation's skills keep playing beside it."""
         with self.client.atomic():
-            self._screen(message, labeling=True)
+            self._screen(message, labeling=True, replay=keep_replay)
             self.query.content = ""
             for element in self.segment_only:
                 element.visible = False
 
-    def show_watch(self, status: str) -> None:
+    def show_watch(self, status: str, detail: str, n_frames: int) -> None:
         """Watch mode: the replay and its context, nothing to label."""
-        self._screen(status, replay=True)
+        with self.client.atomic():
+            self._screen(status, replay=True)
+            self.rule.visible = False
+            self.frame.max = max(n_frames - 1, 1)
+            self.segment.content = detail
+
+    def show_skills_while_waiting(self, detail: str, n_frames: int) -> None:
+        """The waiting screen keeps its status; the 3D view plays the latest evaluation's skills."""
+        with self.client.atomic():
+            self.replay.visible = True
+            self.context_panel.visible = True
+            self.rule.visible = False
+            self.frame.max = max(n_frames - 1, 1)
+            self.segment.content = "**While you wait: the latest evaluation**  \n" + detail
+
+    def add_skill_controls(self, show: SkillShow) -> None:
+        gui = self.client.gui
+        with gui.add_folder("Skills"):
+            move = gui.add_button_group("Skill", options=["◀ previous", "next ▶"])
+            auto = gui.add_checkbox("Next skill when one ends", initial_value=True)
+        move.on_click(lambda _: show.show(show.index + (-1 if move.value.startswith("◀") else 1)))
+        auto.on_update(lambda _: show.set_auto(bool(auto.value)))
 
     def show_segment(self, info: SegmentInfo, error: str | None = None) -> None:
         status = f"⚠️ **This segment cannot be replayed** — {error}  \nPress **S** to skip it." if error else ""
         with self.client.atomic():
             self._screen(status, labeling=True, replay=error is None)
-            self.query.content = f"Segment `{info.query_id}`"
+            again = " — **relabel**: a new label revises yours" if info.revising else ""
+            self.query.content = f"Segment `{info.query_id}`{again}"
+            self.rule.visible = True
             for element in self.segment_only:
                 element.visible = True
             for button in self.label_buttons:
@@ -172,9 +235,60 @@ class Panels:
                 f"**frames** {info.n_frames} from step {info.start}"
             )
 
-    def show_task(self, title: str, description: str, meaning: dict[int, str]) -> None:
+    def show_task(self, task: Task, instructions: str) -> None:
+        """The task, what each label means, the mixed-segment rule, the run's own instructions; a
+        class the task cannot give is disabled, with a note why."""
+        meaning = task.meaning
         lines = "\n".join(f"- **{LABEL_NAMES[k]}**: {meaning[k]}" for k in sorted(meaning) if k in LABEL_NAMES)
-        self.task.content = f"### {title}\n{description}\n\n{lines}"
+        self.task.content = f"### {task.name}\n{task.description}\n\n{lines}"
+        good = self.label_buttons[2]
+        good.disabled = good.disabled or not task.can_be_good
+        good.label = "3 · Good" if task.can_be_good else "3 · Good (not in this task)"
+        self.show_instructions(instructions)
+
+    def show_instruction(self, instruction: str, instructions: str) -> None:
+        """A run without a rule: the person's instruction stands where the task's words would."""
+        lines = "\n".join(f"- **{LABEL_NAMES[k]}**: {v}" for k, v in sorted(INSTRUCTION_MEANING.items()))
+        self.task.content = f"### Instruction\n{instruction}\n\n{lines}"
+        self.label_buttons[2].label = "3 · Good"
+        self.show_instructions(instructions)
+
+    def show_unknown_task(self, name: str, env: str, instructions: str) -> None:
+        self.task.content = f"### {name}\nUnknown task '{name}' for {env}: judge by its name."
+        self.show_instructions(instructions)
+
+    def show_instructions(self, text: str) -> None:
+        self.instructions.content = f"**From your operator:** {text}" if text else ""
+        self.instructions.visible = bool(text)
+
+    def show_speed(self, speed: float) -> None:
+        self.speed_now.content = f"Speed **{speed:g}×**"
+
+    def show_mine(self, mine: list[MyLabel], inset: Callable[[MyLabel], np.ndarray]) -> None:
+        """This labeler's labels in the run, newest first, as the service keeps them."""
+        self._mine, self._mine_inset = mine, inset
+        rows = [
+            f"| `{m.query_id}` | {LABEL_NAMES[m.label]}{'' if m.in_effect else ' (undone)'} | {_clock(m.labelled_at)} |"
+            for m in mine[:MINE_SHOWN]
+        ]
+        more = f"  \n… and {len(mine) - MINE_SHOWN} older" if len(mine) > MINE_SHOWN else ""
+        with self.client.atomic():
+            self.mine_folder.visible = bool(mine)
+            self.mine_list.content = (
+                f"{len(mine)} labelled in this run, newest first  \n\n| segment | label | when |\n|---|---|---|\n"
+                + "\n".join(rows)
+                + more
+            )
+            options = [m.query_id for m in mine] or ["—"]
+            keep = self.mine_pick.value if self.mine_pick.value in options else options[0]
+            self.mine_pick.options = options
+            self.mine_pick.value = keep
+        self._show_mine_inset()
+
+    def _show_mine_inset(self) -> None:
+        picked = next((m for m in self._mine if m.query_id == self.mine_pick.value), None)
+        if picked is not None and self._mine_inset is not None and picked.xy:
+            self.mine_inset.image = self._mine_inset(picked)[::2, ::2]
 
     def show_inset(self, image: np.ndarray) -> None:
         self.inset.image = image
@@ -190,8 +304,15 @@ class Panels:
             self.play.label = "Pause" if playing else "Play"
             self.play.icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
 
-    def greet(self, name: str) -> None:
-        self.title.content = f"**collie · labeling** — signed in as **{name}**"
+    def greet(self, name: str, role: str, before: str | None = None) -> None:
+        """Who this tab is, always on screen; an operator is marked, a change of identity is loud."""
+        marker = " · ⚠️ **operator**: your labels count as the operator's" if role == "operator" else ""
+        changed = f"  \n🔴 **This tab was signed in as {before}**: it is now {name}." if before else ""
+        self.title.content = f"**collie · labeling** — signed in as **{name}**{marker}{changed}"
 
     def notify(self, title: str, body: str, color: str = "blue") -> None:
         self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[arg-type]
+
+
+def _clock(when: datetime) -> str:
+    return when.astimezone().strftime("%H:%M:%S")

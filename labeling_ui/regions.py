@@ -18,6 +18,8 @@ CLASS_RGB = {0: (220, 50, 47), 1: (120, 130, 150), 2: (40, 170, 80)}
 TINT_Z = 0.005  # just above the floor grid, which would hide anything below it
 TINT_GRID_Z = 0.012  # our own grid lines over the tint keep the motion cue inside tinted areas
 TINT_RGB = {0: (255, 190, 185), 2: (185, 240, 200)}  # neutral stays untinted
+REACH = 3  # cells either side of a run's end searched for the region edge at a row's top and bottom
+REFINE_STEPS = 12  # bisection steps placing a tint edge on the region edge: a cell's width / 1024
 
 
 def on_floor(xy: np.ndarray, z: float = FLOOR_Z) -> np.ndarray:
@@ -61,14 +63,34 @@ def edge_rgb(region: dict[str, Any], task: dict[str, Any] | None) -> tuple[int, 
     return CLASS_RGB[0] if borders_bad else CLASS_RGB.get(region["desirability"], (0, 0, 0))
 
 
+def _refine(
+    task: Task, cls: int, x_in: np.ndarray, x_out: np.ndarray, y: np.ndarray, fallback: np.ndarray
+) -> np.ndarray:
+    """Where, between x_in (of class `cls`) and x_out (not), the task's class changes along each row
+    y: bisection on the task's own rule, so the tint's edge follows the true region edge instead of
+    the grid's cells; `fallback` (the cell edge) where the two ends do not straddle it at that y."""
+    inside = task.classify(np.column_stack([x_in, y])) == cls
+    outside = task.classify(np.column_stack([x_out, y])) != cls
+    lo, hi = x_in.copy(), x_out.copy()
+    for _ in range(REFINE_STEPS):
+        mid = (lo + hi) / 2
+        hit = task.classify(np.column_stack([mid, y])) == cls
+        lo, hi = np.where(hit, mid, lo), np.where(hit, hi, mid)
+    return np.where(inside & outside, (lo + hi) / 2, fallback)
+
+
 def tint_meshes(
     task: Task | None, cx: float, cy: float, half: float, cells: int = 120
 ) -> list[tuple[tuple[int, int, int], np.ndarray, np.ndarray]]:
-    """(colour, vertices, faces) of flat opaque meshes covering the bad and good cells of a square
-    around (cx, cy): one quad per run of equal cells in a row. Opaque, because a translucent tint is
-    depth-sorted against the translucent floor grid and vanishes under it from some viewpoints."""
+    """(colour, vertices, faces) of flat opaque meshes covering the bad and good areas of a square
+    around (cx, cy): one quad per run of equal cells in a row, its left and right ends moved onto the
+    region's edge at the row's bottom and top (so a circle's tint is round, not stepped). Opaque,
+    because a translucent tint is depth-sorted against the translucent floor grid and vanishes under
+    it from some viewpoints."""
     classes = class_map(task, cx, cy, half, cells)
     edges = np.linspace(-half, half, cells + 1)
+    centres = (edges[:-1] + edges[1:]) / 2
+    smooth = task is not None and not task.uses_pitch
     meshes = []
     for cls, rgb in TINT_RGB.items():
         quads = []
@@ -77,15 +99,25 @@ def tint_meshes(
             starts = np.flatnonzero(~inside[:-1] & inside[1:])
             stops = np.flatnonzero(inside[:-1] & ~inside[1:])
             y0, y1 = cy + edges[cells - row - 1], cy + edges[cells - row]
-            quads += [(cx + edges[a], cx + edges[b], y0, y1) for a, b in zip(starts, stops, strict=True)]
+            quads += [(a, b, y0, y1) for a, b in zip(starts, stops, strict=True)]
         if not quads:
             continue
         q = np.array(quads)
-        corners = np.stack(
-            [np.column_stack([q[:, 0], q[:, 2]]), np.column_stack([q[:, 1], q[:, 2]]),
-             np.column_stack([q[:, 1], q[:, 3]]), np.column_stack([q[:, 0], q[:, 3]])], axis=1,
-        )  # fmt: skip
-        vertices = on_floor(corners.reshape(-1, 2), z=TINT_Z)
+        a, b = q[:, 0].astype(int), q[:, 1].astype(int)
+        left, right = cx + edges[a], cx + edges[b]
+        corners_x = np.stack([left, right, right, left], axis=1)  # (bottom-left, bottom-right, top-right, top-left)
+        if smooth:
+            assert task is not None
+            for k, y in ((0, q[:, 2]), (3, q[:, 3])):  # the left ends, at the bottom and the top
+                can = a > 0
+                inner, outer = np.minimum(a[can] + REACH, b[can] - 1), np.maximum(a[can] - 1 - REACH, 0)
+                corners_x[can, k] = _refine(task, cls, cx + centres[inner], cx + centres[outer], y[can], left[can])
+            for k, y in ((1, q[:, 2]), (2, q[:, 3])):  # the right ends
+                can = b < cells
+                inner, outer = np.maximum(b[can] - 1 - REACH, a[can]), np.minimum(b[can] + REACH, cells - 1)
+                corners_x[can, k] = _refine(task, cls, cx + centres[inner], cx + centres[outer], y[can], right[can])
+        corners_y = np.stack([q[:, 2], q[:, 2], q[:, 3], q[:, 3]], axis=1)
+        vertices = on_floor(np.stack([corners_x, corners_y], axis=2).reshape(-1, 2), z=TINT_Z)
         base = 4 * np.arange(len(q))[:, None]
         faces = np.concatenate([base + np.array([0, 1, 2]), base + np.array([0, 2, 3])]).astype(np.uint32)
         meshes.append((rgb, vertices, faces))

@@ -21,13 +21,13 @@ import viser
 from mjviser import ViserMujocoScene
 from mjviser.conversions import is_fixed_body
 
+from labeling_ui.colours import EARLIER_RGB, NORTH_RGB, PLAYED_RGB, TO_COME_RGB
 from labeling_ui.models import Poser, replay_model, robot_size
-from labeling_ui.regions import edge_rgb, on_floor, region_outline
+from labeling_ui.regions import FLOOR_Z, edge_rgb, on_floor, region_outline
 
 OVERLAY = "/fixed_bodies/collie"
-SEGMENT_RGB = (255, 150, 30)
-TRAIL_RGB = (230, 40, 120)
-EARLIER_RGB = (90, 90, 90)
+COMPASS = "/collie_north"  # outside the world frame: it stays with the followed robot
+SEGMENT_RGB, TRAIL_RGB = TO_COME_RGB, PLAYED_RGB
 GRID_RGB = (120, 95, 95)
 Tint = list[tuple[tuple[int, int, int], np.ndarray, np.ndarray]]
 
@@ -48,6 +48,7 @@ class ReplayScene:
         self._mj: ViserMujocoScene | None = None
         self._poser: Poser | None = None
         self._tracked = 1
+        self._size = 1.0
         self._trail_xyz = np.zeros((0, 3))
         self._trail: viser.LineSegmentsHandle | None = None
         self._overlays: list[viser.SceneNodeHandle] = []  # this segment's paths
@@ -74,7 +75,9 @@ class ReplayScene:
             self.client.scene.configure_environment_map(hdri=None)
             self.set_shadows(self.shadows)
             self._tracked = next((b for b in range(model.nbody) if not is_fixed_body(model, b)), 0)
-            self._aim_camera(model)
+            self._size = robot_size(model)
+            self._add_compass()
+            self.aim_camera()
             self.env = env
             self.build_s = time.perf_counter() - start
             return model
@@ -87,16 +90,34 @@ class ReplayScene:
         self.shadows = on
         self.client.scene.configure_default_lights(cast_shadow=on)
 
-    def _aim_camera(self, model: mujoco.MjModel) -> None:
-        """Frame the robot (it sits at the origin). viser's per-client camera can only be moved once
-        the browser has reported its camera; before that the server's initial camera applies."""
+    def aim_camera(self) -> None:
+        """Frame the robot (it sits at the origin) from due south, so north (+y) points up the
+        screen as it does in the inset; the robot is followed by moving the world, so north stays
+        up unless the labeler turns the view (the reset-view button turns it back). viser's
+        per-client camera can only be moved once the browser has reported its camera; before that
+        the server's initial camera (app.py, the same view) applies."""
         camera = self.client.camera
         if camera.update_timestamp == 0.0:
             return
-        distance = max(5.0, 5.0 * robot_size(model))
+        distance = max(5.0, 5.0 * self._size)
         # position first: setting it shifts look_at along, so look_at is set after it
-        camera.position = (-0.35 * distance, -distance, 0.6 * distance)
+        camera.up_direction = (0.0, 0.0, 1.0)
+        camera.position = (0.0, -distance, 0.6 * distance)
         camera.look_at = (0.0, 0.0, 0.0)
+
+    def _add_compass(self) -> None:
+        """A north arrow on the floor beside the robot, with an N at its tip."""
+        r = max(1.0, 1.5 * self._size)
+        head = 0.25 * r
+        tip = (0.0, 2.0 * r, FLOOR_Z)
+        lines = np.array(
+            [[(0.0, r, FLOOR_Z), tip], [(-head, 2.0 * r - head, FLOOR_Z), tip], [(head, 2.0 * r - head, FLOOR_Z), tip]],
+            np.float32,
+        )
+        self.client.scene.add_line_segments(
+            f"{COMPASS}/arrow", lines, NORTH_RGB, thickness=4.0, thickness_units="screen"
+        )
+        self.client.scene.add_label(f"{COMPASS}/N", "N", position=(0.0, 2.0 * r + 0.3 * r, FLOOR_Z))
 
     def set_segment(self, poser: Poser, earlier_xy: np.ndarray | None) -> None:
         """Draw a segment: its whole path and the trajectory's earlier path."""

@@ -13,7 +13,21 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from collie.client import ApiError, CollieClient, Unreachable
-from collie.schemas import FINISHED, ClaimRead, EventPage, LabelAck, Me, RolloutsRead, RunRead, Submission
+from collie.schemas import (
+    FINISHED,
+    ClaimRead,
+    EventPage,
+    LabelAck,
+    Me,
+    MetricsRead,
+    MyLabel,
+    QueryRead,
+    RolloutsRead,
+    RunRead,
+    Submission,
+)
+
+__all__ = ["AuthRefused", "MyLabel", "Progress", "Rejected", "ServiceDown", "ServiceLink", "is_open"]
 
 T = TypeVar("T")
 
@@ -37,6 +51,7 @@ class Progress:
     session_size: int  # M
     total_done: int  # n: labels in the run
     total_planned: int | None  # N_total (the run's label budget), when the trainer gave one
+    instructions: str = ""  # the operator's for this run, as they are now
 
 
 class ServiceLink:
@@ -105,7 +120,7 @@ class ServiceLink:
         run = self._call(lambda: self.client.run(run_id))
         queries = self._call(lambda: self.client.queries(run_id, session=session, limit=5000))
         done = sum(1 for q in queries if q.label is not None)
-        return Progress(session, done, len(queries), run.n_labels, run.n_total)
+        return Progress(session, done, len(queries), run.n_labels, run.n_total, run.instructions)
 
     def latest_rollouts(self, run_id: int) -> RolloutsRead | None:
         """The run's newest evaluation rollouts (with simulator states, when the trainer sent them)."""
@@ -115,10 +130,20 @@ class ServiceLink:
     def events(self, run_id: int, after: int, wait_s: float) -> EventPage:
         return self._call(lambda: self.client.events(run_id, after=after, wait_s=wait_s, limit=1000))
 
-    def wait_for_events(self, run_id: int, after: int, wait_s: float) -> int:
-        """Block up to wait_s for anything new on the run's stream; returns the last event id."""
-        page = self._call(lambda: self.client.events(run_id, after=after, wait_s=wait_s, limit=100))
-        return page.last_id
+    def wait_for_events(self, run_id: int, after: int, wait_s: float) -> EventPage:
+        """Block up to wait_s for anything new on the run's stream."""
+        return self._call(lambda: self.client.events(run_id, after=after, wait_s=wait_s, limit=100))
+
+    def query(self, run_id: int, query_id: str) -> QueryRead:
+        return self._call(lambda: self.client.query(run_id, query_id))
+
+    def my_labels(self, run_id: int) -> list[MyLabel]:
+        """This labeler's labels in the run, newest first (the service keeps them: they survive reloads)."""
+        return self._call(lambda: self.client.my_labels(run_id))
+
+    def metrics(self, run_id: int, last: int = 20) -> list[MetricsRead]:
+        """The trainer's latest metrics (their timestamps give its epoch rate)."""
+        return self._call(lambda: self.client.metrics(run_id, limit=last))
 
     def _retrying(self, fn: Callable[[], T], attempts: int = 4) -> T:
         delay = 0.25

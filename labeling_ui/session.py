@@ -1,12 +1,11 @@
-"""One browser tab's labeling session: sign in, claim, replay, label / skip / undo, wait for work,
-and the error screens.
+"""The driver of one browser tab: owns the threads and the I/O around the pure state machine in
+tab.py (which decides everything about whether a key may label).
 
-GUI callbacks only enqueue; one worker thread talks to the service in order, so a fast labeler's
-keys are handled one at a time, each against the segment that was on screen when it was pressed.
-While a segment is on screen the next one is already claimed and prepared (the service lets a
-labeler hold two), so a label key shows the next segment without a round trip.
-While nothing is claimable, a watcher thread long-polls the run's event stream and wakes the
-worker when something happens, so new queries appear without a reload.
+Threads: viser's callbacks (keys and buttons: they ask the machine, under the lock, and queue what
+it decided), one worker (every service call, in order, and every screen change), the stream
+waiter (long-polls the run's event stream while nothing is claimable or in watch mode, and wakes
+the worker), and the player (playback.py). While a segment is on screen the next one is already
+claimed and prepared (the service lets a labeler hold two), so a label key shows it at once.
 """
 
 from __future__ import annotations
@@ -17,63 +16,37 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import viser
 
 from collie.client import new_request_id
-from collie.schemas import MAX_HOLD, QueryRead, RunRead
-from collie.tasks import Task
-from labeling_ui.browser import read_token, read_watch, remember_token
+from collie.schemas import FINISHED, MAX_HOLD, QueryRead, RunRead
+from labeling_ui.actions import (
+    Action,
+    Close,
+    Moved,
+    Relabel,
+    Send,
+    SignIn,
+    SignOut,
+    UiConfig,
+    UndoKey,
+    Wake,
+)
+from labeling_ui.browser import load_prefs, read_identity, remember_token, save_prefs
 from labeling_ui.inset import render_inset
-from labeling_ui.keys import bind_keys
 from labeling_ui.models import ModelError, Poser, replay_model
-from labeling_ui.panels import Panels, SegmentInfo
-from labeling_ui.playback import Player
-from labeling_ui.regions import tint_grid, tint_meshes
-from labeling_ui.rule import rule_text, run_task
-from labeling_ui.scene import ReplayScene
-from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
-from labeling_ui.watch import SkillWatch
+from labeling_ui.panels import SegmentInfo
+from labeling_ui.screen import TabScreen
+from labeling_ui.service import AuthRefused, MyLabel, Rejected, ServiceDown, ServiceLink
+from labeling_ui.tab import Key, Phase, Refusal, Rules, Segment, Submit, TabState, Withdraw
+from labeling_ui.waiting import forecast, waiting_text
+from labeling_ui.watch import SkillShow
 
 log = logging.getLogger(__name__)
 
-HISTORY = 50  # labels that `undo` can walk back, newest last
-FLOOR_HALF_WIDTH = 20.0  # the region tint on the 3D floor spans this far around the segment...
-FLOOR_SNAP = 10.0  # ...whose centre snaps to this grid, so nearby segments share one tint
-
-
-@dataclass(frozen=True)
-class UiConfig:
-    api: str
-    run_id: int | None = None  # pin one run; else the newest open run with work
-    lease_s: float = 60.0  # renewed while the tab is open; a crashed UI frees its claim this fast
-    fps: float = 20.0  # segment frames per second at 1× (env steps are 0.05 s)
-    min_dwell_s: float = 0.3  # label keys are ignored this long after a segment appears
-    prefetch: bool = True  # claim and prepare the next segment while one is on screen
-    wait_s: float = 10.0  # long-poll length while waiting for work
-    release_grace_s: float = 5.0  # a closed tab's claims wait this long for a reload of it
-    retry_max_s: float = 5.0
-
-
-@dataclass
-class Shown:
-    run: RunRead
-    query: QueryRead
-    poser: Poser | None
-    error: str | None
-    appeared: float = 0.0  # perf_counter() when its first frame was sent
-
-
-@dataclass(frozen=True)
-class Action:
-    kind: str  # sign_in, sign_out, label, skip, undo, wake, close
-    value: Any = None
-    query_id: str | None = None
-    at: float = field(default_factory=time.perf_counter)
-    request_id: str = field(default_factory=new_request_id)
+POLL_S = 0.25  # the worker's tick while idle (skills auto-advance, stream wake-ups)
 
 
 class LabelerSession:
@@ -83,54 +56,72 @@ class LabelerSession:
         self,
         client: viser.ClientHandle,
         config: UiConfig,
-        held_elsewhere: Callable[[LabelerSession, int, str], bool] = lambda *_: False,
+        on_show: Callable[[LabelerSession, Key], None] = lambda *_: None,
     ) -> None:
         self.client = client
         self.config = config
-        self.held_elsewhere = held_elsewhere  # is (run, query) now on screen in another of our tabs?
-        self._grace = True
-        self.panels = Panels(client, self)
-        bind_keys(client, self)
-        self.scene = ReplayScene(client)
-        self.player = Player(self.scene.show, self.panels.show_frame, fps=config.fps)
+        self.on_show = on_show  # the app tells this labeler's other tabs that this one took a segment
+        self.state = TabState(Rules(config.min_dwell_s, config.min_played))
+        self._lock = threading.Lock()  # guards self.state across the GUI, worker and app threads
+        # the player thread is frame_drawn's only writer
+        self.screen = TabScreen(client, self, config.fps, self.state.frame_drawn)
+        self.panels, self.scene, self.player = self.screen.panels, self.screen.scene, self.screen.player
         self.link: ServiceLink | None = None
-        self.watch_link: ServiceLink | None = None
-        self.signed_in = False
-        self.shown: Shown | None = None
-        self.held: set[tuple[int, str]] = set()  # (run, query) leases this tab holds
-        self.ahead: list[Shown] = []  # claimed and prepared, shown next (a preload, an undo's interrupted one)
-        self.history: list[Shown] = []
-        self.waiting_on: tuple[int, int] | None = None  # (run, last event id) while idle
+        self.stream_link: ServiceLink | None = None
         self.timings: list[dict[str, float | str]] = []  # key → next first frame, for benchmarks
-        self.watch_run: int | None = None  # ?watch=RUN: replay that run's skills instead of labeling
-        self._skills: SkillWatch | None = None
+        self._loop = True  # the labeler's loop setting (the skills between segments use their own)
+        self.mine: list[MyLabel] = []  # this labeler's labels in the shown run, newest first (the service's)
+        self._skills: SkillShow | None = None
         self._actions: queue.Queue[Action] = queue.Queue()
         self._retry: Action | None = None
         self._down_since: float | None = None
+        self._recheck_at = 0.0  # while waiting: when to try a claim again without a wake-up
+        self._stream: tuple[int, int] | None = None  # (run, after) the stream waiter long-polls
+        self._grace = True
         self._closed = threading.Event()
-        self._tasks: dict[int, Task | None] = {}  # run id → its rule as the service holds it
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
-        self._watcher = threading.Thread(target=self._watch, name=f"collie-watch-{client.client_id}", daemon=True)
+        self._waiter = threading.Thread(
+            target=self._await_stream, name=f"collie-stream-{client.client_id}", daemon=True
+        )
+
+    # ---------------------------------------------------------------- for the app and watch mode
 
     @property
-    def token(self) -> str | None:
-        return self.link.client.token if self.link is not None else None
+    def who(self) -> str | None:
+        return self.state.who
 
     @property
     def closed(self) -> threading.Event:
         return self._closed
 
+    @property
+    def finished(self) -> bool:
+        return self._closed.is_set() and not self._worker.is_alive()
+
+    def on_screen_or_held(self) -> set[Key]:
+        """The segments this tab shows, has prepared, or holds."""
+        with self._lock:
+            shown = [self.state.shown] if self.state.shown else []
+            return {s.key for s in shown + self.state.ahead} | self.state.held
+
+    def taken_over(self, key: Key) -> None:
+        """Another tab of this labeler shows `key` now: this one must not label it."""
+        with self._lock:
+            was_shown = self.state.taken_elsewhere(key)
+        if was_shown:
+            self._actions.put(Moved(key[1]))
+
     def start(self) -> LabelerSession:
         self._worker.start()
-        self._watcher.start()
+        self._waiter.start()
         return self
 
     def close(self, grace: bool = True) -> None:
-        """The tab went away: stop, and hand back any claim (done by the worker on its way out,
-        after a grace period in which a reload of the tab picks its claim up again)."""
+        """The tab went away: stop, and hand back its claims (after a grace period in which a
+        reload of the tab picks them up again: the new tab's on_show takes them off this one)."""
         self._grace = grace
         self._closed.set()
-        self._actions.put(Action("close"))
+        self._actions.put(Close())
         self.player.close()
 
     def join(self, timeout_s: float) -> None:
@@ -140,31 +131,30 @@ class LabelerSession:
     # ---------------------------------------------------------------- Actions (GUI threads)
 
     def sign_in(self, token: str) -> None:
-        self._actions.put(Action("sign_in", token))
+        self._actions.put(SignIn(token))
 
     def sign_out(self) -> None:
-        self._actions.put(Action("sign_out"))
+        self._actions.put(SignOut())
 
     def label(self, value: int) -> None:
-        self._judge("label", value)
+        self._press(value)
 
     def skip(self) -> None:
-        self._judge("skip", "skip")
+        self._press("skip")
+
+    def _press(self, value: int | str) -> None:
+        with self._lock:
+            decision = self.state.press(value, time.perf_counter(), new_request_id())  # type: ignore[arg-type]
+        if isinstance(decision, Refusal):
+            self.panels.notify(decision.title, decision.body, "orange")
+        elif decision is not None:
+            self._actions.put(Send(decision))
 
     def undo(self) -> None:
-        self._actions.put(Action("undo"))
+        self._actions.put(UndoKey())
 
-    def _judge(self, kind: str, value: int | str) -> None:
-        shown = self.shown
-        if shown is None:
-            return
-        if kind == "label" and shown.error is not None:
-            self.panels.notify("Cannot label", "this segment cannot be replayed; press S to skip it", "orange")
-            return
-        if time.perf_counter() - shown.appeared < self.config.min_dwell_s:
-            # a double tap or a held key must not label the segment that has only just appeared
-            return
-        self._actions.put(Action(kind, value, shown.query.query_id))
+    def relabel(self, query_id: str) -> None:
+        self._actions.put(Relabel(query_id))
 
     def replay(self) -> None:
         self.player.replay()
@@ -180,20 +170,32 @@ class LabelerSession:
 
     def set_speed(self, speed: float) -> None:
         self.player.set_speed(speed)
+        self.panels.show_speed(self.player.speed)
+        self._save_prefs()
 
     def set_loop(self, loop: bool) -> None:
         self.player.loop = loop
+        if self.state.phase == Phase.SHOWING:
+            self._loop = loop
+            self._save_prefs()
 
     def set_shadows(self, on: bool) -> None:
         self.scene.set_shadows(on)
 
+    def reset_view(self) -> None:
+        self.scene.aim_camera()
+
+    def _save_prefs(self) -> None:
+        if self.state.who is not None and self.state.phase != Phase.WATCHING:
+            save_prefs(self.client, self.state.who, {"speed": self.player.speed, "loop": self._loop})
+
     # ---------------------------------------------------------------- the worker
 
     def _work(self) -> None:
-        token = read_token(self.client)
-        self.watch_run = read_watch(self.client)
-        if token:
-            self._start_link(token)
+        identity = read_identity(self.client)
+        self.state.watch_run = identity.watch
+        if identity.token:
+            self._use_token(identity.token)
         else:
             self.panels.show_login("Paste the labeler token your operator gave you, then **Sign in**.")
         delay = 0.5
@@ -216,14 +218,15 @@ class LabelerSession:
             except AuthRefused as exc:
                 self._refused(str(exc))
             except Rejected as exc:  # e.g. a pinned run that does not exist
-                self._waiting(f"The service said: {exc}")
+                self._show_waiting(f"The service said: {exc}")
                 self._closed.wait(self.config.wait_s)
             except Exception as exc:  # keep the tab alive; say what happened
                 log.exception("labeling session %s", self.client.client_id)
                 self.panels.notify("Unexpected error", repr(exc)[:300], "red")
-                self.shown = None
+                with self._lock:
+                    self.state.shown = None
                 self._closed.wait(1.0)
-        if self._grace and self.held:
+        if self._grace and self.state.held:
             time.sleep(self.config.release_grace_s)
         self._release_all()
 
@@ -232,27 +235,40 @@ class LabelerSession:
             action, self._retry = self._retry, None
             self._handle(action)
             return
-        if self.link is None:
+        phase = self.state.phase
+        if phase == Phase.SIGNED_OUT or self.link is None:
             self._handle(self._actions.get())
-            return
-        if not self.signed_in:
-            me = self.link.login()
-            self.signed_in = True
-            self.panels.greet(me.name)
-            self.panels.show_message("Looking for segments to label…")
-            return
-        if self.watch_run is not None:
-            self._skills = self._skills or SkillWatch(self, self.watch_run)
-            self._skills.run()  # until the tab closes
-            return
-        if self.shown is None:
-            if not self._claim_next():
-                self._handle(self._next_action(self.config.wait_s))
-            return
-        action = self._next_action(self.config.lease_s / 3)
-        if action is None:
-            self._renew()
+        elif phase == Phase.CHECKING:
+            self._check_token()
+        elif phase == Phase.WATCHING:
+            assert self.state.watch_run is not None
+            self._idle(self.state.watch_run)
+        elif self.state.shown is None:
+            if time.monotonic() >= self._recheck_at and self._show_next():
+                return
+            target = self.state.waiting_on
+            self._idle(target[0] if target else None)
         else:
+            waited = self._next_action(self.config.lease_s / 3)
+            if waited is None:
+                self._renew()
+            else:
+                self._handle(waited)
+
+    def _idle(self, run_id: int | None) -> None:
+        """Nothing to label: the run's latest skills play in 3D; a stream event wakes us."""
+        if run_id is not None and self.link is not None:
+            if self._skills is None or self._skills.run_id != run_id:
+                watching = self.state.phase == Phase.WATCHING
+                self._skills = SkillShow(self.screen, run_id, self.config.fps, self.watch_stream if watching else None)
+                self._skills.reload(self.link)
+            self._skills.tick()
+        action = self._next_action(POLL_S)
+        if isinstance(action, Wake):
+            self._recheck_at = 0.0
+            if self._skills is not None and self.link is not None and "rollouts" in action.kinds:
+                self._skills.reload(self.link)
+        elif action is not None:
             self._handle(action)
 
     def _next_action(self, timeout_s: float) -> Action | None:
@@ -262,143 +278,192 @@ class LabelerSession:
             return None
 
     def _handle(self, action: Action | None) -> None:
-        if action is None or action.kind in ("wake", "close"):
-            return
         try:
-            if action.kind == "sign_in":
-                self._start_link(str(action.value))
-            elif action.kind == "sign_out":
-                self._release_all()
-                remember_token(self.client, None)
-                self._stop_link()
-                self.panels.show_login("Signed out. Paste a labeler token to sign in again.")
-            elif self.link is None:
-                return
-            elif action.kind in ("label", "skip"):
-                self._submit(action)
-            elif action.kind == "undo":
-                self._undo(action)
+            match action:
+                case SignIn(token):
+                    self._use_token(token)
+                case SignOut():
+                    self._release_all()
+                    remember_token(self.client, None)
+                    self._stop_link()
+                    with self._lock:
+                        self.state.signed_out()
+                    self.panels.show_login("Signed out. Paste a labeler token to sign in again.")
+                case _ if self.link is None:
+                    return
+                case Send(Submit() as submit, at):
+                    self._submit(submit, at)
+                case Send(Withdraw() as withdraw):
+                    self._withdraw(withdraw)
+                case UndoKey(request_id):
+                    self._undo(request_id)
+                case Relabel(query_id):
+                    self._relabel(query_id)
+                case Moved(query_id):
+                    self.panels.notify(
+                        "Moved to another tab", f"segment {query_id} is open in another of your tabs", "orange"
+                    )
+                    if self.state.shown is None:
+                        self._show_next()
         except ServiceDown:
             self._retry = action
             raise
 
     # ---------------------------------------------------------------- signing in
 
-    def _start_link(self, token: str) -> None:
+    def _use_token(self, token: str) -> None:
+        self._release_all()
         self._stop_link()
         if not token:
             self.panels.show_login("Type a token first.")
             return
+        with self._lock:
+            self.state.use_token(token)
         self.panels.show_message("Checking your token…")
         self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
-        self.watch_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
+        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
         remember_token(self.client, token)
 
+    def _check_token(self) -> None:
+        assert self.link is not None
+        me = self.link.login()
+        with self._lock:
+            before = self.state.accepted(me.name, me.role)
+        self.panels.greet(me.name, me.role, before)
+        if before is not None:  # loud: this tab was someone else a moment ago
+            self.panels.notify("You are now " + me.name, f"this tab was signed in as {before}", "red")
+        prefs = load_prefs(self.client, me.name) if self.state.phase != Phase.WATCHING else {}
+        speed, loop = prefs.get("speed"), prefs.get("loop")
+        if isinstance(speed, int | float):
+            self.player.set_speed(float(speed))
+        if isinstance(loop, bool):
+            self._loop = self.player.loop = loop
+            self.panels.loop.value = loop
+        self.panels.show_speed(self.player.speed)
+        if self.state.phase == Phase.WAITING:
+            self.panels.show_message("Looking for segments to label…")
+
     def _stop_link(self) -> None:
-        for link in (self.link, self.watch_link):
+        for link in (self.link, self.stream_link):
             if link is not None:
                 link.close()
-        self.link = self.watch_link = None
-        self.signed_in = False
-        self.shown = None
-        self.ahead.clear()
-        self.waiting_on = None
-        self.history.clear()
+        self.link = self.stream_link = None
+        self._stream = None
+        self._skills = None
+        self.mine = []
         self.player.unload()
         self.scene.hide()
 
     def _refused(self, detail: str) -> None:
+        """A refused token signs out this tab only (its own sessionStorage)."""
         self._release_all()
         self._stop_link()
         remember_token(self.client, None)
+        with self._lock:
+            self.state.signed_out()
         self.panels.show_login(f"⚠️ **The service refused this token**: {detail}  \nCheck it and sign in again.")
 
     # ---------------------------------------------------------------- claiming and showing
 
-    def _claim_next(self, run: RunRead | None = None) -> bool:
-        """Show the next segment (the preloaded one, else a fresh claim); False (and the waiting
+    def _show_next(self, run: RunRead | None = None) -> bool:
+        """Show the next segment (the prepared one, else a fresh claim); False (and the waiting
         screen) when there is none."""
         assert self.link is not None
-        if self.ahead:
-            self.waiting_on = None
-            self._present(self.ahead.pop(0))
+        with self._lock:
+            ready = self.state.next_ready()
+        if ready is not None:
+            self._present(ready)
             return True
-        claim = None
-        if run is not None:
-            claim = self._claim(run)
+        claim = self._claim(run) if run is not None else None
         if claim is None:
             run = self.link.pick_run()
             if run is None:
-                self.waiting_on = None
-                self._waiting("No run is open on the service yet.")
+                self._wait_for(None, "No run is open on the service yet.")
                 return False
             claim = self._claim(run)
         if claim is None:
             assert run is not None
-            self.waiting_on = (run.id, run.last_event_id)
-            self._waiting(self._run_status(run))
+            self._wait_for(run, None)
             return False
-        self.waiting_on = None
         self._present(self._prepare(*claim))
         return True
 
     def _claim(self, run: RunRead) -> tuple[RunRead, QueryRead] | None:
+        """A segment this tab may show: a fresh claim, or one this labeler holds that no other of
+        its tabs shows (the service keeps claims per labeler)."""
         assert self.link is not None
-        try:
-            claimed = self.link.claim(run.id)
-        except Rejected:  # the run stopped or finished meanwhile
-            return None
-        return None if claimed is None else (run, claimed.query)
+        for hold in (1, MAX_HOLD):
+            try:
+                claimed = self.link.claim(run.id, hold=hold)
+            except Rejected:  # the run stopped or finished meanwhile
+                return None
+            if claimed is None:
+                return None
+            if (run.id, claimed.query.query_id) not in self.state.moved:
+                return run, claimed.query
+        return None  # both of this labeler's claims are on screen in other tabs
 
-    def _waiting(self, status: str) -> None:
-        self.shown = None
-        self.player.unload()
-        self.scene.hide()
+    def _wait_for(self, run: RunRead | None, status: str | None) -> None:
+        assert self.link is not None
+        run = self.link.run(run.id) if run is not None else None  # fresh counts, after our own claims
+        with self._lock:
+            self.state.nothing_claimable(run.id if run else None, run.last_event_id if run else 0)
+            held_here = sum(1 for k in self.state.held if run is not None and k[0] == run.id)
+        self._stream = self.state.waiting_on
+        self._recheck_at = time.monotonic() + self.config.wait_s
+        if run is not None:
+            status = waiting_text(run, forecast(run, self.link.metrics(run.id)), held_here)
+            if run.status in FINISHED or run.control == "stop":
+                self._recheck_at = time.monotonic() + 3600.0
+            self._load_mine(run)
+        skills = self._skills
+        self._show_waiting(status or "", keep_skills=skills is not None and run is not None and skills.run_id == run.id)
+
+    def _show_waiting(self, status: str, keep_skills: bool = False) -> None:
+        """The waiting screen; the skills of the run's latest evaluation keep playing if they are on."""
+        if not keep_skills:
+            self._skills = None
+            self.player.unload()
+            self.scene.hide()
         self.panels.show_message(
-            f"☕ **Nothing to label right now.**  \n{status}  \nNew segments appear here by themselves."
+            f"☕ **Nothing to label right now.**  \n{status}  \nNew segments appear here by themselves.",
+            keep_replay=keep_skills,
         )
 
-    @staticmethod
-    def _run_status(run: RunRead) -> str:
-        q = run.queue
-        words = run.status.replace("_", " ")
-        return (
-            f"Run {run.id} ({run.env}, {run.task}) is *{words}* at epoch {run.epoch}: "
-            f"{q.leased} being labelled by others, {run.n_labels} labelled."
-        )
-
-    def _prepare(self, run: RunRead, query: QueryRead) -> Shown:
+    def _prepare(self, run: RunRead, query: QueryRead) -> Segment:
         """A claimed segment made ready to show: its model compiled and its frames checked."""
-        self.held.add((run.id, query.query_id))
+        with self._lock:
+            self.state.claimed(Segment(run, query, None))
+        task = self.screen.task_of(run)
+        classes = (0, 1, 2) if task is None or task.can_be_good else (0, 1)
         try:
-            return Shown(run, query, Poser(replay_model(run.env), np.asarray(query.qpos, float)), None)
+            poser = Poser(replay_model(run.env), np.asarray(query.qpos, float))
+            return Segment(run, query, poser, classes=classes)
         except ModelError as exc:
-            return Shown(run, query, None, str(exc))
+            return Segment(run, query, None, str(exc), classes=classes)
 
-    def _present(self, item: Shown) -> None:
-        run, query, poser, error = item.run, item.query, item.poser, item.error
-        self.held.add((run.id, query.query_id))
+    def _present(self, segment: Segment) -> None:
+        run, query = segment.run, segment.query
+        poser: Poser | None = segment.replay
         if poser is not None:
             try:
                 self.scene.load(run.env)  # builds the robot when the env changes
             except ModelError as exc:
-                poser, error = None, str(exc)
-        task = self.task_of(run)
+                poser, segment.error, segment.replay = None, str(exc), None
+        self._skills = None
+        self._stream = None
+        self.player.fps = self.config.fps
+        if self.player.loop != self._loop:  # the skills shown while waiting may have changed it
+            self.player.loop = self._loop
+            self.panels.loop.value = self._loop
+        task = self.screen.task_of(run)
         info = SegmentInfo(
-            query.query_id,
-            run.id,
-            run.env,
-            run.task,
-            run.method,
-            query.epoch,
-            query.session,
-            query.start,
-            query.skill,
-            len(query.qpos),
-        )
-        earlier = None
-        if query.path_xy:
-            earlier = np.asarray(query.path_xy, float)[: query.start + 1]
+            query.query_id, run.id, run.env, run.task, run.method, query.epoch, query.session, query.start,
+            query.skill, len(query.qpos), segment.revising,
+        )  # fmt: skip
+        earlier = np.asarray(query.path_xy, float)[: query.start + 1] if query.path_xy else None
+        with self._lock:  # keys from now on apply to this segment
+            self.state.present(segment, time.perf_counter())
         with self.client.atomic():
             if poser is not None:
                 self.scene.set_segment(poser, earlier)
@@ -406,152 +471,190 @@ class LabelerSession:
             else:
                 self.player.unload()
                 self.scene.hide()
-            self.panels.show_segment(info, error)
+            self.panels.show_segment(info, segment.error)
         self.client.flush()
-        self.shown = Shown(run, query, poser, error, appeared=time.perf_counter())
+        with self._lock:  # time-per-label and the dwell count from the first frame sent
+            segment.appeared = time.perf_counter()
+        self.on_show(self, segment.key)
         # what follows is context, sent after the first frame is out
         if poser is not None:
-            self.show_floor(run, task, np.asarray(query.xy, float))
-        self.panels.show_task(*rule_text(run, task))
+            self.screen.show_floor(run, task, np.asarray(query.xy, float))
+        self.screen.show_task(run, task)
         self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
-        self._show_progress()
         self._preload()
+        self._show_progress()
 
     def _preload(self) -> None:
         """Claim the segment after the one on screen and prepare it, so the label key that ends
         this one shows the next at once. Best effort: without it the next is claimed on demand."""
-        shown = self.shown
-        if not self.config.prefetch or self.link is None or shown is None or self.ahead or len(self.held) >= MAX_HOLD:
+        shown = self.state.shown
+        if self.link is None or shown is None or not self.state.wants_preload(self.config.prefetch):
             return
         try:
             claimed = self.link.claim(shown.run.id, hold=MAX_HOLD)
         except (Rejected, ServiceDown) as exc:
             log.info("no preload for run %s: %s", shown.run.id, exc)
             return
-        if claimed is not None and claimed.query.query_id != shown.query.query_id:
-            self.ahead.append(self._prepare(shown.run, claimed.query))
-
-    def show_floor(self, run: RunRead, task: Task | None, xy: np.ndarray) -> None:
-        """The task's regions on the floor around the segment, recomputed only when the segment
-        leaves the area they cover (centres snap to a coarse grid)."""
-        cx, cy = np.round(xy.mean(axis=0) / FLOOR_SNAP) * FLOOR_SNAP
-        key = (run.id, run.env, cx, cy)
-        if key == self.scene.floor_key:
+        if claimed is None or (shown.run.id, claimed.query.query_id) in self.state.moved:
             return
-        tint = tint_meshes(task, cx, cy, FLOOR_HALF_WIDTH)
-        self.scene.set_floor(key, task.to_dict() if task else None, tint, tint_grid(cx, cy, FLOOR_HALF_WIDTH))
-
-    def task_of(self, run: RunRead) -> Task | None:
-        """The run's rule from the service's copy (fixed for the run's life, so cached by run id)."""
-        if run.id not in self._tasks:
-            self._tasks[run.id] = run_task(run)
-        return self._tasks[run.id]
+        if claimed.query.query_id != shown.query.query_id:
+            segment = self._prepare(shown.run, claimed.query)
+            with self._lock:
+                self.state.preloaded(segment)
 
     def _show_progress(self) -> None:
-        if self.link is not None and self.shown is not None:
-            self.panels.show_progress(self.link.progress(self.shown.run.id, self.shown.query.session))
+        shown = self.state.shown
+        if self.link is not None and shown is not None:
+            progress = self.link.progress(shown.run.id, shown.query.session)
+            self.panels.show_progress(progress)
+            self.panels.show_instructions(progress.instructions)  # an operator may have changed them
+            self._load_mine(shown.run)
+
+    def _load_mine(self, run: RunRead) -> None:
+        assert self.link is not None
+        self.mine = self.link.my_labels(run.id)
+        task = self.screen.task_of(run)
+        self.panels.show_mine(self.mine, lambda label: render_inset(task, np.asarray(label.xy, float), None))
 
     def _renew(self) -> None:
         """Keep the claims alive while the labeler watches (a claim renews every lease one holds);
         a segment whose lease was lost meanwhile (this tab stalled past it) is dropped."""
-        shown = self.shown
+        shown = self.state.shown
         if self.link is None or shown is None:
             return
         try:
             claimed = self.link.claim(shown.run.id)
         except Rejected as exc:
             self.panels.notify("Run closed", str(exc), "orange")
-            self.shown = None
-            self.ahead.clear()
+            with self._lock:
+                self.state.leases(shown.run.id, set())
             return
-        still = set(claimed.held) if claimed is not None else set()
-        for item in [i for i in self.ahead if i.query.query_id not in still]:
-            self.ahead.remove(item)
-            self.held.discard((item.run.id, item.query.query_id))
-        if shown.query.query_id not in still:
-            self.held.discard((shown.run.id, shown.query.query_id))
+        with self._lock:
+            lost = self.state.leases(shown.run.id, set(claimed.held) if claimed is not None else set())
+        if shown in lost:
             self.panels.notify("Claim lost", f"segment {shown.query.query_id} went to someone else", "orange")
-            self.shown = None
-            if claimed is not None and all(i.query.query_id != claimed.query.query_id for i in self.ahead):
-                self.ahead.insert(0, self._prepare(shown.run, claimed.query))
-            self._claim_next(shown.run)
+            self._show_next(shown.run)
 
     # ---------------------------------------------------------------- labels
 
-    def _submit(self, action: Action) -> None:
-        shown = self.shown
-        if self.link is None or shown is None or shown.query.query_id != action.query_id:
-            return  # a key pressed on a segment that is gone
-        run_id, query_id = shown.run.id, shown.query.query_id
-        seconds = max(0.0, action.at - shown.appeared)
+    def _still_held(self, submit: Submit) -> str | None:
+        """Why this tab may no longer label the segment (its lease is gone: another tab or UI of this
+        labeler labelled it, or it ran out and someone else took it), else None."""
+        segment = submit.segment
+        if segment.revising or not self.config.check_lease or self.link is None:
+            return None
         try:
-            self.link.submit(run_id, query_id, action.value, seconds, action.request_id)
+            claimed = self.link.claim(segment.run.id)
         except Rejected as exc:
-            self.held.discard((run_id, query_id))
-            self.shown = None
-            self.panels.notify("Not recorded", str(exc), "red")
-            return
-        self.held.discard((run_id, query_id))
-        if action.kind == "label":
-            self.history = [*self.history[-(HISTORY - 1) :], shown]
-        self.shown = None
-        self._claim_next(shown.run)
-        if self.shown is not None:
-            self.timings.append(
-                {"query_id": self.shown.query.query_id, "key_to_frame_s": self.shown.appeared - action.at}
-            )
+            return str(exc)
+        if claimed is None or segment.query.query_id not in claimed.held:
+            return f"this tab no longer holds segment {segment.query.query_id} (labelled elsewhere, or its claim ended)"
+        return None
 
-    def _undo(self, action: Action) -> None:
+    def _submit(self, submit: Submit, at: float) -> None:
         assert self.link is not None
-        if not self.history:
-            self.panels.notify("Nothing to undo", "no label from this tab to take back", "gray")
-            return
-        last = self.history[-1]
+        segment = submit.segment
+        if self.state.shown is not segment:
+            return  # a key pressed on a segment that is gone
+        reason = self._still_held(submit)
+        if reason is None:
+            try:
+                run_id, query_id = segment.key
+                self.link.submit(run_id, query_id, submit.value, submit.seconds, submit.request_id)
+            except Rejected as exc:
+                reason = str(exc)
+        with self._lock:
+            if reason is None:
+                self.state.recorded(submit)
+            else:
+                self.state.refused(submit)
+        if reason is not None:
+            self.panels.notify("Not recorded", reason, "red")
+        self._show_next(segment.run)
+        shown = self.state.shown
+        if shown is not None and shown.appeared is not None and reason is None:
+            self.timings.append({"query_id": shown.query.query_id, "key_to_frame_s": shown.appeared - at})
+
+    def _undo(self, request_id: str) -> None:
+        mine = [(m.run_id, m.query_id) for m in self.mine if m.in_effect]
+        with self._lock:
+            decision = self.state.undo_target(mine, request_id)
+        if isinstance(decision, Refusal):
+            self.panels.notify(decision.title, decision.body, "gray")
+        elif isinstance(decision, Withdraw):
+            self._withdraw(decision)
+
+    def _withdraw(self, withdraw: Withdraw) -> None:
+        assert self.link is not None
         try:
-            self.link.undo(last.run.id, last.query.query_id, action.request_id)
+            self.link.undo(withdraw.run_id, withdraw.query_id, withdraw.request_id)
         except Rejected as exc:
-            self.history.pop()
+            with self._lock:
+                self.state.labelled = [k for k in self.state.labelled if k != (withdraw.run_id, withdraw.query_id)]
             self.panels.notify("Cannot undo", str(exc), "red")
             return
-        self.history.pop()
+        run = self.link.run(withdraw.run_id)
+        segment = self._prepare(run, self.link.query(withdraw.run_id, withdraw.query_id))
+        with self._lock:
+            self.state.withdrawn(withdraw, segment)
         self.player.pause()
-        self.panels.notify("Label withdrawn", f"segment {last.query.query_id} is back: label it again", "blue")
-        if self.shown is not None and self.shown.query.query_id != last.query.query_id:
-            self.ahead.insert(0, self.shown)  # it comes back after the relabel
-        self._present(last)
+        self.panels.notify("Label withdrawn", f"segment {withdraw.query_id} is back: label it again", "blue")
+        self._show_next(run)
+
+    def _relabel(self, query_id: str) -> None:
+        """Replay one of this labeler's labelled segments; a label on it is a revision."""
+        assert self.link is not None
+        picked = next((m for m in self.mine if m.query_id == query_id), None)
+        if picked is None:
+            self.panels.notify("Not yours", f"segment {query_id} is not among your labels", "orange")
+            return
+        run = self.link.run(picked.run_id)
+        segment = self._prepare(run, self.link.query(picked.run_id, query_id))
+        segment.revising = True
+        with self._lock:
+            self.state.held.discard(segment.key)  # a revision needs no lease
+            shown = self.state.shown
+            if shown is not None and shown.key != segment.key:
+                self.state.ahead.insert(0, shown)
+        self._present(segment)
 
     def _recovered(self) -> None:
         down_since, self._down_since = self._down_since, None
-        shown = self.shown
-        if shown is not None and down_since is not None and shown.appeared < down_since:
+        shown = self.state.shown
+        if shown is not None and down_since is not None and (shown.appeared or 0.0) < down_since:
             self._present(shown)  # the outage screen hid it; show it again
 
     def _release_all(self) -> None:
-        """Hand every claim this tab holds back to the pool (a closed tab, a sign-out)."""
+        """Hand every claim this tab holds back to the pool (a closed tab, a sign-out); claims that
+        another tab of this labeler took over were removed from this tab's by taken_over."""
         link = self.link
-        for run_id, query_id in list(self.held):
-            if link is not None and not self.held_elsewhere(self, run_id, query_id):
+        with self._lock:
+            keys = self.state.release_all()
+        for run_id, query_id in keys:
+            if link is not None:
                 with contextlib.suppress(Rejected, ServiceDown, AuthRefused):  # else the lease runs out
                     link.release(run_id, query_id)
-        self.held.clear()
-        self.ahead.clear()
 
-    # ---------------------------------------------------------------- the watcher
+    # ---------------------------------------------------------------- the stream waiter
 
-    def _watch(self) -> None:
+    def watch_stream(self, run_id: int, after: int) -> None:
+        """Watch mode and the waiting screen's skills: wake the worker on the run's next event."""
+        self._stream = (run_id, after)
+
+    def _await_stream(self) -> None:
         while not self._closed.is_set():
-            target, link = self.waiting_on, self.watch_link
+            target, link = self._stream, self.stream_link
             if target is None or link is None:
                 self._closed.wait(0.25)
                 continue
             try:
-                last = link.wait_for_events(target[0], target[1], self.config.wait_s)
+                page = link.wait_for_events(target[0], target[1], self.config.wait_s)
             except (ServiceDown, AuthRefused, Rejected):
                 self._closed.wait(1.0)
                 continue
             except Exception:  # the link was closed under us (sign-out)
                 self._closed.wait(0.25)
                 continue
-            if last > target[1] and self.waiting_on == target:
-                self.waiting_on = (target[0], last)
-                self._actions.put(Action("wake"))
+            if page.last_id > target[1] and self._stream == target:
+                self._stream = (target[0], page.last_id)
+                self._actions.put(Wake(frozenset(e.kind for e in page.events)))

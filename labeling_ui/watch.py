@@ -1,144 +1,97 @@
-"""Watch mode (`?watch=RUN`, the dashboard's "watch skills in 3D" link): every skill of the run's
-latest evaluation replayed in 3D from the simulator states the trainer posted with it, one skill
-after another. Nothing is claimed or labelled; a new evaluation replaces the skills as it arrives.
+"""The skills of a run's latest evaluation replayed in 3D from the simulator states the trainer
+posted with it, one after another: watch mode (`?watch=RUN`, the dashboard's "watch skills in 3D"
+link), and the waiting screen's 3D view while nothing is claimable. Nothing is claimed or labelled;
+a newer evaluation replaces the skills as it arrives.
 
-The trainer posts every second state of each evaluation rollout, so a rollout replays at half the
-segment frame rate to keep real time.
+Driven by the tab's worker (reload on a stream wake-up, tick while idle); it draws through the
+tab's screen methods (show_skill, show_notice, replay_finished, set_replay_loop) and never
+touches the session's state.
 """
 
 from __future__ import annotations
 
-import threading
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from collie.schemas import RolloutsRead, RunRead
-from labeling_ui.inset import render_inset
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import skill_text
-from labeling_ui.rule import rule_text
+from labeling_ui.service import ServiceLink
 
 if TYPE_CHECKING:
-    from labeling_ui.session import LabelerSession
+    from labeling_ui.screen import TabScreen
 
 STATE_STRIDE = 2  # env steps between two posted states (trainer/loop.py thins rollouts by 2)
-POLL_S = 0.25  # how often the end of a skill is checked for auto-advance
 
 
-class SkillWatch:
-    """Runs in the tab's worker thread until the tab closes. Buttons move between skills from the
-    GUI threads; a second thread long-polls the run's stream for new evaluations."""
-
-    def __init__(self, session: LabelerSession, run_id: int) -> None:
-        self.session = session
+class SkillShow:
+    def __init__(
+        self, screen: TabScreen, run_id: int, fps: float, watch_stream: Callable[[int, int], None] | None
+    ) -> None:
+        """`watch_stream(run, after)`: watch mode (its own controls; the tab wakes on the run's
+        stream); None: the waiting screen's view (the tab already waits on that stream)."""
+        self.screen = screen
         self.run_id = run_id
+        self.fps = fps / STATE_STRIDE
+        self.watch_stream = watch_stream
+        self.watch = watch_stream is not None
         self.rollouts: RolloutsRead | None = None
-        self.watched: RunRead | None = None
+        self.run: RunRead | None = None
         self.index = 0
-        self._lock = threading.Lock()
-        self._fresh = threading.Event()  # a new evaluation was posted
-        self._fresh.set()
-        gui = session.client.gui
-        with gui.add_folder("Skills") as self.folder:
-            self.info = gui.add_markdown("")
-            self.move = gui.add_button_group("Skill", options=["◀ previous", "next ▶"])
-            self.auto = gui.add_checkbox("Next skill when one ends", initial_value=True)
-        self.move.on_click(lambda _: self.show(self.index + (-1 if self.move.value.startswith("◀") else 1)))
-        self.auto.on_update(lambda _: self._set_auto(bool(self.auto.value)))
+        self.auto = True  # the next skill when one ends
+        if self.watch:
+            screen.panels.add_skill_controls(self)
 
-    def run(self) -> None:
-        session = self.session
-        assert session.link is not None and session.watch_link is not None
-        session.panels.title.content = f"**collie · watching run {self.run_id}**"
-        watcher = threading.Thread(target=self._watch_stream, name="collie-watch-stream", daemon=True)
-        watcher.start()
-        while not session.closed.is_set():
-            if self._fresh.is_set():
-                self._fresh.clear()
-                self._reload()
-            elif self._finished() and self.auto.value:
-                self.show(self.index + 1)
-            session.closed.wait(POLL_S)
-
-    def _reload(self) -> None:
-        assert self.session.link is not None
-        run = self.session.link.run(self.run_id)
-        latest = self.session.link.latest_rollouts(self.run_id)
-        replayable = latest is not None and any(r.qpos for r in latest.rollouts)
-        if not replayable:
-            self.session.player.unload()
-            self.session.scene.hide()
-            self.session.panels.show_message(
+    def reload(self, link: ServiceLink) -> None:
+        """Fetch the latest evaluation; show it if it is new."""
+        run = link.run(self.run_id)
+        if self.watch_stream is not None:
+            self.watch_stream(run.id, run.last_event_id)
+        latest = link.latest_rollouts(self.run_id)
+        if latest is None or not any(r.qpos for r in latest.rollouts):
+            self.screen.show_notice(
                 f"🎥 **No evaluation to replay yet** for run {run.id} ({run.env}, {run.task}, {run.status}, "
-                f"epoch {run.epoch}).  \nThe skills appear here by themselves after the next evaluation."
+                f"epoch {run.epoch}).  \nThe skills appear here by themselves after the next evaluation.",
+                self.watch,
             )
             return
-        if self.rollouts is not None and latest is not None and latest.id == self.rollouts.id:
+        self.run = run
+        if self.rollouts is not None and latest.id == self.rollouts.id:
             return
-        with self._lock:
-            self.rollouts, self.watched = latest, run
+        self.rollouts = latest
         self.show(self.index)
+
+    def tick(self) -> None:
+        if self.auto and self.rollouts is not None and self.screen.replay_finished():
+            self.show(self.index + 1)
+
+    def set_auto(self, on: bool) -> None:
+        self.auto = on
+        self.screen.set_replay_loop(not on)
 
     def show(self, index: int) -> None:
         """Replay skill `index` (wrapping around) of the latest evaluation."""
-        with self._lock:
-            if self.rollouts is None or self.watched is None:
-                return
-            skills = [r for r in self.rollouts.rollouts if r.qpos]
-            self.index = index % len(skills)
-            rollout, run, epoch = skills[self.index], self.watched, self.rollouts.epoch
-            session = self.session
-            try:
-                poser = Poser(replay_model(run.env), np.asarray(rollout.qpos, float))
-                session.scene.load(run.env)
-            except ModelError as exc:
-                session.panels.show_message(f"⚠️ **Run {run.id}'s skills cannot be replayed**: {exc}")
-                return
-            xy = np.asarray(rollout.xy, float)
-            session.player.fps = session.config.fps / STATE_STRIDE
-            session.player.loop = not self.auto.value
-            session.panels.loop.value = session.player.loop
-            with session.client.atomic():
-                session.scene.set_segment(poser, None)
-                session.player.load(poser.n_frames)
-                session.panels.show_watch(f"Watching run {run.id}: skill **{self.index + 1} / {len(skills)}**")
-                session.panels.frame.max = max(poser.n_frames - 1, 1)
-                self.info.content = (
-                    f"Skill **{self.index + 1} / {len(skills)}** · evaluation at epoch {epoch}  \n"
-                    f"z = {skill_text(rollout.skill)}"
-                )
-                session.panels.segment.content = (
-                    f"**run** {run.id} · {run.env} · {run.method}  \n**evaluation** epoch {epoch}  \n"
-                    f"**skill** {self.index + 1} of {len(skills)}: {skill_text(rollout.skill)}  \n"
-                    f"**states** {poser.n_frames}, every {STATE_STRIDE} steps"
-                )
-            session.client.flush()
-            task = session.task_of(run)
-            session.show_floor(run, task, xy)
-            session.panels.show_task(*rule_text(run, task))
-            session.panels.show_inset(render_inset(task, xy, None))
-
-    def _set_auto(self, on: bool) -> None:
-        self.session.player.loop = not on
-        self.session.panels.loop.value = not on
-
-    def _finished(self) -> bool:
-        player = self.session.player
-        return player.n_frames > 1 and not player.playing and player.position >= player.n_frames - 1
-
-    def _watch_stream(self) -> None:
-        session = self.session
-        after = 0
-        while not session.closed.is_set():
-            link = session.watch_link
-            if link is None:
-                return
-            try:
-                page = link.events(self.run_id, after, session.config.wait_s)
-            except Exception:  # down or signed out: the worker reports it; try again shortly
-                session.closed.wait(1.0)
-                continue
-            if any(e.kind == "rollouts" for e in page.events):
-                self._fresh.set()
-            after = page.last_id
+        if self.rollouts is None or self.run is None:
+            return
+        skills = [r for r in self.rollouts.rollouts if r.qpos]
+        self.index = index % len(skills)
+        rollout, run, epoch = skills[self.index], self.run, self.rollouts.epoch
+        try:
+            poser = Poser(replay_model(run.env), np.asarray(rollout.qpos, float))
+        except ModelError as exc:
+            self.screen.show_notice(f"⚠️ **Run {run.id}'s skills cannot be replayed**: {exc}", self.watch)
+            return
+        self.screen.set_replay_loop(not self.auto)
+        where = f"**{self.index + 1} / {len(skills)}** · evaluation at epoch {epoch}"
+        self.screen.show_skill(
+            run,
+            poser,
+            np.asarray(rollout.xy, float),
+            self.fps,
+            f"Watching run {run.id}: skill **{self.index + 1} / {len(skills)}**",
+            f"Skill {where}  \nz = {skill_text(rollout.skill)}  \n"
+            f"**run** {run.id} · {run.env} · {run.method} · **states** {poser.n_frames}, every {STATE_STRIDE} steps",
+            self.watch,
+        )

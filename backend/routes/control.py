@@ -7,7 +7,7 @@ from fastapi import APIRouter
 
 from backend.routes.deps import DB, OperatorCaller, RunId
 from backend.services import runs
-from collie.schemas import FeedbackPolicy, RunRead
+from collie.schemas import FeedbackPolicy, RunInstructions, RunRead
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
 
@@ -28,6 +28,13 @@ async def resume(run_id: RunId, _: OperatorCaller, db: DB) -> RunRead:
 async def stop(run_id: RunId, _: OperatorCaller, db: DB) -> RunRead:
     with db.write() as conn:
         return runs.set_control(conn, run_id, "stop")
+
+
+@router.put("/instructions")
+async def instructions(run_id: RunId, body: RunInstructions, _: OperatorCaller, db: DB) -> RunRead:
+    """Free-text instructions for the run's labelers, shown with the task in the labeling UI."""
+    with db.write() as conn:
+        return runs.set_instructions(conn, run_id, body)
 
 
 @router.post("/feedback-policy")

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Response
 from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller
 from backend.services import export, labels, leases
 from backend.services.errors import ServiceError
-from collie.schemas import MAX_INT, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
+from collie.schemas import MAX_INT, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, MyLabel, UndoRequest
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["labels"])
 
@@ -64,6 +64,13 @@ def list_label_events(
 ) -> list[LabelEventRead]:
     with db.read() as conn:
         return labels.list_events(conn, run_id, after, limit)
+
+
+@router.get("/labels/mine")
+def my_labels(run_id: RunId, caller: LabelerCaller, db: DB) -> list[MyLabel]:
+    """The queries you labelled in the run, newest first (your latest label of each), for review."""
+    with db.read() as conn:
+        return labels.my_labels(conn, run_id, caller)
 
 
 @router.get("/labels/effective")

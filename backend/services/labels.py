@@ -17,16 +17,17 @@ Gold copies (services/gold.py) take labels the same way with r = 1, but never to
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
 from sqlalchemy import Connection, bindparam, delete, insert, select, update
 
-from backend.models import LabelEvent, LabelVote, Principal, Query, Run
+from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import consensus, events, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
+from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, MyLabel, UndoRequest
 
 _EVENT_COLUMNS = (
     LabelEvent.id,
@@ -301,3 +302,44 @@ def effective_labels(conn: Connection, run_id: int) -> list[EffectiveLabel]:
             )
         )
     return sorted(result, key=lambda e: e.event_id)
+
+
+MINE_LIMIT = 200  # the newest queries listed in a labeler's "my labels"
+
+
+def my_labels(conn: Connection, run_id: int, caller: Caller, limit: int = MINE_LIMIT) -> list[MyLabel]:
+    """The queries `caller` labelled in the run, newest label first: their latest label of each,
+    how often they revised it, whether it is still the effective label, and the segment's x-y."""
+    runs.row(conn, run_id)
+    rows = conn.execute(
+        select(LabelEvent.id, LabelEvent.kind, LabelEvent.value, LabelEvent.created_at, LabelEvent.query_pk,
+               Query.query_id, Query.session, Query.label_event_id)
+        .join(Query, Query.id == LabelEvent.query_pk)
+        .where(LabelEvent.run_id == run_id, LabelEvent.labeler_id == caller.id, LabelEvent.kind == "label")
+        .order_by(LabelEvent.id)
+    ).all()  # fmt: skip
+    latest: dict[int, Any] = {}
+    count: dict[int, int] = {}
+    for r in rows:
+        latest[r.query_pk] = r
+        count[r.query_pk] = count.get(r.query_pk, 0) + 1
+    newest = sorted(latest.values(), key=lambda r: r.id, reverse=True)[:limit]
+    frames = dict(
+        conn.execute(
+            select(QueryData.query_pk, QueryData.frames).where(QueryData.query_pk.in_([r.query_pk for r in newest]))
+        ).all()
+    )
+    return [
+        MyLabel(
+            run_id=run_id,
+            query_id=r.query_id,
+            session=r.session,
+            label=r.value,
+            event_id=r.id,
+            labelled_at=r.created_at,
+            revisions=count[r.query_pk] - 1,
+            in_effect=r.label_event_id == r.id,
+            xy=json.loads(frames[r.query_pk]).get("xy", []) if r.query_pk in frames else [],
+        )
+        for r in newest
+    ]

@@ -20,6 +20,7 @@ from collie.schemas import (
     QualitySettings,
     QueueCounts,
     RunCreate,
+    RunInstructions,
     RunRead,
     StatusUpdate,
 )
@@ -123,6 +124,7 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         gold_rate=row.gold_rate,
         task_definition=row.task_definition,
         instruction=row.instruction,
+        instructions=row.instructions or "",
     )
 
 
@@ -174,6 +176,14 @@ def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(control=wanted, updated_at=now))
         events.append(conn, run_id, "control", {"control": wanted}, now)
+    return get(conn, run_id)
+
+
+def set_instructions(conn: Connection, run_id: int, body: RunInstructions) -> RunRead:
+    """An operator's instructions for the run's labelers (not on the stream: nothing the trainer
+    reads; open tabs show them with their next segment)."""
+    row(conn, run_id)
+    conn.execute(update(Run).where(Run.id == run_id).values(instructions=body.text.strip(), updated_at=time.time()))
     return get(conn, run_id)
 
 

@@ -39,6 +39,8 @@ POLICY: dict[tuple[str, str], str] = {
     ("POST", "/api/runs/{run_id}/undo"): LABELER,
     ("GET", "/api/runs/{run_id}/labels"): ANY,
     ("GET", "/api/runs/{run_id}/labels/effective"): ANY,
+    ("GET", "/api/runs/{run_id}/labels/mine"): LABELER,
+    ("PUT", "/api/runs/{run_id}/instructions"): OPERATOR,
     ("GET", "/api/runs/{run_id}/export"): TRAINER,
     ("POST", "/api/runs/{run_id}/metrics"): TRAINER,
     ("GET", "/api/runs/{run_id}/metrics"): ANY,

@@ -82,12 +82,24 @@ class Stack:
         return self.operator.create_labeler(name).token
 
     def post_run(
-        self, env: str, n_queries: int, task: str = "north", seed: int = 0, rollout_env: str | None = None
+        self,
+        env: str,
+        n_queries: int,
+        task: str = "north",
+        seed: int = 0,
+        rollout_env: str | None = None,
+        redundancy: int | None = None,
     ) -> RunRead:
         """A run waiting for labels with one session of n_queries segments, rolled out in `env`
-        (or in `rollout_env`, to make a run whose model the UI cannot build)."""
+        (or in `rollout_env`, to make a run whose model the UI cannot build); `redundancy`: labels
+        per query, where the service has that run setting (RunCreate.redundancy)."""
         rollout_env = rollout_env or env
-        spec = RunCreate(env=env, task=task, method="collie", dims=dims_of(rollout_env), n_total=100)
+        extra: dict[str, object] = {}
+        if redundancy is not None:
+            if "redundancy" not in RunCreate.model_fields:
+                raise ValueError("this service has no redundancy run setting (RunCreate.redundancy)")
+            extra["redundancy"] = redundancy
+        spec = RunCreate(env=env, task=task, method="collie", dims=dims_of(rollout_env), n_total=100, **extra)
         run = self.trainer.create_run(spec)
         if n_queries:
             self.post_session(run.id, rollout_env, 0, n_queries, seed)

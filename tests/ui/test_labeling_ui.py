@@ -26,9 +26,9 @@ def effective(stack: Stack, run_id: int) -> dict[str, tuple[int, str]]:
 
 
 def test_label_five_by_keys_then_undo(stack: Stack, browser: Browser, artifacts: Path) -> None:
-    run = stack.post_run("point", 6)
+    run = stack.post_run("point", 6, task="range_north")  # a task with all three classes
     token = stack.new_labeler("keys")
-    page = open_labeler(browser, stack.ui(run.id, min_dwell_s=DWELL_S).labeler_url(token))
+    page = open_labeler(browser, stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0).labeler_url(token))
     seen, shown = [], None
     for key in ["1", "2", "3", "3", "1"]:
         shown = wait_segment(page, shown)
@@ -76,7 +76,7 @@ def test_replay_canvas_is_not_blank(stack: Stack, browser: Browser, artifacts: P
 
 def test_two_labelers_at_once_never_overlap(stack: Stack, browser: Browser, artifacts: Path) -> None:
     run = stack.post_run("point", 8, seed=5)
-    app = stack.ui(run.id, min_dwell_s=DWELL_S)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
     pages = [open_labeler(browser, app.labeler_url(stack.new_labeler(name))) for name in ("ann", "bob")]
     current = [wait_segment(p) for p in pages]
     assert current[0] != current[1]
@@ -120,16 +120,16 @@ def wait_until(condition: object, timeout_s: float = 30.0) -> None:
 
 def test_next_segment_is_preloaded_and_a_closed_tab_releases_both(stack: Stack, browser: Browser) -> None:
     run = stack.post_run("point", 3)
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, release_grace_s=0.5)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0, release_grace_s=0.5)
     page = open_labeler(browser, app.labeler_url(stack.new_labeler("closer")))
     first = wait_segment(page)
     (session,) = app.sessions.values()
-    wait_until(lambda: len(session.ahead) == 1)  # the next one is claimed and ready before any key
-    preloaded = session.ahead[0].query.query_id
+    wait_until(lambda: len(session.state.ahead) == 1)  # the next one is claimed and ready before any key
+    preloaded = session.state.ahead[0].query.query_id
     assert preloaded != first and stack.trainer.run(run.id).queue.leased == 2
-    press(page, "3")
+    press(page, "2")
     assert wait_segment(page, first) == preloaded
-    wait_until(lambda: len(session.ahead) == 1)  # and the one after it
+    wait_until(lambda: len(session.state.ahead) == 1)  # and the one after it
     page.context.close()
     wait_until(lambda: stack.trainer.run(run.id).queue.leased == 0)
     assert stack.trainer.run(run.id).queue.pending == 2
@@ -148,7 +148,9 @@ def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, 
 
 def test_unbuildable_model_can_be_skipped(stack: Stack, browser: Browser, artifacts: Path) -> None:
     broken = stack.post_run("no_such_robot", 2, rollout_env="point")
-    page = open_labeler(browser, stack.ui(broken.id, min_dwell_s=DWELL_S).labeler_url(stack.new_labeler("skipper")))
+    page = open_labeler(
+        browser, stack.ui(broken.id, min_dwell_s=DWELL_S, min_played=0.0).labeler_url(stack.new_labeler("skipper"))
+    )
     first = wait_segment(page)
     wait_text(page, "cannot be replayed")
     page.screenshot(path=str(artifacts / "unbuildable-model.png"))

@@ -131,6 +131,14 @@ def test_floor_map_and_region_outlines() -> None:
     inside = vertices[faces].mean(axis=1)[:, :2]  # triangle centroids all lie in the bad area
     assert (task.classify(inside) == 0).all()
     assert tint_meshes(task, 0.0, 50.0, 1.0, cells=8) == []  # all inside the wedge
+    # the tint's edge follows the region edge, not the grid's cells: the bad area outside range's
+    # circle has its inner corners on the circle (to well within a cell's width)
+    ring = get_task("range", "ant")
+    (circle,) = [r for r in ring.to_dict()["regions"] if r["kind"] == "outside_disc"]
+    (_, verts, _), *_ = tint_meshes(ring, *circle["centre"], 1.5 * circle["radius"], cells=40)
+    radii = np.hypot(verts[:, 0] - circle["centre"][0], verts[:, 1] - circle["centre"][1])
+    near = radii[radii < circle["radius"] + 1.0]
+    assert len(near) > 20 and np.abs(near - circle["radius"]).max() < 0.05
     kinds = {r["kind"]: region_outline(r) for r in get_task("hole", "ant").to_dict()["regions"]}
     outline = kinds["disc"]
     assert outline is not None and outline.shape[1] == 3

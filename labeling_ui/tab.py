@@ -1,0 +1,269 @@
+"""One labeling tab's state machine, pure: no threads, no I/O, no clock (every time is an argument).
+
+The driver (session.py) owns the threads and the calls to the service; it feeds this machine what
+happened (a claim came back, a frame was drawn, a key was pressed, the service answered) and does
+what it decides (submit this, show that, say why not). Every rule about *whether* a key may label
+lives here, so it is tested state by state without a browser (tests/ui/test_tab_state.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from collie.schemas import MAX_HOLD, QueryRead, RunRead, Submission
+
+Key = tuple[int, str]  # (run id, query id)
+
+
+class Phase(StrEnum):
+    SIGNED_OUT = "signed out"  # no token: the sign-in field
+    CHECKING = "checking"  # a token, not yet accepted by the service
+    WAITING = "waiting"  # signed in, nothing on screen (nothing claimable, or between segments)
+    SHOWING = "showing"  # a segment on screen
+    WATCHING = "watching"  # ?watch=RUN: the skills of a run, nothing to label
+
+
+@dataclass(frozen=True)
+class Rules:
+    min_dwell_s: float = 0.3  # a key this soon after a segment appears is a double tap: ignored
+    min_played: float = 1.0  # share of the segment that must have played once before a label counts
+    history: int = 50  # labels `undo` can walk back in this tab (the service keeps all of them)
+
+
+@dataclass
+class Segment:
+    """A claimed segment, prepared to show. `replay` is the driver's (a Poser); opaque here."""
+
+    run: RunRead
+    query: QueryRead
+    replay: Any
+    error: str | None = None  # why it cannot be replayed
+    appeared: float | None = None  # when its first frame was sent (time-per-label starts here)
+    played_to: float = 0.0  # the furthest frame the playhead reached since it appeared
+    classes: tuple[int, ...] = (0, 1, 2)  # the labels its task can give (good is absent from single-constraint tasks)
+    revising: bool = False  # picked from "my labels": a label on it is a revision of one's own, no lease needed
+
+    @property
+    def key(self) -> Key:
+        return (self.run.id, self.query.query_id)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.query.qpos)
+
+    def seen(self, share: float) -> bool:
+        """Played through `share` of its frames at least once (a segment of one frame is seen at once)."""
+        last = max(self.n_frames - 1, 0)
+        return self.played_to >= share * last - 1e-9
+
+
+@dataclass(frozen=True)
+class Submit:
+    """Send this label (0/1/2) or "skip" for this segment; `seconds` from its first frame to the key."""
+
+    segment: Segment
+    value: Submission
+    seconds: float
+    request_id: str
+
+
+@dataclass(frozen=True)
+class Withdraw:
+    """Undo the label of this query (its frames come back to relabel)."""
+
+    run_id: int
+    query_id: str
+    request_id: str
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a key did nothing, said on screen."""
+
+    title: str
+    body: str
+
+
+Decision = Submit | Withdraw | Refusal | None
+
+
+@dataclass
+class TabState:
+    rules: Rules = field(default_factory=Rules)
+    phase: Phase = Phase.SIGNED_OUT
+    token: str | None = None
+    who: str | None = None  # the signed-in labeler's name, as the service says
+    role: str | None = None
+    was: str | None = None  # who this tab was last signed in as (a sign-out does not forget it)
+    shown: Segment | None = None
+    ahead: list[Segment] = field(default_factory=list)  # claimed and prepared, shown next
+    held: set[Key] = field(default_factory=set)  # leases this tab holds
+    moved: set[Key] = field(default_factory=set)  # segments another tab of this labeler took over
+    labelled: list[Key] = field(default_factory=list)  # this tab's labels, newest last (undo walks back)
+    waiting_on: tuple[int, int] | None = None  # (run, last event id) while nothing is claimable
+    watch_run: int | None = None
+
+    # ---------------------------------------------------------------- identity
+
+    def use_token(self, token: str) -> None:
+        self.forget()
+        self.token, self.phase = token, Phase.CHECKING
+
+    def accepted(self, name: str, role: str) -> str | None:
+        """The service took the token. Returns the previous name when this tab's identity changed
+        (the page says so, loudly), else None."""
+        before = self.who or self.was
+        self.who, self.role, self.was = name, role, name
+        self.phase = Phase.WATCHING if self.watch_run is not None else Phase.WAITING
+        return before if before is not None and before != name else None
+
+    def signed_out(self) -> None:
+        self.was = self.who or self.was
+        self.forget()
+        self.token = self.who = self.role = None
+        self.phase = Phase.SIGNED_OUT
+
+    def forget(self) -> None:
+        """Everything tied to one identity (the driver hands the held claims back first)."""
+        self.shown, self.waiting_on = None, None
+        self.ahead.clear()
+        self.held.clear()
+        self.moved.clear()
+        self.labelled.clear()
+
+    # ---------------------------------------------------------------- claims
+
+    def claimed(self, segment: Segment) -> None:
+        self.held.add(segment.key)
+        self.moved.discard(segment.key)
+
+    def wants_preload(self, prefetch: bool) -> bool:
+        return prefetch and self.shown is not None and not self.ahead and len(self.held) < MAX_HOLD
+
+    def preloaded(self, segment: Segment) -> bool:
+        """A second claim came back: keep it to show next unless it is the one on screen."""
+        if self.shown is not None and segment.key == self.shown.key:
+            return False
+        if any(s.key == segment.key for s in self.ahead):
+            return False
+        self.claimed(segment)
+        self.ahead.append(segment)
+        return True
+
+    def next_ready(self) -> Segment | None:
+        """The prepared segment to show next, if any (taken off the list)."""
+        while self.ahead:
+            segment = self.ahead.pop(0)
+            if segment.key not in self.moved:
+                return segment
+        return None
+
+    def present(self, segment: Segment, now: float) -> None:
+        """`segment`'s first frame was just sent."""
+        self.claimed(segment)
+        segment.appeared, segment.played_to = now, 0.0
+        self.shown, self.waiting_on = segment, None
+        self.phase = Phase.SHOWING
+
+    def frame_drawn(self, position: float) -> None:
+        if self.shown is not None:
+            self.shown.played_to = max(self.shown.played_to, position)
+
+    def nothing_claimable(self, run_id: int | None, last_event: int) -> None:
+        self.shown = None
+        self.waiting_on = None if run_id is None else (run_id, last_event)
+        if self.phase != Phase.SIGNED_OUT:
+            self.phase = Phase.WAITING
+
+    def leases(self, run_id: int, still: set[str]) -> list[Segment]:
+        """The service says which queries of `run_id` this labeler still holds; the segments this tab
+        lost meanwhile are dropped and returned (the one on screen first)."""
+        lost = []
+        for segment in ([self.shown] if self.shown else []) + list(self.ahead):
+            if segment.revising:
+                continue  # a revision of one's own label holds no lease
+            if segment.run.id == run_id and segment.query.query_id not in still:
+                lost.append(segment)
+                self.held.discard(segment.key)
+        self.ahead = [s for s in self.ahead if s not in lost]
+        if self.shown is not None and self.shown in lost:
+            self.shown = None
+            self.phase = Phase.WAITING
+        return lost
+
+    def taken_elsewhere(self, key: Key) -> bool:
+        """Another tab of this labeler now shows `key` (the service keeps claims per labeler, so
+        both tabs would hold one lease): this tab must not label it. True if it was on screen here."""
+        self.moved.add(key)
+        self.held.discard(key)
+        self.ahead = [s for s in self.ahead if s.key != key]
+        return self.shown is not None and self.shown.key == key
+
+    def release_all(self) -> list[Key]:
+        """Hand every claim back (sign-out, a closed tab): the keys to release."""
+        keys = sorted(self.held)
+        self.held.clear()
+        self.ahead.clear()
+        return keys
+
+    # ---------------------------------------------------------------- keys
+
+    def press(self, value: Submission, now: float, request_id: str) -> Decision:
+        """A label or skip key at `now`, against the segment on screen at that moment."""
+        shown = self.shown
+        if shown is None or self.phase != Phase.SHOWING or shown.appeared is None:
+            return None
+        if shown.key in self.moved:
+            return Refusal("Not labelled here", f"segment {shown.query.query_id} is open in another of your tabs")
+        if shown.key not in self.held and not shown.revising:
+            return Refusal("Not labelled", f"this tab no longer holds segment {shown.query.query_id}")
+        if now - shown.appeared < self.rules.min_dwell_s:
+            return None  # a double tap or a held key must not label the segment that has only just appeared
+        if value == "skip":
+            return Submit(shown, value, max(0.0, now - shown.appeared), request_id)
+        if shown.error is not None:
+            return Refusal("Cannot label", "this segment cannot be replayed; press S to skip it")
+        if value not in shown.classes:
+            return Refusal("Not a label here", "this task never calls a state good: bad or neutral")
+        if not shown.seen(self.rules.min_played):
+            share = f"{self.rules.min_played:.0%}" if self.rules.min_played < 1 else "all"
+            return Refusal("Watch it first", f"a label counts once {share} of the segment has played once")
+        return Submit(shown, value, max(0.0, now - shown.appeared), request_id)
+
+    def recorded(self, submit: Submit) -> None:
+        """The service took it: the segment leaves this tab."""
+        key = submit.segment.key
+        self.held.discard(key)
+        if submit.value != "skip":
+            self.labelled = [*[k for k in self.labelled if k != key][-(self.rules.history - 1) :], key]
+        if self.shown is submit.segment:
+            self.shown = None
+            self.phase = Phase.WAITING
+
+    def refused(self, submit: Submit) -> None:
+        """The service would not take it (someone else holds it, the run closed): drop it."""
+        self.held.discard(submit.segment.key)
+        if self.shown is submit.segment:
+            self.shown = None
+            self.phase = Phase.WAITING
+
+    def undo_target(self, mine: list[tuple[int, str]], request_id: str) -> Decision:
+        """Undo the newest label: this tab's, else the newest of `mine` (the labeler's labels still
+        in effect, newest first, as the service keeps them: undo works across reloads)."""
+        key = self.labelled[-1] if self.labelled else (mine[0] if mine else None)
+        if key is None:
+            return Refusal("Nothing to undo", "you have no label in effect in this run")
+        return Withdraw(key[0], key[1], request_id)
+
+    def withdrawn(self, withdraw: Withdraw, segment: Segment) -> None:
+        """The label is undone and its segment claimed again: it is shown next, before whatever
+        was on screen (that one comes back after the relabel)."""
+        self.labelled = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
+        if self.shown is not None and self.shown.key != segment.key:
+            self.ahead.insert(0, self.shown)
+        self.ahead = [s for s in self.ahead if s.key != segment.key]
+        self.shown = None
+        self.claimed(segment)
+        self.ahead.insert(0, segment)

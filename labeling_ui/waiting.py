@@ -1,0 +1,86 @@
+"""What the page says while nothing is claimable: the epoch now, the epoch of the next feedback
+session and when it comes, from the trainer's own schedule (the run's config) and its epoch rate
+(the timestamps of its metrics). Pure: the session fetches, this words it."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from collie.schemas import FINISHED, MetricsRead, RunRead
+
+
+@dataclass(frozen=True)
+class Forecast:
+    epoch: int
+    next_feedback: int | None  # None: the trainer's schedule is not in the run's config, or no session is left
+    epochs_per_s: float | None  # from the last metrics posted; None before two of them
+
+    @property
+    def eta_s(self) -> float | None:
+        if self.next_feedback is None or not self.epochs_per_s:
+            return None
+        return max(0.0, (self.next_feedback - self.epoch) / self.epochs_per_s)
+
+
+def next_feedback_epoch(run: RunRead) -> int | None:
+    """The first epoch after now at which the trainer asks for labels (trainer/loop.py's
+    is_feedback_epoch: from `warmup`, every `feedback_every` epochs, while the budget lasts)."""
+    config = run.config
+    every, warmup = config.get("feedback_every"), config.get("warmup", 0)
+    if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
+        return None
+    if run.n_total is not None and run.n_labels >= run.n_total:
+        return None
+    after = run.epoch + 1
+    if after <= warmup:
+        return warmup
+    return warmup + -(-(after - warmup) // every) * every
+
+
+def epoch_rate(metrics: Sequence[MetricsRead]) -> float | None:
+    """Epochs per second between the oldest and the newest of `metrics`."""
+    if len(metrics) < 2:
+        return None
+    first, last = min(metrics, key=lambda m: m.epoch), max(metrics, key=lambda m: m.epoch)
+    seconds = (last.created_at - first.created_at).total_seconds()
+    return (last.epoch - first.epoch) / seconds if seconds > 0 and last.epoch > first.epoch else None
+
+
+def forecast(run: RunRead, metrics: Sequence[MetricsRead]) -> Forecast:
+    return Forecast(run.epoch, next_feedback_epoch(run), epoch_rate(metrics))
+
+
+def duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def run_state(run: RunRead) -> str:
+    """The run's state in words: a run that was stopped says *stopped*, not finished."""
+    if run.control == "stop" and run.status not in FINISHED:
+        return "stopping"
+    if run.status == "finished" and run.control == "stop":
+        return "stopped"
+    return run.status.replace("_", " ")
+
+
+def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
+    """The waiting screen's status. `held_here`: this tab's own claims (never "others")."""
+    q = run.queue
+    others = max(q.leased - held_here, 0)
+    lines = [f"Run {run.id} ({run.env}, {run.task}) is *{run_state(run)}* at epoch **{fc.epoch}**."]
+    if run.status not in FINISHED and run.control != "stop":
+        if fc.next_feedback is not None:
+            eta = f", in about **{duration(fc.eta_s)}**" if fc.eta_s is not None else " (no epoch rate yet for an ETA)"
+            lines.append(f"Next feedback session at epoch **{fc.next_feedback}**{eta}.")
+        else:
+            lines.append("The trainer posts the next feedback session when its schedule says so.")
+    tail = f"{run.n_labels} labelled"
+    if others:
+        tail = f"{others} being labelled by others, " + tail
+    lines.append(tail + ".")
+    return "  \n".join(lines)

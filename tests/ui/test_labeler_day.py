@@ -1,0 +1,235 @@
+"""Labeling all day, in a real browser against a real service: per-tab identity, stale tabs, a label
+only after the segment was seen, my labels across reloads, honest waiting, instructions, playback
+preferences and the reset-view control."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from urllib.parse import quote
+
+import pytest
+from playwright.sync_api import Browser, Page
+
+from collie.client import CollieClient
+from collie.schemas import MetricsIn
+
+from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, segment_id, wait_segment, wait_text
+from .stack import TOKENS, Stack
+from .test_watch import evaluation
+
+pytestmark = pytest.mark.slow
+DWELL_S = 0.1
+
+
+def press(page: Page, key: str) -> None:
+    time.sleep(DWELL_S + 0.05)
+    page.keyboard.press(key)
+
+
+def tab(context: object, url: str) -> Page:
+    """A new tab in the same browser profile (tabs share localStorage, each has its sessionStorage)."""
+    page = context.new_page()  # type: ignore[attr-defined]
+    page.goto(url)
+    return page
+
+
+def profile(browser: Browser) -> object:
+    context = browser.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(TIMEOUT_S * 1000)
+    return context
+
+
+def title(page: Page) -> str:
+    return page.get_by_text("collie · labeling").first.inner_text()
+
+
+def test_identity_is_per_tab(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 4)
+    app = stack.ui(run.id, release_grace_s=30.0)
+    context = profile(browser)
+    ann = tab(context, app.labeler_url(stack.new_labeler("ann")))
+    first = wait_segment(ann)
+    wait_text(ann, "signed in as ann")
+    # the dashboard's watch link (operator token) opened in another tab of the same browser...
+    op = tab(context, f"{app.url}?token={quote(TOKENS['operator'])}&watch={run.id}")
+    wait_text(op, "operator")
+    # ...and a tab with a wrong token
+    wrong = tab(context, app.labeler_url("not-a-real-token"))
+    wait_text(wrong, "The service refused this token")
+    ann.reload()  # still ann, same segment: neither tab changed who this one is
+    assert wait_segment(ann) == first
+    wait_text(ann, "signed in as ann")
+    assert "operator" not in title(ann)
+    ann.screenshot(path=str(artifacts / "identity-after-reload.png"))
+    # a bare URL in a new tab knows nobody: the token is not shared through the profile's storage
+    bare = tab(context, app.url)
+    wait_text(bare, "Paste the labeler token")
+    labelers = {e.labeler for e in stack.trainer.label_events(run.id)}
+    assert labelers <= {"ann"}
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_a_change_of_identity_in_one_tab_is_loud(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 2)
+    app = stack.ui(run.id)
+    context = profile(browser)
+    page = tab(context, app.labeler_url(stack.new_labeler("cara")))
+    wait_text(page, "signed in as cara")
+    page.get_by_text("Account").first.click()
+    page.get_by_role("button", name="Sign out").click()
+    wait_text(page, "Signed out")
+    page.get_by_role("textbox").first.fill(stack.new_labeler("dave"))
+    page.get_by_role("button", name="Sign in").click()
+    wait_text(page, "signed in as dave")
+    wait_text(page, "This tab was signed in as cara")
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_a_stale_tab_never_labels_what_it_no_longer_holds(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 6, seed=11)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    token = stack.new_labeler("erin")
+    context = profile(browser)
+    front = tab(context, app.labeler_url(token))
+    shown = wait_segment(front)
+    # another UI of the same labeler (or a tab of another UI) labels the segment meanwhile
+    with CollieClient(stack.api, token) as other:
+        other.submit(run.id, shown, 1)
+    press(front, "2")
+    wait_text(front, "no longer holds")
+    after = wait_segment(front, shown)
+    # two tabs of this labeler never show one segment: the newest tab to show it labels it
+    back = tab(context, app.labeler_url(token))
+    behind = wait_segment(back)
+    assert behind != segment_id(front) or "another of your tabs" in front.inner_text("body")
+    for page in (back, front):
+        current = segment_id(page)
+        press(page, "1")
+        wait_segment(page, current)
+    events = stack.trainer.label_events(run.id)
+    assert [e.query_id for e in events if e.query_id == shown] == [shown]  # no revision of it
+    assert all(e.revises_event_id is None for e in events), "a tab relabelled a segment it did not hold"
+    assert after != shown
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 2, seed=2)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, fps=5.0)  # 20 frames at 5 fps: 4 s to see it
+    context = profile(browser)
+    page = tab(context, app.labeler_url(stack.new_labeler("fay")))
+    first = wait_segment(page)
+    press(page, "2")
+    wait_text(page, "Watch it first")
+    assert segment_id(page) == first and stack.trainer.label_events(run.id) == []
+    (session,) = app.sessions.values()
+    deadline = time.monotonic() + 60
+    while not session.state.shown.seen(1.0) and time.monotonic() < deadline:  # type: ignore[union-attr]
+        time.sleep(0.1)
+    press(page, "2")
+    wait_segment(page, first)
+    (event,) = stack.trainer.label_events(run.id)
+    assert event.query_id == first and event.seconds is not None and event.seconds > 0
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_my_labels_survive_a_reload_and_can_be_relabelled(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 5, seed=4)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0, release_grace_s=30.0)
+    context = profile(browser)
+    page = tab(context, app.labeler_url(stack.new_labeler("gil")))
+    labelled, shown = [], None
+    for key in ("1", "2"):
+        shown = wait_segment(page, shown)
+        labelled.append(shown)
+        press(page, key)
+    shown = wait_segment(page, shown)
+    page.reload()
+    assert wait_segment(page) == shown
+    page.get_by_text("My labels").first.click()
+    wait_text(page, "2 labelled in this run")
+    for query_id in labelled:
+        wait_text(page, query_id)
+    page.screenshot(path=str(artifacts / "my-labels.png"))
+    press(page, "u")  # undo after the reload: the newest label, kept by the service
+    assert wait_segment(page, shown) == labelled[-1]
+    kinds = [(e.query_id, e.kind) for e in stack.trainer.label_events(run.id)]
+    assert kinds[-1] == (labelled[-1], "undo")
+    press(page, "1")
+    before = wait_segment(page, labelled[-1])
+    # pick one from the list to replay it and relabel it: a revision event
+    page.get_by_role("button", name="Replay and relabel").click()
+    picked = wait_segment(page, before)
+    assert picked in labelled
+    wait_text(page, "relabel")
+    press(page, "2")
+    wait_segment(page, picked)
+    revision = [e for e in stack.trainer.label_events(run.id) if e.query_id == picked][-1]
+    assert revision.kind == "label" and revision.value == 1 and revision.revises_event_id is not None
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("ant", 0)
+    stack.trainer.post_rollouts(run.id, evaluation(3, 2))
+    for epoch in (1, 2, 3):
+        stack.trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values={"loss": 1.0}))
+        time.sleep(0.3)
+    app = stack.ui(run.id)
+    context = profile(browser)
+    page = tab(context, app.labeler_url(stack.new_labeler("hal")))
+    wait_text(page, "Nothing to label right now")
+    wait_text(page, "at epoch 3")
+    wait_text(page, "While you wait: the latest evaluation")
+    time.sleep(1.0)
+    assert canvas_pixels(page, artifacts / "waiting-skills.png").std() > 10.0  # not a blank screen
+    assert "being labelled by others" not in page.inner_text("body")
+    stack.operator.stop(run.id)
+    stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab
+    wait_text(page, "stopping")
+    assert "finished" not in page.inner_text("body")
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_instructions_rule_and_a_class_the_task_cannot_give(stack: Stack, browser: Browser, artifacts: Path) -> None:
+    run = stack.post_run("point", 2)  # north: nothing is ever good
+    stack.operator.set_instructions(run.id, "Judge only the last second of each segment.")
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    context = profile(browser)
+    page = tab(context, app.labeler_url(stack.new_labeler("ivy")))
+    first = wait_segment(page)
+    wait_text(page, "Judge only the last second of each segment.")
+    wait_text(page, "bad if any state is bad")
+    good = page.get_by_role("button", name="3 · Good (not in this task)")
+    good.wait_for()
+    assert good.is_disabled()
+    press(page, "3")
+    wait_text(page, "never calls a state good")
+    assert segment_id(page) == first and stack.trainer.label_events(run.id) == []
+    page.screenshot(path=str(artifacts / "instructions.png"))
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_speed_and_loop_persist_per_labeler(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 2)
+    app = stack.ui(run.id, release_grace_s=30.0)
+    token = stack.new_labeler("jo")
+    context = profile(browser)
+    page = tab(context, app.labeler_url(token))
+    wait_segment(page)
+    wait_text(page, "Speed 1×")
+    page.get_by_role("button", name="2×").click()
+    wait_text(page, "Speed 2×")
+    page.get_by_text("Loop").first.click()
+    (session,) = app.sessions.values()
+    deadline = time.monotonic() + 30
+    while session.player.loop and time.monotonic() < deadline:
+        time.sleep(0.1)
+    page.reload()
+    wait_segment(page)
+    wait_text(page, "Speed 2×")
+    live = [s for s in app.sessions.values() if s.who == "jo" and not s.closed.is_set()]
+    assert live and live[0].player.speed == 2.0 and live[0].player.loop is False
+    page.get_by_role("button", name="Reset view (north up)").click()  # the control is there and answers
+    context.close()  # type: ignore[attr-defined]

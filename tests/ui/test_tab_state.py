@@ -1,0 +1,173 @@
+"""The labeling tab's pure state machine (labeling_ui/tab.py), state by state: no browser, no
+service, no threads (times are arguments)."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+
+import pytest
+
+from collie.schemas import EnvDims, QueryRead, QueueCounts, RunRead
+from labeling_ui.tab import Phase, Refusal, Rules, Segment, Submit, TabState, Withdraw
+
+NOW = datetime(2026, 12, 1, tzinfo=UTC)
+
+
+def run(run_id: int = 1) -> RunRead:
+    dims = EnvDims(obs_dim=2, nq=2, nv=2, horizon=5, skill_dim=2)
+    return RunRead(
+        id=run_id, env="point", task="north", method="collie", config={}, dims=dims, status="waiting_for_labels",
+        control="run", epoch=3, n_labels=0, n_total=None, epochs_total=None, last_event_id=0, queue=QueueCounts(),
+        created_at=NOW, updated_at=NOW,
+    )  # fmt: skip
+
+
+def segment(query_id: str, frames: int = 5, run_id: int = 1, classes: tuple[int, ...] = (0, 1, 2)) -> Segment:
+    query = QueryRead(
+        run_id=run_id, query_id=query_id, session=0, epoch=3, start=0, score=0.0, status="leased", label=None,
+        lease_owner="ann", lease_expires_at=None, created_at=NOW, skill=[1.0, 0.0], obs=[], xy=[[0, 0]] * frames,
+        pitch=None, qpos=[[0, 0]] * frames, qvel=[[0, 0]] * frames, path_xy=None, extra={},
+    )  # fmt: skip
+    return Segment(run(run_id), query, replay=object(), classes=classes)
+
+
+def showing(seg: Segment, rules: Rules | None = None, at: float = 10.0) -> TabState:
+    state = TabState(rules or Rules(min_dwell_s=0.3, min_played=1.0))
+    state.use_token("t")
+    state.accepted("ann", "labeler")
+    state.claimed(seg)
+    state.present(seg, at)
+    return state
+
+
+def test_sign_in_then_a_change_of_identity_is_reported() -> None:
+    state = TabState()
+    assert state.phase == Phase.SIGNED_OUT
+    state.use_token("t1")
+    assert state.phase == Phase.CHECKING
+    assert state.accepted("ann", "labeler") is None
+    assert state.phase == Phase.WAITING
+    state.use_token("t2")
+    assert state.accepted("operator", "operator") == "ann"  # the page says so, loudly
+    state.signed_out()
+    assert (state.phase, state.who, state.token) == (Phase.SIGNED_OUT, None, None)
+    state.use_token("t3")
+    assert state.accepted("bob", "labeler") == "operator"  # signing out and in as another is loud too
+    state.use_token("t4")
+    assert state.accepted("bob", "labeler") is None
+
+
+def test_watch_mode_is_its_own_phase() -> None:
+    state = TabState(watch_run=4)
+    state.use_token("t")
+    state.accepted("op", "operator")
+    assert state.phase == Phase.WATCHING
+    assert state.press(1, 100.0, "r") is None  # nothing to label
+
+
+def test_a_label_before_the_segment_played_once_is_refused_with_a_hint() -> None:
+    seg = segment("a", frames=5)
+    state = showing(seg)
+    decision = state.press(2, 11.0, "r1")
+    assert isinstance(decision, Refusal) and "played" in decision.body
+    state.frame_drawn(2.0)
+    assert isinstance(state.press(2, 11.0, "r1"), Refusal)
+    state.frame_drawn(4.0)  # the last frame of five
+    decision = state.press(2, 12.5, "r1")
+    assert isinstance(decision, Submit) and decision.value == 2
+    assert decision.seconds == pytest.approx(2.5)  # from the first frame, not from the claim
+
+
+def test_the_minimum_is_configurable_and_skip_needs_no_viewing() -> None:
+    seg = segment("a", frames=11)
+    state = showing(seg, Rules(min_dwell_s=0.0, min_played=0.5))
+    state.frame_drawn(4.0)
+    assert isinstance(state.press(0, 10.5, "r"), Refusal)
+    state.frame_drawn(5.0)
+    assert isinstance(state.press(0, 10.5, "r"), Submit)
+    fresh = showing(segment("b"))
+    assert isinstance(fresh.press("skip", 10.5, "r"), Submit)
+
+
+def test_a_double_tap_is_ignored_silently() -> None:
+    state = showing(segment("a", frames=1))
+    assert state.press(1, 10.1, "r") is None  # within the dwell
+    assert isinstance(state.press(1, 10.4, "r"), Submit)
+
+
+def test_a_class_the_task_cannot_give_is_refused() -> None:
+    state = showing(segment("a", frames=1, classes=(0, 1)), at=0.0)
+    decision = state.press(2, 5.0, "r")
+    assert isinstance(decision, Refusal) and "good" in decision.body
+    assert isinstance(state.press(0, 5.0, "r"), Submit)
+
+
+def test_a_segment_taken_over_by_another_tab_is_never_labelled_here() -> None:
+    seg = segment("a", frames=1)
+    state = showing(seg, at=0.0)
+    assert state.taken_elsewhere(seg.key) is True
+    decision = state.press(1, 5.0, "r")
+    assert isinstance(decision, Refusal) and "another of your tabs" in decision.body
+    assert seg.key not in state.held and state.release_all() == []  # and it is not released from here
+
+
+def test_a_lost_lease_drops_the_segment() -> None:
+    seg, nxt = segment("a", frames=1), segment("b", frames=1)
+    state = showing(seg, at=0.0)
+    assert state.preloaded(nxt)
+    lost = state.leases(1, {"b"})
+    assert lost == [seg] and state.shown is None and state.phase == Phase.WAITING
+    assert state.next_ready() is nxt
+
+
+def test_preload_is_wanted_once_and_never_duplicates_the_shown_one() -> None:
+    seg = segment("a", frames=1)
+    state = showing(seg, at=0.0)
+    assert state.wants_preload(prefetch=True) and not state.wants_preload(prefetch=False)
+    assert not state.preloaded(segment("a"))
+    assert state.preloaded(segment("b"))
+    assert not state.wants_preload(prefetch=True)
+
+
+def test_recorded_labels_feed_undo_and_a_withdrawn_segment_comes_back_first() -> None:
+    a, b = segment("a", frames=1), segment("b", frames=1)
+    state = showing(a, at=0.0)
+    state.preloaded(b)
+    submit = state.press(1, 5.0, "r1")
+    assert isinstance(submit, Submit)
+    state.recorded(submit)
+    assert state.shown is None and state.labelled == [a.key] and a.key not in state.held
+    state.present(state.next_ready() or b, 6.0)
+    undo = state.undo_target([], "r2")
+    assert undo == Withdraw(1, "a", "r2")
+    again = segment("a", frames=1)
+    state.withdrawn(undo, again)
+    assert state.shown is None and state.next_ready() is again and state.next_ready() is b  # b comes back after
+    assert state.labelled == []
+
+
+def test_undo_after_a_reload_uses_the_services_list() -> None:
+    state = TabState()
+    assert isinstance(state.undo_target([], "r"), Refusal)
+    assert state.undo_target([(1, "z"), (1, "y")], "r") == Withdraw(1, "z", "r")
+
+
+def test_a_revision_needs_no_lease() -> None:
+    seg = segment("a", frames=1)
+    seg.revising = True
+    state = TabState(Rules(min_dwell_s=0.0, min_played=0.0))
+    state.use_token("t")
+    state.accepted("ann", "labeler")
+    state.present(seg, 0.0)
+    state.held.discard(seg.key)
+    assert state.leases(1, set()) == [] and state.shown is seg  # a lease renewal does not drop it
+    assert isinstance(state.press(2, 1.0, "r"), Submit)
+
+
+def test_a_refused_label_drops_the_segment() -> None:
+    seg = segment("a", frames=1)
+    state = showing(seg, Rules(0.0, 0.0), at=0.0)
+    submit = state.press(0, 1.0, "r")
+    assert isinstance(submit, Submit)
+    state.refused(submit)
+    assert state.shown is None and seg.key not in state.held and state.labelled == []

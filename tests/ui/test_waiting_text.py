@@ -1,0 +1,44 @@
+"""The waiting screen's words (labeling_ui/waiting.py): the next feedback epoch from the trainer's
+schedule, an ETA from its epoch rate, stopped is not finished, and this tab's own claims are never
+"being labelled by others"."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+from collie.schemas import MetricsRead, QueueCounts
+from labeling_ui.waiting import forecast, next_feedback_epoch, run_state, waiting_text
+
+from .test_tab_state import NOW, run
+
+
+def metrics(epoch: int, second: float) -> MetricsRead:
+    return MetricsRead(id=epoch, run_id=1, epoch=epoch, values={}, created_at=NOW + timedelta(seconds=second))
+
+
+def test_next_feedback_epoch_follows_the_trainers_schedule() -> None:
+    r = run().model_copy(update={"config": {"warmup": 10, "feedback_every": 5}, "epoch": 3})
+    assert next_feedback_epoch(r) == 10
+    assert next_feedback_epoch(r.model_copy(update={"epoch": 10})) == 15
+    assert next_feedback_epoch(r.model_copy(update={"epoch": 12})) == 15
+    assert next_feedback_epoch(r.model_copy(update={"config": {}})) is None
+    assert next_feedback_epoch(r.model_copy(update={"n_total": 4, "n_labels": 4})) is None  # budget spent
+
+
+def test_eta_from_the_epoch_rate() -> None:
+    r = run().model_copy(update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 10})
+    fc = forecast(r, [metrics(0, 0.0), metrics(10, 5.0)])  # 2 epochs / s
+    assert (fc.next_feedback, fc.epochs_per_s, fc.eta_s) == (20, 2.0, 5.0)
+    text = waiting_text(r, fc, held_here=0)
+    assert "epoch **10**" in text and "epoch **20**" in text and "5 s" in text
+    assert forecast(r, [metrics(0, 0.0)]).eta_s is None
+
+
+def test_stopped_is_not_finished_and_own_claims_are_not_others() -> None:
+    stopped = run().model_copy(update={"status": "finished", "control": "stop"})
+    assert run_state(stopped) == "stopped"
+    assert run_state(run().model_copy(update={"control": "stop"})) == "stopping"
+    assert run_state(run().model_copy(update={"status": "finished"})) == "finished"
+    mine = run().model_copy(update={"queue": QueueCounts(leased=2)})
+    assert "others" not in waiting_text(mine, forecast(mine, []), held_here=2)
+    assert "1 being labelled by others" in waiting_text(mine, forecast(mine, []), held_here=1)
