@@ -17,10 +17,20 @@ import zlib
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
-LabelValue = Literal[0, 1, 2]  # 0 bad, 1 neutral, 2 good
-Submission = Literal[0, 1, 2, "skip"]
+from collie.labels import Label
+
+
+def _exact_label(value: object) -> Label:
+    # only the integers 0, 1, 2 (or a Label): no "2", 2.0 or true, which lax enum checks would take
+    if isinstance(value, bool) or not isinstance(value, int) or value not in iter(Label):
+        raise ValueError(f"a label is the integer {', '.join(str(int(v)) for v in Label)}, got {value!r}")
+    return Label(value)
+
+
+LabelValue = Annotated[Label, BeforeValidator(_exact_label)]  # on the wire the integer: 0 bad, 1 neutral, 2 good
+Submission = LabelValue | Literal["skip"]
 Role = Literal["operator", "trainer", "labeler"]
 RunStatus = Literal["training", "waiting_for_labels", "paused", "finished", "failed"]
 Control = Literal["run", "pause", "stop"]

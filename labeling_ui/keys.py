@@ -7,14 +7,13 @@ from collections.abc import Callable
 
 import viser
 
+from collie.labels import Label
 from labeling_ui.panels import Actions
 
 
 def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
     bindings: list[tuple[str, str, Callable[[], None]]] = [
-        ("1", "Label bad", lambda: actions.label(0)),
-        ("2", "Label neutral", lambda: actions.label(1)),
-        ("3", "Label good", lambda: actions.label(2)),
+        *((str(v + 1), f"Label {v.word}", lambda v=v: actions.label(v)) for v in Label),  # keys 1 2 3
         ("S", "Skip this segment", actions.skip),
         ("U", "Undo the last label", actions.undo),
         ("space", "Replay from the start", actions.replay),

@@ -13,6 +13,7 @@ from typing import Protocol
 import numpy as np
 import viser
 
+from collie.labels import Label
 from labeling_ui.inset import SIZE
 from labeling_ui.playback import SPEEDS
 from labeling_ui.service import Progress
@@ -21,7 +22,6 @@ KEYMAP = (
     "**Keys** · **1** bad · **2** neutral · **3** good · **S** skip (not a label) · **U** undo the last "
     "label · **Space** replay · **P** play / pause · **← →** one frame"
 )
-LABEL_NAMES = {0: "bad", 1: "neutral", 2: "good"}
 
 
 class Actions(Protocol):
@@ -29,7 +29,7 @@ class Actions(Protocol):
 
     def sign_in(self, token: str) -> None: ...
     def sign_out(self) -> None: ...
-    def label(self, value: int) -> None: ...
+    def label(self, value: Label) -> None: ...
     def skip(self) -> None: ...
     def undo(self) -> None: ...
     def replay(self) -> None: ...
@@ -91,9 +91,9 @@ class Panels:
             gui.add_markdown(KEYMAP)
             self.progress = gui.add_markdown("")
             self.session_bar = gui.add_progress_bar(0.0, color="orange")
-        bad.on_click(lambda _: actions.label(0))
-        neutral.on_click(lambda _: actions.label(1))
-        good.on_click(lambda _: actions.label(2))
+        bad.on_click(lambda _: actions.label(Label.BAD))
+        neutral.on_click(lambda _: actions.label(Label.NEUTRAL))
+        good.on_click(lambda _: actions.label(Label.GOOD))
         skip.on_click(lambda _: actions.skip())
         undo.on_click(lambda _: actions.undo())
         self.label_buttons = (bad, neutral, good)
@@ -173,7 +173,7 @@ class Panels:
             )
 
     def show_task(self, title: str, description: str, meaning: dict[int, str]) -> None:
-        lines = "\n".join(f"- **{LABEL_NAMES[k]}**: {meaning[k]}" for k in sorted(meaning) if k in LABEL_NAMES)
+        lines = "\n".join(f"- **{label.word}**: {meaning[label]}" for label in Label if label in meaning)
         self.task.content = f"### {title}\n{description}\n\n{lines}"
 
     def show_inset(self, image: np.ndarray) -> None:

@@ -24,6 +24,7 @@ import numpy as np
 import viser
 
 from collie.client import new_request_id
+from collie.labels import Label
 from collie.schemas import MAX_HOLD, QueryRead, RunRead
 from collie.tasks import Task, get_task
 from labeling_ui.browser import read_token, read_watch, remember_token
@@ -144,7 +145,7 @@ class LabelerSession:
     def sign_out(self) -> None:
         self._actions.put(Action("sign_out"))
 
-    def label(self, value: int) -> None:
+    def label(self, value: Label) -> None:
         self._judge("label", value)
 
     def skip(self) -> None:

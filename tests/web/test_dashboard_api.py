@@ -119,6 +119,11 @@ def test_run_page_is_one_consistent_snapshot(live: BackgroundServer, trainer: Co
     assert page["rollouts"]["epoch"] == 4 and page["metrics"]["series"]["safe_coverage"] == [3.0]
     assert [r["kind"] for r in page["task"]["regions"]] == ["wedge_north", "outside_disc"]
     assert page["last_event_id"] == trainer.run(run.id).last_event_id
+    assert page["labels"] == [
+        {"value": 0, "name": "bad"},
+        {"value": 1, "name": "neutral"},
+        {"value": 2, "name": "good"},
+    ]
     assert trainer.events(run.id, after=page["last_event_id"]).events == []
     assert get(live, "dashboard/runs/987654").status_code == 404
 

@@ -13,6 +13,8 @@ from typing import Literal
 
 import numpy as np
 
+from collie.labels import Label
+
 
 class StopRequested(Exception):
     """Raised by a source when an operator stops the run while the trainer waits."""
@@ -42,7 +44,7 @@ class LabelEvent:
     """An effective label for one query; label None means "withdrawn" (e.g. undone, no relabel yet)."""
 
     query_id: str
-    label: Literal[0, 1, 2] | None
+    label: Label | None
 
 
 class FeedbackSource(abc.ABC):

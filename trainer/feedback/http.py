@@ -32,6 +32,7 @@ import numpy as np
 
 from collie.client import ApiError, CollieClient, Unreachable
 from collie.frames import pack_frames, unpack_frames
+from collie.labels import Label
 from collie.schemas import (
     MAX_METRICS,
     MAX_QPOS_WIDTH,
@@ -52,7 +53,6 @@ from trainer.feedback.base import FeedbackSource, LabelEvent, Segment, StopReque
 log = logging.getLogger(__name__)
 events_page_size = 1000  # the service's largest page
 T = TypeVar("T")
-Label = Literal[0, 1, 2]
 
 
 class HttpFeedback(FeedbackSource):

@@ -14,6 +14,6 @@ class OracleFeedback(FeedbackSource):
         self.n_labelled = 0
 
     def collect(self, session: int, epoch: int, segments: list[Segment]) -> list[LabelEvent]:
-        events = [LabelEvent(s.query_id, self.teacher.label(s.xy, s.pitch)) for s in segments]  # type: ignore[arg-type]
+        events = [LabelEvent(s.query_id, self.teacher.label(s.xy, s.pitch)) for s in segments]
         self.n_labelled += len(events)
         return events

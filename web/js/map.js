@@ -5,7 +5,6 @@
 import { plot } from "./plotly.js";
 import { CLASS_COLOURS, regionShapes, undrawn } from "./regions.js";
 
-const LABEL_NAMES = ["bad", "neutral", "good"];
 const W_SCALE = [[0, CLASS_COLOURS[0]], [0.5, CLASS_COLOURS[1]], [1, CLASS_COLOURS[2]]]; // w ∈ [0, 2]
 
 // One colour per skill: its direction for 2-D skills (as METRA's plots), else its index.
@@ -45,12 +44,14 @@ export class SkillMap {
     this.task = null;
     this.rollouts = null;
     this.labelled = [];
+    this.labels = []; // [{value, name}] from the service (RunDashboard.labels)
     this.colourBy = "skill";
     this.oneD = false;
   }
 
-  set({ task, rollouts, labelled, colourBy, env }) {
+  set({ task, rollouts, labelled, labels, colourBy, env }) {
     if (task !== undefined) this.task = task;
+    if (labels !== undefined) this.labels = labels;
     if (rollouts !== undefined) this.rollouts = rollouts;
     if (labelled !== undefined) this.labelled = labelled;
     if (colourBy !== undefined) this.colourBy = colourBy;
@@ -88,12 +89,12 @@ export class SkillMap {
 
   labelledTraces() {
     if (this.oneD) return [];
-    return [0, 1, 2].map((label) => {
+    return this.labels.map(({ value: label, name }) => {
       const segments = this.labelled.filter((s) => s.label === label);
       const x = [], y = [];
       for (const s of segments) for (const [px, py] of s.xy) { x.push(px); y.push(py); }
       return {
-        type: "scatter", mode: "markers", x, y, name: `labelled ${LABEL_NAMES[label]} (${segments.length})`,
+        type: "scatter", mode: "markers", x, y, name: `labelled ${name} (${segments.length})`,
         visible: segments.length ? true : "legendonly", hoverinfo: "name",
         marker: { size: 7, symbol: "x", color: CLASS_COLOURS[label], line: { width: 1, color: "#222" } },
       };

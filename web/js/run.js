@@ -45,7 +45,7 @@ export class RunPage {
     this.showRun(page.run);
     renderLabeling(this.root.querySelector("#labeling-body"), page);
     await Promise.all([
-      this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
+      this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, labels: page.labels, colourBy: this.colourBy.value, env: page.run.env }),
       this.curves.load(page.metrics),
     ]);
     this.seeEpoch(page.metrics.epochs.at(-1) ?? 0);
