@@ -18,6 +18,7 @@ import httpx
 from pydantic import BaseModel, TypeAdapter
 
 from collie.schemas import (
+    STREAM_EVENT,
     ClaimRead,
     EffectiveLabel,
     EventPage,
@@ -339,7 +340,7 @@ class EventStream:
                 if line.startswith("data:"):
                     data.append(line[5:].lstrip())
                 elif not line and data:
-                    event = StreamEvent.model_validate_json("\n".join(data))
+                    event = STREAM_EVENT.validate_json("\n".join(data))
                     data = []
                     if event.id > self.last_id:
                         self.last_id = event.id

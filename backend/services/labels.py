@@ -22,7 +22,16 @@ from backend.models import LabelEvent, Principal, Query, Run
 from backend.services import events, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
+from collie.schemas import (
+    FINISHED,
+    EffectiveLabel,
+    LabelAck,
+    LabelChanged,
+    LabelEventRead,
+    LabelSubmit,
+    LabelWithdrawn,
+    UndoRequest,
+)
 
 
 def effective_label(history: Iterable[tuple[str, int | None]]) -> int | None:
@@ -179,14 +188,8 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
         _SET_QUERY,
         {"pk": q.id, "status": "labelled", "label": value, "label_event_id": event.id, "lease_expires_at": None},
     )
-    data = {
-        "query_id": body.query_id,
-        "session": q.session,
-        "event_id": event.id,
-        "labeler": caller.name,
-        "label": value,
-    }
-    events.append(conn, run_id, "label", data, now, labels_delta=int(q.label is None))
+    data = LabelChanged(query_id=body.query_id, session=q.session, event_id=event.id, labeler=caller.name, label=value)
+    events.append(conn, run_id, data, now, labels_delta=int(q.label is None))
     return LabelAck(event=event, label=value, query_status="labelled", duplicate=False)  # type: ignore[arg-type]
 
 
@@ -213,14 +216,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         "label_event_id": None,
     }
     conn.execute(_SET_QUERY, {"pk": q.id, **change})
-    data = {
-        "query_id": body.query_id,
-        "session": q.session,
-        "event_id": event.id,
-        "labeler": caller.name,
-        "label": None,
-    }
-    events.append(conn, run_id, "withdrawn", data, now, labels_delta=-1)
+    data = LabelWithdrawn(query_id=body.query_id, session=q.session, event_id=event.id, labeler=caller.name, label=None)
+    events.append(conn, run_id, data, now, labels_delta=-1)
     return LabelAck(event=event, label=None, query_status=status, duplicate=False)  # type: ignore[arg-type]
 
 

@@ -16,6 +16,8 @@ from collie.schemas import (
     EnvDims,
     LabelledPage,
     LabelledQuery,
+    QueriesPosted,
+    QueriesRetired,
     QueryFrames,
     QueryRead,
     QuerySummary,
@@ -80,9 +82,7 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
         ]
         conn.execute(insert(QueryData), data)
         created = [r["query_id"] for r in rows]
-        events.append(
-            conn, run_id, "queries", {"session": body.session, "epoch": body.epoch, "query_ids": created}, now
-        )
+        events.append(conn, run_id, QueriesPosted(session=body.session, epoch=body.epoch, query_ids=created), now)
     return SessionPosted(
         session=body.session,
         created=[r["query_id"] for r in rows],
@@ -105,7 +105,7 @@ def retire(conn: Connection, run_id: int, query_ids: list[str]) -> Retired:
             .where(Query.id.in_([r.id for r in rows]))
             .values(status="retired", lease_owner_id=None, lease_expires_at=None)
         )
-        events.append(conn, run_id, "retired", {"query_ids": [r.query_id for r in rows]}, time.time())
+        events.append(conn, run_id, QueriesRetired(query_ids=[r.query_id for r in rows]), time.time())
     done = {r.query_id for r in rows}
     return Retired(retired=sorted(done), not_retired=sorted(wanted - done))
 

@@ -9,7 +9,7 @@ from sqlalchemy import Connection, insert, select
 
 from backend.models import Metrics, Rollouts
 from backend.services import events, runs
-from collie.schemas import MetricsIn, MetricsRead, RolloutsIn, RolloutsRead
+from collie.schemas import MetricsIn, MetricsPosted, MetricsRead, RolloutsIn, RolloutsPosted, RolloutsRead
 
 
 def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
@@ -20,7 +20,7 @@ def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
         .values(run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
         .returning(Metrics.id)
     ).scalar_one()
-    events.append(conn, run_id, "metrics", {"id": row_id, "epoch": body.epoch, "values": body.values}, now)
+    events.append(conn, run_id, MetricsPosted(id=row_id, epoch=body.epoch, values=body.values), now)
     return MetricsRead(id=row_id, run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
 
 
@@ -40,7 +40,7 @@ def post_rollouts(conn: Connection, run_id: int, body: RolloutsIn) -> RolloutsRe
     row_id = conn.execute(
         insert(Rollouts).values(run_id=run_id, epoch=body.epoch, rollouts=data, created_at=now).returning(Rollouts.id)
     ).scalar_one()
-    events.append(conn, run_id, "rollouts", {"id": row_id, "epoch": body.epoch, "n": len(data)}, now)
+    events.append(conn, run_id, RolloutsPosted(id=row_id, epoch=body.epoch, n=len(data)), now)
     return RolloutsRead(id=row_id, run_id=run_id, epoch=body.epoch, rollouts=body.rollouts, created_at=now)
 
 

@@ -17,7 +17,7 @@ from backend.main import create_app
 from backend.migrate import alembic_config, upgrade
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
-from collie.schemas import MAX_FEEDBACK_TIMEOUT_S, RunCreate
+from collie.schemas import MAX_FEEDBACK_TIMEOUT_S, PolicyEvent, RunCreate
 from trainer.feedback.http import HttpFeedback
 
 from .conftest import DIMS, TOKENS, make_run_spec, settings_for
@@ -27,7 +27,7 @@ from .test_http_feedback import label_in_background, rule, segments
 
 
 def policy_events(client: CollieClient, run_id: int) -> list[float | None]:
-    return [e.data["timeout_s"] for e in client.events(run_id).events if e.kind == "policy"]
+    return [e.data.timeout_s for e in client.events(run_id).events if isinstance(e, PolicyEvent)]
 
 
 def test_operator_sets_and_clears_the_policy(

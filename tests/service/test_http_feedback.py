@@ -16,6 +16,7 @@ import pytest
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
+from collie.schemas import StatusEvent
 from trainer.feedback.base import LabelEvent, Segment, StopRequested
 from trainer.feedback.http import HttpFeedback
 
@@ -89,7 +90,7 @@ def test_collect_blocks_until_every_label_is_in(live: BackgroundServer, feedback
     assert feedback.revisions() == []
     run = feedback.client.run(feedback.run_id)
     assert run.status == "training" and run.n_labels == 4
-    statuses = [e.data["status"] for e in feedback.client.events(feedback.run_id).events if e.kind == "status"]
+    statuses = [e.data.status for e in feedback.client.events(feedback.run_id).events if isinstance(e, StatusEvent)]
     assert statuses == ["training", "waiting_for_labels", "training"]
 
 

@@ -38,8 +38,11 @@ from collie.schemas import (
     MAX_QPOS_WIDTH,
     MAX_ROLLOUT_POINTS,
     MAX_ROLLOUTS,
+    ControlEvent,
     EventPage,
+    LabelChangedEvent,
     MetricsIn,
+    PolicyEvent,
     QueryIn,
     QueryRead,
     Rollout,
@@ -47,6 +50,8 @@ from collie.schemas import (
     RunCreate,
     RunStatus,
     SessionPost,
+    StreamEvent,
+    WithdrawnEvent,
 )
 from trainer.feedback.base import FeedbackSource, LabelEvent, Segment, StopRequested
 
@@ -197,16 +202,15 @@ class HttpFeedback(FeedbackSource):
         self._apply(page.events)
         return page
 
-    def _apply(self, events: list[Any]) -> None:
+    def _apply(self, events: list[StreamEvent]) -> None:
         for event in events:
-            if event.kind in ("label", "withdrawn"):
-                query_id = event.data["query_id"]
-                self._labels[query_id] = event.data["label"]
-                self._changed.add(query_id)
-            elif event.kind == "control":
-                self._control = event.data["control"]
-            elif event.kind == "policy":
-                self.timeout_s = event.data["timeout_s"]
+            if isinstance(event, LabelChangedEvent | WithdrawnEvent):
+                self._labels[event.data.query_id] = event.data.label
+                self._changed.add(event.data.query_id)
+            elif isinstance(event, ControlEvent):
+                self._control = event.data.control
+            elif isinstance(event, PolicyEvent):
+                self.timeout_s = event.data.timeout_s
             self._after = event.id
 
     def _missing(self, ids: list[str]) -> bool:
