@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trainer.config import LABEL_METHODS, METHODS, PRESETS, Config, make_config
+from trainer.config import PRESETS, Config, make_config
+from trainer.methods import METHODS
 
 if TYPE_CHECKING:
     from trainer.feedback.http import HttpFeedback
@@ -96,7 +97,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
             method=cfg.method,
             config=cfg.to_dict(),
             dims=dims,
-            n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0,
+            n_total=cfg.total_queries if METHODS[cfg.method].asks_labels else 0,
             epochs_total=cfg.epochs,
             feedback_timeout_s=args.feedback_timeout,
         )

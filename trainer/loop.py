@@ -25,12 +25,12 @@ import torch
 
 from collie.tasks import get_task
 from trainer.checkpoint import load_checkpoint, save_checkpoint
-from trainer.config import LABEL_METHODS, Config
+from trainer.config import Config
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
-from trainer.methods import build_agent
+from trainer.methods import build_agent, method
 from trainer.metra import TorchBatch, WeightFn
 from trainer.metrics import coverage_metrics
 from trainer.obs_noise import NoisyObservations
@@ -72,6 +72,7 @@ class Trainer:
             self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
         self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
         self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+        self.method = method(cfg.method)
         self.agent, self.instruction = build_agent(
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
@@ -104,12 +105,14 @@ class Trainer:
         """w for this batch: METRA/LSD/DIAYN/DDG* 1, Oracle the task rule g(s), DoDont* 2ψ(s),
         COLLIE Eq. 8 smoothed."""
         at_next = self.cfg.w_at == "next"
-        if self.cfg.method in ("metra", "lsd", "diayn", "ddg"):
+        guidance = self.method.guidance
+        if guidance == "one":
             return None
-        if self.cfg.method == "dodont":
+        if guidance == "instruction":
+            assert self.instruction is not None, "an instruction-guided method is built with its classifier"
             obs = self.normalise(batch.next_obs if at_next else batch.obs)
             return dodont_weight(self.instruction, obs, self.device)
-        if self.cfg.method == "oracle":
+        if guidance == "task":
             xy, pitch = (batch.next_xy, batch.next_pitch) if at_next else (batch.xy, batch.pitch)
             g = torch.as_tensor(self.task.classify(xy, pitch), dtype=torch.float32, device=self.device)
             return lambda _s, _n: g
@@ -128,7 +131,7 @@ class Trainer:
     def is_feedback_epoch(self) -> bool:
         c = self.cfg
         return (
-            c.method in LABEL_METHODS
+            self.method.asks_labels
             and self.epoch >= c.warmup
             and (self.epoch - c.warmup) % c.feedback_every == 0
             and len(self.labelled) < c.total_queries
@@ -292,7 +295,7 @@ class Trainer:
         """w_e(s) = (1 − β_e)·w(s) + β_e (Eq. 8, smoothed as in Section 4.5) at states `obs`
         (n, T, *obs_shape), as COLLIE's weight_fn applies it; None while w_e ≡ 1 or for methods
         without this guidance."""
-        if self.cfg.method in ("metra", "lsd", "diayn", "ddg", "dodont", "oracle"):
+        if self.method.guidance != "labels":
             return None
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:

@@ -26,7 +26,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trainer.config import METHODS, PRESETS
+from trainer.config import PRESETS
+from trainer.methods import METHODS
 
 
 @dataclass(frozen=True)
