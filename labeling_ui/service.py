@@ -7,12 +7,11 @@ caller), or a submission the service would not take (Rejected).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
-from collie.client import ApiError, CollieClient, Unreachable
+from collie.client import ApiError, Backoff, CollieClient, Overloaded, Unauthorized, Unreachable, retrying
 from collie.schemas import FINISHED, ClaimRead, EventPage, LabelAck, Me, RolloutsRead, RunRead, Submission
 
 T = TypeVar("T")
@@ -57,11 +56,11 @@ class ServiceLink:
             return fn()
         except Unreachable as exc:
             raise ServiceDown(f"the labeling service at {self.api} does not answer") from exc
+        except Overloaded as exc:
+            raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
+        except Unauthorized as exc:
+            raise AuthRefused(str(exc.detail)) from exc
         except ApiError as exc:
-            if exc.status in (401, 403):
-                raise AuthRefused(str(exc.detail)) from exc
-            if exc.status >= 500:
-                raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
             raise Rejected(str(exc.detail)) from exc
 
     def login(self) -> Me:
@@ -121,16 +120,8 @@ class ServiceLink:
         return page.last_id
 
     def _retrying(self, fn: Callable[[], T], attempts: int = 4) -> T:
-        delay = 0.25
-        for attempt in range(attempts):
-            try:
-                return self._call(fn)
-            except ServiceDown:
-                if attempt == attempts - 1:
-                    raise
-                time.sleep(delay)
-                delay *= 2
-        raise AssertionError("unreachable")
+        """A few tries with the shared backoff (a labeler waits for the answer), then ServiceDown."""
+        return self._call(lambda: retrying(fn, Backoff(first_s=0.25, max_s=2.0), attempts=attempts))
 
 
 def is_open(run: RunRead) -> bool:

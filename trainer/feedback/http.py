@@ -30,7 +30,7 @@ from typing import Any, Literal, TypeVar
 
 import numpy as np
 
-from collie.client import ApiError, CollieClient, Unreachable
+from collie.client import ApiError, Backoff, CollieClient, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
 from collie.schemas import (
@@ -248,19 +248,7 @@ class HttpFeedback(FeedbackSource):
 
     def _retry(self, call: Callable[[], T]) -> T:
         """Call until the service answers: waits out restarts with backoff; 4xx errors raise."""
-        delay = 0.1
-        while True:
-            try:
-                return call()
-            except Unreachable as exc:
-                problem: Exception = exc
-            except ApiError as exc:
-                if exc.status < 500 and exc.status != 429:
-                    raise
-                problem = exc
-            log.warning("labeling service unavailable (%s); retrying in %.1f s", problem, delay)
-            time.sleep(delay)
-            delay = min(delay * 2, self.max_backoff_s)
+        return retrying(call, Backoff(max_s=self.max_backoff_s))
 
 
 # ---------------------------------------------------------------- conversions
