@@ -560,6 +560,7 @@ class Rollout(Wire):
     qpos: Matrix | None = Field(
         default=None, max_length=MAX_ROLLOUT_POINTS, description="simulator state at the xy points (3D replay)"
     )
+    stride: int = Field(default=1, ge=1, le=100_000, description="environment steps between two consecutive points")
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")

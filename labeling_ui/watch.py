@@ -2,8 +2,8 @@
 latest evaluation replayed in 3D from the simulator states the trainer posted with it, one skill
 after another. Nothing is claimed or labelled; a new evaluation replaces the skills as it arrives.
 
-The trainer posts every second state of each evaluation rollout, so a rollout replays at half the
-segment frame rate to keep real time.
+The trainer posts every `stride`-th state of each evaluation rollout (Rollout.stride), so a rollout
+replays at 1/stride of the segment frame rate to keep real time.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from labeling_ui.panels import skill_text
 if TYPE_CHECKING:
     from labeling_ui.session import LabelerSession
 
-STATE_STRIDE = 2  # env steps between two posted states (trainer/loop.py thins rollouts by 2)
 POLL_S = 0.25  # how often the end of a skill is checked for auto-advance
 
 
@@ -95,7 +94,7 @@ class SkillWatch:
                 session.panels.show_message(f"⚠️ **Run {run.id}'s skills cannot be replayed**: {exc}")
                 return
             xy = np.asarray(rollout.xy, float)
-            session.player.fps = session.config.fps / STATE_STRIDE
+            session.player.fps = session.config.fps / rollout.stride
             session.player.loop = not self.auto.value
             session.panels.loop.value = session.player.loop
             with session.client.atomic():
@@ -110,7 +109,7 @@ class SkillWatch:
                 session.panels.segment.content = (
                     f"**run** {run.id} · {run.env} · {run.method}  \n**evaluation** epoch {epoch}  \n"
                     f"**skill** {self.index + 1} of {len(skills)}: {skill_text(rollout.skill)}  \n"
-                    f"**states** {poser.n_frames}, every {STATE_STRIDE} steps"
+                    f"**states** {poser.n_frames}, every {rollout.stride} steps"
                 )
             session.client.flush()
             task = session.task_of(run)

@@ -124,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
         from trainer.loop import Trainer
 
         feedback = http_feedback(args, cfg) if args.api else None
-        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress)
+        reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
+        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter)
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2

@@ -39,7 +39,9 @@ from trainer.query import select_queries
 from trainer.replay import Batch, TrajectoryReplay
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
+from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport
 
+ROLLOUT_STRIDE = 2  # evaluation rollouts go out every 2nd state (the stride travels with them)
 CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
 
 
@@ -54,7 +56,13 @@ def pick_device(name: str) -> torch.device:
 
 
 class Trainer:
-    def __init__(self, cfg: Config, feedback: FeedbackSource | None = None, progress: bool = True) -> None:
+    def __init__(
+        self,
+        cfg: Config,
+        feedback: FeedbackSource | None = None,
+        progress: bool = True,
+        reporter: Reporter | None = None,
+    ) -> None:
         cfg.validate()
         self.cfg, self.progress = cfg, progress
         self.out = Path(cfg.out)
@@ -88,6 +96,7 @@ class Trainer:
         )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
+        self.reporter = reporter or Reporter()  # telemetry for live views (none by default)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
         self.segment_xy: dict[str, np.ndarray] = {}  # query id → x-y, to draw labelled states
         self.epoch, self.env_steps, self.session = 0, 0, 0
@@ -242,7 +251,7 @@ class Trainer:
     def diverged(self, what: str) -> None:
         ckpt = self.out / "checkpoint.pt"
         where = f"last checkpoint kept at {ckpt}" if ckpt.exists() else "no checkpoint was written yet"
-        self.feedback.report("status", {"status": "failed", "epoch": self.epoch, "error": what})
+        self.reporter.status(StatusReport("failed", self.epoch, error=what))
         raise TrainingDiverged(f"{what} at epoch {self.epoch}; {where}")
 
     # ---- evaluation ----------------------------------------------------------------------
@@ -278,17 +287,17 @@ class Trainer:
         np.savez_compressed(
             self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
         )  # the final skills' paths, for `collie report` figures
-        self.feedback.report("metrics", record)
-        rollouts = {
-            "epoch": self.epoch,
-            "skills": traj.skill.tolist(),
-            "xy": np.round(traj.xy[:, ::2], 3).tolist(),
-            "qpos": np.round(traj.qpos[:, ::2], 4).tolist(),
-        }  # the labeling UI's watch mode replays these
-        w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
-        if w is not None:
-            rollouts["w"] = np.round(w, 2).tolist()
-        self.feedback.report("rollouts", rollouts)
+        self.reporter.metrics(MetricsReport(self.epoch, record))
+        every = slice(None, None, ROLLOUT_STRIDE)
+        rollouts = RolloutsReport(
+            self.epoch,
+            skills=traj.skill,
+            xy=traj.xy[:, every],
+            stride=ROLLOUT_STRIDE,
+            qpos=traj.qpos[:, every],  # the labeling UI's watch mode replays these
+            w=self.guidance_along(traj.obs[:, every]),  # the dashboard colours the paths by w(s)
+        )
+        self.reporter.rollouts(rollouts)
         return record
 
     def guidance_along(self, obs: np.ndarray) -> np.ndarray | None:
@@ -336,7 +345,6 @@ class Trainer:
         return self.wall_before + (time.perf_counter() - self._t0)
 
     def state_dict(self) -> dict[str, Any]:
-        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
         return {
             "config": self.cfg.to_dict(),
             "epoch": self.epoch,
@@ -353,7 +361,7 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
             "python_rng": random.getstate(),
-            "teacher_rng": rng_teacher.bit_generator.state if rng_teacher is not None else None,
+            "feedback": self.feedback.state_dict(),
             "last_info": self.last_info,
             "instruction": self.instruction.state_dict() if self.instruction is not None else None,
         }
@@ -372,9 +380,8 @@ class Trainer:
         if s["cuda_rng"] is not None and torch.cuda.is_available():
             torch.cuda.set_rng_state_all(s["cuda_rng"])
         random.setstate(s["python_rng"])
-        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
-        if rng_teacher is not None and s["teacher_rng"] is not None:
-            rng_teacher.bit_generator.state = s["teacher_rng"]
+        # checkpoints from before the source kept its own state stored the oracle's RNG as teacher_rng
+        self.feedback.load_state_dict(s.get("feedback", {"rng": s.get("teacher_rng")}))
 
     def checkpoint(self) -> None:
         save_checkpoint(self.out / "checkpoint.pt", self.state_dict())
@@ -404,13 +411,13 @@ class Trainer:
         """Honour the operator: returns False when the run must stop."""
         wish = self.feedback.control()
         if wish == "pause":
-            self.feedback.report("status", {"status": "paused", "epoch": self.epoch})
+            self.reporter.status(StatusReport("paused", self.epoch))
             bar.set_description("paused")
             while wish == "pause":
                 time.sleep(0.5)
                 wish = self.feedback.control()
             if wish != "stop":
-                self.feedback.report("status", {"status": "training", "epoch": self.epoch})
+                self.reporter.status(StatusReport("training", self.epoch))
         return wish != "stop"
 
     def run(self, resume: bool = False) -> dict[str, Any]:
@@ -425,7 +432,7 @@ class Trainer:
         (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
         self.rebuild_from_source()
         self._writer = self._tensorboard()
-        self.feedback.report("status", {"status": "training", "epoch": self.epoch})
+        self.reporter.status(StatusReport("training", self.epoch))
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
         bar = tqdm(
@@ -436,7 +443,8 @@ class Trainer:
             dynamic_ncols=True,
             desc="training",
         )
-        status, record = "finished", None
+        status: LoopStatus = "finished"
+        record: dict[str, Any] | None = None
         try:
             while self.epoch < self.cfg.epochs:
                 if not self.wait_while_paused(bar):
@@ -480,16 +488,16 @@ class Trainer:
         now = time.monotonic()
         if now - getattr(self, "_last_progress", 0.0) >= 1.0:
             self._last_progress = now
-            self.feedback.report("status", {"status": "training", "epoch": self.epoch, "progress": True})
+            self.reporter.status(StatusReport("training", self.epoch, progress=True))
 
-    def finish(self, status: str, record: dict[str, Any] | None) -> dict[str, Any]:
+    def finish(self, status: LoopStatus, record: dict[str, Any] | None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         last = record or (records[-1] if records else {})
         summary = {**last, "status": status, "epochs_done": self.epoch, "config": self.cfg.to_dict()}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
-        self.feedback.report("status", {"status": status, "epoch": self.epoch})
+        self.reporter.status(StatusReport(status, self.epoch))
         return summary
 
     def _tensorboard(self) -> Any:

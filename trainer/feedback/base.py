@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -63,8 +63,12 @@ class FeedbackSource(abc.ABC):
         """Operator's wish for the run, polled once per epoch."""
         return "run"
 
-    def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:  # noqa: B027
-        """Best-effort news for dashboards (status changes, evaluation metrics, rollouts)."""
+    def state_dict(self) -> dict[str, Any]:
+        """What a checkpoint must keep for this source to resume as it was (e.g. a teacher's RNG)."""
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027
+        """Restore what state_dict returned."""
 
     def history(self) -> list[tuple[Segment, int]] | None:
         """All labelled segments known to the source (used to rebuild D0/D1/D2 after a restart).
