@@ -10,11 +10,12 @@ from fastapi.staticfiles import StaticFiles
 
 from backend.routes import dashboard
 
-WEB_DIR = Path(__file__).resolve().parents[2] / "web"
+# backend/web: in the checkout a link to web/, in a wheel the files themselves (package data)
+WEB_DIR = (Path(__file__).resolve().parents[1] / "web").resolve()
 
 
 def install(app: FastAPI, web_dir: Path | None = None) -> None:
-    """Add the dashboard API, then serve `web_dir` (default: the repository's web/) at / — last,
+    """Add the dashboard API, then serve `web_dir` (default: the packaged web/) at / — last,
     since a mount at / answers every path the routes before it did not."""
     app.include_router(dashboard.router, prefix="/api")
     directory = web_dir or WEB_DIR
