@@ -146,7 +146,7 @@ def retrying(
 
 @functools.cache
 def _list_of(model: type[M]) -> TypeAdapter[list[M]]:
-    return TypeAdapter(list[model])  # type: ignore[valid-type]
+    return TypeAdapter(list[model])  # type: ignore[valid-type]  # a runtime type argument
 
 
 def new_request_id() -> str:

@@ -33,7 +33,7 @@ from collie.labels import Label
 
 def _exact_label(value: object) -> Label:
     # only the integers 0, 1, 2 (or a Label): no "2", 2.0 or true, which lax enum checks would take
-    if isinstance(value, bool) or not isinstance(value, int) or value not in iter(Label):
+    if isinstance(value, bool) or not isinstance(value, int) or value not in {int(v) for v in Label}:
         raise ValueError(f"a label is the integer {', '.join(str(int(v)) for v in Label)}, got {value!r}")
     return Label(value)
 

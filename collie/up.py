@@ -49,7 +49,8 @@ class Stack:
     """The child processes of one `collie up`, with their logs in OUT/logs/."""
 
     def __init__(self, out: Path) -> None:
-        self.out, self.procs = out, {}
+        self.out = out
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
     def start(self, name: str, args: list[str], env_extra: dict[str, str] | None = None) -> subprocess.Popen:

@@ -3,6 +3,7 @@ while typing in a text field, so the token field never labels by accident)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import viser
@@ -11,9 +12,13 @@ from collie.labels import Label
 from labeling_ui.panels import Actions
 
 
+def _run(do: Callable[[], None], _event: object) -> None:
+    do()
+
+
 def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
     bindings: list[tuple[str, str, Callable[[], None]]] = [
-        *((str(v + 1), f"Label {v.word}", lambda v=v: actions.label(v)) for v in Label),  # keys 1 2 3
+        *((str(v + 1), f"Label {v.word}", functools.partial(actions.label, v)) for v in Label),  # keys 1 2 3
         ("S", "Skip this segment", actions.skip),
         ("U", "Undo the last label", actions.undo),
         ("space", "Replay from the start", actions.replay),
@@ -22,5 +27,5 @@ def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
         ("arrowright", "Next frame", lambda: actions.step(1)),
     ]
     for key, label, do in bindings:
-        command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]
-        command.on_trigger(lambda _event, do=do: do())
+        command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]  # viser's hotkey Literal lists every key name
+        command.on_trigger(functools.partial(_run, do))

@@ -110,10 +110,10 @@ class Panels:
         self.play.on_click(lambda _: actions.toggle_play())
         again.on_click(lambda _: actions.replay())
         steps.on_click(lambda _: actions.step(-1 if steps.value.startswith("◀") else 1))
-        self.frame.on_update(lambda e: e.client is not None and actions.seek(float(self.frame.value)))
+        self.frame.on_update(lambda e: None if e.client is None else actions.seek(float(self.frame.value)))
         self.speed.on_click(lambda _: actions.set_speed(float(self.speed.value.rstrip("×"))))
-        self.loop.on_update(lambda e: e.client is not None and actions.set_loop(bool(self.loop.value)))
-        self.shadows.on_update(lambda e: e.client is not None and actions.set_shadows(bool(self.shadows.value)))
+        self.loop.on_update(lambda e: None if e.client is None else actions.set_loop(bool(self.loop.value)))
+        self.shadows.on_update(lambda e: None if e.client is None else actions.set_shadows(bool(self.shadows.value)))
 
         with gui.add_folder("Account", expand_by_default=False, visible=False) as self.account:
             sign_out = gui.add_button("Sign out", color="gray")
@@ -182,11 +182,11 @@ class Panels:
     def show_progress(self, p: Progress) -> None:
         total = f"{p.total_done} / {p.total_planned}" if p.total_planned else f"{p.total_done}"
         self.progress.content = f"This session **{p.session_done} / {p.session_size}** · total **{total}**"
-        self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)
+        self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)  # type: ignore[misc]  # settable
 
     def show_frame(self, frame: int, playing: bool) -> None:
         with self.client.atomic():
-            self.frame.value = frame
+            self.frame.value = frame  # type: ignore[misc]  # viser types .value read-only; its setter exists
             self.play.label = "Pause" if playing else "Play"
             self.play.icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
 
@@ -194,4 +194,5 @@ class Panels:
         self.title.content = f"**collie · labeling** — signed in as **{name}**"
 
     def notify(self, title: str, body: str, color: str = "blue") -> None:
-        self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[arg-type]
+        # color: one of viser's Mantine colour names, which callers pass as plain strings
+        self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[call-overload]  # see above

@@ -73,11 +73,11 @@ class ServiceLink:
         """The run to label: the pinned one, else the newest open run with pending queries, else the
         newest open run (to wait on)."""
         if self.pinned_run is not None:
-            return self._call(lambda: self.client.run(self.pinned_run))  # type: ignore[arg-type]
+            return self._call(lambda: self.client.run(self.pinned_run))  # type: ignore[arg-type]  # not None in this branch
         runs = [r for r in self._call(lambda: self.client.runs(limit=50)) if is_open(r)]
         runs.sort(key=lambda r: r.id, reverse=True)
         with_work = [r for r in runs if r.queue.pending > 0]
-        return (with_work or runs or [None])[0]
+        return (with_work or runs)[0] if runs else None
 
     def run(self, run_id: int) -> RunRead:
         return self._call(lambda: self.client.run(run_id))

@@ -249,11 +249,11 @@ class LabelerSession:
             if not self._claim_next():
                 self._handle(self._next_action(self.config.wait_s))
             return
-        action = self._next_action(self.config.lease_s / 3)
-        if action is None:
+        waiting = self._next_action(self.config.lease_s / 3)
+        if waiting is None:
             self._renew()
         else:
-            self._handle(action)
+            self._handle(waiting)
 
     def _next_action(self, timeout_s: float) -> Action | None:
         try:

@@ -96,7 +96,7 @@ class SkillWatch:
             xy = np.asarray(rollout.xy, float)
             session.player.fps = session.config.fps / rollout.stride
             session.player.loop = not self.auto.value
-            session.panels.loop.value = session.player.loop
+            session.panels.loop.value = session.player.loop  # type: ignore[misc]  # viser: settable
             with session.client.atomic():
                 session.scene.set_segment(poser, None)
                 session.player.load(poser.n_frames)
@@ -120,7 +120,7 @@ class SkillWatch:
 
     def _set_auto(self, on: bool) -> None:
         self.session.player.loop = not on
-        self.session.panels.loop.value = not on
+        self.session.panels.loop.value = not on  # type: ignore[misc]  # viser types .value read-only; it is settable
 
     def _finished(self) -> bool:
         player = self.session.player

@@ -3,6 +3,7 @@ the same kind of labeler token a person uses, by the task rule (collie.teacher.O
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -75,9 +76,8 @@ class TeacherLoop:
             if not until_done or self._retry(lambda: self.client.run(self.run_id)).status in FINISHED:
                 break
             # Sleep until something happens on the run (new queries, a status change).
-            after = self._retry(
-                lambda a=after: self.client.events(self.run_id, after=a, wait_s=self.idle_wait_s)
-            ).last_id
+            page = functools.partial(self.client.events, self.run_id, after=after, wait_s=self.idle_wait_s)
+            after = self._retry(page).last_id
         return self.labelled
 
     def _label(self, query: QueryRead) -> QueryRead | None:

@@ -77,7 +77,9 @@ class Trainer:
         self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
         self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
-            self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
+            # NoisyObservations wraps a VectorEnv and offers its interface (duck-typed)
+            noisy = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
+            self.env, self.eval_env = noisy  # type: ignore[assignment]  # see above
         self.normalise = Normaliser(self.env.obs_mean, self.env.obs_std)
         self.prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
         self.method = method(cfg.method)

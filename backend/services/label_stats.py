@@ -12,7 +12,7 @@ import statistics
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,7 +93,7 @@ def share(hits: int, judged: int) -> float | None:
     return hits / judged if judged else None
 
 
-def labeler_stats(events: list[Any], oracle: dict[int, int | None]) -> list[LabelerStats]:
+def labeler_stats(events: Sequence[Any], oracle: dict[int, int | None]) -> list[LabelerStats]:
     by_name: dict[str, list[Any]] = {}
     for e in events:
         by_name.setdefault(e.name, []).append(e)

@@ -151,12 +151,12 @@ def _record(
         query_id=q.query_id,
         session=q.session,
         labeler=caller.name,
-        kind=kind,  # type: ignore[arg-type]
-        value=value,  # type: ignore[arg-type]
+        kind=kind,
+        value=value,
         seconds=seconds,
         client_request_id=request_id,
         revises_event_id=q.label_event_id,
-        created_at=now,  # type: ignore[arg-type]
+        created_at=now,
     )
 
 
@@ -190,7 +190,7 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
     )
     data = LabelChanged(query_id=body.query_id, session=q.session, event_id=event.id, labeler=caller.name, label=value)
     events.append(conn, run_id, data, now, labels_delta=int(q.label is None))
-    return LabelAck(event=event, label=value, query_status="labelled", duplicate=False)  # type: ignore[arg-type]
+    return LabelAck(event=event, label=value, query_status="labelled", duplicate=False)
 
 
 def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease_s: float) -> LabelAck:
@@ -218,7 +218,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     conn.execute(_SET_QUERY, {"pk": q.id, **change})
     data = LabelWithdrawn(query_id=body.query_id, session=q.session, event_id=event.id, labeler=caller.name, label=None)
     events.append(conn, run_id, data, now, labels_delta=-1)
-    return LabelAck(event=event, label=None, query_status=status, duplicate=False)  # type: ignore[arg-type]
+    return LabelAck(event=event, label=None, query_status=status, duplicate=False)
 
 
 def list_events(conn: Connection, run_id: int, after: int, limit: int) -> list[LabelEventRead]:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from sqlalchemy import Connection, insert, select
 
@@ -54,6 +55,6 @@ def list_rollouts(conn: Connection, run_id: int, limit: int, states: bool = True
     return [read_rollouts(r, states) for r in reversed(rows)]
 
 
-def read_rollouts(row: Rollouts, states: bool) -> RolloutsRead:
+def read_rollouts(row: Any, states: bool) -> RolloutsRead:  # a Rollouts row
     paths = row.rollouts if states else [{k: v for k, v in r.items() if k != "qpos"} for r in row.rollouts]
     return RolloutsRead(id=row.id, run_id=row.run_id, epoch=row.epoch, rollouts=paths, created_at=row.created_at)

@@ -23,6 +23,7 @@ numpy only: no torch here, and no database — only HTTP.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -102,7 +103,7 @@ class HttpFeedback(FeedbackSource):
         posted = self._retry(lambda: self.client.post_session(self.run_id, body))
         by_id = {s.query_id: s for s in segments}
         for query_id in posted.existing:
-            adopt(by_id[query_id], self._retry(lambda q=query_id: self.client.query(self.run_id, q)))
+            adopt(by_id[query_id], self._retry(functools.partial(self.client.query, self.run_id, query_id)))
         for s in segments:
             self._given.setdefault(s.query_id, None)
         ids = [s.query_id for s in segments]

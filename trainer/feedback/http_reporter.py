@@ -98,8 +98,8 @@ def rollouts_of(report: RolloutsReport, max_points: int = 1000) -> RolloutsIn:
     plot); w(s) at the same points goes in each rollout's extra["w"], the simulator state at the
     same points in its qpos (for a 3D replay)."""
     skills = np.asarray(report.skills, dtype=float)
-    weights = [] if report.w is None else report.w
-    states = [] if report.qpos is None else report.qpos
+    weights: Any = [] if report.w is None else report.w
+    states: Any = [] if report.qpos is None else report.qpos
     limit = min(max_points, MAX_ROLLOUT_POINTS)
     rollouts = []
     for i, path in enumerate(list(report.xy)[:MAX_ROLLOUTS]):
