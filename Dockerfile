@@ -1,6 +1,6 @@
 # collie images. Two targets from one context:
 #   service — the labeling service alone (FastAPI + SQLAlchemy; no torch, no MuJoCo): small, starts in ~1 s;
-#   full    — trainer, oracle teacher and labeling UI (torch CPU wheel, MuJoCo with EGL/OSMesa rendering).
+#   full    — trainer, oracle teacher and labeling UI (extras trainer, service, ui: torch CPU wheel, viser, MuJoCo with EGL/OSMesa).
 # Built by docker-compose.yml; by hand: docker build --target service -t collie-service .
 FROM python:3.11-slim AS source
 ENV PYTHONUNBUFFERED=1 PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
@@ -31,7 +31,7 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 # The CPU wheel: an unpinned torch pulls gigabytes of CUDA packages.
 RUN pip install --index-url https://download.pytorch.org/whl/cpu "torch==2.13.0" \
- && pip install ".[trainer,service]"
+ && pip install ".[trainer,service,ui]"
 USER collie
 ENV MUJOCO_GL=egl
 CMD ["collie", "--help"]

@@ -43,9 +43,12 @@ demo-oracle: $(STAMP)
 	  --out runs/demo-oracle --exit-when-done
 	@echo "plots: runs/demo-oracle/trainer/skills_latest.png · metrics: runs/demo-oracle/trainer/metrics.jsonl"
 
+# ruff (rules and one format), mypy (pyproject's [tool.mypy]) and the import contracts / type-ignore reasons.
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy
+	$(VENV)/bin/pytest -q -p no:cacheprovider tests/lint
 
 test: $(STAMP) lint
 	$(VENV)/bin/pytest -q

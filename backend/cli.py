@@ -41,7 +41,7 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str]]:
             overrides[f"{role}_token"] = SecretStr(given)
         if given is not None:
             tokens[role] = given
-    return Settings(**overrides), tokens  # type: ignore[arg-type]
+    return Settings(**overrides), tokens  # type: ignore[arg-type]  # pydantic-settings validates the overrides
 
 
 def run(args: argparse.Namespace) -> int:

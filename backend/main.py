@@ -52,9 +52,10 @@ def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> N
                 for name, definition in body.pop("$defs", {}).items():
                     components.setdefault(name, definition)
                 components.setdefault(model.__name__, body)
-        return app.openapi_schema  # build() stored it; the components were added in place
+        assert app.openapi_schema is not None  # build() stored it; the components were added in place
+        return app.openapi_schema
 
-    app.openapi = openapi  # type: ignore[method-assign]
+    app.openapi = openapi  # type: ignore[method-assign]  # FastAPI's documented way to extend the schema
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

@@ -31,7 +31,8 @@ from backend.db import Database
 from backend.services import telemetry
 from collie.client import CollieClient
 from collie.schemas import EnvDims, MetricsIn, RunCreate
-from trainer.feedback.http import rollouts_of
+from trainer.feedback.http_reporter import rollouts_of
+from trainer.telemetry import RolloutsReport
 
 TOKENS = {
     "operator": "bench-operator-0123456789",
@@ -97,18 +98,14 @@ def serve(folder: Path) -> tuple[subprocess.Popen, str]:
     return proc, json.loads(tokens.read_text())["api"]
 
 
-def rollouts(epoch: int, rng: np.random.Generator) -> dict:
+def rollouts(epoch: int, rng: np.random.Generator) -> RolloutsReport:
     """What Trainer.evaluate reports: 48 skills, 201 steps thinned to 101 points, w(s) alike, and
     Ant's 15-value qpos at each point (for the watch mode; stored in the same row the page reads)."""
     steps = rng.normal(size=(48, 101, 2)).cumsum(axis=1) * 0.3
     qpos = np.concatenate([steps, rng.normal(size=(48, 101, 13))], axis=2)
-    return {
-        "epoch": epoch,
-        "skills": rng.normal(size=(48, 2)).tolist(),
-        "xy": steps.tolist(),
-        "w": rng.uniform(0, 2, size=(48, 101)).tolist(),
-        "qpos": qpos.tolist(),
-    }
+    return RolloutsReport(
+        epoch, skills=rng.normal(size=(48, 2)), xy=steps, stride=2, qpos=qpos, w=rng.uniform(0, 2, size=(48, 101))
+    )
 
 
 def new_run(trainer: CollieClient) -> int:

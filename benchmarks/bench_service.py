@@ -41,7 +41,7 @@ from sqlalchemy import Float, Integer, String, create_engine, event
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
 from collie.client import CollieClient
-from collie.schemas import EnvDims, RunCreate, SessionPost
+from collie.schemas import EnvDims, LabelChangedEvent, RunCreate, SessionPost
 
 LABELERS = 50
 ANT = EnvDims(obs_dim=29, nq=15, nv=14, horizon=20, skill_dim=2)
@@ -275,8 +275,8 @@ def stream_reader(api: str, token: str, run_id: int, after: int, done: Any, out:
             super()._apply(events)
             now = time.monotonic()
             for e in events:
-                if e.kind == "label":
-                    seen.setdefault(e.data["query_id"], now)
+                if isinstance(e, LabelChangedEvent):
+                    seen.setdefault(e.data.query_id, now)
 
     source = Timed(api, token, run_id, wait_chunk_s=1.0)
     source._after = after

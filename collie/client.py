@@ -1,23 +1,29 @@
 """A small typed, synchronous client for the labeling service, and a resumable stream consumer.
 
 Used by the trainer's HTTP feedback source, the oracle teacher, the labeling UI and the tests. Every
-method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (status and detail);
-an unreachable service raises Unreachable, which callers may retry (submissions are idempotent by
-client_request_id, so a retry never labels twice).
+method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (status and detail),
+typed by what a caller does about them: Unauthorized (401/403: a token problem), Conflict (409: the
+state does not allow it), and Unavailable — Unreachable (no answer) or Overloaded (5xx, 429) — the
+one kind worth retrying, with `retrying` and its Backoff: the one retry policy of every client
+(submissions are idempotent by client_request_id, so a retry never labels twice).
 """
 
 from __future__ import annotations
 
 import functools
+import logging
+import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import httpx
 from pydantic import BaseModel, TypeAdapter
 
 from collie.schemas import (
+    STREAM_EVENT,
     ClaimRead,
     EffectiveLabel,
     EventPage,
@@ -57,6 +63,8 @@ from collie.schemas import (
 )
 
 M = TypeVar("M", bound=BaseModel)
+T = TypeVar("T")
+log = logging.getLogger(__name__)
 
 
 class ApiError(Exception):
@@ -68,13 +76,80 @@ class ApiError(Exception):
         self.detail = detail
 
 
-class Unreachable(Exception):
+class Unauthorized(ApiError):
+    """401 / 403: the token is missing, unknown, revoked, or its role may not do this."""
+
+
+class Conflict(ApiError):
+    """409: the run's or query's state does not allow it (finished run, lease lost, …)."""
+
+
+class Unavailable(Exception):
+    """The service cannot answer now; the same call may succeed later (what `retrying` waits out)."""
+
+
+class Unreachable(Unavailable):
     """No answer from the service (down, restarting, or the network dropped)."""
+
+
+class Overloaded(ApiError, Unavailable):
+    """5xx or 429: the service answered that it cannot do it now."""
+
+
+def api_error(status: int, detail: Any) -> ApiError:
+    """The typed error for an error status."""
+    if status in (401, 403):
+        return Unauthorized(status, detail)
+    if status == 409:
+        return Conflict(status, detail)
+    if status >= 500 or status == 429:
+        return Overloaded(status, detail)
+    return ApiError(status, detail)
+
+
+@dataclass(frozen=True)
+class Backoff:
+    """Exponential backoff: first_s, doubling, at most max_s between tries."""
+
+    first_s: float = 0.1
+    max_s: float = 5.0
+
+    def delays(self) -> Iterator[float]:
+        delay = self.first_s
+        while True:
+            yield delay
+            delay = min(2 * delay, self.max_s)
+
+
+def retrying(
+    call: Callable[[], T],
+    backoff: Backoff = Backoff(),
+    attempts: int | None = None,
+    stop: threading.Event | None = None,
+    what: str = "labeling service",
+) -> T:
+    """`call()` until it returns: an Unavailable service is waited out with `backoff` (at most
+    `attempts` calls; None: until it answers, or until `stop` is set); any other error raises."""
+    delays = backoff.delays()
+    tries = 0
+    while True:
+        try:
+            return call()
+        except Unavailable as exc:
+            tries += 1
+            if (attempts is not None and tries >= attempts) or (stop is not None and stop.is_set()):
+                raise
+            delay = next(delays)
+            log.warning("%s unavailable (%s); retrying in %.1f s", what, exc, delay)
+            if stop is not None:
+                stop.wait(delay)
+            else:
+                time.sleep(delay)
 
 
 @functools.cache
 def _list_of(model: type[M]) -> TypeAdapter[list[M]]:
-    return TypeAdapter(list[model])  # type: ignore[valid-type]
+    return TypeAdapter(list[model])  # type: ignore[valid-type]  # a runtime type argument
 
 
 def new_request_id() -> str:
@@ -106,7 +181,7 @@ class CollieClient:
                 detail = response.json().get("detail")
             except ValueError:
                 detail = response.text
-            raise ApiError(response.status_code, detail)
+            raise api_error(response.status_code, detail)
         return response
 
     def _get(self, model: type[M], path: str, **params: Any) -> M:
@@ -313,7 +388,7 @@ class CollieClient:
 
 class EventStream:
     """A run's Server-Sent Events as an iterator of StreamEvent. A dropped connection (or a service
-    restart) is retried with exponential backoff (0.1 s doubling up to max_backoff_s) and resumed
+    restart) is retried with the shared Backoff (0.1 s doubling up to max_backoff_s) and resumed
     from the last id seen, so nothing is missed and nothing is yielded twice. 4xx errors end it."""
 
     def __init__(self, client: CollieClient, run_id: int, after: int = 0, max_backoff_s: float = 5.0) -> None:
@@ -328,19 +403,16 @@ class EventStream:
         self._closed = True
 
     def __iter__(self) -> Iterator[StreamEvent]:
-        backoff = 0.1
+        backoff = Backoff(max_s=self.max_backoff_s)
+        delays = backoff.delays()
         while not self._closed:
             try:
                 yield from self._connection()
-                backoff = 0.1  # a clean end (server shutdown): reconnect promptly
-            except (httpx.TransportError, Unreachable):
-                time.sleep(backoff)
-                backoff = min(backoff * 2, self.max_backoff_s)
-            except ApiError as exc:
-                if exc.status < 500:
-                    raise
-                time.sleep(backoff)
-                backoff = min(backoff * 2, self.max_backoff_s)
+                delays = backoff.delays()  # a clean end (server shutdown): reconnect promptly
+            except httpx.TransportError:  # dropped while reading
+                time.sleep(next(delays))
+            except Unavailable:
+                time.sleep(next(delays))
             self.reconnects += 1
 
     def _connection(self) -> Iterator[StreamEvent]:
@@ -349,7 +421,7 @@ class EventStream:
         with self.client._http.stream("GET", f"/runs/{self.run_id}/stream", headers=headers, timeout=timeout) as r:
             if r.status_code >= 400:
                 r.read()
-                raise ApiError(r.status_code, r.text)
+                raise api_error(r.status_code, r.text)
             data: list[str] = []
             for line in r.iter_lines():
                 if self._closed:
@@ -357,7 +429,7 @@ class EventStream:
                 if line.startswith("data:"):
                     data.append(line[5:].lstrip())
                 elif not line and data:
-                    event = StreamEvent.model_validate_json("\n".join(data))
+                    event = STREAM_EVENT.validate_json("\n".join(data))
                     data = []
                     if event.id > self.last_id:
                         self.last_id = event.id

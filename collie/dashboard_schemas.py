@@ -8,6 +8,7 @@ from typing import Any
 
 from pydantic import ConfigDict, Field
 
+from collie.labels import Label
 from collie.schemas import Control, LabelValue, QueueCounts, RolloutsRead, RunRead, RunStatus, Wire
 
 MAX_HISTORY_POINTS = 5000  # the largest metric history one request may ask for
@@ -57,6 +58,16 @@ class MetricHistory(Read):
     epochs: list[int]
     created_at: list[float] = Field(description="seconds since the Unix epoch")
     series: dict[str, list[float | None]] = Field(description="name → values; null where a row lacks it")
+
+
+class LabelName(Read):
+    """A label's value and the word the dashboard shows for it (the names live in collie.labels only)."""
+
+    value: LabelValue
+    name: str
+
+
+LABEL_NAMES = [LabelName(value=v, name=v.word) for v in Label]
 
 
 class LabelledSegment(Read):
@@ -131,3 +142,6 @@ class RunDashboard(LabelingView):
     rollouts: RolloutsRead | None
     metrics: MetricHistory
     last_event_id: int
+    labels: list[LabelName] = Field(
+        default_factory=lambda: list(LABEL_NAMES), description="every label, in value order"
+    )

@@ -15,20 +15,37 @@ import json
 import math
 import zlib
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    TypeAdapter,
+    field_validator,
+    model_validator,
+)
 
+from collie.labels import Label
 from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
 
-LabelValue = Literal[0, 1, 2]  # 0 bad, 1 neutral, 2 good
-Submission = Literal[0, 1, 2, "skip"]
+
+def _exact_label(value: object) -> Label:
+    # only the integers 0, 1, 2 (or a Label): no "2", 2.0 or true, which lax enum checks would take
+    if isinstance(value, bool) or not isinstance(value, int) or value not in {int(v) for v in Label}:
+        raise ValueError(f"a label is the integer {', '.join(str(int(v)) for v in Label)}, got {value!r}")
+    return Label(value)
+
+
+LabelValue = Annotated[Label, BeforeValidator(_exact_label)]  # on the wire the integer: 0 bad, 1 neutral, 2 good
+Submission = LabelValue | Literal["skip"]
 Role = Literal["operator", "trainer", "labeler"]
 RunStatus = Literal["training", "waiting_for_labels", "paused", "finished", "failed"]
 Control = Literal["run", "pause", "stop"]
 QueryStatus = Literal["pending", "leased", "labelled", "retired"]
 EventKind = Literal["label", "skip", "undo"]
-StreamKind = Literal["queries", "retired", "label", "withdrawn", "status", "control", "policy", "metrics", "rollouts"]
 
 FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 
@@ -437,13 +454,138 @@ class LabelledPage(Wire):
 # ---------------------------------------------------------------- stream
 
 
-class StreamEvent(Wire):
+# What each kind of event says (its `data`); the service builds them, every client reads them.
+
+
+class EventData(Wire):
+    model_config = ConfigDict(strict=False)
+    kind: ClassVar[str]  # the event kind this data travels under
+
+
+class QueriesPosted(EventData):
+    kind = "queries"
+    session: int
+    epoch: int
+    query_ids: list[str]
+
+
+class QueriesRetired(EventData):
+    kind = "retired"
+    query_ids: list[str]
+
+
+class LabelChanged(EventData):
+    """A query's effective label is now `label` (kind "label"), or it has none (kind "withdrawn")."""
+
+    kind = "label"
+    query_id: str
+    session: int
+    event_id: int = Field(description="the label event that made the change")
+    labeler: str
+    label: LabelValue | None
+
+
+class LabelWithdrawn(LabelChanged):
+    kind = "withdrawn"
+
+
+class StatusChanged(EventData):
+    kind = "status"
+    status: RunStatus
+    epoch: int
+    message: str | None = None
+
+
+class ControlChanged(EventData):
+    kind = "control"
+    control: Control
+
+
+class PolicyChanged(EventData):
+    kind = "policy"
+    timeout_s: float | None
+
+
+class MetricsPosted(EventData):
+    kind = "metrics"
+    id: int
+    epoch: int
+    values: dict[str, float]
+
+
+class RolloutsPosted(EventData):
+    kind = "rollouts"
+    id: int
+    epoch: int
+    n: int
+
+
+class _Event(Wire):
     model_config = ConfigDict(strict=False)
     id: int = Field(description="per-run, strictly increasing; resume with ?after=id")
     run_id: int
-    kind: StreamKind
-    data: dict[str, Any]
     created_at: datetime
+
+
+class QueriesEvent(_Event):
+    kind: Literal["queries"]
+    data: QueriesPosted
+
+
+class RetiredEvent(_Event):
+    kind: Literal["retired"]
+    data: QueriesRetired
+
+
+class LabelChangedEvent(_Event):
+    kind: Literal["label"]
+    data: LabelChanged
+
+
+class WithdrawnEvent(_Event):
+    kind: Literal["withdrawn"]
+    data: LabelWithdrawn
+
+
+class StatusEvent(_Event):
+    kind: Literal["status"]
+    data: StatusChanged
+
+
+class ControlEvent(_Event):
+    kind: Literal["control"]
+    data: ControlChanged
+
+
+class PolicyEvent(_Event):
+    kind: Literal["policy"]
+    data: PolicyChanged
+
+
+class MetricsEvent(_Event):
+    kind: Literal["metrics"]
+    data: MetricsPosted
+
+
+class RolloutsEvent(_Event):
+    kind: Literal["rollouts"]
+    data: RolloutsPosted
+
+
+# On the wire: {"id", "run_id", "kind", "data", "created_at"}, `data` shaped by `kind`.
+StreamEvent = Annotated[
+    QueriesEvent
+    | RetiredEvent
+    | LabelChangedEvent
+    | WithdrawnEvent
+    | StatusEvent
+    | ControlEvent
+    | PolicyEvent
+    | MetricsEvent
+    | RolloutsEvent,
+    Field(discriminator="kind"),
+]
+STREAM_EVENT: TypeAdapter[StreamEvent] = TypeAdapter(StreamEvent)
 
 
 class EventPage(Wire):
@@ -474,6 +616,7 @@ class Rollout(Wire):
     qpos: Matrix | None = Field(
         default=None, max_length=MAX_ROLLOUT_POINTS, description="simulator state at the xy points (3D replay)"
     )
+    stride: int = Field(default=1, ge=1, le=100_000, description="environment steps between two consecutive points")
     extra: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from collie.labels import Label
 from collie.tasks import BAD, CLASSES, GOOD, NEUTRAL, Task
 
 
-def segment_label(classes: np.ndarray) -> int:
+def segment_label(classes: np.ndarray) -> Label:
     """A segment's label from its states' classes: bad if any state is bad, good if all are
     good, else neutral (the teacher rule of Appendix E)."""
     classes = np.asarray(classes).reshape(-1)
@@ -42,6 +43,6 @@ class OracleTeacher:
             classes[near] = self.rng.choice(np.array([NEUTRAL, BAD], dtype=np.int8), size=int(near.sum()))
         return classes
 
-    def label(self, xy: np.ndarray, pitch: np.ndarray | None = None) -> int:
-        """The segment label (0 bad, 1 neutral, 2 good) for states xy (H, 2), pitch (H,)."""
+    def label(self, xy: np.ndarray, pitch: np.ndarray | None = None) -> Label:
+        """The segment label for states xy (H, 2), pitch (H,)."""
         return segment_label(self.state_labels(xy, pitch))

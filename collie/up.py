@@ -5,6 +5,7 @@ Ctrl-C stops them all cleanly, and running the same command again resumes the ru
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -14,9 +15,8 @@ import time
 from pathlib import Path
 from urllib.parse import quote
 
-from tqdm import tqdm
-
 from collie.client import CollieClient
+from collie.schemas import RunRead
 
 PROCESS_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # stop order: producers first
 
@@ -51,7 +51,8 @@ class Stack:
     """The child processes of one `collie up`, with their logs in OUT/logs/."""
 
     def __init__(self, out: Path) -> None:
-        self.out, self.procs = out, {}
+        self.out = out
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
     def start(self, name: str, args: list[str], env_extra: dict[str, str] | None = None) -> subprocess.Popen:
@@ -256,21 +257,36 @@ def write_info(path: Path | None, urls: dict, run_id: int, tokens: dict) -> None
     path.chmod(0o600)
 
 
+class ProgressLine:
+    """The run's status, epoch and labels on one line, redrawn in place on a terminal and printed
+    once per change otherwise (no tqdm: that is the trainer's dependency, not the light package's)."""
+
+    def __init__(self) -> None:
+        self._last = ""
+        self._inline = sys.stderr.isatty()
+
+    def show(self, r: RunRead) -> None:
+        epochs = f"{r.epoch}/{r.epochs_total}" if r.epochs_total else str(r.epoch)
+        line = f"{r.status}: epoch {epochs} · labels {r.n_labels}/{r.n_total if r.n_total is not None else '-'}"
+        if line != self._last:
+            self._last = line
+            sys.stderr.write(f"\r{line:<72}" if self._inline else line + "\n")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        if self._inline and self._last:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
 def watch(api: str, token: str, run_id: int, stack: Stack, exit_when_done: bool, stopping: dict) -> int:
     """Show the run's progress until it ends (or Ctrl-C). Returns the trainer's exit code."""
-    bar = tqdm(desc="epochs", unit="epoch", dynamic_ncols=True)
+    bar = ProgressLine()
     trainer = stack.procs["trainer"]
     with CollieClient(api, token) as client:
         while not stopping["flag"]:
-            try:
-                r = client.run(run_id)
-                bar.total = r.epochs_total
-                bar.n = r.epoch or 0
-                bar.set_description(r.status)
-                bar.set_postfix(labels=f"{r.n_labels}/{r.n_total}")
-                bar.refresh()
-            except Exception:  # the service may be restarting; keep watching
-                pass
+            with contextlib.suppress(Exception):  # the service may be restarting; keep watching
+                bar.show(client.run(run_id))
             if trainer.poll() is not None:
                 bar.close()
                 code = trainer.returncode

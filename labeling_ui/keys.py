@@ -3,18 +3,22 @@ while typing in a text field, so the token field never labels by accident)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import viser
 
+from collie.labels import Label
 from labeling_ui.panels import Actions
+
+
+def _run(do: Callable[[], None], _event: object) -> None:
+    do()
 
 
 def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
     bindings: list[tuple[str, str, Callable[[], None]]] = [
-        ("1", "Label bad", lambda: actions.label(0)),
-        ("2", "Label neutral", lambda: actions.label(1)),
-        ("3", "Label good", lambda: actions.label(2)),
+        *((str(v + 1), f"Label {v.word}", functools.partial(actions.label, v)) for v in Label),  # keys 1 2 3
         ("S", "Skip this segment", actions.skip),
         ("U", "Undo the last label", actions.undo),
         ("space", "Replay from the start", actions.replay),
@@ -24,5 +28,5 @@ def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
         ("V", "Reset the view: north up", actions.reset_view),
     ]
     for key, label, do in bindings:
-        command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]
-        command.on_trigger(lambda _event, do=do: do())
+        command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]  # viser's hotkey Literal lists every key name
+        command.on_trigger(functools.partial(_run, do))

@@ -1,6 +1,6 @@
 """MuJoCo models for replay, and poses from a segment's qpos frames.
 
-Models come from trainer.envs (no torch is imported on that path); each env's model is compiled
+Models come from collie.mjmodels (numpy + mujoco, what the trainer's envs simulate); each env's model is compiled
 once per process. A segment replays by kinematics only: qpos → body poses, no physics steps, so a
 replay shows exactly the states the trainer recorded.
 """
@@ -16,7 +16,7 @@ from collections import defaultdict
 import mujoco
 import numpy as np
 
-from trainer.envs import ENV_NAMES, load_model
+from collie.mjmodels import MODEL_NAMES, load_model
 
 
 class ModelError(Exception):
@@ -44,7 +44,7 @@ def replay_model(env: str) -> mujoco.MjModel:
         raise ModelError(f"cannot build the MuJoCo model for env '{env}': {exc}") from exc
 
 
-def warm_models(envs: tuple[str, ...] = ENV_NAMES, stop: threading.Event | None = None) -> dict[str, float]:
+def warm_models(envs: tuple[str, ...] = MODEL_NAMES, stop: threading.Event | None = None) -> dict[str, float]:
     """Compile every env's model ahead of the first labeler (quadruped takes about 1 s); returns
     env → seconds, NaN for a model that does not compile (its segments then say so). Stops
     between models once `stop` is set."""

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import viser
 
+from collie.labels import Label
 from collie.tasks import Task
 from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB, css
 from labeling_ui.inset import SIZE
@@ -29,7 +30,7 @@ KEYMAP = (
     "**Keys** · **1** bad · **2** neutral · **3** good · **S** skip (not a label) · **U** undo the last "
     "label · **Space** replay · **P** play / pause · **← →** one frame · **V** reset the view"
 )
-LABEL_NAMES = {0: "bad", 1: "neutral", 2: "good"}
+LABEL_NAMES = {int(label): label.word for label in Label}
 MIXED_RULE = (
     "**A segment with states of different kinds:** it is **bad** if any state is bad, **good** only if "
     "every state is good, else neutral."
@@ -48,7 +49,7 @@ class Actions(Protocol):
 
     def sign_in(self, token: str) -> None: ...
     def sign_out(self) -> None: ...
-    def label(self, value: int) -> None: ...
+    def label(self, value: Label) -> None: ...
     def skip(self) -> None: ...
     def undo(self) -> None: ...
     def relabel(self, query_id: str) -> None: ...
@@ -113,9 +114,9 @@ class Panels:
             gui.add_markdown(KEYMAP)
             self.progress = gui.add_markdown("")
             self.session_bar = gui.add_progress_bar(0.0, color="orange")
-        bad.on_click(lambda _: actions.label(0))
-        neutral.on_click(lambda _: actions.label(1))
-        good.on_click(lambda _: actions.label(2))
+        bad.on_click(lambda _: actions.label(Label.BAD))
+        neutral.on_click(lambda _: actions.label(Label.NEUTRAL))
+        good.on_click(lambda _: actions.label(Label.GOOD))
         skip.on_click(lambda _: actions.skip())
         undo.on_click(lambda _: actions.undo())
         self.label_buttons = (bad, neutral, good)
@@ -135,10 +136,10 @@ class Panels:
         self.play.on_click(lambda _: actions.toggle_play())
         again.on_click(lambda _: actions.replay())
         steps.on_click(lambda _: actions.step(-1 if steps.value.startswith("◀") else 1))
-        self.frame.on_update(lambda e: e.client is not None and actions.seek(float(self.frame.value)))
+        self.frame.on_update(lambda e: None if e.client is None else actions.seek(float(self.frame.value)))
         self.speed.on_click(lambda _: actions.set_speed(float(self.speed.value.rstrip("×"))))
-        self.loop.on_update(lambda e: e.client is not None and actions.set_loop(bool(self.loop.value)))
-        self.shadows.on_update(lambda e: e.client is not None and actions.set_shadows(bool(self.shadows.value)))
+        self.loop.on_update(lambda e: None if e.client is None else actions.set_loop(bool(self.loop.value)))
+        self.shadows.on_update(lambda e: None if e.client is None else actions.set_shadows(bool(self.shadows.value)))
 
         with gui.add_folder("My labels", expand_by_default=False, visible=False) as self.mine_folder:
             self.mine_list = gui.add_markdown("")
@@ -296,11 +297,11 @@ class Panels:
     def show_progress(self, p: Progress) -> None:
         total = f"{p.total_done} / {p.total_planned}" if p.total_planned else f"{p.total_done}"
         self.progress.content = f"This session **{p.session_done} / {p.session_size}** · total **{total}**"
-        self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)
+        self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)  # type: ignore[misc]  # settable
 
     def show_frame(self, frame: int, playing: bool) -> None:
         with self.client.atomic():
-            self.frame.value = frame
+            self.frame.value = frame  # type: ignore[misc]  # viser types .value read-only; its setter exists
             self.play.label = "Pause" if playing else "Play"
             self.play.icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
 
@@ -311,7 +312,8 @@ class Panels:
         self.title.content = f"**collie · labeling** — signed in as **{name}**{marker}{changed}"
 
     def notify(self, title: str, body: str, color: str = "blue") -> None:
-        self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[arg-type]
+        # color: one of viser's Mantine colour names, which callers pass as plain strings
+        self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[call-overload]  # see above
 
 
 def _clock(when: datetime) -> str:

@@ -7,12 +7,11 @@ caller), or a submission the service would not take (Rejected).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
-from collie.client import ApiError, CollieClient, Unreachable
+from collie.client import ApiError, Backoff, CollieClient, Overloaded, Unauthorized, Unreachable, retrying
 from collie.schemas import (
     FINISHED,
     ClaimRead,
@@ -72,11 +71,11 @@ class ServiceLink:
             return fn()
         except Unreachable as exc:
             raise ServiceDown(f"the labeling service at {self.api} does not answer") from exc
+        except Overloaded as exc:
+            raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
+        except Unauthorized as exc:
+            raise AuthRefused(str(exc.detail)) from exc
         except ApiError as exc:
-            if exc.status in (401, 403):
-                raise AuthRefused(str(exc.detail)) from exc
-            if exc.status >= 500:
-                raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
             raise Rejected(str(exc.detail)) from exc
 
     def login(self) -> Me:
@@ -89,11 +88,11 @@ class ServiceLink:
         """The run to label: the pinned one, else the newest open run with pending queries, else the
         newest open run (to wait on)."""
         if self.pinned_run is not None:
-            return self._call(lambda: self.client.run(self.pinned_run))  # type: ignore[arg-type]
+            return self._call(lambda: self.client.run(self.pinned_run))  # type: ignore[arg-type]  # not None in this branch
         runs = [r for r in self._call(lambda: self.client.runs(limit=50)) if is_open(r)]
         runs.sort(key=lambda r: r.id, reverse=True)
         with_work = [r for r in runs if r.queue.pending > 0]
-        return (with_work or runs or [None])[0]
+        return (with_work or runs)[0] if runs else None
 
     def run(self, run_id: int) -> RunRead:
         return self._call(lambda: self.client.run(run_id))
@@ -146,16 +145,8 @@ class ServiceLink:
         return self._call(lambda: self.client.metrics(run_id, limit=last))
 
     def _retrying(self, fn: Callable[[], T], attempts: int = 4) -> T:
-        delay = 0.25
-        for attempt in range(attempts):
-            try:
-                return self._call(fn)
-            except ServiceDown:
-                if attempt == attempts - 1:
-                    raise
-                time.sleep(delay)
-                delay *= 2
-        raise AssertionError("unreachable")
+        """A few tries with the shared backoff (a labeler waits for the answer), then ServiceDown."""
+        return self._call(lambda: retrying(fn, Backoff(first_s=0.25, max_s=2.0), attempts=attempts))
 
 
 def is_open(run: RunRead) -> bool:

@@ -21,6 +21,7 @@ import numpy as np
 import viser
 
 from collie.client import new_request_id
+from collie.labels import Label
 from collie.schemas import FINISHED, MAX_HOLD, QueryRead, RunRead
 from labeling_ui.actions import (
     Action,
@@ -136,7 +137,7 @@ class LabelerSession:
     def sign_out(self) -> None:
         self._actions.put(SignOut())
 
-    def label(self, value: int) -> None:
+    def label(self, value: Label) -> None:
         self._press(value)
 
     def skip(self) -> None:

@@ -5,7 +5,8 @@ a newer evaluation replaces the skills as it arrives.
 
 Driven by the tab's worker (reload on a stream wake-up, tick while idle); it draws through the
 tab's screen methods (show_skill, show_notice, replay_finished, set_replay_loop) and never
-touches the session's state.
+touches the session's state. The trainer posts every `stride`-th state of each evaluation rollout
+(Rollout.stride), so a rollout replays at 1/stride of the segment frame rate to keep real time.
 """
 
 from __future__ import annotations
@@ -23,8 +24,6 @@ from labeling_ui.service import ServiceLink
 if TYPE_CHECKING:
     from labeling_ui.screen import TabScreen
 
-STATE_STRIDE = 2  # env steps between two posted states (trainer/loop.py thins rollouts by 2)
-
 
 class SkillShow:
     def __init__(
@@ -34,7 +33,7 @@ class SkillShow:
         stream); None: the waiting screen's view (the tab already waits on that stream)."""
         self.screen = screen
         self.run_id = run_id
-        self.fps = fps / STATE_STRIDE
+        self.fps = fps  # of segments; a rollout plays at fps / its stride
         self.watch_stream = watch_stream
         self.watch = watch_stream is not None
         self.rollouts: RolloutsRead | None = None
@@ -89,9 +88,9 @@ class SkillShow:
             run,
             poser,
             np.asarray(rollout.xy, float),
-            self.fps,
+            self.fps / rollout.stride,
             f"Watching run {run.id}: skill **{self.index + 1} / {len(skills)}**",
             f"Skill {where}  \nz = {skill_text(rollout.skill)}  \n"
-            f"**run** {run.id} · {run.env} · {run.method} · **states** {poser.n_frames}, every {STATE_STRIDE} steps",
+            f"**run** {run.id} · {run.env} · {run.method} · **states** {poser.n_frames}, every {rollout.stride} steps",
             self.watch,
         )

@@ -3,6 +3,7 @@ the same kind of labeler token a person uses, by the task rule (collie.teacher.O
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -11,7 +12,8 @@ from typing import TypeVar
 
 import numpy as np
 
-from collie.client import ApiError, CollieClient, Unreachable, new_request_id
+from collie.client import CollieClient, Conflict, new_request_id, retrying
+from collie.labels import Label
 from collie.schemas import FINISHED, QueryRead
 from collie.tasks import task_for_run
 from collie.teacher import OracleTeacher
@@ -36,7 +38,7 @@ def oracle_for(client: CollieClient, run_id: int, noise_band: float, seed: int) 
     return OracleTeacher(task, noise_band=noise_band, seed=seed)
 
 
-def segment_label(oracle: OracleTeacher, query: QueryRead) -> int:
+def segment_label(oracle: OracleTeacher, query: QueryRead) -> Label:
     xy = np.asarray(query.xy, dtype=np.float64)
     pitch = None if query.pitch is None else np.array([np.nan if p is None else p for p in query.pitch], np.float64)
     return oracle.label(xy, pitch)
@@ -72,11 +74,9 @@ class TeacherLoop:
             if held is None:
                 try:
                     claim = self._retry(lambda: self.client.claim(self.run_id))
-                except ApiError as exc:
-                    if exc.status == 409:  # finished, failed or stopping: nothing more to do
-                        log.info("run %s takes no more labels: %s", self.run_id, exc.detail)
-                        break
-                    raise
+                except Conflict as exc:  # finished, failed or stopping: nothing more to do
+                    log.info("run %s takes no more labels: %s", self.run_id, exc.detail)
+                    break
                 held = claim.query if claim is not None else None
             if held is not None:
                 held = self._label(held)
@@ -84,9 +84,8 @@ class TeacherLoop:
             if not until_done or self._retry(lambda: self.client.run(self.run_id)).status in FINISHED:
                 break
             # Sleep until something happens on the run (new queries, a status change).
-            after = self._retry(
-                lambda a=after: self.client.events(self.run_id, after=a, wait_s=self.idle_wait_s)
-            ).last_id
+            page = functools.partial(self.client.events, self.run_id, after=after, wait_s=self.idle_wait_s)
+            after = self._retry(page).last_id
         return self.labelled
 
     def _label(self, query: QueryRead) -> QueryRead | None:
@@ -100,11 +99,9 @@ class TeacherLoop:
         seconds = time.monotonic() - started
         try:
             ack = self._retry(
-                lambda: self.client.submit(self.run_id, query.query_id, value, seconds, request_id, next=True)  # type: ignore[arg-type]
+                lambda: self.client.submit(self.run_id, query.query_id, value, seconds, request_id, next=True)
             )
-        except ApiError as exc:
-            if exc.status != 409:  # lost the lease (expired and taken) or the run ended: move on
-                raise
+        except Conflict as exc:  # lost the lease (expired and taken) or the run ended: move on
             log.info("label for %s not taken: %s", query.query_id, exc.detail)
             return None
         self._last_submit = time.monotonic()
@@ -113,13 +110,5 @@ class TeacherLoop:
         return ack.next.query if ack.next is not None else None
 
     def _retry(self, call: Callable[[], T]) -> T:
-        delay = 0.1
-        while True:
-            try:
-                return call()
-            except Unreachable as exc:
-                if self.stop.is_set():
-                    raise
-                log.warning("service unreachable (%s); retrying in %.1f s", exc, delay)
-                self.stop.wait(delay)
-                delay = min(2 * delay, 5.0)
+        """Wait out an unavailable service (the shared backoff), until it answers or we stop."""
+        return retrying(call, stop=self.stop)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
+from collie.mjmodels.floor import HALF_EXTENT, floor_colour, floor_texture
 from trainer.config import make_config
 from trainer.encoders import PixelEncoder
 from trainer.envs import VectorEnv, load_model, make_env, model_path, model_xml
-from trainer.envs.floor import HALF_EXTENT, floor_colour, floor_texture
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
 from trainer.skills import SkillPrior

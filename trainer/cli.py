@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trainer.config import LABEL_METHODS, METHODS, PRESETS, Config, make_config
+from trainer.config import PRESETS, Config, make_config
+from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
@@ -116,7 +117,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
             method=cfg.method,
             config=cfg.to_dict(),
             dims=dims,
-            n_total=cfg.total_queries if cfg.method in LABEL_METHODS else 0,
+            n_total=cfg.total_queries if METHODS[cfg.method].asks_labels else 0,
             epochs_total=cfg.epochs,
             feedback_timeout_s=args.feedback_timeout,
             task_definition=rule.definition,
@@ -154,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
         feedback = None
         if args.api:
             feedback, rule = http_feedback(args, cfg, rule)
-        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, rule=rule)
+        reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
+        trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2

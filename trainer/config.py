@@ -13,12 +13,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
 from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
 
-METHODS = ("collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn")
-LABEL_METHODS = ("collie", "dodont", "ddg")  # methods that ask the feedback source for labels
-RULE_METHODS = ("oracle",)  # methods that read the task rule itself (impossible without one)
+LABEL_METHODS = tuple(n for n, m in METHODS.items() if m.asks_labels)  # they ask the feedback source for labels
+RULE_METHODS = tuple(n for n, m in METHODS.items() if m.guidance == "task")  # they read the rule itself
 DISTANCES = ("temporal", "l2")
 REWARD_FORMS = ("multiplicative", "additive")
 ENCODERS = ("separate", "shared")
@@ -36,7 +36,7 @@ class Config:
     task: str = "north"
     task_file: str = ""  # a task rule from a file (docs/tasks.md); its task's name becomes `task`
     instruction: str = ""  # no rule: people label by this intent (task "instruction"); docs/tasks.md
-    method: Literal["collie", "metra", "oracle", "dodont", "ddg", "lsd", "diayn"] = "collie"
+    method: str = "collie"  # a name in trainer.methods.METHODS
     preset: str = "cpu"
     seed: int = 0
     device: str = "auto"  # auto → cuda when available

@@ -36,7 +36,6 @@ class ProjectedLatent(nn.Module):
 
 def attach_projection(agent: Metra, classifier: InstructionClassifier, cfg: Config) -> None:
     """Replace the agent's φ by head ∘ encoder; φ's optimiser then trains the head only."""
-    agent.phi = ProjectedLatent(classifier.net.encoder, cfg.projection_dim, agent.prior.dim, cfg.hidden, cfg.layers).to(
-        agent.device
-    )
-    agent.phi_opt = torch.optim.Adam(agent.phi.head.parameters(), lr=cfg.lr)
+    phi = ProjectedLatent(classifier.net.encoder, cfg.projection_dim, agent.prior.dim, cfg.hidden, cfg.layers)
+    agent.phi = phi.to(agent.device)  # type: ignore[assignment]  # a SkillLatent in all but its class
+    agent.phi_opt = torch.optim.Adam(phi.head.parameters(), lr=cfg.lr)

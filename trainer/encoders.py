@@ -47,7 +47,7 @@ def is_pixels(obs_shape: int | tuple[int, ...]) -> bool:
 def feature_dim(obs_shape: int | tuple[int, ...]) -> int:
     """Width of what φ, Q and π see after their encoder."""
     if is_pixels(obs_shape):
-        return PixelEncoder(tuple(obs_shape)).out_dim  # type: ignore[arg-type]
+        return PixelEncoder(tuple(obs_shape)).out_dim  # type: ignore[arg-type]  # a tuple here: pixel observations
     return obs_shape if isinstance(obs_shape, int) else int(obs_shape[0])
 
 

@@ -143,6 +143,7 @@ class LabelledSets:
                     dim = emb.shape[1] if emb is not None else 1
                     out.append(torch.zeros((0, dim), device=t.device))
                 else:
+                    assert emb is not None  # some set is non-empty
                     out.append(emb[start : start + n])
                     start += n
             self._cache, self._cache_key = out, key

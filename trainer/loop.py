@@ -36,7 +36,7 @@ from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
-from trainer.methods import build_agent
+from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
 from trainer.obs_noise import NoisyObservations
@@ -48,8 +48,10 @@ from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
+from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport
 from trainer.threads import resolve_threads
 
+ROLLOUT_STRIDE = 2  # evaluation rollouts go out every 2nd state (the stride travels with them)
 CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
 
@@ -66,7 +68,12 @@ def pick_device(name: str) -> torch.device:
 
 class Trainer:
     def __init__(
-        self, cfg: Config, feedback: FeedbackSource | None = None, progress: bool = True, rule: RunRule | None = None
+        self,
+        cfg: Config,
+        feedback: FeedbackSource | None = None,
+        progress: bool = True,
+        reporter: Reporter | None = None,
+        rule: RunRule | None = None,
     ) -> None:
         cfg.validate()
         self.cfg, self.progress = cfg, progress
@@ -88,9 +95,12 @@ class Trainer:
         self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, **vec)
         self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, **vec)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
-            self.env, self.eval_env = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
+            # NoisyObservations wraps a VectorEnv and offers its interface (duck-typed)
+            noisy = (NoisyObservations(e, cfg.obs_noise) for e in (self.env, self.eval_env))
+            self.env, self.eval_env = noisy  # type: ignore[assignment]  # see above
         self.normalise = Normaliser(*observation_stats(cfg.env, self.env.obs_mean, self.env.obs_std, cfg.obs_norm))
         self.prior = SkillPrior.for_config(cfg)
+        self.method = method(cfg.method)
         self.agent, self.instruction = build_agent(
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
@@ -119,6 +129,7 @@ class Trainer:
         )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
+        self.reporter = reporter or Reporter()  # telemetry for live views (none by default)
         self.asked: dict[str, np.ndarray] = {}  # query id → raw states, for revisions after the fact
         self.segment_xy: dict[str, np.ndarray] = {}  # query id → x-y, to draw labelled states
         self.epoch, self.env_steps, self.session = 0, 0, 0
@@ -138,12 +149,14 @@ class Trainer:
         """w for this batch: METRA/LSD/DIAYN/DDG* 1, Oracle the task rule g(s), DoDont* 2ψ(s),
         COLLIE Eq. 8 smoothed. Everything stays on the device."""
         at_next = self.cfg.w_at == "next"
-        if self.cfg.method in ("metra", "lsd", "diayn", "ddg"):
+        guidance = self.method.guidance
+        if guidance == "one":
             return None
         b = sampled.batch
-        if self.cfg.method == "dodont":  # ψ reads the batch's own normalised tensors
+        if guidance == "instruction":  # ψ reads the batch's own normalised tensors
+            assert self.instruction is not None, "an instruction-guided method is built with its classifier"
             return dodont_weight(self.instruction, b.next_obs if at_next else b.obs, self.device)
-        if self.cfg.method == "oracle":
+        if guidance == "task":
             g = sampled.next_rule if at_next else sampled.rule
             return lambda _s, _n: g
         beta = self.beta()
@@ -161,7 +174,7 @@ class Trainer:
     def is_feedback_epoch(self) -> bool:
         c = self.cfg
         return (
-            c.method in LABEL_METHODS
+            self.method.asks_labels
             and self.epoch >= c.warmup
             and (self.epoch - c.warmup) % c.feedback_every == 0
             and len(self.labelled) < c.total_queries
@@ -264,7 +277,7 @@ class Trainer:
     def diverged(self, what: str) -> None:
         ckpt = self.out / "checkpoint.pt"
         where = f"last checkpoint kept at {ckpt}" if ckpt.exists() else "no checkpoint was written yet"
-        self.feedback.report("status", {"status": "failed", "epoch": self.epoch, "error": what})
+        self.reporter.status(StatusReport("failed", self.epoch, error=what))
         raise TrainingDiverged(f"{what} at epoch {self.epoch}; {where}")
 
     # ---- evaluation ----------------------------------------------------------------------
@@ -283,7 +296,7 @@ class Trainer:
             bin_rule=c.bin_rule,
         ) | travel_metrics(xy)
         d0, d1, d2 = self.labelled.counts()
-        w = self.guidance_along(traj.obs[:, ::2])  # the dashboard colours the paths by w(s)
+        w = self.guidance_along(traj.obs[:, ::ROLLOUT_STRIDE])  # the dashboard colours the paths by w(s)
         record: dict[str, Any] = {
             "epoch": self.epoch,
             "env_steps": self.env_steps,
@@ -304,16 +317,17 @@ class Trainer:
         np.savez_compressed(
             self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
         )  # the final skills' paths, for `collie report` figures
-        self.feedback.report("metrics", record)
-        rollouts = {
-            "epoch": self.epoch,
-            "skills": traj.skill.tolist(),
-            "xy": np.round(traj.xy[:, ::2], 3).tolist(),
-            "qpos": np.round(traj.qpos[:, ::2], 4).tolist(),
-        }  # the labeling UI's watch mode replays these
-        if w is not None:
-            rollouts["w"] = np.round(w, 2).tolist()
-        self.feedback.report("rollouts", rollouts)
+        self.reporter.metrics(MetricsReport(self.epoch, record))
+        every = slice(None, None, ROLLOUT_STRIDE)
+        rollouts = RolloutsReport(
+            self.epoch,
+            skills=traj.skill,
+            xy=traj.xy[:, every],
+            stride=ROLLOUT_STRIDE,
+            qpos=traj.qpos[:, every],  # the labeling UI's watch mode replays these
+            w=w,  # the dashboard colours the paths by w(s)
+        )
+        self.reporter.rollouts(rollouts)
         return record
 
     def labels_per_class(self) -> dict[str, int]:
@@ -333,7 +347,7 @@ class Trainer:
         """w_e(s) = (1 − β_e)·w(s) + β_e (Eq. 8, smoothed as in Section 4.5) at states `obs`
         (n, T, *obs_shape), as COLLIE's weight_fn applies it; None while w_e ≡ 1 or for methods
         without this guidance."""
-        if self.cfg.method in ("metra", "lsd", "diayn", "ddg", "dodont", "oracle"):
+        if self.method.guidance != "labels":
             return None
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:
@@ -380,7 +394,6 @@ class Trainer:
         return self.wall_before + (time.perf_counter() - self._t0)
 
     def state_dict(self) -> dict[str, Any]:
-        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
         return {
             "config": self.cfg.to_dict(),
             "epoch": self.epoch,
@@ -396,7 +409,7 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
             "python_rng": random.getstate(),
-            "teacher_rng": rng_teacher.bit_generator.state if rng_teacher is not None else None,
+            "feedback": self.feedback.state_dict(),
             "last_info": self.last_info,
             "instruction": self.instruction.state_dict() if self.instruction is not None else None,
         }
@@ -419,9 +432,8 @@ class Trainer:
         if s["cuda_rng"] is not None and torch.cuda.is_available():
             torch.cuda.set_rng_state_all(s["cuda_rng"])
         random.setstate(s["python_rng"])
-        rng_teacher = getattr(getattr(self.feedback, "teacher", None), "rng", None)
-        if rng_teacher is not None and s["teacher_rng"] is not None:
-            rng_teacher.bit_generator.state = s["teacher_rng"]
+        # checkpoints from before the source kept its own state stored the oracle's RNG as teacher_rng
+        self.feedback.load_state_dict(s.get("feedback", {"rng": s.get("teacher_rng")}))
 
     def checkpoint(self) -> None:
         """checkpoint.pt without the replay, whose new trajectories go to one more chunk first."""
@@ -470,7 +482,7 @@ class Trainer:
         """Honour the operator: returns False when the run must stop."""
         wish = self.feedback.control()
         if wish == "pause":
-            self.feedback.report("status", {"status": "paused", "epoch": self.epoch})
+            self.reporter.status(StatusReport("paused", self.epoch))
             bar.set_description("paused")
             self._waiting = True
             try:
@@ -480,7 +492,7 @@ class Trainer:
             finally:
                 self._waiting = False
             if wish != "stop":
-                self.feedback.report("status", {"status": "training", "epoch": self.epoch})
+                self.reporter.status(StatusReport("training", self.epoch))
         return wish != "stop"
 
     def run(self, resume: bool = False) -> dict[str, Any]:
@@ -496,7 +508,7 @@ class Trainer:
         (self.out / TASK_JSON).write_text(json.dumps(self.rule.to_json(), indent=2))
         self.rebuild_from_source()
         self._writer = self._tensorboard()
-        self.feedback.report("status", {"status": "training", "epoch": self.epoch})
+        self.reporter.status(StatusReport("training", self.epoch))
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
         bar = tqdm(
@@ -507,7 +519,8 @@ class Trainer:
             dynamic_ncols=True,
             desc="training",
         )
-        status, record = "finished", None
+        status: LoopStatus = "finished"
+        record: dict[str, Any] | None = None
         previous_handlers = self._install_signal_handlers()
         try:
             while self.epoch < self.cfg.epochs:
@@ -559,9 +572,9 @@ class Trainer:
         now = time.monotonic()
         if now - getattr(self, "_last_progress", 0.0) >= 1.0:
             self._last_progress = now
-            self.feedback.report("status", {"status": "training", "epoch": self.epoch, "progress": True})
+            self.reporter.status(StatusReport("training", self.epoch, progress=True))
 
-    def finish(self, status: str, record: dict[str, Any] | None) -> dict[str, Any]:
+    def finish(self, status: LoopStatus, record: dict[str, Any] | None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         last = record or (records[-1] if records else {})
         summary = {**last, "status": status, "epochs_done": self.epoch, "config": self.cfg.to_dict()}
@@ -569,7 +582,7 @@ class Trainer:
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
         if status != "interrupted":  # an interrupted run is not over for the service
-            self.feedback.report("status", {"status": status, "epoch": self.epoch})
+            self.reporter.status(StatusReport(status, self.epoch))
         return summary
 
     def _tensorboard(self) -> Any:

@@ -1,5 +1,5 @@
-"""Which learner each method name builds (`--method`, `--distance`). One place, so the training
-loop stays the same for every method:
+"""The method registry: one table, name → whether it asks for labels, how its learner is built and
+how its w is computed. Adding a method is one row here (and its learner's module):
 
     metra, oracle, collie   METRA's φ with the dual λ (Eqs. 9–11); w ≡ 1, g(s′), Eq. 8
     lsd                     Lipschitz φ by spectral normalisation, no dual (trainer/lsd.py)
@@ -8,39 +8,122 @@ loop stays the same for every method:
     ddg                     METRA on φ(s) = head(encoder(s)), the classifier's encoder (trainer/ddg.py)
 `--distance l2` swaps METRA's temporal constraint for LSD's Euclidean one in any w-guided method
 (COLLIE-L2 is `--method collie --distance l2`).
+
+The learners are imported when built, not here: the table is read by light commands too
+(`collie sweep`, the config's validation), which must not load torch.
 """
 
 from __future__ import annotations
 
-import torch
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
-from trainer.config import Config
-from trainer.ddg import attach_projection
-from trainer.diayn import Diayn
-from trainer.encoders import feature_dim, is_pixels
-from trainer.instruction import InstructionClassifier
-from trainer.lsd import Lsd
-from trainer.metra import Metra
-from trainer.skills import SkillPrior
+if TYPE_CHECKING:
+    import torch
 
-CLASSIFIER_METHODS = ("dodont", "ddg")
+    from trainer.config import Config
+    from trainer.instruction import InstructionClassifier
+    from trainer.metra import Metra
+    from trainer.skills import SkillPrior
+
+# How w(s) is computed (trainer/loop.py applies it): "one" w ≡ 1; "task" the task rule g(s′) (the
+# Oracle baseline); "instruction" 2ψ(s′) (trainer/dodont.py); "labels" Eq. 8 from D0/D1/D2, smoothed.
+Guidance = Literal["one", "task", "instruction", "labels"]
+Learner = tuple["Metra", "InstructionClassifier | None"]
+Builder = Callable[["Config", "int | tuple[int, ...]", int, "SkillPrior", "torch.device"], Learner]
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    asks_labels: bool  # does the loop open feedback sessions (Algorithm 1, lines 4–7)?
+    guidance: Guidance
+    build: Builder
+
+
+def _metra(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> Metra:
+    """METRA, or LSD's Lipschitz φ with `--distance l2`."""
+    from trainer.lsd import Lsd
+    from trainer.metra import Metra
+
+    return (Lsd if cfg.distance == "l2" else Metra)(obs_shape, action_dim, prior, cfg, device)
+
+
+def _plain(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> Learner:
+    return _metra(cfg, obs_shape, action_dim, prior, device), None
+
+
+def _lsd(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> Learner:
+    from trainer.lsd import Lsd
+
+    return Lsd(obs_shape, action_dim, prior, cfg, device), None
+
+
+def _diayn(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> Learner:
+    from trainer.diayn import Diayn
+
+    return Diayn(obs_shape, action_dim, prior, cfg, device), None
+
+
+def _dodont(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> tuple[Metra, InstructionClassifier]:
+    """The learner and ψ, the instruction classifier (an MLP: state observations only)."""
+    from trainer.encoders import feature_dim, is_pixels
+    from trainer.instruction import InstructionClassifier
+
+    if is_pixels(obs_shape):
+        raise ValueError(f"{cfg.method}'s instruction classifier is an MLP: state observations only")
+    agent = _metra(cfg, obs_shape, action_dim, prior, device)
+    return agent, InstructionClassifier(feature_dim(obs_shape), cfg, device)
+
+
+def _ddg(
+    cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
+) -> Learner:
+    """DoDont*'s pair, with φ reading ψ's encoder (trainer/ddg.py)."""
+    from trainer.ddg import attach_projection
+
+    if cfg.distance == "l2":
+        raise ValueError("ddg runs on METRA's temporal distance only (--distance temporal)")
+    agent, classifier = _dodont(cfg, obs_shape, action_dim, prior, device)
+    attach_projection(agent, classifier, cfg)
+    return agent, classifier
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("collie", asks_labels=True, guidance="labels", build=_plain),
+        Method("metra", asks_labels=False, guidance="one", build=_plain),
+        Method("oracle", asks_labels=False, guidance="task", build=_plain),
+        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont),
+        Method("ddg", asks_labels=True, guidance="one", build=_ddg),
+        Method("lsd", asks_labels=False, guidance="one", build=_lsd),
+        Method("diayn", asks_labels=False, guidance="one", build=_diayn),
+    )
+}
+
+
+def method(name: str) -> Method:
+    """The registry's row for `name`; a clear error listing the valid names otherwise."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ValueError(f"unknown method {name!r}; valid: {', '.join(METHODS)}") from None
 
 
 def build_agent(
     cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
-) -> tuple[Metra, InstructionClassifier | None]:
+) -> Learner:
     """The learner for `cfg.method` and, for DoDont*/DDG*, its instruction classifier."""
-    if cfg.method == "diayn":
-        return Diayn(obs_shape, action_dim, prior, cfg, device), None
-    if cfg.method == "ddg" and cfg.distance == "l2":
-        raise ValueError("ddg runs on METRA's temporal distance only (--distance temporal)")
-    lipschitz = cfg.method == "lsd" or cfg.distance == "l2"
-    agent = (Lsd if lipschitz else Metra)(obs_shape, action_dim, prior, cfg, device)
-    if cfg.method not in CLASSIFIER_METHODS:
-        return agent, None
-    if is_pixels(obs_shape):
-        raise ValueError(f"{cfg.method}'s instruction classifier is an MLP: state observations only")
-    classifier = InstructionClassifier(feature_dim(obs_shape), cfg, device)
-    if cfg.method == "ddg":
-        attach_projection(agent, classifier, cfg)
-    return agent, classifier
+    return method(cfg.method).build(cfg, obs_shape, action_dim, prior, device)

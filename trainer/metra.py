@@ -78,7 +78,7 @@ class Metra:
         grouped pair), or one CNN shared by φ, Q and π with the target critic's own copy."""
         if not is_pixels(obs_shape):
             return dict.fromkeys(("phi", "qf", "qf_target", "policy"))
-        shape = tuple(obs_shape)  # type: ignore[arg-type]
+        shape = tuple(obs_shape)  # type: ignore[arg-type]  # a tuple here: pixel observations
         if kind == "shared":
             shared = PixelEncoder(shape)
             return {"phi": shared, "qf": shared, "qf_target": PixelEncoder(shape), "policy": shared}

@@ -43,10 +43,10 @@ def skill_colours(skills: np.ndarray | None, n: int) -> list[RGBA]:
         one_hot = s.shape[1] > 1 and np.isin(s, (0.0, 1.0)).all() and (s.sum(axis=1) == 1).all()
         if s.shape[1] >= 2 and not one_hot:
             angle = np.arctan2(s[:, 1], s[:, 0])
-            return [tuple(c) for c in colormaps["hsv"]((angle + np.pi) / (2 * np.pi))]
+            return [(c[0], c[1], c[2], c[3]) for c in colormaps["hsv"]((angle + np.pi) / (2 * np.pi))]
         index = s.argmax(axis=1) if one_hot else s[:, 0].astype(int)
     qualitative = colormaps["tab10" if index.max(initial=0) < 10 else "tab20"]
-    return [tuple(qualitative(int(i) % qualitative.N)) for i in index]
+    return [qualitative(int(i) % qualitative.N) for i in index]
 
 
 def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:

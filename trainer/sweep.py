@@ -26,7 +26,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trainer.config import METHODS, PRESETS
+from trainer.config import PRESETS
+from trainer.methods import METHODS
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,7 @@ def run_all(
         futures = {pool.submit(run_one, s): s for s in specs}
         for fut in as_completed(futures):
             exc = fut.exception()
-            yield futures[fut], (exc if exc is not None else fut.result())
+            yield futures[fut], (exc if isinstance(exc, Exception) else fut.result())
 
 
 def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
@@ -219,8 +220,8 @@ def run(args: argparse.Namespace) -> int:
     except RuntimeError as exc:  # the engine itself could not start
         print(f"collie sweep: error: {exc}", file=sys.stderr)
         return 2
-    for spec, exc in failed:
-        print(f"FAILED {spec.out}: {exc}", file=sys.stderr)
+    for spec, error in failed:
+        print(f"FAILED {spec.out}: {error}", file=sys.stderr)
     if not args.no_report:
         from trainer.report import write_report
 

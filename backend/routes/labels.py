@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
 
@@ -23,7 +23,9 @@ def _ack_response(ack: LabelAck, next_claim: bytes | None = None) -> Response:
     return Response(body, status_code=200 if ack.duplicate else 201, media_type="application/json")
 
 
-_REPEAT = {200: {"description": "a repeat of an earlier client_request_id", "model": LabelAck}}
+_REPEAT: dict[int | str, dict[str, Any]] = {
+    200: {"description": "a repeat of an earlier client_request_id", "model": LabelAck}
+}
 
 
 @router.post("/labels", response_model=LabelAck, status_code=201, responses=_REPEAT)

@@ -10,13 +10,14 @@ from fastapi.staticfiles import StaticFiles
 
 from backend.routes import dashboard, quality
 
-WEB_DIR = Path(__file__).resolve().parents[2] / "web"
+# backend/web: in the checkout a link to web/, in a wheel the files themselves (package data)
+WEB_DIR = (Path(__file__).resolve().parents[1] / "web").resolve()
 
 
 def install(app: FastAPI, web_dir: Path | None = None) -> None:
     """Add the dashboard API (and the run quality settings it edits), then serve `web_dir`
-    (default: the repository's web/) at / — last, since a mount at / answers every path the
-    routes before it did not."""
+    (default: the packaged web/) at / — last, since a mount at / answers every path the routes
+    before it did not."""
     app.include_router(dashboard.router, prefix="/api")
     app.include_router(quality.router, prefix="/api")  # the quality panel's one write
     directory = web_dir or WEB_DIR

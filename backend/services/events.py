@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import asyncio
 from collections import defaultdict
-from typing import Any
 
 from sqlalchemy import Connection, bindparam, insert, select, update
 
 from backend.models import Run, StreamEvent
 from backend.services.errors import NotFound
+from collie.schemas import STREAM_EVENT, EventData
 from collie.schemas import StreamEvent as StreamEventSchema
-from collie.schemas import StreamKind
 
 MAX_PAGE = 1000
 
@@ -31,14 +30,13 @@ _NEXT_ID = (
 _INSERT = insert(StreamEvent)
 
 
-def append(
-    conn: Connection, run_id: int, kind: StreamKind, data: dict[str, Any], now: float, labels_delta: int = 0
-) -> int:
+def append(conn: Connection, run_id: int, data: EventData, now: float, labels_delta: int = 0) -> int:
     """Add one event to the run's log (and `labels_delta` to its label count); returns the event's
-    id. Readers are woken after commit."""
+    id. Its kind is the data's. Readers are woken after commit."""
     params = {"run": run_id, "now": now, "labels_delta": labels_delta}
     seq = conn.execute(_NEXT_ID, params).scalar_one()
-    conn.execute(_INSERT, {"run_id": run_id, "seq": seq, "kind": kind, "data": data, "created_at": now})
+    row = {"run_id": run_id, "seq": seq, "kind": data.kind, "data": data.model_dump(mode="json"), "created_at": now}
+    conn.execute(_INSERT, row)
     conn.info.setdefault("published", []).append((run_id, seq))
     return seq
 
@@ -50,7 +48,12 @@ def read_after(conn: Connection, run_id: int, after: int, limit: int = MAX_PAGE)
         .order_by(StreamEvent.seq)
         .limit(min(limit, MAX_PAGE))
     )
-    return [StreamEventSchema(id=r.seq, run_id=run_id, kind=r.kind, data=r.data, created_at=r.created_at) for r in rows]
+    return [
+        STREAM_EVENT.validate_python(
+            {"id": r.seq, "run_id": run_id, "kind": r.kind, "data": r.data, "created_at": r.created_at}
+        )
+        for r in rows
+    ]
 
 
 def last_id(conn: Connection, run_id: int) -> int:

@@ -27,7 +27,17 @@ from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, R
 from backend.services import consensus, events, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, MyLabel, UndoRequest
+from collie.schemas import (
+    FINISHED,
+    EffectiveLabel,
+    LabelAck,
+    LabelChanged,
+    LabelEventRead,
+    LabelSubmit,
+    LabelWithdrawn,
+    MyLabel,
+    UndoRequest,
+)
 
 _EVENT_COLUMNS = (
     LabelEvent.id,
@@ -143,8 +153,8 @@ def _record(
         query_id=q.query_id,
         session=q.session,
         labeler=caller.name,
-        kind=kind,  # type: ignore[arg-type]
-        value=value,  # type: ignore[arg-type]
+        kind=kind,
+        value=value,
         seconds=seconds,
         client_request_id=request_id,
         revises_event_id=revises,
@@ -158,9 +168,10 @@ def _announce(
     """Tell the stream (the trainer) that the query's effective label changed; gold stays off it."""
     if q.gold_of is not None:
         return
-    data = {"query_id": q.query_id, "session": q.session, "event_id": event_id, "labeler": caller.name, "label": label}
+    kind_of = LabelChanged if kind == "label" else LabelWithdrawn
+    data = kind_of(query_id=q.query_id, session=q.session, event_id=event_id, labeler=caller.name, label=label)
     delta = int(label is not None) - int(q.label is not None)
-    events.append(conn, run_id, kind, data, now, labels_delta=delta)  # type: ignore[arg-type]
+    events.append(conn, run_id, data, now, labels_delta=delta)
 
 
 def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> LabelAck:

@@ -16,6 +16,8 @@ from collie.schemas import (
     EnvDims,
     LabelledPage,
     LabelledQuery,
+    QueriesPosted,
+    QueriesRetired,
     QueryFrames,
     QueryRead,
     QuerySummary,
@@ -75,17 +77,15 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
     if rows:
         pks = conn.execute(insert(Query).returning(Query.id, sort_by_parameter_order=True), rows).scalars().all()
         data = [
-            {"query_pk": pk, "frames": q.model_dump_json(include=FRAME_FIELDS), "extra": q.extra}
+            {"query_pk": pk, "frames": q.model_dump_json(include=set(FRAME_FIELDS)), "extra": q.extra}
             for pk, q in zip(pks, new, strict=True)
         ]
         conn.execute(insert(QueryData), data)
-        created = [r["query_id"] for r in rows]
-        events.append(
-            conn, run_id, "queries", {"session": body.session, "epoch": body.epoch, "query_ids": created}, now
-        )
+        created = [str(r["query_id"]) for r in rows]
+        events.append(conn, run_id, QueriesPosted(session=body.session, epoch=body.epoch, query_ids=created), now)
     return SessionPosted(
         session=body.session,
-        created=[r["query_id"] for r in rows],
+        created=[str(r["query_id"]) for r in rows],
         existing=[i for i in ids if i in existing],
     )
 
@@ -105,12 +105,12 @@ def retire(conn: Connection, run_id: int, query_ids: list[str]) -> Retired:
             .where(Query.id.in_([r.id for r in rows]))
             .values(status="retired", lease_owner_id=None, lease_expires_at=None)
         )
-        events.append(conn, run_id, "retired", {"query_ids": [r.query_id for r in rows]}, time.time())
+        events.append(conn, run_id, QueriesRetired(query_ids=[r.query_id for r in rows]), time.time())
     done = {r.query_id for r in rows}
     return Retired(retired=sorted(done), not_retired=sorted(wanted - done))
 
 
-def summary_select() -> Select[Any]:
+def summary_select() -> Select:  # its many columns: any row shape
     return select(*SUMMARY_COLUMNS).outerjoin(Principal, Principal.id == Query.lease_owner_id)
 
 

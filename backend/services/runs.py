@@ -16,12 +16,15 @@ from backend.services.errors import Conflict, NotFound
 from collie.schemas import (
     FINISHED,
     Control,
+    ControlChanged,
     FeedbackPolicy,
+    PolicyChanged,
     QualitySettings,
     QueueCounts,
     RunCreate,
     RunInstructions,
     RunRead,
+    StatusChanged,
     StatusUpdate,
 )
 from collie.tasks import get_task, to_definition
@@ -72,7 +75,7 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
         )
         .returning(Run.id)
     ).scalar_one()
-    events.append(conn, run_id, "status", {"status": "training", "epoch": 0}, now)
+    events.append(conn, run_id, StatusChanged(status="training", epoch=0), now)
     return get(conn, run_id)
 
 
@@ -157,10 +160,9 @@ def set_status(conn: Connection, run_id: int, change: StatusUpdate) -> RunRead:
     if (change.status, epoch) != (current.status, current.epoch) or change.message:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(status=change.status, epoch=epoch, updated_at=now))
-        data: dict[str, Any] = {"status": change.status, "epoch": epoch}
-        if change.message:
-            data["message"] = change.message
-        events.append(conn, run_id, "status", data, now)
+        events.append(
+            conn, run_id, StatusChanged(status=change.status, epoch=epoch, message=change.message or None), now
+        )
     return get(conn, run_id)
 
 
@@ -175,7 +177,7 @@ def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
     if wanted != current.control:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(control=wanted, updated_at=now))
-        events.append(conn, run_id, "control", {"control": wanted}, now)
+        events.append(conn, run_id, ControlChanged(control=wanted), now)
     return get(conn, run_id)
 
 
@@ -199,7 +201,7 @@ def set_feedback_policy(conn: Connection, run_id: int, policy: FeedbackPolicy) -
     conn.execute(update(Run).where(Run.id == run_id).values(feedback_timeout_s=policy.timeout_s, updated_at=now))
     # always on the stream, also when the column already says so: a trainer restarted with another
     # --feedback-timeout on an existing run still hears the operator's word
-    events.append(conn, run_id, "policy", {"timeout_s": policy.timeout_s}, now)
+    events.append(conn, run_id, PolicyChanged(timeout_s=policy.timeout_s), now)
     return get(conn, run_id)
 
 

@@ -4,12 +4,13 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from sqlalchemy import Connection, insert, select
 
 from backend.models import Metrics, Rollouts
 from backend.services import events, runs
-from collie.schemas import MetricsIn, MetricsRead, RolloutsIn, RolloutsRead
+from collie.schemas import MetricsIn, MetricsPosted, MetricsRead, RolloutsIn, RolloutsPosted, RolloutsRead
 
 
 def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
@@ -20,7 +21,7 @@ def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
         .values(run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
         .returning(Metrics.id)
     ).scalar_one()
-    events.append(conn, run_id, "metrics", {"id": row_id, "epoch": body.epoch, "values": body.values}, now)
+    events.append(conn, run_id, MetricsPosted(id=row_id, epoch=body.epoch, values=body.values), now)
     return MetricsRead(id=row_id, run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)
 
 
@@ -40,7 +41,7 @@ def post_rollouts(conn: Connection, run_id: int, body: RolloutsIn) -> RolloutsRe
     row_id = conn.execute(
         insert(Rollouts).values(run_id=run_id, epoch=body.epoch, rollouts=data, created_at=now).returning(Rollouts.id)
     ).scalar_one()
-    events.append(conn, run_id, "rollouts", {"id": row_id, "epoch": body.epoch, "n": len(data)}, now)
+    events.append(conn, run_id, RolloutsPosted(id=row_id, epoch=body.epoch, n=len(data)), now)
     return RolloutsRead(id=row_id, run_id=run_id, epoch=body.epoch, rollouts=body.rollouts, created_at=now)
 
 
@@ -54,6 +55,6 @@ def list_rollouts(conn: Connection, run_id: int, limit: int, states: bool = True
     return [read_rollouts(r, states) for r in reversed(rows)]
 
 
-def read_rollouts(row: Rollouts, states: bool) -> RolloutsRead:
+def read_rollouts(row: Any, states: bool) -> RolloutsRead:  # a Rollouts row
     paths = row.rollouts if states else [{k: v for k, v in r.items() if k != "qpos"} for r in row.rollouts]
     return RolloutsRead(id=row.id, run_id=row.run_id, epoch=row.epoch, rollouts=paths, created_at=row.created_at)

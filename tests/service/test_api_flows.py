@@ -219,7 +219,7 @@ def test_control_pause_resume_stop(operator: CollieClient, labeler: CollieClient
     with pytest.raises(ApiError) as err:
         labeler.claim(run.id)
     assert err.value.status == 409
-    kinds = [(e.kind, e.data) for e in operator.events(run.id).events if e.kind == "control"]
+    kinds = [(e.kind, e.data.model_dump()) for e in operator.events(run.id).events if e.kind == "control"]
     assert [d["control"] for _, d in kinds] == ["pause", "run", "stop"]
 
 

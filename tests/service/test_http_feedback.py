@@ -16,8 +16,10 @@ import pytest
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
+from collie.schemas import StatusEvent
 from trainer.feedback.base import LabelEvent, Segment, StopRequested
 from trainer.feedback.http import HttpFeedback
+from trainer.telemetry import MetricsReport, RolloutsReport, StatusReport
 
 from .conftest import DIMS, TOKENS, make_run_spec, settings_for
 
@@ -89,7 +91,7 @@ def test_collect_blocks_until_every_label_is_in(live: BackgroundServer, feedback
     assert feedback.revisions() == []
     run = feedback.client.run(feedback.run_id)
     assert run.status == "training" and run.n_labels == 4
-    statuses = [e.data["status"] for e in feedback.client.events(feedback.run_id).events if e.kind == "status"]
+    statuses = [e.data.status for e in feedback.client.events(feedback.run_id).events if isinstance(e, StatusEvent)]
     assert statuses == ["training", "waiting_for_labels", "training"]
 
 
@@ -211,9 +213,9 @@ def test_service_restart_mid_session(tmp_path: Path) -> None:
 def test_report_is_best_effort_and_bounded(live: BackgroundServer) -> None:
     feedback = HttpFeedback.create(live.url, TOKENS["trainer"], make_run_spec(), report_timeout_s=120)  # busy CI
     record = {"epoch": 5, "safe_ratio": np.float32(0.5), "n_labelled_states": [1, 2, 3], "bad": float("nan"), "s": "x"}
-    feedback.report("metrics", record)
-    feedback.report("rollouts", {"epoch": 5, "skills": np.eye(2), "xy": np.zeros((100, 5000, 2))})
-    feedback.report("status", {"status": "stopped", "epoch": 6})
+    feedback.reporter.metrics(MetricsReport(5, record))  # type: ignore[arg-type]  # "s": a string is dropped
+    feedback.reporter.rollouts(RolloutsReport(5, skills=np.eye(2), xy=np.zeros((100, 5000, 2))))
+    feedback.reporter.status(StatusReport("stopped", 6))
     metrics = feedback.client.metrics(feedback.run_id)
     assert metrics[-1].values == {
         "safe_ratio": 0.5,
@@ -228,8 +230,8 @@ def test_report_is_best_effort_and_bounded(live: BackgroundServer) -> None:
     dead = HttpFeedback("http://127.0.0.1:9", TOKENS["trainer"], 1, report_timeout_s=0.5)
     started = time.monotonic()
     for _ in range(20):
-        dead.report("metrics", {"epoch": 1, "x": 1.0})
-        dead.report("status", {"status": "training", "epoch": 1})
+        dead.reporter.metrics(MetricsReport(1, {"x": 1.0}))
+        dead.reporter.status(StatusReport("training", 1))
         assert dead.revisions() == [] and dead.control() == "run"  # the last known state, at once
     assert time.monotonic() - started < 30  # refused at once (generous for a busy CI box); never raises
     dead.close()

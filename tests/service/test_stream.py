@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 import time
+import typing
 from pathlib import Path
 
 import httpx
@@ -12,7 +13,8 @@ import httpx
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import CollieClient
-from collie.schemas import RunRead, StreamEvent
+from collie.labels import Label
+from collie.schemas import EventData, LabelChangedEvent, MetricsIn, RolloutsIn, RunRead, StreamEvent
 
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
 
@@ -33,7 +35,10 @@ def test_long_poll_wakes_when_a_label_arrives(trainer: CollieClient, labeler: Co
     started = time.monotonic()
     page = trainer.events(run.id, after=after, wait_s=10)
     assert time.monotonic() - started < 9  # woken by the label, not by the 10 s wait
-    assert [(e.kind, e.data["query_id"], e.data["label"]) for e in page.events] == [("label", "0-0", 2)]
+    assert [(e.kind, e.data.query_id, e.data.label) for e in page.events if isinstance(e, LabelChangedEvent)] == [
+        ("label", "0-0", 2)
+    ]
+    assert [e.kind for e in page.events] == ["label"]
     assert page.last_id == page.events[-1].id
     timer.join()
     assert trainer.events(run.id, after=page.last_id, wait_s=0.2).events == []
@@ -102,3 +107,31 @@ def test_sse_consumer_survives_a_service_restart(tmp_path: Path) -> None:
     assert stream.reconnects >= 1
     for client in (trainer, labeler, stream.client):
         client.close()
+
+
+def test_every_event_kind_has_its_own_typed_data(
+    trainer: CollieClient, labeler: CollieClient, operator: CollieClient
+) -> None:
+    """Each envelope's kind names its data model's kind, and a run's life produces only typed data."""
+    for member in typing.get_args(typing.get_args(StreamEvent)[0]):
+        (kind,) = typing.get_args(member.model_fields["kind"].annotation)
+        assert member.model_fields["data"].annotation.kind == kind
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 2))
+    claim = labeler.claim(created.id)
+    assert claim is not None
+    labeler.submit(created.id, claim.query.query_id, 2)
+    labeler.undo(created.id, claim.query.query_id)
+    trainer.retire(created.id, ["0-1"])
+    operator.pause(created.id)
+    operator.set_feedback_policy(created.id, 5.0)
+    trainer.post_metrics(created.id, MetricsIn(epoch=1, values={"safe_coverage": 1.0}))
+    trainer.post_rollouts(created.id, RolloutsIn(epoch=1, rollouts=[]))
+    events = trainer.events(created.id).events
+    assert {e.kind for e in events} == {
+        "status", "queries", "label", "withdrawn", "retired", "control", "policy", "metrics", "rollouts"
+    }  # fmt: skip
+    for e in events:
+        assert isinstance(e.data, EventData) and type(e.data).kind == e.kind
+    label = next(e for e in events if isinstance(e, LabelChangedEvent))
+    assert (label.data.query_id, label.data.label, label.data.labeler) == (claim.query.query_id, Label.GOOD, "labeler")

@@ -15,6 +15,7 @@ from collie.tasks import get_task
 from collie.teacher import OracleTeacher
 from teacher import TeacherLoop, oracle_for, segment_label
 from trainer.feedback.http import HttpFeedback
+from trainer.telemetry import StatusReport
 
 from .conftest import TOKENS, make_run_spec, make_session
 from .test_http_feedback import segments
@@ -69,7 +70,7 @@ def test_feedback_source_collects_from_the_teacher_with_a_rate(live: BackgroundS
     got = source.collect(0, 0, segments(0, 6))
     assert time.monotonic() - started >= 5 / 20  # six labels at 20 per second
     assert {e.query_id: e.label for e in got} == expected(labeler, source.run_id)
-    source.report("status", {"status": "finished", "epoch": 1})
+    source.reporter.status(StatusReport("finished", 1))
     worker.join(5)
     assert not worker.is_alive()
     source.close()

@@ -6,11 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 from urllib.parse import quote
 
+import numpy as np
 import pytest
 from playwright.sync_api import Browser
 
 from collie.schemas import RolloutsIn
-from trainer.feedback.http import rollouts_of
+from trainer.feedback.http_reporter import rollouts_of
+from trainer.telemetry import RolloutsReport
 
 from .page import canvas_pixels, open_labeler, wait_text
 from .stack import TOKENS, Stack, rollout_queries
@@ -21,10 +23,8 @@ pytestmark = pytest.mark.slow
 def evaluation(epoch: int, n: int) -> RolloutsIn:
     """n Ant rollouts as the trainer posts them (through the trainer's own thinning)."""
     walks = rollout_queries("ant", 0, n, seed=21)
-    return rollouts_of(
-        {"epoch": epoch, "skills": [w.skill for w in walks], "xy": [w.xy for w in walks],
-         "qpos": [w.qpos for w in walks]}
-    )  # fmt: skip
+    skills, xy, qpos = (np.stack([getattr(w, name) for w in walks]) for name in ("skill", "xy", "qpos"))
+    return rollouts_of(RolloutsReport(epoch, skills=skills, xy=xy, stride=2, qpos=qpos))
 
 
 def test_watch_replays_every_skill_and_claims_nothing(stack: Stack, browser: Browser, artifacts: Path) -> None:

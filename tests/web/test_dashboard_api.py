@@ -18,7 +18,8 @@ from backend.services import label_stats, telemetry
 from collie.client import ApiError, CollieClient
 from collie.dashboard_schemas import MAX_HISTORY_POINTS, MAX_LABELLED_POINTS
 from collie.schemas import MAX_ROLLOUT_POINTS, MAX_ROLLOUTS, MetricsIn, QueryIn, Rollout, RolloutsIn, SessionPost
-from trainer.feedback.http import rollouts_of
+from trainer.feedback.http_reporter import rollouts_of
+from trainer.telemetry import RolloutsReport
 
 OPERATOR = {"Authorization": f"Bearer {TOKENS['operator']}"}
 
@@ -67,24 +68,26 @@ def test_trainer_rollouts_are_thinned_with_w_at_the_same_points() -> None:
     xy = np.cumsum(np.ones((70, 3000, 2)), axis=1)
     xy[0, 5] = np.nan  # dropped, and its w with it
     w = np.broadcast_to(np.arange(3000) / 1500.0, (70, 3000))
-    body = rollouts_of({"epoch": 3, "skills": np.eye(70, 2), "xy": xy.tolist(), "w": w.tolist()})
+    body = rollouts_of(RolloutsReport(3, skills=np.eye(70, 2), xy=xy, stride=2, w=w))
     assert len(body.rollouts) == MAX_ROLLOUTS and all(len(r.xy) == 1000 for r in body.rollouts)
+    assert body.rollouts[1].stride == 6  # 2 steps a point, thinned a further 3000 → 1000
     first = body.rollouts[0]
     assert len(first.extra["w"]) == 1000
     steps = [round(p[0]) - 1 for p in first.xy]  # x = step + 1 on these paths
     assert 5 not in steps and first.extra["w"] == [round(s / 1500.0, 2) for s in steps]
     assert len(RolloutsIn.model_validate_json(body.model_dump_json()).model_dump_json()) < 16 * 1024 * 1024
-    assert "w" not in rollouts_of({"epoch": 3, "skills": [[1.0, 0.0]], "xy": [[[0, 0], [1, 1]]]}).rollouts[0].extra
+    short = rollouts_of(RolloutsReport(3, skills=np.eye(1, 2), xy=np.array([[[0, 0], [1, 1]]]), stride=2)).rollouts[0]
+    assert "w" not in short.extra and short.stride == 2
 
 
 def test_trainer_rollouts_carry_states_at_the_same_points_for_the_watch_mode() -> None:
     xy = np.cumsum(np.ones((2, 3000, 2)), axis=1)
     qpos = np.concatenate([xy, np.zeros((2, 3000, 13))], axis=2)  # ant-sized states, x and y first
-    body = rollouts_of({"epoch": 3, "skills": np.eye(2), "xy": xy.tolist(), "qpos": qpos.tolist()})
+    body = rollouts_of(RolloutsReport(3, skills=np.eye(2), xy=xy, qpos=qpos))
     first = body.rollouts[0]
     assert len(first.qpos) == len(first.xy) == 1000 and len(first.qpos[0]) == 15
     assert [q[:2] for q in first.qpos] == first.xy
-    too_wide = {"epoch": 3, "skills": np.eye(1), "xy": xy[:1].tolist(), "qpos": np.zeros((1, 3000, 200)).tolist()}
+    too_wide = RolloutsReport(3, skills=np.eye(1), xy=xy[:1], qpos=np.zeros((1, 3000, 200)))
     assert rollouts_of(too_wide).rollouts[0].qpos is None  # left out, the paths still go
     with pytest.raises(ValueError, match="one state per point"):
         RolloutsIn(epoch=1, rollouts=[{"skill": [1.0], "xy": [[0.0, 0.0]], "qpos": [[0.0], [1.0]]}])
@@ -119,6 +122,11 @@ def test_run_page_is_one_consistent_snapshot(live: BackgroundServer, trainer: Co
     assert page["rollouts"]["epoch"] == 4 and page["metrics"]["series"]["safe_coverage"] == [3.0]
     assert [r["kind"] for r in page["task"]["regions"]] == ["wedge_north", "outside_disc"]
     assert page["last_event_id"] == trainer.run(run.id).last_event_id
+    assert page["labels"] == [
+        {"value": 0, "name": "bad"},
+        {"value": 1, "name": "neutral"},
+        {"value": 2, "name": "good"},
+    ]
     assert trainer.events(run.id, after=page["last_event_id"]).events == []
     assert get(live, "dashboard/runs/987654").status_code == 404
 

@@ -89,6 +89,12 @@ def test_trajectories_appear_and_update_while_training(stack: dict[str, Any], pa
     first = number(page, "#map", "epoch")
     page.wait_for_function(f"Number(document.querySelector('#map').dataset.epoch) > {first}")
     page.wait_for_function("Number(document.querySelector('#map').dataset.labelled) > 0")
+    names = page.evaluate("document.querySelector('#map').data.map((t) => t.name || '')")  # Plotly's traces
+    assert {n.split(" (")[0] for n in names if n.startswith("labelled")} == {  # names from the service
+        "labelled bad",
+        "labelled neutral",
+        "labelled good",
+    }
     assert page.locator("#runs-body tr[data-run-id]").count() == 1
     assert page.locator("#labeling-body").inner_text().count("labeler") >= 1
     page.screenshot(path=str(artifacts / "dashboard.png"), full_page=True)

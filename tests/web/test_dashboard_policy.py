@@ -47,7 +47,7 @@ def test_the_control_sets_and_clears_the_policy(page: Any, trainer: CollieClient
     shown(page, "wait for every label")
     assert trainer.run(run.id).feedback_timeout_s is None
     assert not page.is_enabled("#policy-wait")  # already so
-    kinds = [(e.kind, e.data) for e in trainer.events(run.id).events if e.kind == "policy"]
+    kinds = [(e.kind, e.data.model_dump()) for e in trainer.events(run.id).events if e.kind == "policy"]
     assert kinds == [("policy", {"timeout_s": 30.0}), ("policy", {"timeout_s": None})]
 
 

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from trainer.envs.quiet import quiet_compile
+from collie import mjmodels
 
 
 class SkillEnv(abc.ABC):
@@ -57,21 +57,21 @@ class SkillEnv(abc.ABC):
 
     # -- what subclasses provide -------------------------------------------------------------
 
+    # The models live in collie.mjmodels (shared with the labeling UI's replay), by env name.
     @classmethod
-    @abc.abstractmethod
     def mjcf_path(cls) -> Path:
         """The MJCF file this environment's model is compiled from (for replay elsewhere)."""
+        return mjmodels.mjcf_path(cls.name)
 
     @classmethod
-    def model_xml(cls) -> str:
+    def model_xml(cls, layout_seed: int | None = None) -> str:
         """The MJCF text of the model, self-contained (what a replay viewer compiles)."""
-        return cls.mjcf_path().read_text()
+        return mjmodels.model_xml(cls.name, layout_seed)
 
     @classmethod
-    def load_model(cls) -> mujoco.MjModel:
+    def load_model(cls, layout_seed: int | None = None) -> mujoco.MjModel:
         """The compiled model, exactly as the env simulates (and renders) it."""
-        with quiet_compile():
-            return mujoco.MjModel.from_xml_path(str(cls.mjcf_path()))
+        return mjmodels.load_model(cls.name, layout_seed)
 
     @abc.abstractmethod
     def _reset_state(self, seed: int | None) -> None:

@@ -15,34 +15,17 @@ hazard pseudo-lidar (lidar.py). Coverage is measured in 0.01 × 0.01 bins (paper
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from collie.tasks import HAZARD_RADIUS, hazard_layout
+from collie.tasks import hazard_layout
 from trainer.envs.ant import quat_pitch
 from trainer.envs.base import SkillEnv
 from trainer.envs.lidar import pseudo_lidar
-from trainer.envs.quiet import quiet_compile
 
-_XML = Path(__file__).with_name("car.xml")
 LIDAR_BINS = 16
 OWN_STATE = 9
-
-
-def add_hazards(spec: mujoco.MjSpec, centres: np.ndarray) -> None:
-    """Draw hazards as flat, non-colliding discs on the floor (for 3-D views; physics ignores them)."""
-    for i, (x, y) in enumerate(centres):
-        spec.worldbody.add_geom(
-            name=f"hazard{i}",
-            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-            size=[HAZARD_RADIUS, 0.001, 0],
-            pos=[x, y, 0.001],
-            contype=0,
-            conaffinity=0,
-            material="hazard",
-        )
 
 
 class CarEnv(SkillEnv):
@@ -66,25 +49,6 @@ class CarEnv(SkillEnv):
             model, mujoco.MjData(model), frame_skip=self.frame_skip, episode_steps=episode_steps, seed=seed
         )
         self._rng = np.random.default_rng(seed)
-
-    @classmethod
-    def mjcf_path(cls) -> Path:
-        return _XML
-
-    @classmethod
-    def model_xml(cls, layout_seed: int | None = None) -> str:
-        """The car's MJCF; with `layout_seed`, that experiment's hazards are drawn on the floor."""
-        if layout_seed is None:
-            return _XML.read_text()
-        spec = mujoco.MjSpec.from_file(str(_XML))
-        add_hazards(spec, hazard_layout(layout_seed))
-        spec.compile()  # to_xml needs a compiled spec
-        return spec.to_xml()
-
-    @classmethod
-    def load_model(cls, layout_seed: int | None = None) -> mujoco.MjModel:
-        with quiet_compile():
-            return mujoco.MjModel.from_xml_string(cls.model_xml(layout_seed))
 
     def _reset_state(self, seed: int | None) -> None:
         if seed is not None:

@@ -12,23 +12,19 @@ from __future__ import annotations
 
 import abc
 import os
-from pathlib import Path
 from typing import Any, ClassVar
 
-import mujoco
 import numpy as np
 
+from collie.mjmodels import PIXEL_CAMERA
+from collie.mjmodels.floor import paint_floor
+from collie.mjmodels.quiet import quiet_compile
 from trainer.envs.ant import quat_pitch
 from trainer.envs.base import SkillEnv
-from trainer.envs.floor import add_floor_material, paint_floor
 from trainer.envs.offscreen import shared_camera
-from trainer.envs.quiet import quiet_compile
 
 # dm_control picks its GL backend at import; without this it tries GLFW, which needs a display.
 os.environ.setdefault("MUJOCO_GL", "egl")
-
-CAMERA = "pixels"
-_XML_CACHE: dict[str, str] = {}
 
 
 class DmcPixelEnv(SkillEnv):
@@ -41,49 +37,12 @@ class DmcPixelEnv(SkillEnv):
     frame_stack: ClassVar[int] = 3
     action_repeat: ClassVar[int] = 2
     substeps: ClassVar[int]  # physics steps per dm_control control step
-    camera_offset: ClassVar[tuple[float, float]]  # (behind, above) the centre of mass, metres
 
     # -- what each robot provides -------------------------------------------------------------
-
-    @classmethod
-    @abc.abstractmethod
-    def dmc_model(cls) -> tuple[str, dict[str, Any]]:
-        """dm_control's MJCF text of the robot on an empty floor, and its asset files."""
 
     @abc.abstractmethod
     def dmc_task(self, seed: int | None) -> Any:
         """The dm_control suite task whose `initialize_episode` draws the initial state."""
-
-    # -- the model ------------------------------------------------------------------------------
-
-    @classmethod
-    def mjcf_path(cls) -> Path:
-        raise NotImplementedError(f"{cls.name}: the model is edited in memory; use model_xml() or load_model()")
-
-    @classmethod
-    def model_xml(cls) -> str:
-        if cls.name not in _XML_CACHE:
-            xml, assets = cls.dmc_model()
-            spec = mujoco.MjSpec.from_string(xml, assets)
-            add_floor_material(spec, "floor")
-            behind, above = cls.camera_offset
-            spec.worldbody.add_camera(
-                name=CAMERA,
-                mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
-                pos=[0.0, -behind, above],
-                xyaxes=[1, 0, 0, 0, above, behind],
-            )
-            with quiet_compile():
-                spec.compile()  # to_xml needs a compiled spec
-            _XML_CACHE[cls.name] = spec.to_xml()
-        return _XML_CACHE[cls.name]
-
-    @classmethod
-    def load_model(cls) -> mujoco.MjModel:
-        with quiet_compile():
-            model = mujoco.MjModel.from_xml_string(cls.model_xml())
-        paint_floor(model)
-        return model
 
     # -- the env --------------------------------------------------------------------------------
 
@@ -94,7 +53,7 @@ class DmcPixelEnv(SkillEnv):
             self.physics = Physics.from_xml_string(self.model_xml())
         model = self.physics.model.ptr
         paint_floor(model)
-        self._camera = shared_camera(self.name, model, CAMERA, self.image_size)
+        self._camera = shared_camera(self.name, model, PIXEL_CAMERA, self.image_size)
         self._frames = np.zeros((3 * self.frame_stack, self.image_size, self.image_size), np.uint8)
         self._task = self.dmc_task(seed)
         super().__init__(

@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
+from collie.mjmodels.quiet import quiet_compile
 from trainer.envs.gym_mujoco import GymnasiumMujocoEnv
-from trainer.envs.quiet import quiet_compile
 
 
 class HalfCheetahEnv(GymnasiumMujocoEnv):

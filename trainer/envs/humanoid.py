@@ -15,14 +15,6 @@ from trainer.envs.dmc import DmcPixelEnv
 class HumanoidEnv(DmcPixelEnv):
     name = "humanoid"
     substeps = 5  # dm_control: control timestep 0.025 s / physics timestep 0.005 s
-    camera_offset = (3.0, 4.0)
-
-    @classmethod
-    def dmc_model(cls) -> tuple[str, dict[str, Any]]:
-        from dm_control.suite import humanoid
-
-        xml, assets = humanoid.get_model_and_assets()
-        return xml.decode() if isinstance(xml, bytes) else xml, assets
 
     def dmc_task(self, seed: int | None) -> Any:
         from dm_control.suite import humanoid

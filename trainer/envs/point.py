@@ -6,14 +6,10 @@ episode can travel about 50 units. Reset puts it within ±0.1 of the origin, at 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import mujoco
 import numpy as np
 
 from trainer.envs.base import SkillEnv
-
-_XML = Path(__file__).with_name("point.xml")
 
 
 class PointEnv(SkillEnv):
@@ -30,13 +26,9 @@ class PointEnv(SkillEnv):
     reset_noise = 0.1
 
     def __init__(self, episode_steps: int = 200, seed: int | None = None) -> None:
-        model = mujoco.MjModel.from_xml_path(str(_XML))
+        model = self.load_model()
         super().__init__(model, mujoco.MjData(model), frame_skip=1, episode_steps=episode_steps, seed=seed)
         self._rng = np.random.default_rng(seed)
-
-    @classmethod
-    def mjcf_path(cls) -> Path:
-        return _XML
 
     def _reset_state(self, seed: int | None) -> None:
         if seed is not None:

@@ -15,13 +15,6 @@ from trainer.envs.dmc import DmcPixelEnv
 class QuadrupedEnv(DmcPixelEnv):
     name = "quadruped"
     substeps = 4  # dm_control: control timestep 0.02 s / physics timestep 0.005 s
-    camera_offset = (2.5, 4.0)
-
-    @classmethod
-    def dmc_model(cls) -> tuple[str, dict[str, Any]]:
-        from dm_control.suite import common, quadruped
-
-        return quadruped.make_model(floor_size=1.0).decode(), common.ASSETS  # floor resized by dmc.py
 
     def dmc_task(self, seed: int | None) -> Any:
         from dm_control.suite import quadruped

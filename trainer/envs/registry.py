@@ -1,16 +1,14 @@
 """The environment registry: one line per env name, classes imported only when that env is used.
 
-Lazy imports keep `point` (and `model_path`, which the labeling UI calls) free of Gymnasium.
+Lazy imports keep `point` free of Gymnasium.
 To add an env: write a `SkillEnv` subclass in its own module and add one `_register` line.
 """
 
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
 
-import mujoco
-
+from collie import mjmodels
 from trainer.envs.base import SkillEnv
 
 _REGISTRY: dict[str, str] = {}  # name -> "module:Class"
@@ -51,21 +49,5 @@ def make_env(name: str, seed: int | None = None, episode_steps: int = 200, layou
     return cls(episode_steps=episode_steps, seed=seed, **_layout(cls, layout_seed))
 
 
-def model_path(name: str) -> Path:
-    """The MJCF file the env `name` is built from, so a viewer can rebuild the exact model.
-    The DMC envs edit dm_control's files in memory and have none: use `model_xml`/`load_model`."""
-    return env_class(name).mjcf_path()
-
-
-def model_xml(name: str, layout_seed: int | None = None) -> str:
-    """Self-contained MJCF text of env `name` (`mujoco.MjModel.from_xml_string` compiles it);
-    with `layout_seed`, random scenery (the car's hazards) is drawn in too."""
-    cls = env_class(name)
-    return cls.model_xml(**_layout(cls, layout_seed))
-
-
-def load_model(name: str, layout_seed: int | None = None) -> mujoco.MjModel:
-    """The compiled MuJoCo model of env `name` (what a replay viewer needs), compiled quietly;
-    pixel envs come with their position-coloured floor painted in."""
-    cls = env_class(name)
-    return cls.load_model(**_layout(cls, layout_seed))
+# The models themselves (what a replay viewer rebuilds) come from the light collie.mjmodels.
+model_path, model_xml, load_model = mjmodels.mjcf_path, mjmodels.model_xml, mjmodels.load_model

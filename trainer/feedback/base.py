@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
+
+from collie.labels import Label
 
 
 class StopRequested(Exception):
@@ -42,7 +44,7 @@ class LabelEvent:
     """An effective label for one query; label None means "withdrawn" (e.g. undone, no relabel yet)."""
 
     query_id: str
-    label: Literal[0, 1, 2] | None
+    label: Label | None
 
 
 class FeedbackSource(abc.ABC):
@@ -61,8 +63,12 @@ class FeedbackSource(abc.ABC):
         """Operator's wish for the run, polled once per epoch."""
         return "run"
 
-    def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:  # noqa: B027
-        """Best-effort news for dashboards (status changes, evaluation metrics, rollouts)."""
+    def state_dict(self) -> dict[str, Any]:
+        """What a checkpoint must keep for this source to resume as it was (e.g. a teacher's RNG)."""
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027
+        """Restore what state_dict returned."""
 
     def history(self) -> list[tuple[Segment, int]] | None:
         """All labelled segments known to the source (used to rebuild D0/D1/D2 after a restart).

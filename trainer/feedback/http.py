@@ -15,13 +15,15 @@ The trainer's side of the contract (docs/service.md):
   are retired on the service, so a label the trainer cannot use is never taken.
 - A segment id the service already holds (a session re-posted after a restart) keeps the stored
   segment: `collect` copies the stored arrays into the given segment in place.
-- The service going away (restart, network) is waited out with backoff; `report` and `control`
-  never block training for long and never raise.
+- The service going away (restart, network) is waited out with backoff; `control` never blocks
+  training for long and never raises. Telemetry goes through `reporter` (an HttpReporter for the
+  same run), which the trainer's command hands to the loop.
 numpy only: no torch here, and no database — only HTTP.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -30,29 +32,29 @@ from typing import Any, Literal, TypeVar
 
 import numpy as np
 
-from collie.client import ApiError, CollieClient, Unreachable
+from collie.client import ApiError, Backoff, CollieClient, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
+from collie.labels import Label
 from collie.schemas import (
-    MAX_METRICS,
-    MAX_QPOS_WIDTH,
-    MAX_ROLLOUT_POINTS,
-    MAX_ROLLOUTS,
+    ControlEvent,
     EventPage,
-    MetricsIn,
+    LabelChangedEvent,
+    PolicyEvent,
     QueryIn,
     QueryRead,
-    Rollout,
-    RolloutsIn,
     RunCreate,
     RunStatus,
     SessionPost,
+    StreamEvent,
+    WithdrawnEvent,
 )
 from trainer.feedback.base import FeedbackSource, LabelEvent, Segment, StopRequested
+from trainer.feedback.http_reporter import HttpReporter
+from trainer.telemetry import StatusReport
 
 log = logging.getLogger(__name__)
 events_page_size = 1000  # the service's largest page
 T = TypeVar("T")
-Label = Literal[0, 1, 2]
 
 
 class HttpFeedback(FeedbackSource):
@@ -74,14 +76,12 @@ class HttpFeedback(FeedbackSource):
         self.wait_chunk_s = wait_chunk_s
         self.max_backoff_s = max_backoff_s
         self.client = CollieClient(api, token)
-        self._reporter = CollieClient(api, token, timeout_s=report_timeout_s)
-        self._report_quiet_until = 0.0
+        self.reporter = HttpReporter(api, token, run_id, timeout_s=report_timeout_s)  # the run's telemetry
         self._after = 0  # last event id applied from the run's log
         self._labels: dict[str, Label | None] = {}  # effective labels, as the log says
         self._given: dict[str, Label | None] = {}  # what the trainer was handed, per known query
         self._changed: set[str] = set()  # queries whose label moved since the last revisions()
         self._control: Literal["run", "pause", "stop"] = "run"
-        self._shown_status: RunStatus | None = None
         self._swept = False  # leftovers of sessions before the first collect retired?
 
     @classmethod
@@ -103,7 +103,7 @@ class HttpFeedback(FeedbackSource):
         posted = self._retry(lambda: self.client.post_session(self.run_id, body))
         by_id = {s.query_id: s for s in segments}
         for query_id in posted.existing:
-            adopt(by_id[query_id], self._retry(lambda q=query_id: self.client.query(self.run_id, q)))
+            adopt(by_id[query_id], self._retry(functools.partial(self.client.query, self.run_id, query_id)))
         for s in segments:
             self._given.setdefault(s.query_id, None)
         ids = [s.query_id for s in segments]
@@ -141,27 +141,9 @@ class HttpFeedback(FeedbackSource):
             log.warning("labeling service unreachable, keeping control=%s: %s", self._control, exc)
         if self._control == "pause":
             self._show("paused", None)
-        elif self._shown_status == "paused":
+        elif self.reporter.shown == "paused":
             self._show("training", None)
         return self._control
-
-    def report(self, kind: Literal["status", "metrics", "rollouts"], payload: dict) -> None:
-        if (kind != "status" or payload.get("progress")) and time.monotonic() < self._report_quiet_until:
-            return  # the service failed recently: skip the bulky reports, do not slow training down
-        try:
-            if kind == "status":
-                status, message = _run_status(str(payload.get("status", "")), payload.get("error"))
-                self._reporter.set_status(self.run_id, status, _epoch(payload), message)
-                self._shown_status = status
-            elif kind == "metrics":
-                self._reporter.post_metrics(
-                    self.run_id, MetricsIn(epoch=_epoch(payload) or 0, values=flat_numbers(payload))
-                )
-            elif kind == "rollouts":
-                self._reporter.post_rollouts(self.run_id, rollouts_of(payload))
-        except Exception as exc:  # best effort by contract: a dashboard never stops training
-            log.warning("report %s not delivered: %s", kind, exc)
-            self._report_quiet_until = time.monotonic() + 10.0  # status changes (rare) are still tried
 
     def history(self) -> list[tuple[Segment, int]]:
         """Every labelled segment of the run, once each (the trainer rebuilds D0/D1/D2 from it)."""
@@ -178,7 +160,7 @@ class HttpFeedback(FeedbackSource):
 
     def close(self) -> None:
         self.client.close()
-        self._reporter.close()
+        self.reporter.close()
 
     # ---------------------------------------------------------------- the log
 
@@ -197,16 +179,15 @@ class HttpFeedback(FeedbackSource):
         self._apply(page.events)
         return page
 
-    def _apply(self, events: list[Any]) -> None:
+    def _apply(self, events: list[StreamEvent]) -> None:
         for event in events:
-            if event.kind in ("label", "withdrawn"):
-                query_id = event.data["query_id"]
-                self._labels[query_id] = event.data["label"]
-                self._changed.add(query_id)
-            elif event.kind == "control":
-                self._control = event.data["control"]
-            elif event.kind == "policy":
-                self.timeout_s = event.data["timeout_s"]
+            if isinstance(event, LabelChangedEvent | WithdrawnEvent):
+                self._labels[event.data.query_id] = event.data.label
+                self._changed.add(event.data.query_id)
+            elif isinstance(event, ControlEvent):
+                self._control = event.data.control
+            elif isinstance(event, PolicyEvent):
+                self.timeout_s = event.data.timeout_s
             self._after = event.id
 
     def _missing(self, ids: list[str]) -> bool:
@@ -239,24 +220,12 @@ class HttpFeedback(FeedbackSource):
             log.info("retired %d unlabelled leftover queries", len(retired.retired))
 
     def _show(self, status: RunStatus, epoch: int | None) -> None:
-        if status != self._shown_status:
-            self.report("status", {"status": status, "epoch": epoch})
+        if status != self.reporter.shown:
+            self.reporter.status(StatusReport(status, epoch))
 
     def _retry(self, call: Callable[[], T]) -> T:
         """Call until the service answers: waits out restarts with backoff; 4xx errors raise."""
-        delay = 0.1
-        while True:
-            try:
-                return call()
-            except Unreachable as exc:
-                problem: Exception = exc
-            except ApiError as exc:
-                if exc.status < 500 and exc.status != 429:
-                    raise
-                problem = exc
-            log.warning("labeling service unavailable (%s); retrying in %.1f s", problem, delay)
-            time.sleep(delay)
-            delay = min(delay * 2, self.max_backoff_s)
+        return retrying(call, Backoff(max_s=self.max_backoff_s))
 
 
 # ---------------------------------------------------------------- conversions
@@ -334,66 +303,3 @@ def plain(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value if value is None or isinstance(value, str | int | float | bool) else str(value)
-
-
-def flat_numbers(record: dict[str, Any]) -> dict[str, float]:
-    """Finite numbers of a metrics record, lists flattened as name[i]; at most MAX_METRICS keys."""
-    out: dict[str, float] = {}
-
-    def put(name: str, value: Any) -> None:
-        if len(out) >= MAX_METRICS or len(name) > 64:
-            return
-        if isinstance(value, list | tuple | np.ndarray):
-            for i, v in enumerate(np.asarray(value).reshape(-1).tolist()[:16]):
-                put(f"{name}[{i}]", v)
-        elif isinstance(value, int | float | np.number) and not isinstance(value, bool) and math.isfinite(value):
-            out[name] = float(value)
-
-    for key, value in record.items():
-        if key != "epoch":
-            put(str(key), value)
-    return out
-
-
-def rollouts_of(payload: dict[str, Any], max_points: int = 1000) -> RolloutsIn:
-    """{"epoch", "skills": (N, dz), "xy": (N, T, 2), optional "w": (N, T), optional "qpos": (N, T, nq)}
-    → at most MAX_ROLLOUTS paths of at most max_points finite points each (evenly thinned;
-    millimetres are plenty for a plot); w(s) at the same points goes in each rollout's extra["w"],
-    the simulator state at the same points in its qpos (for a 3D replay)."""
-    skills = np.asarray(payload.get("skills", []), dtype=float)
-    paths = payload.get("xy", [])
-    weights = payload.get("w") or []
-    states = payload.get("qpos") or []
-    rollouts = []
-    for i, path in enumerate(paths[:MAX_ROLLOUTS]):
-        xy = np.asarray(path, dtype=float).reshape(-1, 2)
-        kept = np.flatnonzero(np.isfinite(xy).all(axis=1))
-        if len(kept) > min(max_points, MAX_ROLLOUT_POINTS):
-            kept = kept[np.linspace(0, len(kept) - 1, min(max_points, MAX_ROLLOUT_POINTS)).round().astype(int)]
-        skill = skills[i].reshape(-1) if i < len(skills) else np.zeros(1)
-        extra = {}
-        if i < len(weights) and len(weights[i]) == len(xy):
-            extra["w"] = np.round(np.nan_to_num(np.asarray(weights[i], dtype=float)[kept], nan=1.0), 2).tolist()
-        qpos = None
-        if i < len(states) and len(states[i]) == len(xy):
-            q = np.asarray(states[i], dtype=float)[kept]
-            if q.ndim == 2 and q.shape[1] <= MAX_QPOS_WIDTH and np.isfinite(q).all():
-                qpos = np.round(q, 4).tolist()
-        rollouts.append(
-            Rollout(skill=np.nan_to_num(skill).tolist(), xy=np.round(xy[kept], 3).tolist(), qpos=qpos, extra=extra)
-        )
-    return RolloutsIn(epoch=_epoch(payload) or 0, rollouts=rollouts)
-
-
-def _epoch(payload: dict[str, Any]) -> int | None:
-    epoch = payload.get("epoch")
-    return int(epoch) if isinstance(epoch, int | np.integer) and epoch >= 0 else None
-
-
-def _run_status(status: str, error: Any) -> tuple[RunStatus, str | None]:
-    """The loop's words → the service's: "stopped" is a finished run with a message."""
-    if status == "stopped":
-        return "finished", "stopped by an operator"
-    if status in ("training", "waiting_for_labels", "paused", "finished", "failed"):
-        return status, (str(error)[:1000] if error else None)  # type: ignore[return-value]
-    return "training", f"unknown status {status!r}"

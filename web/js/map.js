@@ -5,8 +5,7 @@
 import { plot } from "./plotly.js";
 import { CLASS_COLOURS, FILL, regionPath, regionShapes, undrawn } from "./regions.js";
 
-const LABEL_NAMES = ["bad", "neutral", "good"];
-const LABEL_SYMBOLS = ["x", "circle", "diamond"];
+const LABEL_SYMBOLS = ["x", "circle", "diamond"]; // by label value (0 bad, 1 neutral, 2 good)
 const W_SCALE = [[0, CLASS_COLOURS[0]], [0.5, CLASS_COLOURS[1]], [1, CLASS_COLOURS[2]]]; // w ∈ [0, 2]
 
 // One colour per skill: its direction for 2-D skills (as METRA's plots), else its index.
@@ -46,12 +45,14 @@ export class SkillMap {
     this.task = null;
     this.rollouts = null;
     this.labelled = [];
+    this.labels = []; // [{value, name}] from the service (RunDashboard.labels)
     this.colourBy = "skill";
     this.oneD = false;
   }
 
-  set({ task, rollouts, labelled, colourBy, env }) {
+  set({ task, rollouts, labelled, labels, colourBy, env }) {
     if (task !== undefined) this.task = task;
+    if (labels !== undefined) this.labels = labels;
     if (rollouts !== undefined) this.rollouts = rollouts;
     if (labelled !== undefined) this.labelled = labelled;
     if (colourBy !== undefined) this.colourBy = colourBy;
@@ -89,12 +90,12 @@ export class SkillMap {
 
   labelledTraces() {
     if (this.oneD) return [];
-    return [0, 1, 2].map((label) => {
+    return this.labels.map(({ value: label, name }) => {
       const segments = this.labelled.filter((s) => s.label === label);
       const x = [], y = [];
       for (const s of segments) for (const [px, py] of s.xy) { x.push(px); y.push(py); }
       return {
-        type: "scatter", mode: "markers", x, y, name: `labelled ${LABEL_NAMES[label]} (${segments.length})`,
+        type: "scatter", mode: "markers", x, y, name: `labelled ${name} (${segments.length})`,
         visible: segments.length ? true : "legendonly", hoverinfo: "name",
         // large and each class its own shape: bad and neutral must be told apart at a glance
         marker: { size: 11, symbol: LABEL_SYMBOLS[label], color: CLASS_COLOURS[label], line: { width: 1.2, color: "#222" } },
@@ -115,8 +116,8 @@ export class SkillMap {
       const box = { x0: -1, x1: 1, y0: -1, y1: 1 }; // only whether a region is drawn at all matters here
       const drawn = this.task.regions.filter((r) => regionPath(r, box, false) != null);
       const classes = new Set([this.task.background, ...drawn.map((r) => r.desirability)]);
-      for (const c of [0, 1, 2]) {
-        if (classes.has(c)) entries.push(entry(`${LABEL_NAMES[c]} region`, { symbol: "square", size: 12, color: FILL[c], line: { width: 1, color: "#999" } }));
+      for (const { value: c, name } of this.labels) {
+        if (classes.has(c)) entries.push(entry(`${name} region`, { symbol: "square", size: 12, color: FILL[c], line: { width: 1, color: "#999" } }));
       }
     }
     return entries;

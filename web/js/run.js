@@ -55,7 +55,7 @@ export class RunPage {
     rule.hidden = !rule.textContent;
     this.renderLabeling(page);
     await Promise.all([
-      this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, colourBy: this.colourBy.value, env: page.run.env }),
+      this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, labels: page.labels, colourBy: this.colourBy.value, env: page.run.env }),
       this.curves.load(page.metrics),
     ]);
     this.seeEpoch(page.metrics.epochs.at(-1) ?? 0);
