@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from collie.tokens import add_token_arguments, resolve_token
 from trainer.config import LABEL_METHODS, METHODS, PRESETS, Config, make_config
 
 if TYPE_CHECKING:
@@ -28,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
-    p.add_argument("--token", default=None, help="trainer token for --api")
+    add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
     p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
         "--feedback-timeout",
@@ -75,8 +76,9 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
     from trainer.envs import make_env
     from trainer.feedback.http import HttpFeedback
 
-    if not args.token:
-        raise ValueError("--api needs --token (a trainer token)")
+    token = resolve_token(args, "trainer")
+    if not token:
+        raise ValueError("--api needs a trainer token: --token-file, COLLIE_TOKEN or --token")
     if args.feedback_timeout is not None and not 0 < args.feedback_timeout <= MAX_FEEDBACK_TIMEOUT_S:
         raise ValueError(f"--feedback-timeout must be in (0, {MAX_FEEDBACK_TIMEOUT_S}] seconds")
     memo = Path(cfg.out) / "service_run.json"
@@ -85,7 +87,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
         run_id = json.loads(memo.read_text())["run_id"]
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
-        source = HttpFeedback(args.api, args.token, int(run_id), **kwargs)
+        source = HttpFeedback(args.api, token, int(run_id), **kwargs)
     else:
         env = make_env(cfg.env, episode_steps=cfg.episode_steps)
         dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length, skill_dim=cfg.skill_dim)
@@ -100,7 +102,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config) -> HttpFeedback:
             epochs_total=cfg.epochs,
             feedback_timeout_s=args.feedback_timeout,
         )
-        source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
+        source = HttpFeedback.create(args.api, token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
     return source
