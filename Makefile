@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml Makefile $(SYS_STAMP)
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH_SPEC)" mujoco==3.17.0
-	$(PY) -m pip install -q -e ".[trainer,service,ui,dev]"
+	$(PY) -m pip install -q -e ".[trainer,service,ui,dev,sweep]"
 	@touch $(STAMP)
 
 setup: $(STAMP)
