@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -70,6 +70,10 @@ bench-pixels: $(STAMP)
 
 bench-encoders: $(STAMP)
 	$(PY) benchmarks/bench_encoders.py
+
+# kill -9 ×100 over service, trainer, teacher and labeling UI during a 1000-label oracle run under collie up.
+bench-chaos: $(STAMP)
+	$(PY) benchmarks/bench_chaos.py
 
 # Issue 7's comparison: every method on the point tasks, 3 seeds, then the paper-format report
 # (hours on 2 cores; resumable: rerun it to continue). docs/results.md says what it measured.
