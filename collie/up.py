@@ -54,12 +54,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def wait_for(path: Path, proc: subprocess.Popen, what: str, timeout_s: float = 120.0) -> dict:
+def wait_for(path: Path, proc: subprocess.Popen, what: str, key: str | None = None, timeout_s: float = 120.0) -> dict:
+    """The JSON at path once it exists (and holds `key`), or an error if proc exits first."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if path.exists():
             try:
-                return json.loads(path.read_text())
+                found = json.loads(path.read_text())
+                if key is None or key in found:
+                    return found
             except json.JSONDecodeError:
                 pass  # being written
         if proc.poll() is not None:
@@ -109,7 +112,7 @@ def child_env(token: str | None = None) -> dict[str, str]:
 def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, stopping: dict) -> int:
     tokens_file = out / "tokens.json"
     tokens = stack_tokens(tokens_file)
-    tokens_file.unlink(missing_ok=True)  # the service writes it again (0600) once it listens
+    write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
     service_env = {**child_env(), **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}
     port = {"service": args.port, "labeling_ui": args.ui_port}  # after the first start: the bound ports
 
@@ -118,7 +121,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
         return ["serve", *where, "--db", str(db), "--tokens-json", str(tokens_file)]
 
     service = stack.start("service", service_args, service_env)
-    api = wait_for(tokens_file, service, "the service")["api"]
+    api = wait_for(tokens_file, service, "the service", key="api")["api"]  # the service adds its URL
     port["service"] = urlsplit(api).port or args.port
     with CollieClient(api, tokens["operator"]) as client:
         wait_healthy(client, service)
