@@ -8,7 +8,7 @@ duplicated, 0 re-asked, finished.
     python benchmarks/bench_chaos.py --short         # 12 kills on a small run (the test's size)
 
 Kills are spread by progress, not by time: kill i waits until the run's progress (the mean of its
-label and epoch fractions, the highest seen so far) passes 0.9·(i+1)/(kills+1), and until the last part
+label and epoch fractions, the highest seen so far) passes 0.8·(i+1)/(kills+1), and until the last part
 killed is back, so every kill lands on a live stack and the run always moves on between kills.
 Writes OUT/chaos.json (default runs/bench/chaos.json)."""
 
@@ -82,7 +82,7 @@ def chaos(out: Path, kills: int, seed: int, up: subprocess.Popen) -> dict[str, i
                 back = last_killed is None or (
                     pids.get(last_killed[0], last_killed[1]) != last_killed[1] and alive(pids[last_killed[0]])
                 )
-                if now is not None and back and best >= 0.9 * (i + 1) / (kills + 1) and best < 1.0:
+                if now is not None and back and best >= 0.8 * (i + 1) / (kills + 1) and best < 1.0:
                     break
                 time.sleep(0.1)
             if up.poll() is not None:
