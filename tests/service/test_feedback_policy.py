@@ -194,7 +194,7 @@ def test_a_0001_database_upgrades(tmp_path: Path) -> None:
     upgrade(db.engine)
     with db.engine.connect() as conn:
         assert "feedback_timeout_s" in {c["name"] for c in inspect(conn).get_columns("runs")}
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar_one() == "0006"  # the newest revision
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar_one() == "0006"
         assert conn.execute(text("SELECT epoch, feedback_timeout_s FROM runs")).one() == (3, None)
     db.dispose()
     with (
