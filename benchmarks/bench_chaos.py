@@ -7,9 +7,11 @@ duplicated, 0 re-asked, finished.
     python benchmarks/bench_chaos.py                 # ~1000 labels, 100 kills (make bench-chaos)
     python benchmarks/bench_chaos.py --short         # 12 kills on a small run (the test's size)
 
-Kills are spread by progress, not by time: kill i waits until the run's progress (the mean of its
-label and epoch fractions, the highest seen so far) passes 0.8·(i+1)/(kills+1), and until the last part
-killed is back, so every kill lands on a live stack and the run always moves on between kills.
+The oracle labels at a person's pace (--teacher-rate), so that a fast machine does not finish the
+run before the kills are done. Kills are spread by progress, not by time: kill i waits until the
+run's progress (the mean of its label and epoch fractions, the highest seen so far) passes
+0.8·(i+1)/(kills+1), and until the last part killed is back, so every kill lands on a live stack
+and the run always moves on between kills.
 Writes OUT/chaos.json (default runs/bench/chaos.json)."""
 
 from __future__ import annotations
@@ -140,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--short", action="store_true", help="the test's size: 50 labels, 12 kills")
     p.add_argument("--kills", type=int, default=None, help="kill -9 count (default 100, --short 12)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--teacher-rate", type=float, default=None, help="oracle labels per second (default 4, --short 1)")
     p.add_argument("--out", type=Path, default=Path("runs/bench/chaos"), help="the stack's folder (emptied first)")
     p.add_argument("--timeout", type=float, default=3600.0, help="give up after this many seconds")
     args = p.parse_args(argv)
@@ -151,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     cmd = [sys.executable, "-m", "collie.cli", "up", "--env", "point", "--task", "north", "--method", "collie"]
     cmd += ["--preset", "smoke", "--teacher", "oracle", "--seed", str(args.seed), "--port", "0", "--ui-port", "0"]
     cmd += ["--out", str(out), "--info-json", str(out / "info.json"), "--exit-when-done", "--max-restarts", "1000"]
+    cmd += ["--teacher-rate", str(args.teacher_rate or (1.0 if args.short else 4.0))]
     cmd += ["--train-args", f"{SHORT if args.short else FULL} {COMMON}"]
     started, done = time.monotonic(), dict.fromkeys(PARTS, 0)
     with open(out / "up.out", "wb") as log:
