@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml Makefile $(SYS_STAMP)
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH_SPEC)" mujoco==3.17.0
-	$(PY) -m pip install -q -e ".[trainer,service,ui,dev]"
+	$(PY) -m pip install -q -e ".[trainer,service,ui,dev,sweep]"
 	@touch $(STAMP)
 
 setup: $(STAMP)
@@ -87,6 +87,10 @@ bench-pixels: $(STAMP)
 
 bench-encoders: $(STAMP)
 	$(PY) benchmarks/bench_encoders.py
+
+# kill -9 ×100 over service, trainer, teacher and labeling UI during a 1000-label oracle run under collie up.
+bench-chaos: $(STAMP)
+	$(PY) benchmarks/bench_chaos.py
 
 # Issue 7's comparison: every method on the point tasks, 3 seeds, then the paper-format report
 # (hours on 2 cores; resumable: rerun it to continue). docs/results.md says what it measured.

@@ -60,8 +60,10 @@ def run(args: argparse.Namespace) -> int:
         partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
         partial.replace(args.tokens_json)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
-    for role, token in tokens.items():  # secrets given through the environment stay out of logs
-        print(f"  {role} token: {token if role in generated else '(from environment)'}", flush=True)
+    for role, token in tokens.items():  # secrets given through the environment or a file stay out of logs
+        shown = token if role in generated and args.tokens_json is None else None
+        where = "(from environment)" if role not in generated else f"(in {args.tokens_json})"
+        print(f"  {role} token: {shown or where}", flush=True)
     # uvicorn shuts down cleanly, then re-raises Ctrl-C: for us that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):
         uvicorn_server(app, args.log_level).run(sockets=[sock])

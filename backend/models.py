@@ -83,6 +83,20 @@ class Query(Base):
     )
 
 
+class FeedbackSession(Base):
+    """One feedback session of a run, by its position in the trainer's schedule (0, 1, …): posted
+    once; a trainer that replays that position after a restart gets this one back."""
+
+    __tablename__ = "feedback_sessions"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"))
+    session: Mapped[int] = mapped_column(Integer)
+    epoch: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[float] = mapped_column(Float)
+
+    __table_args__ = (UniqueConstraint("run_id", "session", name="uq_feedback_sessions_run_session"),)
+
+
 class QueryData(Base):
     """A query's frames: the JSON of collie.schemas.QueryFrames, written once, and its extra."""
 

@@ -293,7 +293,9 @@ class QueryIn(QueryFrames):
 
 
 class SessionPost(Wire):
-    """One feedback session's M segments, posted in one call (idempotent by query_id)."""
+    """One feedback session's M segments, posted in one call. `session` is the session's position in
+    the run's feedback schedule (0, 1, …): a position is posted once; posting it again stores nothing
+    and answers with the session stored for it (SessionPosted.reused)."""
 
     session: Count
     epoch: Count
@@ -309,8 +311,13 @@ class SessionPost(Wire):
 
 class SessionPosted(Wire):
     session: int
+    epoch: int = Field(description="the epoch the session was first posted at")
     created: list[str]
     existing: list[str] = Field(description="ids already stored; kept as they were (the service is the truth)")
+    reused: bool = Field(
+        default=False, description="this position was posted before: nothing was stored; query_ids are its queries"
+    )
+    query_ids: list[str] = Field(default_factory=list, description="the session's queries, as stored, in order")
 
 
 class RetireRequest(Wire):

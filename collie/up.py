@@ -1,6 +1,9 @@
 """`collie up`: the whole loop on one machine — service, trainer and (optionally) the oracle teacher,
-on the embedded SQLite default. Each part is its own process talking HTTP, as in production;
-Ctrl-C stops them all cleanly, and running the same command again resumes the run."""
+on the embedded SQLite default. Each part is its own process talking HTTP, as in production, and is
+supervised (collie/supervisor.py): one that dies is restarted — the trainer from its checkpoint.
+Tokens reach the children through their environment, never their command line, and are written
+only to files their owner alone may read. Ctrl-C stops them all cleanly, and running the same
+command again resumes the run."""
 
 from __future__ import annotations
 
@@ -8,17 +11,20 @@ import argparse
 import contextlib
 import json
 import os
+import secrets
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
-from urllib.parse import quote
+from urllib.parse import quote, urlsplit
 
 from collie.client import CollieClient
 from collie.schemas import RunRead
+from collie.supervisor import ChildFailed, Supervisor
+from collie.tokens import TOKEN_ENV, write_secret
 
-PROCESS_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # stop order: producers first
+ROLES = ("operator", "trainer", "labeler")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,51 +51,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
     p.add_argument("--ui-port", type=int, default=8080, help="labeling UI port (0 = any free port)")
     p.add_argument("--train-args", default="", help='extra `collie train` flags, e.g. "--epochs 50"')
+    p.add_argument(
+        "--max-restarts", type=int, default=5, help="restarts of a part that keeps dying before the stack gives up"
+    )
 
 
-class Stack:
-    """The child processes of one `collie up`, with their logs in OUT/logs/."""
-
-    def __init__(self, out: Path) -> None:
-        self.out = out
-        self.procs: dict[str, subprocess.Popen[bytes]] = {}
-        (out / "logs").mkdir(parents=True, exist_ok=True)
-
-    def start(self, name: str, args: list[str], env_extra: dict[str, str] | None = None) -> subprocess.Popen:
-        log = open(self.out / "logs" / f"{name}.log", "ab")  # noqa: SIM115 - lives as long as the child
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env_extra or {})}
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "collie.cli", *args],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=env,
-            start_new_session=True,
-        )  # our Ctrl-C is handled here, not by children
-        self.procs[name] = proc
-        return proc
-
-    def stop(self, timeout_s: float = 15.0) -> None:
-        for name in PROCESS_ORDER:
-            proc = self.procs.get(name)
-            if proc is None or proc.poll() is not None:
-                continue
-            proc.send_signal(signal.SIGINT if name == "trainer" else signal.SIGTERM)
-            try:
-                proc.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-    def dead(self) -> list[str]:
-        return [n for n, p in self.procs.items() if p.poll() is not None]
-
-
-def wait_for(path: Path, proc: subprocess.Popen, what: str, timeout_s: float = 120.0) -> dict:
+def wait_for(path: Path, proc: subprocess.Popen, what: str, key: str | None = None, timeout_s: float = 120.0) -> dict:
+    """The JSON at path once it exists (and holds `key`), or an error if proc exits first."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if path.exists():
             try:
-                return json.loads(path.read_text())
+                found = json.loads(path.read_text())
+                if key is None or key in found:
+                    return found
             except json.JSONDecodeError:
                 pass  # being written
         if proc.poll() is not None:
@@ -130,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")
     out.mkdir(parents=True, exist_ok=True)
     db = args.db or out / "collie.db"
-    stack = Stack(out)
+    stack = Supervisor(out, max_restarts=args.max_restarts)
     stopping = {"flag": False}
 
     def on_signal(signum: int, _frame: object) -> None:
@@ -140,27 +115,44 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     try:
         return supervise(args, out, db, stack, stopping)
-    except (RuntimeError, TimeoutError) as exc:
+    except (RuntimeError, TimeoutError) as exc:  # ChildFailed included
+        stack.log(f"error: {exc}")
         print(f"collie up: error: {exc} (logs in {out / 'logs'})", file=sys.stderr)
         return 1
     finally:
         stack.stop()
 
 
-def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopping: dict) -> int:
-    tokens_file = out / "tokens.json"
-    keep: dict[str, str] = {}  # a resumed stack keeps its tokens, so links already handed out stay valid
+def stack_tokens(tokens_file: Path) -> dict[str, str]:
+    """A resumed stack keeps its tokens (links already handed out stay valid); a new one takes
+    COLLIE_<ROLE>_TOKEN from the environment, else fresh random ones."""
     if tokens_file.exists():
-        saved = json.loads(tokens_file.read_text())["tokens"]
-        keep = {f"COLLIE_{role.upper()}_TOKEN": tok for role, tok in saved.items()}
-        tokens_file.unlink()
-    service = stack.start(
-        "service",
-        ["serve", "--host", "127.0.0.1", "--port", str(args.port), "--db", str(db), "--tokens-json", str(tokens_file)],
-        env_extra=keep,
-    )
-    info = wait_for(tokens_file, service, "the service")
-    api, tokens = info["api"], info["tokens"]
+        return dict(json.loads(tokens_file.read_text())["tokens"])
+    return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or secrets.token_urlsafe(32) for r in ROLES}
+
+
+def child_env(token: str | None = None) -> dict[str, str]:
+    """Our environment without the stack's secrets, plus the one token this child may use."""
+    env = {
+        k: v for k, v in os.environ.items() if k != TOKEN_ENV and not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))
+    }
+    return {**env, TOKEN_ENV: token} if token is not None else env
+
+
+def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, stopping: dict) -> int:
+    tokens_file = out / "tokens.json"
+    tokens = stack_tokens(tokens_file)
+    write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
+    service_env = {**child_env(), **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}
+    port = {"service": args.port, "labeling_ui": args.ui_port}  # after the first start: the bound ports
+
+    def service_args() -> list[str]:
+        where = ["--host", "127.0.0.1", "--port", str(port["service"])]
+        return ["serve", *where, "--db", str(db), "--tokens-json", str(tokens_file)]
+
+    service = stack.start("service", service_args, service_env)
+    api = wait_for(tokens_file, service, "the service", key="api")["api"]  # the service adds its URL
+    port["service"] = urlsplit(api).port or args.port
     with CollieClient(api, tokens["operator"]) as client:
         wait_healthy(client, service)
     trainer_out = out / "trainer"
@@ -183,43 +175,38 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
         str(trainer_out),
         "--api",
         api,
-        "--token",
-        tokens["trainer"],
         "--no-progress",
         "--noise-band",
         str(args.noise_band),
         *args.train_args.split(),
     ]
+
+    def train_args() -> list[str]:
+        """A (re)started trainer continues the run it created, from its checkpoint when it wrote one."""
+        more = ["--run-id", str(json.loads(memo.read_text())["run_id"])] if memo.exists() else []
+        return [*train, *more, *(["--resume"] if (trainer_out / "checkpoint.pt").exists() and more else [])]
+
     # OpenMP threads that sleep while idle (trainer/threads.py); `collie train` picks the thread count
-    trainer = stack.start("trainer", [*train, "--resume"] if resume else train, {"OMP_WAIT_POLICY": "PASSIVE"})
+    trainer_env = {**child_env(tokens["trainer"]), "OMP_WAIT_POLICY": "PASSIVE"}
+    trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)
     run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
     if args.teacher == "oracle":
-        teach = [
-            "teacher",
-            "--api",
-            api,
-            "--token",
-            tokens["labeler"],
-            "--run",
-            str(run_id),
-            "--until-done",
-            "--noise-band",
-            str(args.noise_band),
-            "--seed",
-            str(args.seed),
-        ]
-        if args.teacher_rate:
-            teach += ["--rate", str(args.teacher_rate)]
-        stack.start("teacher", teach)
+        teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
+        teach += ["--seed", str(args.seed), *(["--rate", str(args.teacher_rate)] if args.teacher_rate else [])]
+        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), done_when_ok=True)
     labeler_url = None
     if not args.no_label_ui:
         ui_info = out / "labeling_ui.json"
         ui_info.unlink(missing_ok=True)
-        ui = stack.start(
-            "labeling_ui",
-            ["label-ui", "--api", api, "--run", str(run_id), "--port", str(args.ui_port), "--info-json", str(ui_info)],
-        )
-        labeler_url = wait_for(ui_info, ui, "the labeling UI")["url"] + "?token=" + quote(tokens["labeler"])
+
+        def ui_args() -> list[str]:
+            where = ["--port", str(port["labeling_ui"]), "--info-json", str(ui_info)]
+            return ["label-ui", "--api", api, "--run", str(run_id), *where]
+
+        ui = stack.start("labeling_ui", ui_args, child_env())
+        ui_meta = wait_for(ui_info, ui, "the labeling UI")
+        port["labeling_ui"] = int(ui_meta["port"])
+        labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])
     dashboard = f"{api}/?token={quote(tokens['operator'])}"
     if labeler_url:  # the dashboard's "watch skills in 3D" link opens the labeling UI in watch mode
         dashboard += "&ui=" + quote(labeler_url.split("?")[0], safe="")
@@ -227,12 +214,13 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Stack, stopp
     write_info(args.info_json, urls, run_id, tokens)
     print(f"collie up: run {run_id} · {args.env} {run_name(args)} {args.method} ({args.preset})")
     print(f"  service   {api}   (API docs {api}/docs)")
-    if labeler_url:
+    if labeler_url:  # links with tokens go to the terminal of the person who started the stack, not to logs
         print(f"  label     {labeler_url}")
     print(f"  dashboard {dashboard}")
-    print(f"  tokens    operator {tokens['operator']} · labeler {tokens['labeler']}")
+    print(f"  tokens    in {tokens_file} (readable by you only)")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
+    stack.log(f"stack up: run {run_id}, service {api}")
     return watch(api, tokens["operator"], run_id, stack, args.exit_when_done, stopping)
 
 
@@ -250,11 +238,8 @@ def wait_healthy(client: CollieClient, service: subprocess.Popen, timeout_s: flo
 
 
 def write_info(path: Path | None, urls: dict, run_id: int, tokens: dict) -> None:
-    if path is None:
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({**urls, "run_id": run_id, "tokens": tokens}, indent=1))
-    path.chmod(0o600)
+    if path is not None:
+        write_secret(path, json.dumps({**urls, "run_id": run_id, "tokens": tokens}, indent=1))
 
 
 class ProgressLine:
@@ -279,27 +264,30 @@ class ProgressLine:
             sys.stderr.flush()
 
 
-def watch(api: str, token: str, run_id: int, stack: Stack, exit_when_done: bool, stopping: dict) -> int:
-    """Show the run's progress until it ends (or Ctrl-C). Returns the trainer's exit code."""
+def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: bool, stopping: dict) -> int:
+    """Show the run's progress and keep every part alive until the run ends (or Ctrl-C). Returns 0
+    when the trainer finished, 1 when a part could not be kept alive, 130 on Ctrl-C."""
     bar = ProgressLine()
-    trainer = stack.procs["trainer"]
     with CollieClient(api, token) as client:
         while not stopping["flag"]:
             with contextlib.suppress(Exception):  # the service may be restarting; keep watching
                 bar.show(client.run(run_id))
-            if trainer.poll() is not None:
+            try:
+                stack.check()
+            except ChildFailed:
                 bar.close()
-                code = trainer.returncode
-                print(f"collie up: trainer finished with code {code}; outputs in {stack.out / 'trainer'}")
-                if exit_when_done or code != 0:
-                    return code
+                raise
+            if stack.finished("trainer"):
+                bar.close()
+                print(f"collie up: trainer finished; outputs in {stack.out / 'trainer'}")
+                stack.log("trainer finished")
+                if exit_when_done:
+                    return 0
                 print("collie up: the service stays up for inspection; Ctrl-C to stop.", flush=True)
                 while not stopping["flag"]:
+                    stack.check()
                     time.sleep(0.5)
                 return 0
-            broken = [n for n in stack.dead() if n in ("service", "labeling_ui")]
-            if broken:
-                raise RuntimeError(f"{', '.join(broken)} exited unexpectedly")
             time.sleep(0.5)
     bar.close()
     print("collie up: stopping…", flush=True)

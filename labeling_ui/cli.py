@@ -8,6 +8,7 @@ import signal
 import threading
 from pathlib import Path
 
+from collie.tokens import resolve_token
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
 
@@ -18,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
     parser.add_argument("--run", type=int, default=None, help="label only this run (default: newest with work)")
     parser.add_argument("--token", default=None, help="print a labeler URL that signs in with this token")
+    parser.add_argument("--token-file", type=Path, default=None, help="the same, with the token read from this file")
     parser.add_argument("--lease-s", type=float, default=60.0, help="claim length, renewed while a tab is open")
     parser.add_argument("--fps", type=float, default=20.0, help="segment frames per second at 1x")
     parser.add_argument("--info-json", type=Path, default=None, help="write the URL and port here once serving")
@@ -27,8 +29,9 @@ def run(args: argparse.Namespace) -> int:
     config = UiConfig(api=args.api, run_id=args.run, lease_s=args.lease_s, fps=args.fps)
     app = LabelingApp(config, host=args.host, port=args.port)
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
-    if args.token:
-        print(f"labeler URL: {app.labeler_url(args.token)}", flush=True)
+    token = resolve_token(args, "labeler", from_env=False)
+    if token:  # asked for by the person who started it: their terminal, not a log
+        print(f"labeler URL: {app.labeler_url(token)}", flush=True)
     if args.info_json is not None:  # how `collie up` learns the port when it asked for any free one
         tmp = args.info_json.with_suffix(".tmp")
         tmp.write_text(json.dumps({"url": app.url, "port": app.port}))

@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import time
 
 from collie.client import ApiError, CollieClient, Unreachable
+from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, help="service URL, e.g. http://127.0.0.1:8000")
-    parser.add_argument("--token", default=os.environ.get("COLLIE_LABELER_TOKEN"), help="a labeler token")
+    add_token_arguments(parser, "labeler")
     parser.add_argument("--run", type=int, required=True, help="run id")
     parser.add_argument("--noise-band", type=float, default=0.0, help="R_error: random labels this close to a boundary")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
@@ -42,11 +42,18 @@ def wait_for_run(client: CollieClient, run_id: int, patience_s: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.token:
-        print("collie teacher: give --token or set COLLIE_LABELER_TOKEN", file=sys.stderr)
+    try:
+        token = resolve_token(args, "labeler")
+    except ValueError as exc:
+        print(f"collie teacher: error: {exc}", file=sys.stderr)
+        return 2
+    if not token:
+        print(
+            "collie teacher: give --token-file, set COLLIE_TOKEN (or COLLIE_LABELER_TOKEN), or --token", file=sys.stderr
+        )
         return 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
-    with CollieClient(args.api, args.token) as client:
+    with CollieClient(args.api, token) as client:
         try:
             wait_for_run(client, args.run, args.wait)
         except (ApiError, Unreachable) as exc:

@@ -85,3 +85,55 @@ def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
     finally:
         service.terminate()
         service.wait(timeout=30)
+
+
+def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_path):
+    """No checkpoint since the start (as after a crash): the restarted trainer replays from epoch 0,
+    reaches the sessions it posted before and gets them back — one session per position, the label
+    given before the kill applied, the budget not spent twice."""
+    info = tmp_path / "service.json"
+    service = cli(
+        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
+    )
+    try:
+        wait_until(info.exists)
+        api = json.loads(info.read_text())["api"]
+        out = tmp_path / "trainer"
+        train = ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--no-progress"]
+        trainer = cli(*train, "--checkpoint-every", "100", log=tmp_path / "trainer.log")
+        memo = out / "service_run.json"
+        wait_until(memo.exists)
+        run_id = json.loads(memo.read_text())["run_id"]
+        with CollieClient(api, TOKENS["labeler"]) as labeler:
+
+            def label_one_of(session: int) -> str:
+                wait_until(lambda: any(q.session == session for q in labeler.queries(run_id, status="pending")))
+                claim = labeler.claim(run_id)
+                assert claim is not None and claim.query.session == session
+                labeler.submit(run_id, claim.query.query_id, 2)
+                return claim.query.query_id
+
+            label_one_of(0), label_one_of(0)
+            given = label_one_of(1)  # session 1: one label of two, then the crash
+            trainer.send_signal(signal.SIGKILL)
+            trainer.wait()
+            assert not (out / "checkpoint.pt").exists()
+            teacher = cli("teacher", "--api", api, "--run", str(run_id), "--until-done", log=tmp_path / "teacher.log")
+            restarted = cli(*train, "--run-id", str(run_id), log=tmp_path / "trainer.log")
+            assert restarted.wait(timeout=300) == 0, (tmp_path / "trainer.log").read_text()[-3000:]
+            teacher.wait(timeout=60)
+            asked = labeler.queries(run_id)
+            in_db = {e.query_id: e.label for e in labeler.effective_labels(run_id)}
+        epoch_of: dict[int, set[int]] = {}
+        for q in asked:
+            epoch_of.setdefault(q.session, set()).add(q.epoch)
+        sessions_at = [e for epochs in epoch_of.values() for e in epochs]
+        assert len(sessions_at) == len(set(sessions_at)), f"a position was asked twice: {epoch_of}"
+        ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+        applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
+        total = ckpt["config"]["total_queries"]
+        assert applied == in_db and len(applied) == total == len(asked)  # every query asked was used
+        assert applied[given] == 2
+    finally:
+        service.terminate()
+        service.wait(timeout=30)

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from collie.tokens import add_token_arguments, resolve_token
 from trainer.config import PRESETS, Config, make_config
 from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
@@ -36,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
-    p.add_argument("--token", default=None, help="trainer token for --api")
+    add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
     p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
         "--feedback-timeout",
@@ -90,8 +91,9 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     from trainer.envs import make_env
     from trainer.feedback.http import HttpFeedback
 
-    if not args.token:
-        raise ValueError("--api needs --token (a trainer token)")
+    token = resolve_token(args, "trainer")
+    if not token:
+        raise ValueError("--api needs a trainer token: --token-file, COLLIE_TOKEN or --token")
     if args.feedback_timeout is not None and not 0 < args.feedback_timeout <= MAX_FEEDBACK_TIMEOUT_S:
         raise ValueError(f"--feedback-timeout must be in (0, {MAX_FEEDBACK_TIMEOUT_S}] seconds")
     memo = Path(cfg.out) / "service_run.json"
@@ -100,7 +102,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         run_id = json.loads(memo.read_text())["run_id"]
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
-        source = HttpFeedback(args.api, args.token, int(run_id), **kwargs)
+        source = HttpFeedback(args.api, token, int(run_id), **kwargs)
         held = source.client.run(source.run_id)
         rule = from_stored(held.task_definition, held.instruction)
         if rule.task is None and rule.instruction is None:
@@ -123,7 +125,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
             task_definition=rule.definition,
             instruction=rule.instruction,
         )
-        source = HttpFeedback.create(args.api, args.token, spec, **kwargs)
+        source = HttpFeedback.create(args.api, token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
     return source, rule

@@ -229,13 +229,13 @@ class Trainer:
 
     def feedback_session(self) -> None:
         segments = self.make_segments()
-        for s in segments:
-            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
-        self._waiting = True
+        self._waiting = True  # a signal now stops at once
         try:
-            events = self.feedback.collect(self.session, self.epoch, segments)
+            events = self.feedback.collect(self.session, self.epoch, segments)  # may swap in a session posted before
         finally:
             self._waiting = False
+        for s in segments:
+            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
         self.apply_labels(events)
         if self.first_feedback_epoch is None:
             self.first_feedback_epoch = self.epoch
@@ -251,10 +251,9 @@ class Trainer:
             self.asked[seg.query_id] = np.asarray(seg.obs, np.float32)
             self.segment_xy[seg.query_id] = np.asarray(seg.xy)
             self.labelled.set(seg.query_id, seg.obs, label)
-        if history:
-            self.session = max(self.session, 1 + max(seg.session for seg, _ in history))
-            if self.first_feedback_epoch is None:
-                self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
+        # self.session stays the checkpoint's: the replay reuses the sessions posted since (by position).
+        if history and self.first_feedback_epoch is None:
+            self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
 
     # ---- learning (Algorithm 1, lines 9–13) -----------------------------------------------
     def train_epoch(self) -> None:

@@ -1,5 +1,8 @@
 """Queries (segments): posted a feedback session at a time by the trainer, read by labelers and UIs.
-Posting is idempotent by query_id: ids already stored are kept unchanged and reported back."""
+A session is identified by its position in the trainer's schedule (`session`, unique per run): posting
+a position already posted stores nothing and answers with the stored session's queries, so a resumed
+trainer asks for nothing twice. Within a new session, query ids already stored are kept unchanged
+and reported back."""
 
 from __future__ import annotations
 
@@ -8,7 +11,7 @@ from typing import Any
 
 from sqlalchemy import Connection, Select, insert, select, update
 
-from backend.models import Principal, Query, QueryData
+from backend.models import FeedbackSession, Principal, Query, QueryData
 from backend.services import events, runs
 from backend.services.errors import Conflict, Invalid, NotFound
 from collie.schemas import (
@@ -55,11 +58,30 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
     problems = [f"{q.query_id}: {e}" for q in body.queries for e in q.shape_errors(dims)]
     if problems:
         raise Invalid("segments do not match the run's env dims: " + "; ".join(problems[:5]))
+    posted_before = conn.execute(
+        select(FeedbackSession.epoch).where(FeedbackSession.run_id == run_id, FeedbackSession.session == body.session)
+    ).first()
+    if posted_before is not None:
+        stored = conn.execute(
+            select(Query.query_id).where(Query.run_id == run_id, Query.session == body.session).order_by(Query.id)
+        ).scalars()
+        stored_ids = list(stored)
+        return SessionPosted(
+            session=body.session,
+            epoch=posted_before.epoch,
+            created=[],
+            existing=stored_ids,
+            reused=True,
+            query_ids=stored_ids,
+        )
+    now = time.time()
+    conn.execute(  # the unique (run, session) makes a concurrent second post of this position a 409
+        insert(FeedbackSession).values(run_id=run_id, session=body.session, epoch=body.epoch, created_at=now)
+    )
     ids = [q.query_id for q in body.queries]
     existing = set(
         conn.execute(select(Query.query_id).where(Query.run_id == run_id, Query.query_id.in_(ids))).scalars()
     )
-    now = time.time()
     new = [q for q in body.queries if q.query_id not in existing]
     rows = [
         {
@@ -85,8 +107,10 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
         events.append(conn, run_id, QueriesPosted(session=body.session, epoch=body.epoch, query_ids=created), now)
     return SessionPosted(
         session=body.session,
+        epoch=body.epoch,
         created=[str(r["query_id"]) for r in rows],
         existing=[i for i in ids if i in existing],
+        query_ids=ids,
     )
 
 

@@ -31,13 +31,22 @@ def test_create_read_and_list_runs(trainer: CollieClient, labeler: CollieClient)
     assert updated.epoch == 7 and updated.updated_at >= created.updated_at
 
 
-def test_post_session_is_idempotent_and_keeps_the_stored_segment(trainer: CollieClient, run: RunRead) -> None:
-    again = make_session(0, 6)
-    again.queries[0].start = 999_999  # a different segment under an existing id is not stored
+def test_a_session_position_is_posted_once(trainer: CollieClient, run: RunRead) -> None:
+    again = make_session(0, 6, epoch=5)  # session 0 again (a resumed trainer), other segments
+    again.queries[0].start = 999_999
     posted = trainer.post_session(run.id, again)
-    assert posted.existing == ["0-0", "0-1", "0-2", "0-3"] and posted.created == ["0-4", "0-5"]
+    assert posted.reused and posted.created == [] and posted.epoch == 0
+    assert posted.query_ids == posted.existing == ["0-0", "0-1", "0-2", "0-3"]
     assert trainer.query(run.id, "0-0").start != 999_999
-    assert trainer.run(run.id).queue.pending == 6
+    assert trainer.run(run.id).queue.pending == 4
+
+
+def test_a_new_session_keeps_stored_segments_under_ids_it_repeats(trainer: CollieClient, run: RunRead) -> None:
+    body = make_session(1, 2)
+    body.queries[0] = make_session(0, 1).queries[0].model_copy(update={"start": 999_999})  # id 0-0, stored
+    posted = trainer.post_session(run.id, body)
+    assert not posted.reused and posted.existing == ["0-0"] and posted.created == ["1-1"]
+    assert trainer.query(run.id, "0-0").start != 999_999
 
 
 def test_query_round_trips_exactly(trainer: CollieClient, run: RunRead) -> None:

@@ -53,6 +53,8 @@ def test_serve_then_export(tmp_path: Path) -> None:
         assert oct(tokens_file.stat().st_mode & 0o777) == "0o600"
         rest = [server.stdout.readline() for _ in range(3)]  # type: ignore[union-attr]
         assert "labeler token: (from environment)" in "".join(rest)  # secrets given by env are not echoed
+        assert info["tokens"]["trainer"] not in "".join(rest)  # generated ones are in the 0600 file, not the log
+        assert f"trainer token: (in {tokens_file})" in "".join(rest)
         trainer = CollieClient(info["api"], info["tokens"]["trainer"])
         labeler = CollieClient(info["api"], info["tokens"]["labeler"])
         run = trainer.create_run(make_run_spec())

@@ -15,7 +15,7 @@ import pytest
 
 from backend.main import create_app
 from backend.server import BackgroundServer
-from collie.client import ApiError, CollieClient
+from collie.client import CollieClient
 from collie.schemas import StatusEvent
 from trainer.feedback.base import LabelEvent, Segment, StopRequested
 from trainer.feedback.http import HttpFeedback
@@ -139,7 +139,9 @@ def test_pause_holds_collect_until_resume(live: BackgroundServer, feedback: Http
         assert feedback.control() == "run" and operator.run(feedback.run_id).status == "training"
 
 
-def test_restarted_trainer_rebuilds_everything_once(live: BackgroundServer, feedback: HttpFeedback) -> None:
+def test_restarted_trainer_replays_its_sessions_and_asks_nothing_twice(
+    live: BackgroundServer, feedback: HttpFeedback
+) -> None:
     url, run_id = live.url, feedback.run_id
     label_in_background(url, run_id, 3)
     first = segments(0, 3)
@@ -158,17 +160,40 @@ def test_restarted_trainer_rebuilds_everything_once(live: BackgroundServer, feed
     assert label == rule("s0-q1")
     np.testing.assert_array_equal(stored.obs, first[1].obs)
     assert np.isnan(stored.pitch[0]) and stored.extra == {"note": 1.5}
-    with CollieClient(url, TOKENS["labeler"]) as labeler:  # the leftovers of session 1 are closed
-        assert {q.query_id for q in labeler.queries(run_id, status="retired")} == {"s1-q2", "s1-q3"}
-        assert labeler.claim(run_id) is None
-        with pytest.raises(ApiError):
-            labeler.submit(run_id, "s1-q2", 1)
+    with CollieClient(url, TOKENS["labeler"]) as labeler:  # session 1's leftovers stay open: it is replayed
+        assert labeler.queries(run_id, status="retired") == []
     assert again.revisions() == []
+    # The replay (from a checkpoint before session 0) reaches sessions 0 and 1 again with other segments:
+    # it gets the stored ones back, and waits only for the labels still missing.
+    replay0 = segments(0, 3, seed=7)
+    assert again.collect(0, 0, replay0) == []  # every label of session 0 is in D already
+    assert [s.query_id for s in replay0] == ["s0-q0", "s0-q1", "s0-q2"]
+    np.testing.assert_array_equal(replay0[1].obs, first[1].obs)
     label_in_background(url, run_id, 2)
-    applied = {s.query_id: label for s, label in history} | as_dict(again.collect(2, 20, segments(2, 2)))
+    replay1 = segments(1, 1, seed=7)  # fewer segments (less budget left): the stored four come back
+    got = as_dict(again.collect(1, 10, replay1))
+    assert [s.query_id for s in replay1] == ["s1-q0", "s1-q1", "s1-q2", "s1-q3"]
+    assert set(got) == {"s1-q2", "s1-q3"}
+    label_in_background(url, run_id, 2)
+    applied = {s.query_id: label for s, label in history} | got | as_dict(again.collect(2, 20, segments(2, 2)))
     with CollieClient(url, TOKENS["trainer"]) as trainer:
         effective = {e.query_id: e.label for e in trainer.effective_labels(run_id)}
-    assert effective == applied and len(applied) == 7  # exactly what the trainer was given
+        asked = trainer.queries(run_id)
+    assert effective == applied and len(applied) == 9  # exactly what the trainer was given
+    assert len(asked) == 9 and {q.session for q in asked} == {0, 1, 2}  # no session posted twice
+    again.close()
+
+
+def test_leftovers_of_sessions_the_replay_skips_are_retired(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    url, run_id = live.url, feedback.run_id
+    feedback.timeout_s = 0.1
+    feedback.collect(0, 0, segments(0, 3))  # the trainer moved on with no label (its timeout)
+    feedback.close()
+    again = HttpFeedback(url, TOKENS["trainer"], run_id, timeout_s=0.1)
+    assert again.history() == []
+    again.collect(1, 10, segments(1, 1))  # its checkpoint is past session 0: that one is never replayed
+    with CollieClient(url, TOKENS["labeler"]) as labeler:
+        assert {q.query_id for q in labeler.queries(run_id, status="retired")} == {"s0-q0", "s0-q1", "s0-q2"}
     again.close()
 
 

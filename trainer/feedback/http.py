@@ -10,11 +10,14 @@ The trainer's side of the contract (docs/service.md):
   A stop raises StopRequested; while paused it keeps waiting and does not return.
 - Every label the trainer is given is remembered with its value, so a label reaches the trainer
   once, and a change of it (undo, relabel, a late label) once more as a revision.
-- `history` returns the labelled segments of the run for a restarted trainer. The loop then
-  resumes after the last labelled session; unlabelled leftovers of sessions it will not revisit
-  are retired on the service, so a label the trainer cannot use is never taken.
-- A segment id the service already holds (a session re-posted after a restart) keeps the stored
-  segment: `collect` copies the stored arrays into the given segment in place.
+- `history` returns the labelled segments of the run for a restarted trainer, which replays from
+  its checkpoint. A session is identified by its schedule position (`session`): re-posting one
+  already posted (the replay reaches it again) stores nothing; `collect` then replaces the given
+  segments, in place in the list, by the stored session's and waits only for the labels it still
+  lacks. Unlabelled leftovers of sessions before the first one posted are retired on the service,
+  so a label the trainer cannot use is never taken.
+- A segment id the service already holds in a new session keeps the stored segment: `collect`
+  copies the stored arrays into the given segment in place.
 - The service going away (restart, network) is waited out with backoff; `control` never blocks
   training for long and never raises. Telemetry goes through `reporter` (an HttpReporter for the
   same run), which the trainer's command hands to the loop.
@@ -101,12 +104,21 @@ class HttpFeedback(FeedbackSource):
             self._swept = True
         body = SessionPost(session=session, epoch=epoch, queries=[to_wire(s) for s in segments])
         posted = self._retry(lambda: self.client.post_session(self.run_id, body))
-        by_id = {s.query_id: s for s in segments}
-        for query_id in posted.existing:
-            adopt(by_id[query_id], self._retry(functools.partial(self.client.query, self.run_id, query_id)))
+        if posted.reused:  # this position was posted before (a resumed trainer): its queries, not new ones
+            stored = [self._retry(functools.partial(self.client.query, self.run_id, q)) for q in posted.query_ids]
+            given = {s.query_id: s for s in segments}
+            for q in stored:  # a segment under a stored id is overwritten in place (callers may hold its arrays)
+                if q.query_id in given:
+                    adopt(given[q.query_id], q)
+            segments[:] = [given.get(q.query_id) or from_wire(q) for q in stored]
+            ids = [q.query_id for q in stored if q.status != "retired"]  # closed ones will get no label
+        else:
+            by_id = {s.query_id: s for s in segments}
+            for query_id in posted.existing:
+                adopt(by_id[query_id], self._retry(functools.partial(self.client.query, self.run_id, query_id)))
+            ids = [s.query_id for s in segments]
         for s in segments:
             self._given.setdefault(s.query_id, None)
-        ids = [s.query_id for s in segments]
         started = time.monotonic()  # the deadline is started + self.timeout_s, as the policy says now
         self._show("waiting_for_labels", epoch)
         wait = 0.0  # first look without waiting: the labels may all be in already (a re-posted session)
@@ -154,9 +166,7 @@ class HttpFeedback(FeedbackSource):
             self._given[item.query.query_id] = item.label
             self._changed.discard(item.query.query_id)
             result.append((from_wire(item.query), int(item.label)))
-        if result:  # the loop resumes after the last labelled session: earlier leftovers are dead
-            self._retire_leftovers(before_session=1 + max(s.session for s, _ in result))
-        return result
+        return result  # leftovers stay open: the resumed loop replays their sessions and waits for them
 
     def close(self) -> None:
         self.client.close()

@@ -1,0 +1,134 @@
+"""The child processes of one `collie up`, supervised: a child that dies is started again after a
+backoff (0.5 s, doubling to 10 s), and one that keeps dying — `max_restarts` times without staying
+up `stable_s` in between — ends the stack with an error naming it. Every start and exit is logged to
+OUT/logs/up.log; OUT/children.json names the live process of each part (for tools and tests)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
+BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
+
+
+class ChildFailed(RuntimeError):
+    """A supervised child died more often than the restart limit allows."""
+
+
+@dataclass
+class Child:
+    name: str
+    args: Callable[[], list[str]]  # evaluated at each start (a restarted trainer adds --resume)
+    env: dict[str, str]
+    done_when_ok: bool  # exit 0 means its work is over (trainer, teacher): not restarted
+    proc: subprocess.Popen | None = None
+    started_at: float = 0.0
+    failures: int = 0  # deaths since it last stayed up stable_s
+    restarts: int = 0
+    restart_at: float | None = None
+    finished: bool = False
+    exit_codes: list[int] = field(default_factory=list)
+
+
+class Supervisor:
+    def __init__(self, out: Path, max_restarts: int = 5, stable_s: float = 60.0) -> None:
+        self.out, self.max_restarts, self.stable_s = out, max_restarts, stable_s
+        self.children: dict[str, Child] = {}
+        (out / "logs").mkdir(parents=True, exist_ok=True)
+        self._log = open(out / "logs" / "up.log", "a")  # noqa: SIM115 - lives as long as the stack
+
+    def log(self, message: str) -> None:
+        line = f"{time.strftime('%Y-%m-%d %H:%M:%S')} {message}"
+        self._log.write(line + "\n")
+        self._log.flush()
+
+    def start(
+        self, name: str, args: Callable[[], list[str]], env: dict[str, str], done_when_ok: bool = False
+    ) -> subprocess.Popen:
+        child = Child(name, args, env, done_when_ok)
+        self.children[name] = child
+        return self._spawn(child)
+
+    def _spawn(self, child: Child) -> subprocess.Popen:
+        log = open(self.out / "logs" / f"{child.name}.log", "ab")  # noqa: SIM115 - lives as long as the child
+        env = {**child.env, "PYTHONUNBUFFERED": "1"}
+        child.proc = subprocess.Popen(
+            [sys.executable, "-m", "collie.cli", *child.args()],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,  # our Ctrl-C is handled here, not by children
+        )
+        log.close()  # the child holds its own copy
+        child.started_at, child.restart_at = time.monotonic(), None
+        self.log(f"started {child.name} (pid {child.proc.pid})")
+        self._write_pids()
+        return child.proc
+
+    def proc(self, name: str) -> subprocess.Popen:
+        proc = self.children[name].proc
+        assert proc is not None
+        return proc
+
+    def check(self) -> None:
+        """Restart children that died (after their backoff); raise ChildFailed past the limit."""
+        now = time.monotonic()
+        for child in self.children.values():
+            if child.finished or child.proc is None:
+                continue
+            if child.restart_at is not None:
+                if now >= child.restart_at:
+                    child.restarts += 1
+                    self._spawn(child)
+                continue
+            code = child.proc.poll()
+            if code is None:
+                continue
+            child.exit_codes.append(code)
+            if code == 0 and child.done_when_ok:
+                child.finished = True
+                self.log(f"{child.name} finished (exit 0)")
+                continue
+            if now - child.started_at >= self.stable_s:
+                child.failures = 0
+            child.failures += 1
+            how = f"signal {-code}" if code < 0 else f"code {code}"
+            if child.failures > self.max_restarts:
+                self.log(f"{child.name} exited with {how}; {self.max_restarts} restarts did not help, giving up")
+                raise ChildFailed(f"the {child.name} keeps exiting (last: {how}); see {self.out / 'logs'}")
+            delay = min(BACKOFF_S * 2 ** (child.failures - 1), MAX_BACKOFF_S)
+            self.log(f"{child.name} exited with {how}; restarting in {delay:.1f} s")
+            print(f"collie up: {child.name} exited with {how}; restarting in {delay:.1f} s", file=sys.stderr)
+            child.restart_at = now + delay
+
+    def finished(self, name: str) -> bool:
+        child = self.children.get(name)
+        return child is not None and child.finished
+
+    def stop(self, timeout_s: float = 15.0) -> None:
+        for name in STOP_ORDER:
+            child = self.children.get(name)
+            if child is None or child.proc is None or child.proc.poll() is not None:
+                continue
+            child.proc.send_signal(signal.SIGINT if name == "trainer" else signal.SIGTERM)
+            try:
+                child.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                child.proc.kill()
+                child.proc.wait()
+        self.log("stopped")
+        self._log.close()
+
+    def _write_pids(self) -> None:
+        pids = {n: c.proc.pid for n, c in self.children.items() if c.proc is not None}
+        tmp = self.out / "children.json.tmp"
+        tmp.write_text(json.dumps({"up": os.getpid(), "children": pids}))
+        tmp.replace(self.out / "children.json")

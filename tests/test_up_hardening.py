@@ -1,0 +1,139 @@
+"""`collie up` under attack and faults, with real processes: tokens never reach a command line, a
+log or a file others can read (a token starting with '-' included), and a part killed mid-run is
+restarted so the run still finishes."""
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from collie.client import CollieClient
+
+
+def up_command(out: Path, *more: str) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "collie.cli",
+        "up",
+        "--env",
+        "point",
+        "--task",
+        "north",
+        "--teacher",
+        "oracle",
+        "--preset",
+        "smoke",
+        "--port",
+        "0",
+        "--ui-port",
+        "0",
+        "--out",
+        str(out),
+        "--info-json",
+        str(out / "info.json"),
+        "--exit-when-done",
+        *more,
+    ]
+
+
+def children(out: Path) -> dict[str, int]:
+    try:
+        return json.loads((out / "children.json").read_text())["children"]
+    except (FileNotFoundError, json.JSONDecodeError):
+        return {}
+
+
+def cmdlines() -> list[bytes]:
+    lines = []
+    for pid in os.listdir("/proc"):
+        if pid.isdigit():
+            with contextlib.suppress(OSError):  # gone, or not ours to read
+                lines.append(Path(f"/proc/{pid}/cmdline").read_bytes())
+    return lines
+
+
+def test_tokens_starting_with_a_dash_stay_out_of_argv_logs_and_open_files(tmp_path):
+    tokens = {"operator": "-op" + "o" * 40, "trainer": "-tr" + "t" * 40, "labeler": "--lb" + "l" * 40}
+    (tmp_path / "tokens.json").write_text(json.dumps({"tokens": tokens}))  # a saved stack, reused as is
+    proc = subprocess.Popen(up_command(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    seen_children: set[str] = set()
+    leaked: list[bytes] = []
+    while proc.poll() is None:  # watch every process's command line while the stack runs
+        seen_children |= set(children(tmp_path))
+        leaked += [c for c in cmdlines() if any(t.encode() in c for t in tokens.values())]
+        time.sleep(0.2)
+    output = proc.stdout.read().decode()
+    assert proc.returncode == 0, output[-3000:]
+    assert seen_children >= {"service", "trainer", "teacher", "labeling_ui"}
+    assert leaked == []
+    for log in (tmp_path / "logs").iterdir():
+        text = log.read_text(errors="replace")
+        assert not [r for r, t in tokens.items() if t in text], f"a token is in {log.name}"
+    for secret in (tmp_path / "tokens.json", tmp_path / "info.json"):
+        assert secret.stat().st_mode & 0o777 == 0o600, secret
+    meta = json.loads((tmp_path / "info.json").read_text())
+    assert meta["tokens"] == tokens
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
+
+
+def test_a_teacher_and_labeling_ui_killed_mid_run_are_restarted_and_the_run_finishes(tmp_path):
+    proc = subprocess.Popen(
+        up_command(tmp_path, "--teacher-rate", "2"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
+    killed: dict[str, int] = {}
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline and len(killed) < 2:
+            info = tmp_path / "info.json"
+            if info.exists() and not killed:
+                meta = json.loads(info.read_text())
+                with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+                    run = client.run(meta["run_id"])
+                if 0 < run.n_labels < run.n_total:  # mid-run: some labels given, more to come
+                    for name in ("teacher", "labeling_ui"):
+                        killed[name] = children(tmp_path)[name]
+                        os.kill(killed[name], signal.SIGKILL)
+            time.sleep(0.1)
+        assert proc.wait(timeout=300) == 0, proc.stdout.read().decode()[-3000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert set(killed) == {"teacher", "labeling_ui"}
+    now = children(tmp_path)
+    assert all(now[name] != pid for name, pid in killed.items())  # each was started again
+    up_log = (tmp_path / "logs" / "up.log").read_text()
+    assert "teacher exited with signal 9; restarting" in up_log
+    assert "labeling_ui exited with signal 9; restarting" in up_log
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
+
+
+def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
+    proc = subprocess.Popen(
+        up_command(tmp_path, "--teacher-rate", "1", "--max-restarts", "1"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    killed: set[int] = set()
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline:
+            pid = children(tmp_path).get("teacher")
+            if pid is not None and pid not in killed:
+                killed.add(pid)
+                os.kill(pid, signal.SIGKILL)
+            time.sleep(0.1)
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = proc.stderr.read().decode()
+    assert code == 1 and len(killed) == 2, err[-2000:]
+    assert "the teacher keeps exiting" in err
+    assert "giving up" in (tmp_path / "logs" / "up.log").read_text()
