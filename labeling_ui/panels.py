@@ -146,7 +146,7 @@ class Panels:
             self.mine_pick = gui.add_dropdown("Segment", options=["—"], initial_value="—")
             self.mine_inset = gui.add_image(np.full((SIZE // 2, SIZE // 2, 3), 255, np.uint8), label="its path")
             replay_mine = gui.add_button("Replay and relabel", icon=viser.Icon.REPEAT, hint="a new label revises yours")
-        replay_mine.on_click(lambda _: self.mine_pick.value != "—" and actions.relabel(self.mine_pick.value))
+        replay_mine.on_click(lambda _: self._relabel_picked(actions))
         self.mine_pick.on_update(lambda _: self._show_mine_inset())
         self._mine: list[MyLabel] = []
         self._mine_inset: Callable[[MyLabel], np.ndarray] | None = None
@@ -283,8 +283,12 @@ class Panels:
             options = [m.query_id for m in mine] or ["—"]
             keep = self.mine_pick.value if self.mine_pick.value in options else options[0]
             self.mine_pick.options = options
-            self.mine_pick.value = keep
+            self.mine_pick.value = keep  # type: ignore[misc]  # viser types .value read-only; it is settable
         self._show_mine_inset()
+
+    def _relabel_picked(self, actions: Actions) -> None:
+        if self.mine_pick.value != "—":
+            actions.relabel(self.mine_pick.value)
 
     def _show_mine_inset(self) -> None:
         picked = next((m for m in self._mine if m.query_id == self.mine_pick.value), None)

@@ -35,7 +35,7 @@ class TabScreen:
         self.scene = ReplayScene(client)
         self.player = Player(self._render, self.panels.show_frame, fps=fps)
         self._drawn = drawn
-        self._tasks: dict[tuple[str, str, object], Task | None] = {}
+        self._tasks: dict[int, Task | None] = {}  # run id → its stored rule
 
     def _render(self, position: float) -> None:
         self.scene.show(position)
@@ -101,4 +101,4 @@ class TabScreen:
 
     def set_replay_loop(self, loop: bool) -> None:
         self.player.loop = loop
-        self.panels.loop.value = loop
+        self.panels.loop.value = loop  # type: ignore[misc]  # viser types .value read-only; it is settable

@@ -339,7 +339,7 @@ class LabelerSession:
             self.player.set_speed(float(speed))
         if isinstance(loop, bool):
             self._loop = self.player.loop = loop
-            self.panels.loop.value = loop
+            self.panels.loop.value = loop  # type: ignore[misc]  # viser types .value read-only; it is settable
         self.panels.show_speed(self.player.speed)
         if self.state.phase == Phase.WAITING:
             self.panels.show_message("Looking for segments to label…")
@@ -456,7 +456,7 @@ class LabelerSession:
         self.player.fps = self.config.fps
         if self.player.loop != self._loop:  # the skills shown while waiting may have changed it
             self.player.loop = self._loop
-            self.panels.loop.value = self._loop
+            self.panels.loop.value = self._loop  # type: ignore[misc]  # viser types .value read-only; it is settable
         task = self.screen.task_of(run)
         info = SegmentInfo(
             query.query_id, run.id, run.env, run.task, run.method, query.epoch, query.session, query.start,

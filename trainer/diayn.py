@@ -51,7 +51,9 @@ class GaussianDiscriminator(SkillLatent):
                     nn.init.xavier_uniform_(module.weight)
                     nn.init.zeros_(module.bias)
         else:
-            nn.init.zeros_(self.log_std_net[-1].bias)  # σ = 1 at the start either way
+            last = self.log_std_net[-1]
+            assert isinstance(last, nn.Linear)
+            nn.init.zeros_(last.bias)  # σ = 1 at the start either way
 
     def log_std(self, obs: torch.Tensor) -> torch.Tensor:
         return self.log_std_net(self.encoder(obs)).clamp(min=math.log(DISCRIMINATOR_MIN_STD))
@@ -94,7 +96,8 @@ class Diayn(Metra):
     def update(self, b: TorchBatch, weight_fn: WeightFn | None) -> dict[str, torch.Tensor]:
         """One discriminator step, then SAC on r = log q(z | s′) + log D. `weight_fn` is ignored."""
         discrete = self.prior.discrete
-        log_std = self.phi.log_std(b.next_obs) if self.reference and not discrete else None
+        phi = self.phi
+        log_std = phi.log_std(b.next_obs) if isinstance(phi, GaussianDiscriminator) and not discrete else None
         log_q = skill_log_likelihood(self.phi(b.next_obs), b.skill, discrete, log_std)
         disc_loss = -log_q.mean()
         self.phi_opt.zero_grad(set_to_none=True)

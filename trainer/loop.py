@@ -52,7 +52,16 @@ from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsRepor
 from trainer.threads import resolve_threads
 
 ROLLOUT_STRIDE = 2  # evaluation rollouts go out every 2nd state (the stride travels with them)
-CURVE_KEYS = ("safe_coverage", "safe_ratio", "composite_coverage", "lambda", "alpha", "phi_loss", "qf_loss", "n_labels")
+CURVE_KEYS: tuple[str, ...] = (
+    "safe_coverage",
+    "safe_ratio",
+    "composite_coverage",
+    "lambda",
+    "alpha",
+    "phi_loss",
+    "qf_loss",
+    "n_labels",
+)
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
 
 
@@ -91,7 +100,9 @@ class Trainer:
         self.rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
         torch.manual_seed(cfg.seed)
-        vec = dict(episode_steps=cfg.episode_steps, layout_seed=cfg.seed, physics_threads=cfg.physics_threads or None)
+        vec: dict[str, Any] = dict(
+            episode_steps=cfg.episode_steps, layout_seed=cfg.seed, physics_threads=cfg.physics_threads or None
+        )
         self.env = VectorEnv(cfg.env, cfg.episodes_per_epoch, **vec)
         self.eval_env = VectorEnv(cfg.env, cfg.eval_trajectories, **vec)
         if cfg.obs_noise > 0:  # the noisy-observation ablation: the agent sees ŝ = (1 + x)·s
@@ -117,7 +128,8 @@ class Trainer:
         self.replay_log = ReplayLog(self.out / "replay", self.replay)
         task = self.task
 
-        def rule(xy: np.ndarray, pitch: np.ndarray) -> np.ndarray:  # g(s) per stored state, for the Oracle
+        def oracle_rule(xy: np.ndarray, pitch: np.ndarray) -> np.ndarray:  # g(s) per stored state, for the Oracle
+            assert task is not None, "only a rule method reads g(s), and it refuses a run without a rule"
             return task.classify(xy.reshape(-1, 2), pitch.reshape(-1)).reshape(pitch.shape)
 
         self.device_replay = DeviceReplay(
@@ -125,7 +137,7 @@ class Trainer:
             self.normalise,
             self.prior.reward_direction,
             self.device,
-            rule=rule if cfg.method == "oracle" else None,
+            rule=oracle_rule if self.method.guidance == "task" else None,
         )
         self.labelled = LabelledSets(self.normalise, self.device)
         self.feedback = feedback or OracleFeedback(self.task, cfg.noise_band, cfg.seed)
@@ -158,6 +170,7 @@ class Trainer:
             return dodont_weight(self.instruction, b.next_obs if at_next else b.obs, self.device)
         if guidance == "task":
             g = sampled.next_rule if at_next else sampled.rule
+            assert g is not None, "a rule method's batches carry g(s)"
             return lambda _s, _n: g
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:

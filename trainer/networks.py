@@ -148,5 +148,6 @@ def init_like_reference(phi: nn.Module, qf: TwinQ, policy: TanhGaussianPolicy) -
     for layer in linears[:-1]:
         _xavier(layer, normal=False)
     _xavier(linears[-1], normal=True)
-    for layer in qf.layers:
-        layer.xavier_normal_()
+    for ensemble in qf.layers:
+        assert isinstance(ensemble, EnsembleLinear)
+        ensemble.xavier_normal_()

@@ -75,8 +75,9 @@ def rollout(
             try:
                 for t in range(t_max):
                     for g, rows in enumerate(env.groups):
-                        if pending[g] is not None:
-                            pending[g].result()  # group g's state at t is in `obs`
+                        waiting = pending[g]
+                        if waiting is not None:
+                            waiting.result()  # group g's state at t is in `obs`
                         pending[g] = env.submit(env.step_rows, rows, act(rows, t), views[t + 1])
             finally:
                 for f in pending:

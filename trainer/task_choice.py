@@ -39,8 +39,8 @@ def choose_rule(cfg: Config) -> RunRule:
     if cfg.instruction:
         return RunRule(None, None, cfg.instruction)
     if cfg.task_file:
-        task = None if cfg.task in ("", INSTRUCTION_TASK) else cfg.task
-        return from_stored(load_task_file(cfg.task_file, task, cfg.env, layout_seed=cfg.seed))
+        name = None if cfg.task in ("", INSTRUCTION_TASK) else cfg.task
+        return from_stored(load_task_file(cfg.task_file, name, cfg.env, layout_seed=cfg.seed))
     task = get_task(cfg.task, cfg.env, layout_seed=cfg.seed)  # fails early with the list of task names
     try:
         return RunRule(task, to_definition(task, source="builtin"))

@@ -21,10 +21,11 @@ Per coder, `coder_alpha` restricts the observed disagreement to the pairs the co
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-Unit = Mapping[Hashable, int]  # coder → value, for one unit
+Unit = Mapping[Any, int]  # coder (any hashable) → value, for one unit
 
 
 def _values(units: Sequence[Unit]) -> list[int]:

@@ -16,7 +16,7 @@ import statistics
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,7 +113,7 @@ class Vote:
     gold_answer: int | None  # a gold copy's answer (None for the run's own queries)
 
 
-def labeler_stats(events: list[Any], votes: list[Vote], oracle: dict[int, int | None]) -> list[LabelerStats]:
+def labeler_stats(events: Sequence[Any], votes: list[Vote], oracle: dict[int, int | None]) -> list[LabelerStats]:
     """Per labeler: their current labels (revisions replace, undos withdraw), skips, pace, agreement
     with the oracle, their α against the other labelers, and their gold accuracy."""
     real = [v for v in votes if v.gold_answer is None]
@@ -168,9 +168,9 @@ def disagreements(votes: list[Vote], oracle: dict[int, int | None], segments: di
             Disagreement(
                 query_id=mine[0].query_id,
                 session=mine[0].session,
-                labels={v.name: v.value for v in mine},  # type: ignore[misc]
-                effective=mine[0].effective,  # type: ignore[arg-type]
-                oracle=rule,  # type: ignore[arg-type]
+                labels={v.name: v.value for v in mine},
+                effective=mine[0].effective,
+                oracle=rule,
                 xy=thinned(segments[pk].xy, MAX_LABELLED_POINTS // MAX_DISAGREEMENTS) if pk in segments else [],
             )
         )

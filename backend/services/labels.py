@@ -158,7 +158,7 @@ def _record(
         seconds=seconds,
         client_request_id=request_id,
         revises_event_id=revises,
-        created_at=now,  # type: ignore[arg-type]
+        created_at=now,
     )
 
 
@@ -223,7 +223,7 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
         change, status = {}, q.status
     if change:
         conn.execute(_SET_QUERY, {"pk": q.id, **change})
-    return LabelAck(event=event, label=label, query_status=status, duplicate=False)  # type: ignore[arg-type]
+    return LabelAck(event=event, label=label, query_status=status, duplicate=False)
 
 
 def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease_s: float) -> LabelAck:
@@ -252,7 +252,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         # the query returns to the pool (a lease another labeler holds now stands)
         keep = live_other or q.gold_of is not None  # a gold copy stays its labeler's
         status = "leased" if live_other else "pending"
-        owner, expires = (q.lease_owner_id, q.lease_expires_at) if keep else (None, None)
+        owner: int | None = q.lease_owner_id if keep else None
+        expires: float | None = q.lease_expires_at if keep else None
     else:
         raise Conflict(f"query '{body.query_id}' was labelled by someone else")
     event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)
@@ -266,7 +267,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     conn.execute(_SET_QUERY, {"pk": q.id, **change})
     if q.label is not None:
         _announce(conn, run_id, q, caller, "withdrawn", event.id, None, now)
-    return LabelAck(event=event, label=None, query_status=status, duplicate=False)  # type: ignore[arg-type]
+    return LabelAck(event=event, label=None, query_status=status, duplicate=False)
 
 
 def list_events(conn: Connection, run_id: int, after: int, limit: int) -> list[LabelEventRead]:

@@ -70,6 +70,8 @@ def run_status(report: StatusReport) -> tuple[RunStatus, str | None]:
     """The loop's words → the service's: "stopped" is a finished run with a message."""
     if report.status == "stopped":
         return "finished", "stopped by an operator"
+    if report.status == "interrupted":  # the loop does not send it (the run goes on after --resume)
+        return "paused", "the trainer process was told to end; --resume continues the run"
     return report.status, (report.error[:1000] if report.error else None)
 
 
