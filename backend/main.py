@@ -4,39 +4,21 @@ the routes under /api (and the dashboard at / when web_dir holds one)."""
 from __future__ import annotations
 
 import asyncio
-import json
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi import FastAPI
 from pydantic import BaseModel
-from sqlalchemy.exc import IntegrityError
 
-from backend import __version__, migrate
+from backend import __version__, errors, migrate
 from backend.db import Database
 from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
-from backend.services.errors import ServiceError
 from backend.services.events import EventHub
 from backend.settings import Settings
 from collie.schemas import SessionPost
-
-
-def _plain_error(error: dict[str, Any]) -> dict[str, Any]:
-    """A validation error fit to send back: the offending input only when small and plain JSON
-    (it may hold NaN, or be a whole session)."""
-    plain = {"type": error.get("type"), "loc": list(error.get("loc", ())), "msg": error.get("msg")}
-    try:
-        text = json.dumps(error.get("input"), allow_nan=False)
-    except (TypeError, ValueError):
-        text = None
-    if text is not None and len(text) <= 200:
-        plain["input"] = error.get("input")
-    return plain
 
 
 def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> None:
@@ -95,18 +77,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")
 
-    @app.exception_handler(ServiceError)
-    async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
-        return JSONResponse({"detail": exc.detail}, status_code=exc.status)
-
-    @app.exception_handler(RequestValidationError)
-    async def _invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return JSONResponse({"detail": [_plain_error(e) for e in exc.errors()[:20]]}, status_code=422)
-
-    @app.exception_handler(IntegrityError)
-    async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:
-        # A race lost against a concurrent writer (e.g. the same client_request_id twice at once).
-        return JSONResponse({"detail": f"conflicting write: {exc.orig}"}, status_code=409)
+    errors.install(app)
 
     large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
     _document_raw_bodies(app, (SessionPost,))

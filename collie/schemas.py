@@ -66,8 +66,12 @@ def _width(rows: list[list[float]], name: str) -> int:
 
 
 def _bounded_json(value: dict[str, Any], limit: int, name: str) -> dict[str, Any]:
+    """Free JSON (a run's config, a segment's extra): finite, valid UTF-8 (no lone surrogate from a
+    \\u escape, which would be stored and then break every read of it), at most `limit` bytes."""
     try:
-        size = len(json.dumps(value, allow_nan=False))
+        size = len(json.dumps(value, allow_nan=False, ensure_ascii=False).encode("utf-8"))
+    except UnicodeEncodeError:
+        raise ValueError(f"{name}: holds a lone UTF-16 surrogate (text must be valid Unicode)") from None
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: not plain finite JSON ({exc})") from exc
     if size > limit:
