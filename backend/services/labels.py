@@ -6,7 +6,8 @@ of its latest `label` event, unless an `undo` came after it (then it has none). 
 - label: the holder of the live lease; the query's last labeler again (a revision); or the last
   lease holder after the lease ran out, as long as nobody else has claimed the query since;
 - undo: the labeler of the effective label (the query comes back to them under a fresh lease, to
-  relabel at once) or an operator (the query returns to the pool);
+  relabel at once, within MAX_HOLD: their last preloaded query goes back to the pool) or an
+  operator (the query returns to the pool);
 - every submission is idempotent by (labeler, client_request_id): a repeat returns the first answer.
 """
 
@@ -19,7 +20,7 @@ from typing import Any
 from sqlalchemy import Connection, bindparam, insert, select, update
 
 from backend.models import LabelEvent, Principal, Query, Run
-from backend.services import events, runs
+from backend.services import events, leases, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import FINISHED, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, UndoRequest
@@ -205,6 +206,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     # Your own label comes back to you under a fresh lease, to relabel at once; an operator's undo
     # returns the query to the pool.
     status, owner, expires = ("leased", caller.id, now + lease_s) if own else ("pending", None, None)
+    if own:  # it counts against MAX_HOLD like a claimed one: the preloaded query goes back to the pool
+        leases.make_room(conn, run_id, caller, now)
     change = {
         "status": status,
         "lease_owner_id": owner,
