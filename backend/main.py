@@ -4,6 +4,7 @@ the routes under /api (and the dashboard at / when web_dir holds one)."""
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -19,6 +20,8 @@ from backend.services import auth
 from backend.services.events import EventHub
 from backend.settings import Settings
 from collie.schemas import SessionPost
+
+log = logging.getLogger("collie.service")
 
 
 def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> None:
@@ -47,8 +50,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     with db.write() as conn:
         for role in auth.ROLES:
             token = getattr(settings, f"{role}_token")
-            if token is not None:
-                auth.bootstrap(conn, role, token.get_secret_value())
+            if token is not None and not auth.bootstrap(conn, role, token.get_secret_value()):
+                log.warning("the built-in %s principal is revoked: its token stays refused", role)
 
     async def checkpoints() -> None:
         while True:

@@ -451,9 +451,21 @@ class RolloutsRead(RolloutsIn):
 # ---------------------------------------------------------------- people and health
 
 
+MAX_SCOPED_RUNS = 1000
+
+
 class LabelerCreate(Wire):
     name: Name
     role: Role = "labeler"
+    runs: list[Annotated[int, Field(ge=1, le=MAX_INT)]] | None = Field(
+        default=None, max_length=MAX_SCOPED_RUNS, description="a labeler limited to these runs; null: every run"
+    )
+
+    @model_validator(mode="after")
+    def _runs_for_labelers(self) -> LabelerCreate:
+        if self.runs is not None and self.role != "labeler":
+            raise ValueError(f"only a labeler token can be limited to runs, not a {self.role} token")
+        return self
 
 
 class LabelerRead(Wire):
@@ -463,6 +475,7 @@ class LabelerRead(Wire):
     role: Role
     created_at: datetime
     revoked: bool
+    runs: list[int] | None = Field(default=None, description="the runs a labeler is limited to; null: every run")
 
 
 class Me(Wire):

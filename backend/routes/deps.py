@@ -10,8 +10,10 @@ from fastapi import Depends, HTTPException, Path, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import BaseModel, ValidationError
+from sqlalchemy import select
 
 from backend.db import Database
+from backend.models import Run
 from backend.services.auth import Caller, TokenCache
 from backend.services.events import EventHub
 from backend.settings import Settings
@@ -73,8 +75,27 @@ def authenticate(request: Request, token: str | None) -> Caller:
     return caller
 
 
+def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> None:
+    """The run in the path must be in the caller's scope: a labeler limited to runs sees only
+    those; on a trainer's own routes (sessions, status, telemetry, …) a trainer acts only on the
+    runs it created. An unknown run is left to the route (404)."""
+    raw = request.path_params.get("run_id")
+    if raw is None or not str(raw).isdigit() or caller.role == "operator":
+        return
+    run_id = int(raw)
+    if not caller.may_see(run_id):
+        raise HTTPException(403, f"this token is limited to other runs than run {run_id}")
+    if caller.role == "trainer" and roles == TRAINER:
+        db: Database = request.app.state.db
+        with db.read() as conn:
+            creator = conn.execute(select(Run.created_by).where(Run.id == run_id)).scalar()
+        if creator is not None and creator != caller.id:
+            raise HTTPException(403, f"run {run_id} was created by another trainer")
+
+
 def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
-    """Dependency: the caller, if their role is one of `roles` (operators may do everything)."""
+    """Dependency: the caller, if their role is one of `roles` (operators may do everything) and the
+    run in the path is in their scope."""
 
     async def dependency(
         request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)]
@@ -82,6 +103,7 @@ def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
         caller = authenticate(request, credentials.credentials if credentials else None)
         if caller.role != "operator" and caller.role not in roles:
             raise HTTPException(403, f"a {caller.role} token may not do this")
+        check_scope(request, caller, roles)
         return caller
 
     return dependency

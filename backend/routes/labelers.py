@@ -20,7 +20,7 @@ async def me(caller: AnyCaller) -> Me:
 @router.post("/labelers", status_code=201)
 async def create_labeler(body: LabelerCreate, _: OperatorCaller, db: DB) -> LabelerCreated:
     with db.write() as conn:
-        read, token = auth.create_principal(conn, body.name, body.role)
+        read, token = auth.create_principal(conn, body.name, body.role, body.runs)
     return LabelerCreated(**read.model_dump(), token=token)
 
 

@@ -21,14 +21,14 @@ async def create_run(body: RunCreate, caller: TrainerCaller, db: DB) -> RunRead:
 
 @router.get("")
 def list_runs(
-    _: AnyCaller,
+    caller: AnyCaller,
     db: DB,
     status: RunStatus | None = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
 ) -> list[RunRead]:
     with db.read() as conn:
-        return runs.list_runs(conn, status, limit, offset)
+        return runs.list_runs(conn, status, limit, offset, caller.runs)
 
 
 @router.get("/{run_id}")

@@ -17,7 +17,7 @@ from fastapi import APIRouter, Depends, Header, Query, Request
 from fastapi.responses import StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials
 
-from backend.routes.deps import DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer
+from backend.routes.deps import ANY, DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer, check_scope
 from backend.services import events
 from backend.services.auth import Caller
 from collie.schemas import MAX_INT, EventPage
@@ -56,7 +56,9 @@ async def _stream_caller(
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
     access_token: Annotated[str | None, Query(description="for EventSource, which cannot send headers")] = None,
 ) -> Caller:
-    return authenticate(request, credentials.credentials if credentials else access_token)  # every role may read
+    caller = authenticate(request, credentials.credentials if credentials else access_token)
+    check_scope(request, caller, ANY)  # every role may read, within its scope
+    return caller
 
 
 @router.get(
