@@ -14,6 +14,7 @@ from pydantic import BaseModel
 
 from backend import __version__, errors, migrate
 from backend.db import Database
+from backend.headers import SecurityHeaders
 from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
@@ -85,5 +86,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
     _document_raw_bodies(app, (SessionPost,))
     app.add_middleware(BodyLimit, default_bytes=settings.max_body_bytes, by_suffix=large)
+    app.add_middleware(SecurityHeaders)  # outermost: also on the 413s BodyLimit answers itself
     web.install(app, settings.web_dir)  # the operators' dashboard: /api/dashboard, and web/ at /
     return app
