@@ -46,7 +46,12 @@ def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> N
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     hub = EventHub()
-    db = Database(settings.database_url, publisher=hub.publish, background_checkpoints=True)
+    db = Database(
+        settings.database_url,
+        publisher=hub.publish,
+        background_checkpoints=True,
+        synchronous=settings.sqlite_synchronous,
+    )
     migrate.upgrade(db.engine)
     with db.write() as conn:
         for role in auth.ROLES:
