@@ -20,9 +20,33 @@ from backend.routes import control, health, labelers, labels, queries, runs, str
 from backend.services import auth
 from backend.services.events import EventHub
 from backend.settings import Settings
-from collie.schemas import SessionPost
+from collie.schemas import (
+    FeedbackPolicy,
+    LabelerCreate,
+    LabelSubmit,
+    MetricsIn,
+    RetireRequest,
+    RolloutsIn,
+    RunCreate,
+    SessionPost,
+    StatusUpdate,
+    UndoRequest,
+)
 
 log = logging.getLogger("collie.service")
+# Every request body is read by the route itself (deps.parse_body), after its caller is checked.
+RAW_BODIES = (
+    SessionPost,
+    RunCreate,
+    StatusUpdate,
+    FeedbackPolicy,
+    RetireRequest,
+    LabelSubmit,
+    UndoRequest,
+    MetricsIn,
+    RolloutsIn,
+    LabelerCreate,
+)
 
 
 def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> None:
@@ -89,7 +113,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(app)
 
     large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
-    _document_raw_bodies(app, (SessionPost,))
+    _document_raw_bodies(app, RAW_BODIES)
     app.add_middleware(BodyLimit, default_bytes=settings.max_body_bytes, by_suffix=large)
     app.add_middleware(SecurityHeaders)  # outermost: also on the 413s BodyLimit answers itself
     web.install(app, settings.web_dir)  # the operators' dashboard: /api/dashboard, and web/ at /

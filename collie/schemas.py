@@ -49,6 +49,16 @@ MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
 MAX_QPOS_WIDTH = 128  # humanoid's nq is 28
 MAX_METRICS = 256
+# One segment's bounds (EnvDims allows no more): frames per segment, values per frame, and the
+# context path's points (a whole episode's x-y; every claim of the query carries it).
+MAX_FRAMES = 10_000
+MAX_FRAME_WIDTH = 100_000
+MAX_PATH_POINTS = 10_001
+MAX_SKILL_DIM = 1_000
+MAX_SESSION_QUERIES = 10_000  # the service's own limit (max_queries_per_session) is lower
+FrameRows = Annotated[
+    list[Annotated[list[FiniteFloat], Field(max_length=MAX_FRAME_WIDTH)]], Field(max_length=MAX_FRAMES)
+]
 
 
 class Wire(BaseModel):
@@ -183,14 +193,18 @@ class QueryFrames(Wire):
     """What a labeler replays and what the trainer rebuilds its labelled sets from (H frames).
     Image observations travel packed in obs_packed (obs is then empty)."""
 
-    skill: Vector
-    obs: Matrix = Field(default_factory=list)
+    skill: Vector = Field(max_length=MAX_SKILL_DIM)
+    obs: FrameRows = Field(default_factory=list)
     obs_packed: PackedFrames | None = Field(default=None, description="image observations (obs empty)")
-    xy: Matrix
-    pitch: list[FiniteFloat | None] | None = Field(default=None, description="null where undefined")
-    qpos: Matrix
-    qvel: Matrix
-    path_xy: Matrix | None = Field(default=None, description="the whole trajectory's x-y, for context")
+    xy: FrameRows
+    pitch: list[FiniteFloat | None] | None = Field(
+        default=None, max_length=MAX_FRAMES, description="null where undefined"
+    )
+    qpos: FrameRows
+    qvel: FrameRows
+    path_xy: list[Annotated[list[FiniteFloat], Field(max_length=2)]] | None = Field(
+        default=None, max_length=MAX_PATH_POINTS, description="the whole trajectory's x-y, for context"
+    )
 
     @model_validator(mode="after")
     def _shapes(self) -> QueryFrames:
@@ -243,7 +257,7 @@ class SessionPost(Wire):
 
     session: Count
     epoch: Count
-    queries: list[QueryIn] = Field(min_length=1)
+    queries: list[QueryIn] = Field(min_length=1, max_length=MAX_SESSION_QUERIES)
 
     @model_validator(mode="after")
     def _unique_ids(self) -> SessionPost:
@@ -415,7 +429,7 @@ class MetricsRead(MetricsIn):
 
 
 class Rollout(Wire):
-    skill: Vector
+    skill: Vector = Field(max_length=MAX_SKILL_DIM)
     xy: Matrix = Field(max_length=MAX_ROLLOUT_POINTS)
     pitch: list[FiniteFloat | None] | None = Field(default=None, max_length=MAX_ROLLOUT_POINTS)
     qpos: Matrix | None = Field(

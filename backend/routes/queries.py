@@ -37,9 +37,10 @@ async def post_session(
         return queries.post_session(conn, run_id, body, settings.max_queries_per_session)
 
 
-@router.post("/retire")
-async def retire(run_id: RunId, body: RetireRequest, _: TrainerCaller, db: DB) -> Retired:
+@router.post("/retire", openapi_extra=json_body(RetireRequest))
+async def retire(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> Retired:
     """Close unlabelled queries the trainer will never use (a restarted trainer's leftovers)."""
+    body = await parse_body(request, RetireRequest)
     with db.write() as conn:
         return queries.retire(conn, run_id, body.query_ids)
 
