@@ -19,6 +19,7 @@ from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
 from backend.services.events import EventHub
+from backend.services.fanout import StreamFeed
 from backend.settings import Settings
 from collie.schemas import (
     FeedbackPolicy,
@@ -91,9 +92,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         hub.bind(asyncio.get_running_loop())
+        app.state.feed = StreamFeed(db, hub, settings.stream_poll_s)
+        app.state.feed.start()
         checkpointer = asyncio.create_task(checkpoints())
         yield
         checkpointer.cancel()
+        app.state.feed.stop()
         db.checkpoint()
         db.dispose()
 
