@@ -33,7 +33,7 @@ FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
 QueryId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
 RequestId = Annotated[str, Field(min_length=1, max_length=128, pattern=r"^[\x21-\x7e]+$")]
-MAX_INT = 2**53  # ints stay exact in JSON numbers and fit every database's integer column
+MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
 Matrix = list[list[FiniteFloat]]

@@ -17,6 +17,13 @@ from collie.client import CollieClient
 
 from .conftest import TOKENS, make_run_spec, make_session
 
+
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
 POISONS: tuple[bytes, ...] = (
     b'"\\ud800"',  # a lone high surrogate, as a JSON escape
     b'"a\\udfffb"',  # a lone low surrogate inside text
@@ -26,9 +33,13 @@ POISONS: tuple[bytes, ...] = (
     b"-Infinity",
     b"1e999999",
     b"9" * 5000,  # an integer far beyond any column
+    b"4294967296",  # beyond a 32-bit column (PostgreSQL's INTEGER)
+    b'"a\\u0000b"',  # NUL, which PostgreSQL text cannot hold
     b"[" * 5000 + b"]" * 5000,  # deep nesting
     b'{"\\ud800": 1}',  # a surrogate as an object key
 )
+
+
 PATH_POISONS = ("%ED%A0%80", "%FF%FE", "%00", "9" * 400, "..%2F..%2Fetc")
 PLACEHOLDER = "__POISON__"
 

@@ -13,6 +13,12 @@ from collie.schemas import MAX_HOLD, RunRead
 from .conftest import make_run_spec, make_session
 
 
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
 def held_by(client: CollieClient, run_id: int, name: str) -> list[str]:
     return [q.query_id for q in client.queries(run_id, status="leased") if q.lease_owner == name]
 
@@ -20,6 +26,7 @@ def held_by(client: CollieClient, run_id: int, name: str) -> list[str]:
 def test_a_released_query_cannot_be_labelled_by_its_former_holder(
     new_labeler: Callable[[str], CollieClient], run: RunRead
 ) -> None:
+
     holder = new_labeler("releaser")
     claim = holder.claim(run.id)
     assert claim is not None

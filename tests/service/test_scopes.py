@@ -17,6 +17,12 @@ from collie.schemas import MetricsIn, RolloutsIn, RunRead
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
 
 
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
 @pytest.fixture
 def other_trainer(live: BackgroundServer, operator: CollieClient) -> Callable[[str], CollieClient]:
     def make(name: str) -> CollieClient:
@@ -28,6 +34,7 @@ def other_trainer(live: BackgroundServer, operator: CollieClient) -> Callable[[s
 def test_a_trainer_acts_only_on_its_own_runs(
     trainer: CollieClient, other_trainer: Callable[[str], CollieClient], run: RunRead
 ) -> None:
+
     intruder = other_trainer("trainer-b")
     before = trainer.run(run.id)
     for call in (

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 from sqlalchemy import event
 
 from backend.main import create_app
@@ -17,6 +18,12 @@ from backend.server import BackgroundServer
 from collie.client import CollieClient
 
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
+
+
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
 
 
 class Reader(threading.Thread):
