@@ -13,6 +13,7 @@ from fastapi import FastAPI
 from pydantic import BaseModel
 
 from backend import __version__, errors, migrate
+from backend.bodies import SessionParser
 from backend.db import Database
 from backend.headers import SecurityHeaders
 from backend.limits import BodyLimit
@@ -94,10 +95,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         hub.bind(asyncio.get_running_loop())
         app.state.feed = StreamFeed(db, hub, settings.stream_poll_s)
         app.state.feed.start()
+        app.state.session_parser.start()
         checkpointer = asyncio.create_task(checkpoints())
         yield
         checkpointer.cancel()
         app.state.feed.stop()
+        app.state.session_parser.stop()
         db.checkpoint()
         db.dispose()
 
@@ -110,6 +113,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.db = db
     app.state.hub = hub
+    app.state.session_parser = SessionParser()
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")

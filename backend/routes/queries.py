@@ -6,7 +6,17 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response
 
-from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller, json_body, parse_body
+from backend.routes.deps import (
+    DB,
+    OFF_LOOP_BYTES,
+    AnyCaller,
+    LabelerCaller,
+    RunId,
+    SettingsDep,
+    TrainerCaller,
+    json_body,
+    parse_body,
+)
 from backend.services import leases, queries
 from collie.schemas import (
     MAX_HOLD,
@@ -32,7 +42,11 @@ async def post_session(
     run_id: RunId, request: Request, _: TrainerCaller, db: DB, settings: SettingsDep
 ) -> SessionPosted:
     """A feedback session's segments in one call; ids already stored are kept as they were."""
-    body = await parse_body(request, SessionPost)
+    declared = request.headers.get("content-length", "")
+    if declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
+        body = await parse_body(request, SessionPost)
+    else:  # a big one: validated in the worker process, the loop and its GIL stay free
+        body = await request.app.state.session_parser.parse(request)
     with db.write() as conn:
         return queries.post_session(conn, run_id, body, settings.max_queries_per_session)
 

@@ -3,12 +3,14 @@ buffered), and the schemas bound what one segment may carry."""
 
 from __future__ import annotations
 
+import json
 import socket
 from urllib.parse import urlsplit
 
 import httpx
 import pytest
 
+from backend.routes.deps import OFF_LOOP_BYTES
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.schemas import MAX_FRAMES, MAX_PATH_POINTS
@@ -86,3 +88,26 @@ def test_segment_arrays_are_bounded(
     assert response.status_code == 422 and words in response.text and "at most" in response.text, response.text
     with pytest.raises(ApiError):
         trainer.query(created.id, "0-0")
+
+
+def test_a_big_session_is_parsed_in_the_worker_like_a_small_one(live: BackgroundServer, trainer: CollieClient) -> None:
+    """Above OFF_LOOP_BYTES the worker process validates the body: the same answers, the same rows."""
+    created = trainer.create_run(make_run_spec())
+    session = make_session(0, 600)
+    assert len(session.model_dump_json()) > OFF_LOOP_BYTES
+    posted = trainer.post_session(created.id, session)
+    assert len(posted.created) == 600 and posted.existing == []
+    stored = trainer.query(created.id, "0-599")
+    sent = session.queries[599]
+    assert (stored.xy, stored.qpos, stored.path_xy, stored.start) == (sent.xy, sent.qpos, sent.path_xy, sent.start)
+    again = trainer.post_session(created.id, session)  # idempotent, through the worker too
+    assert again.created == [] and len(again.existing) == 600
+
+    bad = make_session(1, 600).model_dump(mode="json")
+    bad["queries"][599]["obs"][0][0] = "__BAD__"
+    text = json.dumps(bad).replace('"__BAD__"', "NaN")
+    headers = {"Authorization": f"Bearer {TOKENS['trainer']}", "Content-Type": "application/json"}
+    response = httpx.post(f"{live.url}/api/runs/{created.id}/sessions", content=text, headers=headers, timeout=60)
+    assert response.status_code == 422 and "finite" in response.text
+    assert "599" in response.text  # the location of the bad value is named
+    assert trainer.run(created.id).queue.pending == 600  # nothing of the bad session stored
