@@ -87,27 +87,21 @@ def prepare_session(body_path: str) -> tuple[str, Any]:
     return "ok", out
 
 
-def _warm() -> None:
-    pass
-
-
 class SessionParser:
-    """One worker process (spawned: the service's threads make fork unsafe), started at service start."""
+    """One worker process (spawned: the service's threads make fork unsafe), started with the
+    first big session (a service that never gets one never starts it) and kept."""
 
     def __init__(self, spool_dir: Path | None = None) -> None:
         self.spool_dir = spool_dir
         self._pool: ProcessPoolExecutor | None = None
-
-    def start(self) -> None:
-        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
-        self._pool.submit(_warm)  # import in the background now, not on the first big session
 
     def stop(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
     async def parse(self, request: Request) -> SessionPost:
-        assert self._pool is not None, "SessionParser.start() was not called"
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
         fd, body_path = tempfile.mkstemp(prefix="collie-body-", suffix=".json", dir=self.spool_dir)
         out: str | None = None
         try:

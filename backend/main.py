@@ -95,7 +95,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         hub.bind(asyncio.get_running_loop())
         app.state.feed = StreamFeed(db, hub, settings.stream_poll_s)
         app.state.feed.start()
-        app.state.session_parser.start()
         checkpointer = asyncio.create_task(checkpoints())
         yield
         checkpointer.cancel()
