@@ -383,10 +383,11 @@ def with_service(args: argparse.Namespace, tmp: Path, env: dict[str, str], base_
         info = json.loads(tokens_file.read_text())
         api, tokens = info["api"], info["tokens"]
         wait_up(f"{api}/api/health")
+        big = big_body(api, tokens, service.pid, args.big_mib)  # first: a fresh process has no freed memory to reuse
         figures = measure(
             args, api, int(api.rsplit(":", 1)[1]), tokens, base_port, {"collie": service.pid, "baseline": base_pid}
         )
-        figures["big"] = big_body(api, tokens, service.pid, args.big_mib)
+        figures["big"] = big
         figures["streams"] = idle_streams(api, tokens, service.pid, args.streams)
         return figures
     finally:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
+import anyio
 from fastapi import APIRouter, Query, Request, Response
 
+from backend.db import Database
 from backend.routes.deps import (
     DB,
     OFF_LOOP_BYTES,
@@ -45,10 +47,15 @@ async def post_session(
     declared = request.headers.get("content-length", "")
     if declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
         body = await parse_body(request, SessionPost)
-    else:  # a big one: validated in the worker process, the loop and its GIL stay free
+    else:  # a big one: validated in the worker process, stored from a thread (SQLite frees the GIL)
         body = await request.app.state.session_parser.parse(request)
+        return await anyio.to_thread.run_sync(_store, db, run_id, body, settings.max_queries_per_session)
+    return _store(db, run_id, body, settings.max_queries_per_session)
+
+
+def _store(db: Database, run_id: int, body: SessionPost, max_queries: int) -> SessionPosted:
     with db.write() as conn:
-        return queries.post_session(conn, run_id, body, settings.max_queries_per_session)
+        return queries.post_session(conn, run_id, body, max_queries)
 
 
 @router.post("/retire", openapi_extra=json_body(RetireRequest))
