@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 TORCH_SPEC ?= torch==2.13.0
 STAMP := $(VENV)/.stamp-install
 # Debian packages: Chromium for the browser tests, EGL (Mesa) for MuJoCo's offscreen rendering.
-SYSTEM_PACKAGES := chromium libegl1 libegl-mesa0 libgl1 libgles2 libosmesa6 fonts-liberation
+SYSTEM_PACKAGES := chromium libegl1 libegl-mesa0 libgl1 libgles2 libosmesa6 fonts-liberation postgresql
 SYS_STAMP := $(VENV)/.stamp-system
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl

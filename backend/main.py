@@ -4,39 +4,55 @@ the routes under /api (and the dashboard at / when web_dir holds one)."""
 from __future__ import annotations
 
 import asyncio
-import json
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi import FastAPI
 from pydantic import BaseModel
-from sqlalchemy.exc import IntegrityError
 
-from backend import __version__, migrate
+from backend import __version__, errors, migrate
+from backend.bodies import SessionParser
 from backend.db import Database
+from backend.headers import SecurityHeaders
 from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
-from backend.services.errors import ServiceError
 from backend.services.events import EventHub
+from backend.services.fanout import StreamFeed
 from backend.settings import Settings
-from collie.schemas import SessionPost
+from collie.schemas import (
+    FeedbackPolicy,
+    LabelerCreate,
+    LabelSubmit,
+    MetricsIn,
+    QualitySettings,
+    RetireRequest,
+    RolloutsIn,
+    RunCreate,
+    RunInstructions,
+    SessionPost,
+    StatusUpdate,
+    UndoRequest,
+)
 
-
-def _plain_error(error: dict[str, Any]) -> dict[str, Any]:
-    """A validation error fit to send back: the offending input only when small and plain JSON
-    (it may hold NaN, or be a whole session)."""
-    plain = {"type": error.get("type"), "loc": list(error.get("loc", ())), "msg": error.get("msg")}
-    try:
-        text = json.dumps(error.get("input"), allow_nan=False)
-    except (TypeError, ValueError):
-        text = None
-    if text is not None and len(text) <= 200:
-        plain["input"] = error.get("input")
-    return plain
+log = logging.getLogger("collie.service")
+# Every request body is read by the route itself (deps.parse_body), after its caller is checked.
+RAW_BODIES = (
+    SessionPost,
+    RunCreate,
+    StatusUpdate,
+    FeedbackPolicy,
+    RetireRequest,
+    LabelSubmit,
+    UndoRequest,
+    MetricsIn,
+    RolloutsIn,
+    LabelerCreate,
+    QualitySettings,
+    RunInstructions,
+)
 
 
 def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> None:
@@ -61,13 +77,18 @@ def _document_raw_bodies(app: FastAPI, models: tuple[type[BaseModel], ...]) -> N
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     hub = EventHub()
-    db = Database(settings.database_url, publisher=hub.publish, background_checkpoints=True)
+    db = Database(
+        settings.database_url,
+        publisher=hub.publish,
+        background_checkpoints=True,
+        synchronous=settings.sqlite_synchronous,
+    )
     migrate.upgrade(db.engine)
     with db.write() as conn:
         for role in auth.ROLES:
             token = getattr(settings, f"{role}_token")
-            if token is not None:
-                auth.bootstrap(conn, role, token.get_secret_value())
+            if token is not None and not auth.bootstrap(conn, role, token.get_secret_value()):
+                log.warning("the built-in %s principal is revoked: its token stays refused", role)
 
     async def checkpoints() -> None:
         while True:
@@ -77,9 +98,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         hub.bind(asyncio.get_running_loop())
+        app.state.feed = StreamFeed(db, hub, settings.stream_poll_s)
+        app.state.feed.start()
         checkpointer = asyncio.create_task(checkpoints())
         yield
         checkpointer.cancel()
+        app.state.feed.stop()
+        app.state.session_parser.stop()
         db.checkpoint()
         db.dispose()
 
@@ -92,25 +117,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.db = db
     app.state.hub = hub
+    app.state.session_parser = SessionParser()
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")
 
-    @app.exception_handler(ServiceError)
-    async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
-        return JSONResponse({"detail": exc.detail}, status_code=exc.status)
-
-    @app.exception_handler(RequestValidationError)
-    async def _invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return JSONResponse({"detail": [_plain_error(e) for e in exc.errors()[:20]]}, status_code=422)
-
-    @app.exception_handler(IntegrityError)
-    async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:
-        # A race lost against a concurrent writer (e.g. the same client_request_id twice at once).
-        return JSONResponse({"detail": f"conflicting write: {exc.orig}"}, status_code=409)
+    errors.install(app)
 
     large = {"sessions": settings.max_session_bytes, "rollouts": settings.max_rollouts_bytes}
-    _document_raw_bodies(app, (SessionPost,))
+    _document_raw_bodies(app, RAW_BODIES)
     app.add_middleware(BodyLimit, default_bytes=settings.max_body_bytes, by_suffix=large)
+    app.add_middleware(SecurityHeaders)  # outermost: also on the 413s BodyLimit answers itself
     web.install(app, settings.web_dir)  # the operators' dashboard: /api/dashboard, and web/ at /
     return app

@@ -15,7 +15,8 @@ class Base(DeclarativeBase):
 
 
 class Principal(Base):
-    """Anyone holding a token: operators, trainers and labelers (humans or the oracle teacher)."""
+    """Anyone holding a token: operators, trainers and labelers (humans or the oracle teacher). A
+    revoked principal stays revoked (revoked_at is never cleared)."""
 
     __tablename__ = "principals"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
@@ -24,6 +25,7 @@ class Principal(Base):
     token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
     created_at: Mapped[float] = mapped_column(Float)
     revoked_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    runs: Mapped[list[int] | None] = mapped_column(JSON, nullable=True)  # a labeler limited to these runs
 
 
 class Run(Base):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -23,5 +24,9 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=1024 * 1024, description="body limit for every other request")
     max_queries_per_session: int = 4096
     token_cache_s: float = Field(default=5.0, description="how long a resolved token is trusted without a read")
+    max_streams_per_token: int = Field(default=32, ge=1, description="open SSE streams one token may hold")
     stream_poll_s: float = Field(default=1.0, description="fallback re-read for events written by other processes")
+    sqlite_synchronous: Literal["NORMAL", "FULL"] = Field(
+        default="FULL", description="FULL: an acknowledged label survives a power cut (NORMAL: a process crash)"
+    )
     web_dir: Path | None = Field(default=None, description="static dashboard to serve at / when present")

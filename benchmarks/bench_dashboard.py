@@ -139,7 +139,7 @@ def rendered_at(page, selector: str, attribute: str, value: str) -> float:
 
 
 def live_latency(browser, api: str, trainer: CollieClient, run_id: int, rng: np.random.Generator) -> dict:
-    page = browser.new_page(viewport={"width": 1400, "height": 1400})
+    page = browser.new_page(bypass_csp=True, viewport={"width": 1400, "height": 1400})
     page.goto(f"{api}/?token={TOKENS['operator']}#run={run_id}")
     page.wait_for_function("document.querySelector('#map').dataset.renderedAt", timeout=60_000)
     times: dict[str, list[float]] = {"metrics": [], "rollouts": []}
@@ -161,7 +161,7 @@ def live_latency(browser, api: str, trainer: CollieClient, run_id: int, rng: np.
 def cold_load(browser, api: str, run_id: int) -> list[float]:
     loads = []
     for _ in range(5):
-        context = browser.new_context(viewport={"width": 1400, "height": 1400})
+        context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1400})
         page = context.new_page()
         page.goto(f"{api}/?token={TOKENS['operator']}#run={run_id}")
         page.wait_for_function(

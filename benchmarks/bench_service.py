@@ -9,8 +9,15 @@ Measured, each in its own server process (uvicorn, SQLite file in WAL mode):
   connection; claim, then label), paced at an offered total rate: achieved labels/s, p50/p99;
 - collie, service start: import and app construction (migrations included), fresh interpreter;
 - collie, label submitted → applied by a trainer-side reader of the run's stream (the long poll of
-  trainer/feedback/http.py, in its own process): p50/p99.
-Targets: ≥ 1000 labels/s with p99 ≤ 20 ms; stream p99 ≤ 50 ms; 1000 queries claimable ≤ 1 s.
+  trainer/feedback/http.py, in its own process): p50/p99;
+- collie, a session body at the size limit (--big-mib, default the 128 MiB limit): the server's
+  peak RSS growth over the body's size, and /api/health p99 (pinged every 10 ms) while it is parsed;
+- collie, 1000 idle SSE streams: the server's CPU, as a share of one core.
+Each is measured on SQLite with synchronous=FULL (the default: an acknowledged label survives a
+power cut), on SQLite with NORMAL (the cost of FULL) and on a real PostgreSQL server (Debian's
+postgresql 15, started by the bench; --no-postgres skips it).
+Targets: ≥ 1000 labels/s with p99 ≤ 20 ms; stream p99 ≤ 50 ms; 1000 queries claimable ≤ 1 s; body at
+the limit: RSS growth ≤ 2× its size, health p99 ≤ 100 ms; 1000 idle streams ≤ 5 % of a core.
 Bounded: fixed durations and counts; everything runs on 127.0.0.1.
 JSON (runs/bench/service.json): baseline_rps, baseline_p50_ms, baseline_p99_ms, label_rps, label_p50_ms,
 label_p99_ms, claim_p99_ms, stream_p50_ms, stream_p99_ms, post_1000_s, stream_missing,
@@ -320,6 +327,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rate", type=float, default=1000.0, help="offered labels (and inserts) per second")
     parser.add_argument("--seconds", type=float, default=4.0, help="length of each paced phase")
+    parser.add_argument("--big-mib", type=float, default=128.0, help="size of the large session body (MiB)")
+    parser.add_argument("--streams", type=int, default=1000, help="idle SSE streams to hold open")
+    parser.add_argument("--no-postgres", action="store_true", help="SQLite only")
     parser.add_argument("--baseline-server", nargs=2, metavar=("PORT", "DB"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.baseline_server:
@@ -327,44 +337,67 @@ def main() -> int:
         return 0
 
     tmp = Path(tempfile.mkdtemp(prefix="collie-bench-"))
-    tokens_file = tmp / "tokens.json"
     base_port = free_port()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     baseline = subprocess.Popen(
         [sys.executable, __file__, "--baseline-server", str(base_port), str(tmp / "base.db")], env=env
     )
-    service = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "collie.cli",
-            "serve",
-            "--port",
-            "0",
-            "--db",
-            str(tmp / "collie.db"),
-            "--tokens-json",
-            str(tokens_file),
-        ],
-        env=env,
-        stdout=subprocess.DEVNULL,
-    )
+    postgres = None
+    configurations = [
+        ("SQLite, synchronous=FULL", {"COLLIE_DATABASE_URL": f"sqlite:///{tmp / 'full.db'}"}),
+        (
+            "SQLite, synchronous=NORMAL",
+            {"COLLIE_DATABASE_URL": f"sqlite:///{tmp / 'normal.db'}", "COLLIE_SQLITE_SYNCHRONOUS": "NORMAL"},
+        ),
+    ]
     try:
-        deadline = time.monotonic() + 120  # a busy machine can take a while to start two servers
+        if not args.no_postgres:
+            sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+            from tests.service.postgres import PostgresServer
+
+            postgres = PostgresServer().start()
+            configurations.append(("PostgreSQL 15", {"COLLIE_DATABASE_URL": postgres.new_database()}))
+        wait_up(f"http://127.0.0.1:{base_port}/health")
+        results = {}
+        for name, extra in configurations:
+            say(f"--- {name}")
+            results[name] = with_service(args, tmp / name.split(",")[0], {**env, **extra}, base_port, baseline.pid)
+            print_figures(name, results[name], args)
+        compare(results)
+        record("service", {name: figures_of(f) for name, f in results.items()})
+        print(f"service start (import + migrations, fresh interpreter): {startup_seconds(tmp / 'start.db'):.2f} s")
+        return 0
+    finally:
+        baseline.terminate()
+        baseline.wait(10)
+        if postgres is not None:
+            postgres.stop()
+
+
+def with_service(args: argparse.Namespace, tmp: Path, env: dict[str, str], base_port: int, base_pid: int) -> dict:
+    """Start `collie serve` with `env` (its database), measure everything against it, stop it."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    tokens_file = tmp / "tokens.json"
+    tokens_file.unlink(missing_ok=True)
+    command = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--tokens-json", str(tokens_file)]
+    service = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120  # a busy machine can take a while to start a server
         while not tokens_file.exists() and time.monotonic() < deadline and service.poll() is None:
             time.sleep(0.05)
         info = json.loads(tokens_file.read_text())
         api, tokens = info["api"], info["tokens"]
-        port = int(api.rsplit(":", 1)[1])
         wait_up(f"{api}/api/health")
-        wait_up(f"http://127.0.0.1:{base_port}/health")
-        code = measure(args, api, port, tokens, base_port, {"collie": service.pid, "baseline": baseline.pid})
-        print(f"service start (import + migrations, fresh interpreter): {startup_seconds(tmp / 'start.db'):.2f} s")
-        return code
+        big = big_body(api, tokens, service.pid, args.big_mib)  # first: a fresh process has no freed memory to reuse
+        figures = measure(
+            args, api, int(api.rsplit(":", 1)[1]), tokens, base_port, {"collie": service.pid, "baseline": base_pid}
+        )
+        figures["big"] = big
+        figures["streams"] = idle_streams(api, tokens, service.pid, args.streams)
+        return figures
     finally:
-        for process in (service, baseline):
-            process.terminate()
-            process.wait(10)
+        service.terminate()
+        service.wait(10)
 
 
 def startup_seconds(db: Path) -> float:
@@ -390,7 +423,7 @@ def cpu_seconds(pid: int) -> float:
 
 def measure(
     args: argparse.Namespace, api: str, port: int, tokens: dict[str, str], base_port: int, pids: dict[str, int]
-) -> int:
+) -> dict[str, Any]:
     say("posting sessions")
     rng = np.random.default_rng(0)
     n_labels = int(args.rate * args.seconds * 1.2) + LABELERS
@@ -433,19 +466,55 @@ def measure(
     stream = [applied[q] - t for q, t in sent.items() if q in applied]
     missing = len(sent) - len(stream)
 
+    trainer.close()
+    operator.close()
+    return {
+        "base": base,
+        "labels": labels,
+        "stream": stream,
+        "missing": missing,
+        "post_s": post_s,
+        "post_mb": len(first.model_dump_json()) / 1e6,
+    }
+
+
+def figures_of(f: dict) -> dict[str, Any]:
+    """One configuration's figures, flat, for runs/bench/service.json."""
+    base, labels, stream = f["base"], f["labels"], f["stream"]
+    return {
+        "baseline_rps": base["rps"],
+        "baseline_p99_ms": base["p99"],
+        "label_rps": labels["rps"],
+        "label_p50_ms": labels["p50"],
+        "label_p99_ms": labels["p99"],
+        "claim_p99_ms": labels["claim_p99"],
+        "stream_p50_ms": percentile(stream, 50),
+        "stream_p99_ms": percentile(stream, 99),
+        "post_1000_s": f["post_s"],
+        "stream_missing": f["missing"],
+        "label_cpu_ms": labels["cpu_ms"],
+        "big_body_mib": f["big"]["mib"],
+        "big_body_rss_growth_ratio": f["big"]["growth_ratio"],
+        "big_body_health_p99_ms": f["big"]["health_p99"],
+        "idle_streams": f["streams"]["n"],
+        "idle_streams_core_share": f["streams"]["core_share"],
+    }
+
+
+def print_figures(name: str, f: dict, args: argparse.Namespace) -> None:
+    base, labels, stream, missing, post_s = f["base"], f["labels"], f["stream"], f["missing"], f["post_s"]
     rows = [
         ("baseline one-row insert", f"{base['rps']:.0f}/s", f"{base['p50']:.1f} ms", f"{base['p99']:.1f} ms"),
         ("collie label (+ next query)", f"{labels['rps']:.0f}/s", f"{labels['p50']:.1f} ms", f"{labels['p99']:.1f} ms"),
         ("collie first claim per labeler", "", "", f"{labels['claim_p99']:.1f} ms"),
         ("label → applied from the stream", "", f"{percentile(stream, 50):.1f} ms", f"{percentile(stream, 99):.1f} ms"),
     ]
-    print(f"\nloopback, {LABELERS} concurrent clients, offered {args.rate:.0f}/s for {args.seconds:.0f} s each")
+    print(f"\n=== {name}")
+    print(f"loopback, {LABELERS} concurrent clients, offered {args.rate:.0f}/s for {args.seconds:.0f} s each")
     print(f"{'':36s}{'rate':>10s}{'p50':>12s}{'p99':>12s}")
-    for name, *cells in rows:
-        print(f"{name:36s}" + "".join(f"{c:>12s}" if i else f"{c:>10s}" for i, c in enumerate(cells)))
-    print(
-        f"\n1000 queries posted → all claimable: {post_s:.2f} s ({len(first.model_dump_json()) / 1e6:.0f} MB of JSON)"
-    )
+    for row_name, *cells in rows:
+        print(f"{row_name:36s}" + "".join(f"{c:>12s}" if i else f"{c:>10s}" for i, c in enumerate(cells)))
+    print(f"\n1000 queries posted → all claimable: {post_s:.2f} s ({f['post_mb']:.0f} MB of JSON)")
     print(f"labels not seen on the stream: {missing}")
     print(f"ratios vs baseline: rate {labels['rps'] / base['rps']:.2f}×, p99 {labels['p99'] / base['p99']:.2f}×")
     print(
@@ -453,36 +522,138 @@ def measure(
         f" {labels['cpu_ms']:.2f} ms ({labels['cpu_ms'] / base['cpu_ms']:.2f}×; one core serves"
         f" ≈ {1000 / labels['cpu_ms']:.0f} labels/s)"
     )
+    big, streams = f["big"], f["streams"]
+    print(
+        f"session body of {big['mib']:.0f} MiB ({big['status']}): peak RSS growth {big['growth_ratio']:.2f}× its size,"
+        f" parsed in {big['seconds']:.1f} s; /api/health meanwhile p99 {big['health_p99']:.0f} ms"
+        f" (max {big['health_max']:.0f} ms, {big['health_n']} pings)"
+    )
+    print(f"{streams['n']} idle SSE streams: {100 * streams['core_share']:.1f} % of a core")
     ok = (
         labels["rps"] >= 0.95 * args.rate
         and labels["p99"] <= 20
         and percentile(stream, 99) <= 50
         and post_s <= 1.0
         and missing == 0
+        and big["growth_ratio"] <= 2.0
+        and big["health_p99"] <= 100
+        and streams["core_share"] <= 0.05
     )
-    print("targets (≥1000/s, p99 ≤ 20 ms, stream p99 ≤ 50 ms, post ≤ 1 s):", "met" if ok else "NOT met")
-    record(
-        "service",
-        {
-            "baseline_rps": base["rps"],
-            "baseline_p50_ms": base["p50"],
-            "baseline_p99_ms": base["p99"],
-            "label_rps": labels["rps"],
-            "label_p50_ms": labels["p50"],
-            "label_p99_ms": labels["p99"],
-            "claim_p99_ms": labels["claim_p99"],
-            "stream_p50_ms": percentile(stream, 50),
-            "stream_p99_ms": percentile(stream, 99),
-            "post_1000_s": post_s,
-            "stream_missing": missing,
-            "baseline_cpu_ms": base["cpu_ms"],
-            "label_cpu_ms": labels["cpu_ms"],
-            "targets_met": bool(ok),
-        },
+    print(
+        "targets (≥1000/s, p99 ≤ 20 ms, stream p99 ≤ 50 ms, post ≤ 1 s, body RSS ≤ 2×, health p99 ≤ 100 ms,"
+        " idle streams ≤ 5 %):",
+        "met" if ok else "NOT met",
     )
+
+
+def compare(results: dict[str, dict]) -> None:
+    """The cost of synchronous=FULL, and PostgreSQL beside SQLite."""
+    print("\n=== side by side (label + next query: rate, p50, p99, server CPU per label)")
+    for name, f in results.items():
+        lab = f["labels"]
+        print(f"{name:28s}{lab['rps']:>8.0f}/s{lab['p50']:>9.1f} ms{lab['p99']:>9.1f} ms{lab['cpu_ms']:>9.2f} ms")
+    full, normal = results.get("SQLite, synchronous=FULL"), results.get("SQLite, synchronous=NORMAL")
+    if full and normal:
+        print(
+            f"cost of synchronous=FULL vs NORMAL: p99 {full['labels']['p99'] / normal['labels']['p99']:.2f}×,"
+            f" CPU per label {full['labels']['cpu_ms'] / normal['labels']['cpu_ms']:.2f}×"
+        )
+
+
+# ---------------------------------------------------------------- limits: a body at the limit, idle streams
+
+
+def rss_kib(pid: int, field: str) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise RuntimeError(f"no {field} for {pid}")
+
+
+def big_body(api: str, tokens: dict[str, str], pid: int, mib: float) -> dict[str, Any]:
+    """POST one session of about `mib` MiB (random full-precision Ant segments) while /api/health is
+    pinged every 10 ms; the server's peak RSS growth (VmHWM, reset first) over the body's size."""
+    rng = np.random.default_rng(1)
+    trainer = CollieClient(api, tokens["trainer"], timeout_s=600)
+    run = trainer.create_run(RunCreate(env="ant", task="north", method="collie", dims=ANT))
+    one = len(json.dumps(session(0, 1, ANT, rng)["queries"][0])) + 2
+    n = max(1, min(4096, int(mib * 2**20 / one)))
+    body = json.dumps(session(0, n, ANT, rng)).encode()
+    del rng
+    Path(f"/proc/{pid}/clear_refs").write_text("5")  # reset the peak RSS to the current one
+    before = rss_kib(pid, "VmRSS")
+    pings: list[float] = []
+    stop = asyncio.Event()
+
+    async def ping() -> None:
+        async with httpx.AsyncClient(timeout=120) as client:
+            while not stop.is_set():
+                t = time.perf_counter()
+                await client.get(f"{api}/api/health")
+                pings.append(time.perf_counter() - t)
+                await asyncio.sleep(0.01)
+
+    async def post() -> tuple[int, float]:
+        headers = {"Authorization": f"Bearer {tokens['trainer']}", "Content-Type": "application/json"}
+        async with httpx.AsyncClient(timeout=600) as client:
+            t = time.perf_counter()
+            response = await client.post(f"{api}/api/runs/{run.id}/sessions", content=body, headers=headers)
+            return response.status_code, time.perf_counter() - t
+
+    async def both() -> tuple[int, float]:
+        pinger = asyncio.create_task(ping())
+        await asyncio.sleep(0.2)
+        result = await post()
+        stop.set()
+        await pinger
+        return result
+
+    status, seconds = asyncio.run(both())
+    peak = rss_kib(pid, "VmHWM")
     trainer.close()
+    return {
+        "mib": len(body) / 2**20,
+        "status": status,
+        "seconds": seconds,
+        "growth_ratio": (peak - before) * 1024 / len(body),
+        "health_p99": percentile(pings, 99),
+        "health_max": max(pings) * 1000 if pings else float("nan"),
+        "health_n": len(pings),
+    }
+
+
+def idle_streams(api: str, tokens: dict[str, str], pid: int, n: int, seconds: float = 10.0) -> dict[str, Any]:
+    """Hold `n` SSE streams open on one run (tokens of their own: a token may hold only a few),
+    then measure the server's CPU over `seconds` of quiet."""
+    operator = CollieClient(api, tokens["operator"])
+    trainer = CollieClient(api, tokens["trainer"])
+    run = trainer.create_run(RunCreate(env="ant", task="north", method="collie", dims=ANT))
+    per_token = 25
+    labelers = [operator.create_labeler(f"streams-{pid}-{i}").token for i in range((n + per_token - 1) // per_token)]
+    host, port = "127.0.0.1", int(api.rsplit(":", 1)[1])
+
+    async def hold() -> float:
+        writers = []
+        for i in range(n):
+            reader, writer = await asyncio.open_connection(host, port)
+            head = f"GET /api/runs/{run.id}/stream HTTP/1.1\r\nHost: {host}\r\n"
+            head += f"Authorization: Bearer {labelers[i // per_token]}\r\n\r\n"
+            writer.write(head.encode())
+            status = await reader.readuntil(b"\r\n\r\n")
+            assert status.startswith(b"HTTP/1.1 200"), status[:100]
+            writers.append(writer)
+        await asyncio.sleep(2.0)  # every stream has read its backlog
+        cpu = cpu_seconds(pid)
+        await asyncio.sleep(seconds)
+        used = cpu_seconds(pid) - cpu
+        for writer in writers:
+            writer.close()
+        return used / seconds
+
+    share = asyncio.run(hold())
     operator.close()
-    return 0
+    trainer.close()
+    return {"n": n, "core_share": share}
 
 
 if __name__ == "__main__":

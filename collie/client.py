@@ -213,8 +213,9 @@ class CollieClient:
     def me(self) -> Me:
         return self._get(Me, "/me")
 
-    def create_labeler(self, name: str, role: Role = "labeler") -> LabelerCreated:
-        return self._post(LabelerCreated, "/labelers", LabelerCreate(name=name, role=role))
+    def create_labeler(self, name: str, role: Role = "labeler", runs: list[int] | None = None) -> LabelerCreated:
+        """A new principal and its token; `runs` limits a labeler to those runs."""
+        return self._post(LabelerCreated, "/labelers", LabelerCreate(name=name, role=role, runs=runs))
 
     def labelers(self) -> list[LabelerRead]:
         return self._list(LabelerRead, "/labelers")

@@ -52,7 +52,7 @@ FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
 QueryId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
 RequestId = Annotated[str, Field(min_length=1, max_length=128, pattern=r"^[\x21-\x7e]+$")]
-MAX_INT = 2**53  # ints stay exact in JSON numbers and fit every database's integer column
+MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
 Matrix = list[list[FiniteFloat]]
@@ -73,6 +73,16 @@ MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
 MAX_QPOS_WIDTH = 128  # humanoid's nq is 28
 MAX_METRICS = 256
+# One segment's bounds (EnvDims allows no more): frames per segment, values per frame, and the
+# context path's points (a whole episode's x-y; every claim of the query carries it).
+MAX_FRAMES = 10_000
+MAX_FRAME_WIDTH = 100_000
+MAX_PATH_POINTS = 10_001
+MAX_SKILL_DIM = 1_000
+MAX_SESSION_QUERIES = 10_000  # the service's own limit (max_queries_per_session) is lower
+FrameRows = Annotated[
+    list[Annotated[list[FiniteFloat], Field(max_length=MAX_FRAME_WIDTH)]], Field(max_length=MAX_FRAMES)
+]
 
 
 class Wire(BaseModel):
@@ -90,8 +100,12 @@ def _width(rows: list[list[float]], name: str) -> int:
 
 
 def _bounded_json(value: dict[str, Any], limit: int, name: str) -> dict[str, Any]:
+    """Free JSON (a run's config, a segment's extra): finite, valid UTF-8 (no lone surrogate from a
+    \\u escape, which would be stored and then break every read of it), at most `limit` bytes."""
     try:
-        size = len(json.dumps(value, allow_nan=False))
+        size = len(json.dumps(value, allow_nan=False, ensure_ascii=False).encode("utf-8"))
+    except UnicodeEncodeError:
+        raise ValueError(f"{name}: holds a lone UTF-16 surrogate (text must be valid Unicode)") from None
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: not plain finite JSON ({exc})") from exc
     if size > limit:
@@ -237,14 +251,18 @@ class QueryFrames(Wire):
     """What a labeler replays and what the trainer rebuilds its labelled sets from (H frames).
     Image observations travel packed in obs_packed (obs is then empty)."""
 
-    skill: Vector
-    obs: Matrix = Field(default_factory=list)
+    skill: Vector = Field(max_length=MAX_SKILL_DIM)
+    obs: FrameRows = Field(default_factory=list)
     obs_packed: PackedFrames | None = Field(default=None, description="image observations (obs empty)")
-    xy: Matrix
-    pitch: list[FiniteFloat | None] | None = Field(default=None, description="null where undefined")
-    qpos: Matrix
-    qvel: Matrix
-    path_xy: Matrix | None = Field(default=None, description="the whole trajectory's x-y, for context")
+    xy: FrameRows
+    pitch: list[FiniteFloat | None] | None = Field(
+        default=None, max_length=MAX_FRAMES, description="null where undefined"
+    )
+    qpos: FrameRows
+    qvel: FrameRows
+    path_xy: list[Annotated[list[FiniteFloat], Field(max_length=2)]] | None = Field(
+        default=None, max_length=MAX_PATH_POINTS, description="the whole trajectory's x-y, for context"
+    )
 
     @model_validator(mode="after")
     def _shapes(self) -> QueryFrames:
@@ -299,7 +317,7 @@ class SessionPost(Wire):
 
     session: Count
     epoch: Count
-    queries: list[QueryIn] = Field(min_length=1)
+    queries: list[QueryIn] = Field(min_length=1, max_length=MAX_SESSION_QUERIES)
 
     @model_validator(mode="after")
     def _unique_ids(self) -> SessionPost:
@@ -617,7 +635,7 @@ class MetricsRead(MetricsIn):
 
 
 class Rollout(Wire):
-    skill: Vector
+    skill: Vector = Field(max_length=MAX_SKILL_DIM)
     xy: Matrix = Field(max_length=MAX_ROLLOUT_POINTS)
     pitch: list[FiniteFloat | None] | None = Field(default=None, max_length=MAX_ROLLOUT_POINTS)
     qpos: Matrix | None = Field(
@@ -654,9 +672,21 @@ class RolloutsRead(RolloutsIn):
 # ---------------------------------------------------------------- people and health
 
 
+MAX_SCOPED_RUNS = 1000
+
+
 class LabelerCreate(Wire):
     name: Name
     role: Role = "labeler"
+    runs: list[Annotated[int, Field(ge=1, le=MAX_INT)]] | None = Field(
+        default=None, max_length=MAX_SCOPED_RUNS, description="a labeler limited to these runs; null: every run"
+    )
+
+    @model_validator(mode="after")
+    def _runs_for_labelers(self) -> LabelerCreate:
+        if self.runs is not None and self.role != "labeler":
+            raise ValueError(f"only a labeler token can be limited to runs, not a {self.role} token")
+        return self
 
 
 class LabelerRead(Wire):
@@ -666,6 +696,7 @@ class LabelerRead(Wire):
     role: Role
     created_at: datetime
     revoked: bool
+    runs: list[int] | None = Field(default=None, description="the runs a labeler is limited to; null: every run")
 
 
 class Me(Wire):

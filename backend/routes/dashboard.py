@@ -49,7 +49,7 @@ Cache = Annotated[SegmentCache, Depends(segment_cache)]
 @router.get("/runs")
 async def list_runs(
     request: Request,
-    _: AnyCaller,
+    caller: AnyCaller,
     db: DB,
     limit: RunsLimit = 100,
     after: Annotated[int, Query(ge=0, le=MAX_INT, description="the version last seen")] = 0,
@@ -68,7 +68,7 @@ async def list_runs(
 
     def page() -> RunsPage:
         with db.read() as conn:
-            return RunsPage(version=dashboard.latest_event_id(conn), runs=dashboard.summaries(conn, limit))
+            return RunsPage(version=dashboard.latest_event_id(conn), runs=dashboard.summaries(conn, limit, caller.runs))
 
     return await asyncio.to_thread(page)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Request
 
-from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId
+from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId, json_body, parse_body
 from backend.services import auth
 from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, Me
 
@@ -17,10 +17,11 @@ async def me(caller: AnyCaller) -> Me:
     return Me(id=caller.id, name=caller.name, role=caller.role)
 
 
-@router.post("/labelers", status_code=201)
-async def create_labeler(body: LabelerCreate, _: OperatorCaller, db: DB) -> LabelerCreated:
+@router.post("/labelers", status_code=201, openapi_extra=json_body(LabelerCreate))
+async def create_labeler(request: Request, _: OperatorCaller, db: DB) -> LabelerCreated:
+    body = await parse_body(request, LabelerCreate)
     with db.write() as conn:
-        read, token = auth.create_principal(conn, body.name, body.role)
+        read, token = auth.create_principal(conn, body.name, body.role, body.runs)
     return LabelerCreated(**read.model_dump(), token=token)
 
 

@@ -4,9 +4,18 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Query, Response
+from fastapi import APIRouter, Query, Request, Response
 
-from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller
+from backend.routes.deps import (
+    DB,
+    AnyCaller,
+    LabelerCaller,
+    RunId,
+    SettingsDep,
+    TrainerCaller,
+    json_body,
+    parse_body,
+)
 from backend.services import export, labels, leases
 from backend.services.errors import ServiceError
 from collie.schemas import MAX_INT, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, MyLabel, UndoRequest
@@ -28,16 +37,19 @@ _REPEAT: dict[int | str, dict[str, Any]] = {
 }
 
 
-@router.post("/labels", response_model=LabelAck, status_code=201, responses=_REPEAT)
+@router.post(
+    "/labels", response_model=LabelAck, status_code=201, responses=_REPEAT, openapi_extra=json_body(LabelSubmit)
+)
 async def submit_label(
     run_id: RunId,
-    body: LabelSubmit,
+    request: Request,
     caller: LabelerCaller,
     db: DB,
     settings: SettingsDep,
     next: Annotated[bool, Query(description="also claim the next query (one round trip per label)")] = False,
 ) -> Response:
     """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision)."""
+    body = await parse_body(request, LabelSubmit)
     with db.write() as conn:
         ack = labels.submit(conn, run_id, caller, body)
         if not next:
@@ -49,9 +61,10 @@ async def submit_label(
     return _ack_response(ack, following)
 
 
-@router.post("/undo", response_model=LabelAck, status_code=201, responses=_REPEAT)
-async def undo(run_id: RunId, body: UndoRequest, caller: LabelerCaller, db: DB, settings: SettingsDep) -> Response:
+@router.post("/undo", response_model=LabelAck, status_code=201, responses=_REPEAT, openapi_extra=json_body(UndoRequest))
+async def undo(run_id: RunId, request: Request, caller: LabelerCaller, db: DB, settings: SettingsDep) -> Response:
     """Withdraw the effective label; your own comes back to you under a fresh lease to relabel."""
+    body = await parse_body(request, UndoRequest)
     with db.write() as conn:
         return _ack_response(labels.undo(conn, run_id, caller, body, settings.lease_s))
 

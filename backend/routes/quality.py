@@ -3,16 +3,17 @@ per query) and the gold rate (share of each labeler's segments that are gold).""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
-from backend.routes.deps import DB, OperatorCaller, RunId
+from backend.routes.deps import DB, OperatorCaller, RunId, json_body, parse_body
 from backend.services import runs
 from collie.schemas import QualitySettings, RunRead
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
 
 
-@router.put("/quality")
-async def set_quality(run_id: RunId, body: QualitySettings, _: OperatorCaller, db: DB) -> RunRead:
+@router.put("/quality", openapi_extra=json_body(QualitySettings))
+async def set_quality(run_id: RunId, request: Request, _: OperatorCaller, db: DB) -> RunRead:
+    body = await parse_body(request, QualitySettings)  # read after the caller is checked
     with db.write() as conn:
         return runs.set_quality(conn, run_id, body)

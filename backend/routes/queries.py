@@ -4,9 +4,21 @@ from __future__ import annotations
 
 from typing import Annotated
 
+import anyio
 from fastapi import APIRouter, Query, Request, Response
 
-from backend.routes.deps import DB, AnyCaller, LabelerCaller, RunId, SettingsDep, TrainerCaller, json_body, parse_body
+from backend.db import Database
+from backend.routes.deps import (
+    DB,
+    OFF_LOOP_BYTES,
+    AnyCaller,
+    LabelerCaller,
+    RunId,
+    SettingsDep,
+    TrainerCaller,
+    json_body,
+    parse_body,
+)
 from backend.services import leases, queries
 from collie.schemas import (
     MAX_HOLD,
@@ -32,14 +44,24 @@ async def post_session(
     run_id: RunId, request: Request, _: TrainerCaller, db: DB, settings: SettingsDep
 ) -> SessionPosted:
     """A feedback session's segments in one call; ids already stored are kept as they were."""
-    body = await parse_body(request, SessionPost)
+    declared = request.headers.get("content-length", "")
+    if declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
+        body = await parse_body(request, SessionPost)
+    else:  # a big one: validated in the worker process, stored from a thread (SQLite frees the GIL)
+        body = await request.app.state.session_parser.parse(request)
+        return await anyio.to_thread.run_sync(_store, db, run_id, body, settings.max_queries_per_session)
+    return _store(db, run_id, body, settings.max_queries_per_session)
+
+
+def _store(db: Database, run_id: int, body: SessionPost, max_queries: int) -> SessionPosted:
     with db.write() as conn:
-        return queries.post_session(conn, run_id, body, settings.max_queries_per_session)
+        return queries.post_session(conn, run_id, body, max_queries)
 
 
-@router.post("/retire")
-async def retire(run_id: RunId, body: RetireRequest, _: TrainerCaller, db: DB) -> Retired:
+@router.post("/retire", openapi_extra=json_body(RetireRequest))
+async def retire(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> Retired:
     """Close unlabelled queries the trainer will never use (a restarted trainer's leftovers)."""
+    body = await parse_body(request, RetireRequest)
     with db.write() as conn:
         return queries.retire(conn, run_id, body.query_ids)
 

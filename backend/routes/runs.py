@@ -4,31 +4,32 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 
-from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller
+from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller, json_body, parse_body
 from backend.services import runs
 from collie.schemas import MAX_INT, RunCreate, RunRead, RunStatus, StatusUpdate
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-@router.post("", status_code=201)
-async def create_run(body: RunCreate, caller: TrainerCaller, db: DB) -> RunRead:
+@router.post("", status_code=201, openapi_extra=json_body(RunCreate))
+async def create_run(request: Request, caller: TrainerCaller, db: DB) -> RunRead:
+    body = await parse_body(request, RunCreate)
     with db.write() as conn:
         return runs.create(conn, caller, body)
 
 
 @router.get("")
 def list_runs(
-    _: AnyCaller,
+    caller: AnyCaller,
     db: DB,
     status: RunStatus | None = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
 ) -> list[RunRead]:
     with db.read() as conn:
-        return runs.list_runs(conn, status, limit, offset)
+        return runs.list_runs(conn, status, limit, offset, caller.runs)
 
 
 @router.get("/{run_id}")
@@ -37,7 +38,8 @@ async def get_run(run_id: RunId, _: AnyCaller, db: DB) -> RunRead:
         return runs.get(conn, run_id)
 
 
-@router.put("/{run_id}/status")
-async def set_status(run_id: RunId, body: StatusUpdate, _: TrainerCaller, db: DB) -> RunRead:
+@router.put("/{run_id}/status", openapi_extra=json_body(StatusUpdate))
+async def set_status(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> RunRead:
+    body = await parse_body(request, StatusUpdate)
     with db.write() as conn:
         return runs.set_status(conn, run_id, body)

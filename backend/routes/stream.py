@@ -5,6 +5,8 @@ Two ways to read it, both resumable from the last id seen (nothing missed, nothi
   what synchronous clients such as the trainer use);
 - GET /stream — Server-Sent Events; resumes from the Last-Event-ID header (browsers send it on
   reconnect) or ?after=ID. EventSource cannot send headers, so ?access_token= is accepted here.
+  One reader feeds every open stream (services/fanout.py); a token may hold
+  `max_streams_per_token` streams open at once (429 beyond).
 """
 
 from __future__ import annotations
@@ -13,13 +15,14 @@ import asyncio
 from collections.abc import AsyncIterator
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header, Query, Request
+from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request
 from fastapi.responses import StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials
 
-from backend.routes.deps import DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer
+from backend.routes.deps import ANY, DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer, check_scope
 from backend.services import events
 from backend.services.auth import Caller
+from backend.services.fanout import StreamFeed
 from collie.schemas import MAX_INT, EventPage
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["stream"])
@@ -56,7 +59,9 @@ async def _stream_caller(
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
     access_token: Annotated[str | None, Query(description="for EventSource, which cannot send headers")] = None,
 ) -> Caller:
-    return authenticate(request, credentials.credentials if credentials else access_token)  # every role may read
+    caller = authenticate(request, credentials.credentials if credentials else access_token)
+    check_scope(request, caller, ANY)  # every role may read, within its scope
+    return caller
 
 
 @router.get(
@@ -67,9 +72,8 @@ async def _stream_caller(
 async def stream(
     run_id: RunId,
     request: Request,
-    _: Annotated[Caller, Depends(_stream_caller)],
+    caller: Annotated[Caller, Depends(_stream_caller)],
     db: DB,
-    hub: Hub,
     settings: SettingsDep,
     after: Annotated[int | None, Query(ge=0, le=MAX_INT)] = None,
     last_event_id: Annotated[int | None, Header(ge=0, le=MAX_INT)] = None,
@@ -77,24 +81,38 @@ async def stream(
     with db.read() as conn:
         events.last_id(conn, run_id)
     start = last_event_id if last_event_id is not None else (after or 0)
+    feed: StreamFeed = request.app.state.feed
+    if feed.open_by_caller[caller.id] >= settings.max_streams_per_token:
+        raise HTTPException(429, f"at most {settings.max_streams_per_token} open streams per token; close one first")
 
     async def frames() -> AsyncIterator[str]:
-        loop = asyncio.get_running_loop()
-        last, idle_since = start, loop.time()
-        yield "retry: 1000\n\n"
-        while not await request.is_disconnected():
-            with db.read() as conn:
-                page = events.read_after(conn, run_id, last)
-            for event in page:
-                yield f"id: {event.id}\nevent: {event.kind}\ndata: {event.model_dump_json()}\n\n"
-                last = event.id
-            if page:
-                idle_since = loop.time()
-                continue
-            if loop.time() - idle_since > HEARTBEAT_S:
-                yield ": keep-alive\n\n"
-                idle_since = loop.time()
-            await hub.wait(run_id, last, settings.stream_poll_s)
+        feed.open_by_caller[caller.id] += 1
+        subscription = await feed.subscribe(run_id, start)
+        try:
+            yield "retry: 1000\n\n"
+            while True:
+                if subscription.lagged:
+                    sent = await feed.backlog(subscription)
+                else:
+                    sent = list(subscription.frames)
+                    subscription.frames.clear()
+                fresh = [(i, text) for i, text in sent if i > subscription.last]
+                if fresh:
+                    subscription.last = fresh[-1][0]
+                    yield "".join(text for _, text in fresh)
+                    continue
+                if subscription.lagged or subscription.frames:
+                    continue
+                subscription.signal.clear()
+                try:
+                    await asyncio.wait_for(subscription.signal.wait(), HEARTBEAT_S)
+                except TimeoutError:
+                    yield ": keep-alive\n\n"
+        finally:
+            feed.unsubscribe(subscription)
+            feed.open_by_caller[caller.id] -= 1
+            if feed.open_by_caller[caller.id] <= 0:
+                del feed.open_by_caller[caller.id]
 
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
     return StreamingResponse(frames(), media_type="text/event-stream", headers=headers)

@@ -4,17 +4,18 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 
-from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller
+from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller, json_body, parse_body
 from backend.services import telemetry
 from collie.schemas import MAX_INT, MetricsIn, MetricsRead, RolloutsIn, RolloutsRead
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["rollouts and metrics"])
 
 
-@router.post("/metrics", status_code=201)
-async def post_metrics(run_id: RunId, body: MetricsIn, _: TrainerCaller, db: DB) -> MetricsRead:
+@router.post("/metrics", status_code=201, openapi_extra=json_body(MetricsIn))
+async def post_metrics(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> MetricsRead:
+    body = await parse_body(request, MetricsIn)
     with db.write() as conn:
         return telemetry.post_metrics(conn, run_id, body)
 
@@ -31,8 +32,10 @@ def list_metrics(
         return telemetry.list_metrics(conn, run_id, after_epoch, limit)
 
 
-@router.post("/rollouts", status_code=201)
-async def post_rollouts(run_id: RunId, body: RolloutsIn, _: TrainerCaller, db: DB) -> RolloutsRead:
+@router.post("/rollouts", status_code=201, openapi_extra=json_body(RolloutsIn))
+async def post_rollouts(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> RolloutsRead:
+    """Read only once the caller is authorised (the body may be 16 MiB)."""
+    body = await parse_body(request, RolloutsIn)
     with db.write() as conn:
         return telemetry.post_rollouts(conn, run_id, body)
 

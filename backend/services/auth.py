@@ -1,5 +1,9 @@
 """Tokens and roles. A token is 32 random bytes (url-safe base64); the service stores only its
-sha256 — enough for high-entropy secrets, and a lookup by hash is one indexed read."""
+sha256 — enough for high-entropy secrets, and a lookup by hash is one indexed read.
+
+Scopes (docs/service.md): an operator may do everything; a trainer acts only on the runs it
+created; a labeler may be limited to some runs (`runs`). Revoking is final: nothing — a restart
+with the same bootstrap token included — brings a revoked principal back."""
 
 from __future__ import annotations
 
@@ -25,6 +29,10 @@ class Caller:
     id: int
     name: str
     role: Role
+    runs: frozenset[int] | None = None  # a labeler limited to these runs; None: every run
+
+    def may_see(self, run_id: int) -> bool:
+        return self.runs is None or run_id in self.runs
 
 
 def hash_token(token: str) -> str:
@@ -65,39 +73,53 @@ class TokenCache:
 
 def lookup(conn: Connection, digest: str) -> Caller | None:
     row = conn.execute(
-        select(Principal.id, Principal.name, Principal.role).where(
+        select(Principal.id, Principal.name, Principal.role, Principal.runs).where(
             Principal.token_sha256 == digest, Principal.revoked_at.is_(None)
         )
     ).first()
-    return Caller(row.id, row.name, row.role) if row else None
+    if row is None:
+        return None
+    return Caller(row.id, row.name, row.role, None if row.runs is None else frozenset(row.runs))
 
 
-def bootstrap(conn: Connection, role: Role, token: str) -> None:
-    """Make `token` the token of the built-in principal named after `role` (created if missing)."""
+def bootstrap(conn: Connection, role: Role, token: str) -> bool:
+    """Make `token` the token of the built-in principal named after `role` (created if missing).
+    A revoked built-in principal stays revoked, token and all; returns False for one."""
     digest = hash_token(token)
     holder = conn.execute(select(Principal.id, Principal.name).where(Principal.token_sha256 == digest)).first()
     if holder is not None and holder.name != role:
         raise Conflict(f"the {role} bootstrap token is already the token of '{holder.name}'")
-    existing = conn.execute(select(Principal.id).where(Principal.name == role)).scalar()
+    existing = conn.execute(select(Principal.id, Principal.revoked_at).where(Principal.name == role)).first()
     if existing is None:
         conn.execute(insert(Principal).values(name=role, role=role, token_sha256=digest, created_at=time.time()))
+    elif existing.revoked_at is not None:
+        return False
     else:
-        conn.execute(
-            update(Principal).where(Principal.id == existing).values(role=role, token_sha256=digest, revoked_at=None)
-        )
+        conn.execute(update(Principal).where(Principal.id == existing.id).values(role=role, token_sha256=digest))
+    return True
 
 
 def _read(row: Row[Any]) -> LabelerRead:
     return LabelerRead(
-        id=row.id, name=row.name, role=row.role, created_at=row.created_at, revoked=row.revoked_at is not None
+        id=row.id,
+        name=row.name,
+        role=row.role,
+        created_at=row.created_at,
+        revoked=row.revoked_at is not None,
+        runs=row.runs,
     )
 
 
-def create_principal(conn: Connection, name: str, role: Role) -> tuple[LabelerRead, str]:
+def create_principal(conn: Connection, name: str, role: Role, runs: list[int] | None = None) -> tuple[LabelerRead, str]:
     if conn.execute(select(Principal.id).where(Principal.name == name)).first():
         raise Conflict(f"name '{name}' is taken")
     token = new_token()
-    conn.execute(insert(Principal).values(name=name, role=role, token_sha256=hash_token(token), created_at=time.time()))
+    scope = None if runs is None else sorted(set(runs))
+    conn.execute(
+        insert(Principal).values(
+            name=name, role=role, token_sha256=hash_token(token), created_at=time.time(), runs=scope
+        )
+    )
     row = conn.execute(select(Principal).where(Principal.name == name)).one()
     return _read(row), token
 

@@ -32,10 +32,10 @@ def latest_evaluations(conn: Connection, run_ids: list[int]) -> dict[int, int]:
     return {r[0]: r[1] for r in rows}
 
 
-def summaries(conn: Connection, limit: int) -> list[RunSummary]:
+def summaries(conn: Connection, limit: int, only: frozenset[int] | None = None) -> list[RunSummary]:
     """The newest `limit` runs, without their configs (the list stays small). The epoch is the
     latest the trainer told: in a status change or an evaluation, whichever is further."""
-    found = runs.list_runs(conn, None, limit, 0)
+    found = runs.list_runs(conn, None, limit, 0, only)
     ids = [r.id for r in found]
     last, evaluated = last_label_times(conn, ids), latest_evaluations(conn, ids)
     return [

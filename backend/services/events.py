@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import defaultdict
+from collections.abc import Callable
 
 from sqlalchemy import Connection, bindparam, insert, select, update
 
@@ -70,9 +71,14 @@ class EventHub:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._latest: dict[int, int] = {}
         self._waiters: dict[int, list[asyncio.Future[None]]] = defaultdict(list)
+        self._listeners: list[Callable[[list[tuple[int, int]]], None]] = []
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
+
+    def listen(self, callback: Callable[[list[tuple[int, int]]], None]) -> None:
+        """Also call `callback` (on the loop) with every published (run_id, event id) batch."""
+        self._listeners.append(callback)
 
     def publish(self, items: list[tuple[int, int]]) -> None:
         """Thread-safe: called after a commit, from the loop or from a worker thread."""
@@ -94,6 +100,8 @@ class EventHub:
             for future in self._waiters.pop(run_id, []):
                 if not future.done():
                     future.set_result(None)
+        for listener in self._listeners:
+            listener(items)
 
     async def wait(self, run_id: int, after: int, timeout: float) -> None:
         """Return when the run may have an event past `after`, or after `timeout` seconds."""

@@ -10,7 +10,8 @@ effective label. Who may write:
 - label: the holder of the live lease; a labeler with a vote on the query (a revision); or the
   last lease holder after the lease ran out, as long as nobody else has claimed the query since;
 - undo: a labeler withdraws their own vote (the query comes back to them under a fresh lease, to
-  relabel at once); an operator without a vote withdraws every vote (the query returns to the pool);
+  relabel at once, within MAX_HOLD: their last preloaded query goes back to the pool); an operator
+  without a vote withdraws every vote (the query returns to the pool);
 - every submission is idempotent by (labeler, client_request_id): a repeat returns the first answer.
 Gold copies (services/gold.py) take labels the same way with r = 1, but never touch the stream.
 """
@@ -24,7 +25,7 @@ from typing import Any
 from sqlalchemy import Connection, bindparam, delete, insert, select, update
 
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
-from backend.services import consensus, events, runs
+from backend.services import consensus, events, leases, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import (
@@ -244,8 +245,10 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
             )
         revises = mine.event_id
         conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": caller.id})
-        # your own label comes back to you under a fresh lease, to relabel at once
+        # your own label comes back to you under a fresh lease, to relabel at once; it counts against
+        # MAX_HOLD like a claimed one: the preloaded query goes back to the pool
         status, owner, expires = "leased", caller.id, now + lease_s
+        leases.make_room(conn, run_id, caller, now)
     elif caller.role == "operator":
         revises = q.label_event_id if q.label_event_id is not None else max(v.event_id for v in votes)
         conn.execute(_DROP_VOTES, {"pk": q.id})

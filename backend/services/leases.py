@@ -1,12 +1,12 @@
 """Claiming under a lease. Taking a query is one conditional UPDATE … RETURNING (the row must still
 be pending), so two labelers never hold the same query, on SQLite or PostgreSQL alike. Expired
 leases go back to the pool at the next claim in their run (keeping their last holder, who may
-still hand in a late label while nobody else has the query). Queries a labeler skipped come to
-them last; a query they voted on never comes to them again (redundancy: r distinct labelers), and
-gold copies (services/gold.py) are never in the pool: a due one is served to its labeler instead.
-A labeler may hold up to MAX_HOLD queries (the one on screen and the next, preloaded); a claim
-renews every lease they hold. Statements are built once: this is the hottest path of the
-service."""
+still hand in a late label while nobody else has the query); a released query keeps no holder.
+Queries a labeler skipped come to them last; a query they voted on never comes to them again
+(redundancy: r distinct labelers), and gold copies (services/gold.py) are never in the pool: a due
+one is served to its labeler instead. A labeler may hold up to MAX_HOLD queries (the one on screen
+and the next, preloaded); a claim renews every lease they hold. Statements are built once: this is
+the hottest path of the service."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from backend.models import LabelEvent, LabelVote, Query, QueryData, Run
 from backend.services import gold
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, QueryStatus
+from collie.schemas import FINISHED, MAX_HOLD, QueryStatus
 
 _RETURNED = (
     Query.id,
@@ -54,7 +54,17 @@ _RENEW = (
 _RELEASE = (
     update(Query)
     .where(Query.id == bindparam("pk"), Query.status == "leased", Query.lease_owner_id == bindparam("me"))
-    .values(status="pending", lease_expires_at=bindparam("now"))
+    .values(status="pending", lease_owner_id=None, lease_expires_at=bindparam("now"))
+)
+_HELD = (
+    select(Query.id)
+    .where(
+        Query.run_id == bindparam("run"),
+        Query.status == "leased",
+        Query.lease_owner_id == bindparam("me"),
+        Query.lease_expires_at > bindparam("now"),
+    )
+    .order_by(Query.session.desc(), Query.id.desc())
 )
 
 
@@ -127,6 +137,19 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
         conn.execute(_RELEASE, {"pk": row.id, "me": caller.id, "now": time.time()})
         return "pending"
     return row.status
+
+
+def make_room(conn: Connection, run_id: int, caller: Caller, now: float) -> list[str]:
+    """Before a query comes back to the caller outside a claim (an undo of their label): release
+    the last ones they hold in claim order (the preloaded) so they hold at most MAX_HOLD with it.
+    Returns the released query ids."""
+    held = conn.execute(_HELD, {"run": run_id, "me": caller.id, "now": now}).scalars().all()
+    extra = held[: max(0, len(held) - (MAX_HOLD - 1))]
+    released = []
+    for pk in extra:
+        conn.execute(_RELEASE, {"pk": pk, "me": caller.id, "now": now})
+        released.append(conn.execute(select(Query.query_id).where(Query.id == pk)).scalar_one())
+    return released
 
 
 def iso(t: float) -> str:

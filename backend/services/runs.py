@@ -143,10 +143,15 @@ def get(conn: Connection, run_id: int) -> RunRead:
     return _read(found, _counts(conn, [run_id]).get(run_id, QueueCounts()))
 
 
-def list_runs(conn: Connection, status: str | None, limit: int, offset: int) -> list[RunRead]:
+def list_runs(
+    conn: Connection, status: str | None, limit: int, offset: int, only: frozenset[int] | None = None
+) -> list[RunRead]:
+    """The newest runs (of `only`, for a caller limited to those)."""
     stmt = select(Run).order_by(Run.id.desc()).limit(limit).offset(offset)
     if status is not None:
         stmt = stmt.where(Run.status == status)
+    if only is not None:
+        stmt = stmt.where(Run.id.in_(sorted(only)))
     rows = conn.execute(stmt).all()
     counts = _counts(conn, [r.id for r in rows])
     return [_read(r, counts.get(r.id, QueueCounts())) for r in rows]

@@ -1,4 +1,5 @@
-"""A real service for the tests: uvicorn on an ephemeral 127.0.0.1 port over a SQLite file."""
+"""A real service for the tests: uvicorn on an ephemeral 127.0.0.1 port over a SQLite file, or a
+real PostgreSQL server (tests/service/postgres.py) in the modules that run on both databases."""
 
 from __future__ import annotations
 
@@ -14,13 +15,19 @@ from backend.settings import Settings
 from collie.client import CollieClient
 from collie.schemas import EnvDims, QueryIn, RunCreate, RunRead, SessionPost
 
+from .postgres import PostgresServer
+
 TOKENS = {"operator": "op-token-0123456789", "trainer": "tr-token-0123456789", "labeler": "lb-token-0123456789"}
 DIMS = EnvDims(obs_dim=4, nq=3, nv=2, horizon=5, skill_dim=2)
 
 
-def settings_for(db: Path, **overrides: object) -> Settings:
+DATABASES = ("sqlite", "postgresql")
+
+
+def settings_for(db: Path | str, **overrides: object) -> Settings:
+    """A SQLite file (a path) or any database URL (a str), with the bootstrap tokens."""
     return Settings(
-        database_url=f"sqlite:///{db}",
+        database_url=db if isinstance(db, str) else f"sqlite:///{db}",
         operator_token=TOKENS["operator"],
         trainer_token=TOKENS["trainer"],
         labeler_token=TOKENS["labeler"],
@@ -28,10 +35,36 @@ def settings_for(db: Path, **overrides: object) -> Settings:
     )
 
 
+@pytest.fixture(scope="session")
+def postgres() -> Iterator[PostgresServer]:
+    """One real PostgreSQL server for the session (started on first use)."""
+    server = PostgresServer().start()
+    yield server
+    server.stop()
+
+
+def new_database_url(kind: str, request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> str:
+    """A fresh, empty database of `kind` ("sqlite" or "postgresql")."""
+    if kind == "postgresql":
+        return request.getfixturevalue("postgres").new_database()
+    return f"sqlite:///{tmp_path_factory.mktemp('svc') / 'collie.db'}"
+
+
 @pytest.fixture(scope="module")
-def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BackgroundServer]:
-    db = tmp_path_factory.mktemp("svc") / "collie.db"
-    with BackgroundServer(create_app(settings_for(db))) as server:
+def database_url(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> str:
+    """SQLite; a module that runs on both databases overrides this with `both_databases`:
+    `database_url = both_databases` (params over DATABASES)."""
+    return new_database_url("sqlite", request, tmp_path_factory)
+
+
+@pytest.fixture(scope="module", params=DATABASES)
+def both_databases(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> str:
+    return new_database_url(request.param, request, tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def live(database_url: str) -> Iterator[BackgroundServer]:
+    with BackgroundServer(create_app(settings_for(database_url))) as server:
         yield server
 
 

@@ -16,6 +16,12 @@ from collie.schemas import MetricsIn, Rollout, RolloutsIn, RunRead
 from .conftest import DIMS, make_run_spec, make_session
 
 
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
 def test_health_needs_no_token(live: object) -> None:
     with CollieClient(live.url, "nobody") as anonymous:  # type: ignore[attr-defined]
         assert anonymous.health().status == "ok"

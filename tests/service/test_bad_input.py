@@ -17,6 +17,12 @@ from collie.schemas import EnvDims, RunRead
 from .conftest import DIMS, TOKENS, make_run_spec, make_session, settings_for
 
 
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
 def post(url: str, role: str, path: str, **kwargs: object) -> httpx.Response:
     headers = {"Authorization": f"Bearer {TOKENS[role]}", **kwargs.pop("headers", {})}  # type: ignore[dict-item]
     return httpx.post(url + path, headers=headers, timeout=30, **kwargs)  # type: ignore[arg-type]

@@ -19,9 +19,10 @@ from .conftest import TOKENS, make_run_spec, make_session, settings_for
 
 
 @pytest.fixture(scope="module")
-def fuzzed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BackgroundServer]:
-    """A service of its own, with a few runs and queries for generated ids to hit."""
-    with BackgroundServer(create_app(settings_for(tmp_path_factory.mktemp("fuzz") / "f.db"))) as server:
+def fuzzed(both_databases: str) -> Iterator[BackgroundServer]:
+    """A service of its own (on SQLite, then on PostgreSQL), with a few runs and queries for
+    generated ids to hit."""
+    with BackgroundServer(create_app(settings_for(both_databases))) as server:
         with CollieClient(server.url, TOKENS["trainer"]) as trainer:
             for _ in range(3):
                 run = trainer.create_run(make_run_spec())

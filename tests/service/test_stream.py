@@ -6,9 +6,9 @@ from __future__ import annotations
 import threading
 import time
 import typing
-from pathlib import Path
 
 import httpx
+import pytest
 
 from backend.main import create_app
 from backend.server import BackgroundServer
@@ -17,6 +17,12 @@ from collie.labels import Label
 from collie.schemas import EventData, LabelChangedEvent, MetricsIn, RolloutsIn, RunRead, StreamEvent
 
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
+
+
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
 
 
 def label_all(labeler: CollieClient, run_id: int) -> list[str]:
@@ -79,8 +85,8 @@ def test_sse_accepts_access_token_for_eventsource(live: BackgroundServer, run: R
     assert httpx.get(f"{live.url}/api/runs/{run.id}/stream?access_token=bad").status_code == 401
 
 
-def test_sse_consumer_survives_a_service_restart(tmp_path: Path) -> None:
-    settings = settings_for(tmp_path / "restart.db")
+def test_sse_consumer_survives_a_service_restart(database_url: str) -> None:
+    settings = settings_for(database_url)  # a second service on the module's database
     server = BackgroundServer(create_app(settings)).start()
     port = int(server.url.rsplit(":", 1)[1])
     trainer = CollieClient(server.url, TOKENS["trainer"])

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from chromium import chromium
 from playwright.sync_api import Browser
-from service.conftest import labeler, live, operator, trainer  # noqa: F401 (the same live service)
+from service.conftest import database_url, labeler, live, operator, trainer  # noqa: F401 (the same live service)
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "web"
 

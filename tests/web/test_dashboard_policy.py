@@ -24,7 +24,9 @@ def run(trainer: CollieClient) -> RunRead:
 
 @pytest.fixture(scope="module")
 def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
-    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    # bypass_csp: Playwright's wait_for_function evaluates strings, which the dashboard's policy
+    # forbids (tests/service/test_security_headers.py checks the page works under it)
+    page = browser.new_page(bypass_csp=True, viewport={"width": 1400, "height": 1000})
     page.set_default_timeout(WAIT_MS)
     page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run.id}")
     yield page
@@ -69,7 +71,7 @@ def test_a_bad_value_is_refused_and_said(page: Any, trainer: CollieClient, run: 
 def test_a_labeler_token_may_not_set_it(
     live: BackgroundServer, browser: Any, trainer: CollieClient, run: RunRead
 ) -> None:
-    labeler = browser.new_page()
+    labeler = browser.new_page(bypass_csp=True)
     labeler.set_default_timeout(WAIT_MS)
     labeler.goto(f"{live.url}/?token={TOKENS['labeler']}#run={run.id}")
     shown(labeler, "continue after 2.5 s")
@@ -88,7 +90,7 @@ def test_a_stopped_run_disables_the_control(page: Any, live: BackgroundServer, r
 
 
 def test_watch_link_opens_the_labeling_ui_in_watch_mode(live: BackgroundServer, browser: Any, run: RunRead) -> None:
-    page = browser.new_page()
+    page = browser.new_page(bypass_csp=True)
     page.goto(f"{live.url}/?token={TOKENS['operator']}&ui=http%3A%2F%2F127.0.0.1%3A8080%2F#run={run.id}")
     page.wait_for_selector("#watch-3d:not([hidden])", timeout=WAIT_MS)
     href = page.get_attribute("#watch-3d", "href")

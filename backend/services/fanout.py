@@ -1,0 +1,149 @@
+"""One reader for every open SSE stream. Streams subscribe to a run; the feed reads each run's new
+events once — when a commit in this process wakes it (EventHub), or when a cheap poll of the runs'
+last ids (one query for all runs, every `poll_s`: writers in other processes) shows news — and
+hands the same SSE frames to every subscriber. A subscriber reads its own backlog from the log
+(resume from any id) and again whenever it fell too far behind, so nothing is missed or doubled:
+ids are gap-free per run and a subscriber keeps the last one it sent."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections import Counter, defaultdict, deque
+
+import anyio
+from sqlalchemy import select
+
+from backend.db import Database
+from backend.models import Run
+from backend.services import events
+from backend.services.events import EventHub
+from collie.schemas import StreamEvent
+
+MAX_QUEUED = 2000  # frames a subscriber may fall behind before it re-reads the log itself
+
+Frame = tuple[int, str]  # (event id, SSE text)
+
+
+def sse_frame(event: StreamEvent) -> str:
+    return f"id: {event.id}\nevent: {event.kind}\ndata: {event.model_dump_json()}\n\n"
+
+
+class Subscription:
+    def __init__(self, run_id: int, after: int) -> None:
+        self.run_id = run_id
+        self.last = after
+        self.frames: deque[Frame] = deque()
+        self.lagged = True  # the backlog comes from the log first
+        self.signal = asyncio.Event()
+
+    def offer(self, frame: Frame) -> None:
+        if self.lagged:
+            return
+        if len(self.frames) >= MAX_QUEUED:
+            self.frames.clear()
+            self.lagged = True
+        else:
+            self.frames.append(frame)
+        self.signal.set()
+
+
+class StreamFeed:
+    """Lives on the service's event loop (start() in the lifespan)."""
+
+    def __init__(self, db: Database, hub: EventHub, poll_s: float) -> None:
+        self.db, self.hub, self.poll_s = db, hub, poll_s
+        self._subscribers: dict[int, set[Subscription]] = defaultdict(set)
+        self._cursor: dict[int, int] = {}  # per run: the last event id handed out
+        self._woken: set[int] = set()
+        self._wake = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+        self.open_by_caller: Counter[int] = Counter()
+        hub.listen(self._published)
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    def _published(self, items: list[tuple[int, int]]) -> None:
+        """Called by the hub on the loop after a commit in this process."""
+        runs = {run_id for run_id, _ in items if run_id in self._subscribers}
+        if runs:
+            self._woken |= runs
+            self._wake.set()
+
+    async def subscribe(self, run_id: int, after: int) -> Subscription:
+        if run_id not in self._cursor:
+            last = await anyio.to_thread.run_sync(self._last_id, run_id)
+            self._cursor.setdefault(run_id, last)
+        subscription = Subscription(run_id, after)
+        self._subscribers[run_id].add(subscription)
+        return subscription
+
+    def unsubscribe(self, subscription: Subscription) -> None:
+        subscribers = self._subscribers.get(subscription.run_id)
+        if subscribers is None:
+            return
+        subscribers.discard(subscription)
+        if not subscribers:
+            del self._subscribers[subscription.run_id]
+            self._cursor.pop(subscription.run_id, None)
+
+    async def backlog(self, subscription: Subscription) -> list[Frame]:
+        """The subscriber's events from the log, after the last one it sent (one page)."""
+        subscription.lagged = False
+        page = await anyio.to_thread.run_sync(self._read, subscription.run_id, subscription.last)
+        if len(page) == events.MAX_PAGE:
+            subscription.lagged = True  # more to read
+            subscription.signal.set()
+        return [(e.id, sse_frame(e)) for e in page]
+
+    # ---------------------------------------------------------------- the one reader
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        polled = loop.time()
+        while True:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), max(0.0, polled + self.poll_s - loop.time()))
+            self._wake.clear()
+            woken, self._woken = self._woken, set()
+            watched = dict(self._cursor)
+            if watched and loop.time() >= polled + self.poll_s:  # which runs did other processes write to?
+                latest = await anyio.to_thread.run_sync(self._last_ids, list(watched))
+                woken |= {run_id for run_id, last in latest.items() if last > watched[run_id]}
+            if loop.time() >= polled + self.poll_s:
+                polled = loop.time()
+            for run_id in woken & set(watched):
+                page = await anyio.to_thread.run_sync(self._read, run_id, watched[run_id])
+                self._dispatch(run_id, page)
+                if len(page) == events.MAX_PAGE:
+                    self._woken.add(run_id)
+                    self._wake.set()
+
+    def _dispatch(self, run_id: int, page: list[StreamEvent]) -> None:
+        if run_id not in self._cursor or not page:
+            return
+        for event in page:
+            if event.id <= self._cursor[run_id]:
+                continue
+            frame = (event.id, sse_frame(event))
+            for subscription in self._subscribers.get(run_id, ()):
+                subscription.offer(frame)
+            self._cursor[run_id] = event.id
+
+    def _read(self, run_id: int, after: int) -> list[StreamEvent]:
+        with self.db.read() as conn:
+            return events.read_after(conn, run_id, after)
+
+    def _last_id(self, run_id: int) -> int:
+        with self.db.read() as conn:
+            return events.last_id(conn, run_id)
+
+    def _last_ids(self, run_ids: list[int]) -> dict[int, int]:
+        with self.db.read() as conn:
+            rows = conn.execute(select(Run.id, Run.last_event_id).where(Run.id.in_(run_ids)))
+            return {r.id: r.last_event_id for r in rows}

@@ -1,0 +1,61 @@
+"""Lease gaps: a released query is nobody's (its former holder cannot label it), and an undo that
+hands a query back keeps its labeler within MAX_HOLD."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from collie.client import ApiError, CollieClient
+from collie.schemas import MAX_HOLD, RunRead
+
+from .conftest import make_run_spec, make_session
+
+
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
+def held_by(client: CollieClient, run_id: int, name: str) -> list[str]:
+    return [q.query_id for q in client.queries(run_id, status="leased") if q.lease_owner == name]
+
+
+def test_a_released_query_cannot_be_labelled_by_its_former_holder(
+    new_labeler: Callable[[str], CollieClient], run: RunRead
+) -> None:
+
+    holder = new_labeler("releaser")
+    claim = holder.claim(run.id)
+    assert claim is not None
+    assert holder.release(run.id, claim.query.query_id).status == "pending"
+    with pytest.raises(ApiError) as err:
+        holder.submit(run.id, claim.query.query_id, 2)
+    assert err.value.status == 409 and "not claimed by you" in err.value.detail
+    assert holder.query(run.id, claim.query.query_id).status == "pending"
+
+
+def test_undo_keeps_the_labeler_within_max_hold(
+    trainer: CollieClient, new_labeler: Callable[[str], CollieClient]
+) -> None:
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 6))
+    who = new_labeler("undoer")
+    name = who.me().name
+    done = []
+    for _ in range(2):
+        claim = who.claim(created.id)
+        assert claim is not None
+        who.submit(created.id, claim.query.query_id, 1)
+        done.append(claim.query.query_id)
+    for hold in range(1, MAX_HOLD + 1):  # one on screen, one preloaded
+        assert who.claim(created.id, hold=hold) is not None
+    assert len(held_by(trainer, created.id, name)) == MAX_HOLD
+    for query_id in done:
+        assert who.undo(created.id, query_id).query_status == "leased"
+        held = held_by(trainer, created.id, name)
+        assert query_id in held and len(held) <= MAX_HOLD, held
+    run = trainer.run(created.id)
+    assert run.queue.leased <= MAX_HOLD and run.n_labels == 0

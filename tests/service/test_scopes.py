@@ -1,0 +1,102 @@
+"""Token scopes: a trainer acts only on the runs it created, a labeler may be limited to runs, and
+a revoked principal stays revoked — a restart with the same bootstrap token included."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import httpx
+import pytest
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from collie.client import ApiError, CollieClient
+from collie.schemas import MetricsIn, RolloutsIn, RunRead
+
+from .conftest import TOKENS, make_run_spec, make_session, settings_for
+
+
+@pytest.fixture(scope="module")
+def database_url(both_databases: str) -> str:
+    """This module runs on SQLite and on a real PostgreSQL server."""
+    return both_databases
+
+
+@pytest.fixture
+def other_trainer(live: BackgroundServer, operator: CollieClient) -> Callable[[str], CollieClient]:
+    def make(name: str) -> CollieClient:
+        return CollieClient(live.url, operator.create_labeler(name, role="trainer").token)
+
+    return make
+
+
+def test_a_trainer_acts_only_on_its_own_runs(
+    trainer: CollieClient, other_trainer: Callable[[str], CollieClient], run: RunRead
+) -> None:
+
+    intruder = other_trainer("trainer-b")
+    before = trainer.run(run.id)
+    for call in (
+        lambda: intruder.post_session(run.id, make_session(5, 1)),
+        lambda: intruder.retire(run.id, ["0-0"]),
+        lambda: intruder.set_status(run.id, "failed"),
+        lambda: intruder.post_metrics(run.id, MetricsIn(epoch=1, values={"x": 1.0})),
+        lambda: intruder.post_rollouts(run.id, RolloutsIn(epoch=1, rollouts=[])),
+        lambda: list(intruder.labelled(run.id)),
+        lambda: intruder.export(run.id),
+    ):
+        with pytest.raises(ApiError) as err:
+            call()
+        assert err.value.status == 403 and "another trainer" in str(err.value.detail)
+    after = trainer.run(run.id)
+    assert (after.status, after.queue, after.last_event_id) == (before.status, before.queue, before.last_event_id)
+    assert intruder.run(run.id).id == run.id  # reading stays open to every role
+    own = intruder.create_run(make_run_spec())
+    assert intruder.post_session(own.id, make_session(0, 1)).created == ["0-0"]
+    with pytest.raises(ApiError) as err:
+        trainer.set_status(own.id, "failed")  # and the other way round
+    assert err.value.status == 403
+
+
+def test_a_labeler_limited_to_runs(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -> None:
+    mine = trainer.create_run(make_run_spec())
+    other = trainer.create_run(make_run_spec())
+    for created in (mine, other):
+        trainer.post_session(created.id, make_session(0, 2))
+    token = operator.create_labeler("scoped", runs=[mine.id]).token
+    assert next(p for p in operator.labelers() if p.name == "scoped").runs == [mine.id]
+    with CollieClient(live.url, token) as scoped:
+        assert scoped.claim(mine.id) is not None
+        for call in (
+            lambda: scoped.claim(other.id),
+            lambda: scoped.run(other.id),
+            lambda: scoped.queries(other.id),
+            lambda: scoped.events(other.id),
+        ):
+            with pytest.raises(ApiError) as err:
+                call()
+            assert err.value.status == 403 and "limited" in str(err.value.detail)
+        assert [r.id for r in scoped.runs()] == [mine.id]
+    headers = {"Authorization": f"Bearer {token}"}
+    assert httpx.get(f"{live.url}/api/runs/{other.id}/stream", headers=headers).status_code == 403
+    page = httpx.get(f"{live.url}/api/dashboard/runs", headers=headers).json()
+    assert [r["id"] for r in page["runs"]] == [mine.id]
+    body = {"name": "scoped-trainer", "role": "trainer", "runs": [mine.id]}
+    response = httpx.post(
+        f"{live.url}/api/labelers", json=body, headers={"Authorization": f"Bearer {TOKENS['operator']}"}
+    )
+    assert response.status_code == 422 and "only a labeler" in response.text
+
+
+def test_a_revoked_principal_stays_revoked(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path / "revoke.db")
+    with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["operator"]) as operator:
+        builtin = next(p for p in operator.labelers() if p.name == "labeler")
+        assert operator.revoke(builtin.id).revoked
+    # the next start supplies the same bootstrap token again: it must not revive the principal
+    with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["operator"]) as operator:
+        response = httpx.get(f"{server.url}/api/me", headers={"Authorization": f"Bearer {TOKENS['labeler']}"})
+        assert response.status_code == 401
+        assert next(p for p in operator.labelers() if p.name == "labeler").revoked
+        assert operator.me().name == "operator"  # the others are untouched
