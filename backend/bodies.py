@@ -76,11 +76,12 @@ def prepare_session(body_path: str) -> tuple[str, Any]:
         return "invalid", [plain_error({**e, "loc": ("body", *e["loc"])}) for e in exc.errors(include_url=False)[:20]]
     del raw
     queries = [
-        PreparedQuery(q.query_id, q.start, q.score, q.extra, q.model_dump_json(include=FRAME_FIELDS), _shell(q))
+        PreparedQuery(q.query_id, q.start, q.score, q.extra, q.model_dump_json(include=set(FRAME_FIELDS)), _shell(q))
         for q in session.queries
     ]
     fields = {name: getattr(session, name) for name in type(session).model_fields if name != "queries"}
-    prepared = SessionPost.model_construct(**fields, queries=queries)
+    # PreparedQuery stands in, duck-typed, for the QueryIn fields post_session reads
+    prepared = SessionPost.model_construct(**fields, queries=queries)  # type: ignore[arg-type]  # see above
     fd, out = tempfile.mkstemp(prefix="collie-session-", suffix=".pickle", dir=Path(body_path).parent)
     with os.fdopen(fd, "wb") as file:
         pickle.dump(prepared, file, protocol=5)

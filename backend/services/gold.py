@@ -23,6 +23,7 @@ from typing import Any
 from sqlalchemy import Connection, func, insert, select
 
 from backend.models import LabelVote, Query, QueryData, Run
+from backend.services import runs
 from backend.services.auth import Caller
 from backend.services.dashboard import task_of
 from backend.services.label_stats import decode
@@ -59,7 +60,7 @@ def serve_if_due(conn: Connection, run_id: int, caller: Caller, expires: float) 
     ).scalar()
     if current is None:
         return None
-    task = task_of(run)[0]
+    task = task_of(runs.get(conn, run_id))[0]  # the rule as stored with the run (or none)
     if task is None:
         return None
     served = select(Query.gold_of).where(_mine(run_id, caller.id))

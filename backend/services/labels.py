@@ -238,6 +238,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     if q.status == "retired" or not votes:
         raise Conflict(f"query '{body.query_id}' has no label to undo")
     live_other = q.status == "leased" and q.lease_expires_at > now and q.lease_owner_id != caller.id
+    owner: int | None
+    expires: float | None
     if mine is not None:
         if live_other:
             raise Conflict(
@@ -255,8 +257,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         # the query returns to the pool (a lease another labeler holds now stands)
         keep = live_other or q.gold_of is not None  # a gold copy stays its labeler's
         status = "leased" if live_other else "pending"
-        owner: int | None = q.lease_owner_id if keep else None
-        expires: float | None = q.lease_expires_at if keep else None
+        owner = q.lease_owner_id if keep else None
+        expires = q.lease_expires_at if keep else None
     else:
         raise Conflict(f"query '{body.query_id}' was labelled by someone else")
     event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)

@@ -5,7 +5,7 @@ no two processes can disagree about a run's rule.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol, cast
 
 from collie.task_schemas import (
     DiscSpec,
@@ -29,7 +29,7 @@ class NotDeclarative(ValueError):
 
 
 def region_spec(region: Region) -> RegionSpec:
-    d = region.desirability
+    d = cast(Literal[0, 1, 2], region.desirability)  # a Region's class is 0, 1 or 2 (checked where it is made)
     if isinstance(region, OutsideDisc):
         return OutsideDiscSpec(kind="outside_disc", desirability=d, centre=list(region.centre), radius=region.radius)
     if isinstance(region, Disc):
@@ -37,7 +37,7 @@ def region_spec(region: Region) -> RegionSpec:
     if isinstance(region, WedgeNorth):
         return WedgeNorthSpec(kind="wedge_north", desirability=d, apex=list(region.apex))
     if isinstance(region, HalfPlane):
-        return HalfPlaneSpec(kind=region.kind, desirability=d, x0=region.x0)  # type: ignore[arg-type]
+        return HalfPlaneSpec(kind=region.kind, desirability=d, x0=region.x0)  # type: ignore[arg-type]  # kind: 'halfplane_left' or '_right'
     if isinstance(region, PitchBeyond):
         return PitchLimitSpec(kind="pitch_beyond", desirability=d, limit=region.limit)
     if isinstance(region, Polygon):
