@@ -145,7 +145,7 @@ class LabelerSession:
 
     def _press(self, value: int | str) -> None:
         with self._lock:
-            decision = self.state.press(value, time.perf_counter(), new_request_id())  # type: ignore[arg-type]
+            decision = self.state.press(value, time.perf_counter(), new_request_id())  # type: ignore[arg-type]  # Tab.press takes the label as an int
         if isinstance(decision, Refusal):
             self.panels.notify(decision.title, decision.body, "orange")
         elif decision is not None:

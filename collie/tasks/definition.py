@@ -57,7 +57,7 @@ def to_definition(task: Task, source: str = "") -> TaskDefinition:
         name=task.name,
         description=task.description,
         meaning=meaning,
-        background=task.background,  # type: ignore[arg-type]
+        background=task.background,  # type: ignore[arg-type]  # a Task background is 0, 1 or 2
         regions=[region_spec(r) for r in task.regions],
         source=source,
     )
