@@ -18,6 +18,7 @@ from datetime import datetime
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -52,6 +53,15 @@ FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
 QueryId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
 RequestId = Annotated[str, Field(min_length=1, max_length=128, pattern=r"^[\x21-\x7e]+$")]
+
+
+def _no_nul(text: str) -> str:
+    if "\x00" in text:  # PostgreSQL text cannot hold it, and no person means it
+        raise ValueError("text must not contain the NUL character (\\u0000)")
+    return text
+
+
+Text = Annotated[str, AfterValidator(_no_nul)]  # free text stored as text: no NUL
 MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
@@ -140,7 +150,7 @@ class RunCreate(Wire):
     redundancy: Redundancy = Field(default=1, description="labels from distinct labelers per query")
     gold_rate: GoldRate = Field(default=0.0, description="share of each labeler's segments that are gold")
     task_definition: TaskDefinition | None = Field(default=None, description="the run's rule, judged by every client")
-    instruction: str | None = Field(
+    instruction: Text | None = Field(
         default=None, min_length=1, max_length=MAX_INSTRUCTION, description="intent in words, for a run without a rule"
     )
 
@@ -203,7 +213,7 @@ MAX_INSTRUCTIONS = 4000  # characters of an operator's free-text instructions fo
 class RunInstructions(Wire):
     """An operator's free-text instructions for a run's labelers, shown with the task (empty: none)."""
 
-    text: str = Field(max_length=MAX_INSTRUCTIONS)
+    text: Text = Field(max_length=MAX_INSTRUCTIONS)
 
 
 class FeedbackPolicy(Wire):

@@ -18,6 +18,7 @@ from backend.db import Database
 from backend.migrate import alembic_config, upgrade
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
+from collie.schemas import LabelChangedEvent, WithdrawnEvent
 from trainer.feedback.http import HttpFeedback
 
 from .conftest import DIMS, TOKENS, make_run_spec, make_session
@@ -28,9 +29,9 @@ Labelers = Callable[[str], CollieClient]
 
 def label_events_on_stream(client: CollieClient, run_id: int) -> list[tuple[str, str, int | None]]:
     return [
-        (e.kind, e.data["query_id"], e.data["label"])
+        (e.kind, e.data.query_id, e.data.label)
         for e in client.events(run_id).events
-        if e.kind in ("label", "withdrawn")
+        if isinstance(e, LabelChangedEvent | WithdrawnEvent)
     ]
 
 
@@ -164,7 +165,10 @@ def test_gold_segments_are_served_scored_and_kept_from_the_trainer(
     b.submit(run.id, second.query.query_id, 2)  # wrong
     # the trainer's side sees none of it
     events = trainer.events(run.id, after=stream_before).events
-    assert [(e.kind, e.data["query_id"]) for e in events if e.kind == "label"] == [("label", "1-0"), ("label", "1-1")]
+    assert [(e.kind, e.data.query_id) for e in events if isinstance(e, LabelChangedEvent)] == [
+        ("label", "1-0"),
+        ("label", "1-1"),
+    ]
     assert trainer.run(run.id).n_labels == before.n_labels + 2
     ids = {q.query_id for q in trainer.queries(run.id)}
     assert ids == {"0-0", "0-1", "1-0", "1-1", "1-2"}

@@ -46,7 +46,8 @@ def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -
 
 @pytest.fixture(scope="module")
 def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    # bypass_csp: Playwright evaluates its predicates as strings, which the dashboard's CSP refuses
+    context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1000})
     context.grant_permissions(["clipboard-read", "clipboard-write"], origin=live.url)
     page = context.new_page()
     page.set_default_timeout(WAIT_MS)
