@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -70,6 +70,9 @@ bench-contention: $(STAMP)
 	$(PY) benchmarks/bench_contention.py
 
 # The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
+bench-first-segment: $(STAMP)
+	$(PY) benchmarks/bench_first_segment.py
+
 bench-gpu: $(STAMP)
 	$(PY) benchmarks/bench_gpu.py
 
