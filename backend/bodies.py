@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ctypes
 import multiprocessing
 import os
 import pickle
+import signal
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -88,6 +90,13 @@ def prepare_session(body_path: str) -> tuple[str, Any]:
     return "ok", out
 
 
+def _die_with_parent() -> None:
+    """A worker that outlived a killed service would hold its memory forever: on Linux, the kernel
+    ends it when the service goes (prctl PR_SET_PDEATHSIG); elsewhere nothing is done."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+
+
 class SessionParser:
     """One worker process (spawned: the service's threads make fork unsafe), started with the
     first big session (a service that never gets one never starts it) and kept."""
@@ -102,7 +111,9 @@ class SessionParser:
 
     async def parse(self, request: Request) -> SessionPost:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(
+                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
+            )
         fd, body_path = tempfile.mkstemp(prefix="collie-body-", suffix=".json", dir=self.spool_dir)
         out: str | None = None
         try:
