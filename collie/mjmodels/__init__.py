@@ -48,7 +48,7 @@ def mjcf_path(name: str) -> Path:
     if name in GYMNASIUM_FILES:
         return gymnasium_asset(GYMNASIUM_FILES[name])
     if name in CAMERA_OFFSETS:
-        raise NotImplementedError(f"{name}: the model is edited in memory; use model_xml() or load_model()")
+        raise ValueError(f"{name}: the model is edited in memory; use model_xml() or load_model()")
     return HERE / f"{name}.xml"
 
 
