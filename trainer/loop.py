@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from collie.labels import Label
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.device_replay import DeviceBatch, DeviceReplay
@@ -344,10 +345,10 @@ class Trainer:
 
     def labels_per_class(self) -> dict[str, int]:
         """Labelled segments per class (a rule-free metric, as is n_labels)."""
-        counts = dict.fromkeys((0, 1, 2), 0)
+        counts = dict.fromkeys(Label, 0)
         for segment in self.labelled.segments.values():
-            counts[int(segment.label)] += 1
-        return {f"n_labels_{name}": counts[c] for c, name in ((0, "bad"), (1, "neutral"), (2, "good"))}
+            counts[Label(int(segment.label))] += 1
+        return {f"n_labels_{label.word}": n for label, n in counts.items()}
 
     def guidance_summary(self, w: np.ndarray | None) -> dict[str, float]:
         """w(s) over the evaluation rollouts (rule-free): mean, min, max; nothing while w ≡ 1."""
@@ -397,7 +398,7 @@ class Trainer:
         (self.out / "skills_latest.png").write_bytes(path.read_bytes())
         if w is not None and self.env.position_dims == 2:  # the map coloured by w(s) (needs no rule)
             guidance = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · epoch {self.epoch} · w(s)"
-            xy = list(traj.xy[:, ::2])  # the states w was computed at
+            xy = list(traj.xy[:, ::ROLLOUT_STRIDE])  # the states w was computed at
             out = self.out / "guidance_latest.png"
             plot_guidance_map(xy, w, out, task=self.task, title=guidance, labelled=labelled)
 
