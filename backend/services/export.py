@@ -10,6 +10,7 @@ import json
 from sqlalchemy import Connection
 
 from backend.services import labels
+from collie.labels import Label
 
 EVENT_FIELDS = (
     "id",
@@ -25,11 +26,10 @@ EVENT_FIELDS = (
     "created_at",
 )
 EFFECTIVE_FIELDS = ("query_id", "session", "label", "label_name", "event_id", "labeler", "seconds", "labelled_at")
-LABEL_NAMES = ("bad", "neutral", "good")  # by stored value
 
 
 def name_of(value: int | None) -> str | None:
-    return None if value is None else LABEL_NAMES[value]
+    return None if value is None else Label(value).word
 
 
 def rows(conn: Connection, run_id: int, effective: bool) -> list[dict[str, object]]:
