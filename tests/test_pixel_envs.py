@@ -93,7 +93,7 @@ def test_model_xml_rebuilds_the_scene(name: str) -> None:
     tex = painted.texture("position_floor")
     texels = painted.tex_data[tex.adr[0] : tex.adr[0] + 3 * tex.width[0] * tex.height[0]]
     assert np.array_equal(texels, floor_texture(int(tex.width[0])).reshape(-1))
-    with pytest.raises(NotImplementedError, match="model_xml"):
+    with pytest.raises(ValueError, match="model_xml"):
         model_path(name)
 
 
