@@ -51,7 +51,7 @@ lint: $(STAMP)
 	$(VENV)/bin/pytest -q -p no:cacheprovider tests/lint
 
 test: $(STAMP) lint
-	$(VENV)/bin/pytest -q
+	$(VENV)/bin/pytest -q --durations=15
 
 # The settings docs/results.md's point-mass numbers were measured with, before the reference's
 # initialisation, policy log-std floor and DIAYN variant became the defaults (docs/algorithm.md).
