@@ -47,10 +47,14 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str]]:
 def run(args: argparse.Namespace) -> int:
     from backend.main import create_app
     from backend.server import bind, uvicorn_server
+    from collie.startup import mark
+
+    mark("imports")  # FastAPI, SQLAlchemy, the routes
 
     settings, tokens = settings_from(args)
     generated = {r for r in tokens if f"COLLIE_{r.upper()}_TOKEN" not in os.environ}
     app = create_app(settings)
+    mark("app built")  # the database opened and migrated
     sock, url = bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
         args.tokens_json.parent.mkdir(parents=True, exist_ok=True)

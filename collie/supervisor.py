@@ -15,6 +15,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from collie.startup import PART_ENV, mark
+
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
 
@@ -59,7 +61,7 @@ class Supervisor:
 
     def _spawn(self, child: Child) -> subprocess.Popen:
         log = open(self.out / "logs" / f"{child.name}.log", "ab")  # noqa: SIM115 - lives as long as the child
-        env = {**child.env, "PYTHONUNBUFFERED": "1"}
+        env = {**child.env, "PYTHONUNBUFFERED": "1", PART_ENV: child.name}  # PART_ENV: its startup marks
         child.proc = subprocess.Popen(
             [sys.executable, "-m", "collie.cli", *child.args()],
             stdout=log,
@@ -69,6 +71,7 @@ class Supervisor:
         )
         log.close()  # the child holds its own copy
         child.started_at, child.restart_at = time.monotonic(), None
+        mark(f"spawned {child.name}")
         self.log(f"started {child.name} (pid {child.proc.pid})")
         self._write_pids()
         return child.proc

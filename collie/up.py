@@ -21,6 +21,7 @@ from urllib.parse import quote, urlsplit
 
 from collie.client import CollieClient
 from collie.schemas import RunRead
+from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import TOKEN_ENV, write_secret
 
@@ -140,6 +141,10 @@ def child_env(token: str | None = None) -> dict[str, str]:
 
 
 def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, stopping: dict) -> int:
+    timeline = out / "logs" / "startup.jsonl"  # every part's startup marks (collie/startup.py), this start's only
+    timeline.unlink(missing_ok=True)
+    os.environ[LOG_ENV] = str(timeline.resolve())  # for our own marks and, through child_env, the parts'
+    mark("python start")
     tokens_file = out / "tokens.json"
     tokens = stack_tokens(tokens_file)
     write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
@@ -153,8 +158,10 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     service = stack.start("service", service_args, service_env)
     api = wait_for(tokens_file, service, "the service", key="api")["api"]  # the service adds its URL
     port["service"] = urlsplit(api).port or args.port
+    mark("waited: service URL")
     with CollieClient(api, tokens["operator"]) as client:
         wait_healthy(client, service)
+    mark("waited: service healthy")
     trainer_out = out / "trainer"
     memo = trainer_out / "service_run.json"
     resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
@@ -190,6 +197,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     trainer_env = {**child_env(tokens["trainer"]), "OMP_WAIT_POLICY": "PASSIVE"}
     trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)
     run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
+    mark("waited: run created")
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
         teach += ["--seed", str(args.seed), *(["--rate", str(args.teacher_rate)] if args.teacher_rate else [])]
@@ -205,6 +213,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
 
         ui = stack.start("labeling_ui", ui_args, child_env())
         ui_meta = wait_for(ui_info, ui, "the labeling UI")
+        mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
         labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])
     dashboard = f"{api}/?token={quote(tokens['operator'])}"

@@ -11,6 +11,7 @@ from urllib.parse import quote
 
 import viser
 
+from collie.startup import mark
 from labeling_ui.models import warm_models
 from labeling_ui.session import LabelerSession, UiConfig
 
@@ -32,10 +33,12 @@ class LabelingApp:
         self.server.on_client_disconnect(self._disconnect)
         self.compile_s: dict[str, float] = {}  # env → seconds its model took to compile, once warm
         self._stopping = threading.Event()
-        self._warm = threading.Thread(
-            target=lambda: self.compile_s.update(warm_models(stop=self._stopping)), name="collie-warm"
-        )
+        self._warm = threading.Thread(target=self._warm_models, name="collie-warm")
         self._warm.start()
+
+    def _warm_models(self) -> None:
+        self.compile_s.update(warm_models(stop=self._stopping))
+        mark("models compiled")
 
     @property
     def port(self) -> int:

@@ -8,6 +8,7 @@ import signal
 import threading
 from pathlib import Path
 
+from collie.startup import mark
 from collie.tokens import resolve_token
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
@@ -27,7 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = UiConfig(api=args.api, run_id=args.run, lease_s=args.lease_s, fps=args.fps)
+    mark("imports")  # viser, mujoco, the UI's modules
     app = LabelingApp(config, host=args.host, port=args.port)
+    mark("serving")  # viser's server is up; models compile in the background
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
     token = resolve_token(args, "labeler", from_env=False)
     if token:  # asked for by the person who started it: their terminal, not a log

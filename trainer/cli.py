@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from collie.startup import mark
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.config import PRESETS, Config, make_config
 from trainer.methods import METHODS
@@ -150,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer
 
+        mark("imports")  # torch, mujoco, the trainer's modules
+
         # a resumed run keeps the rule it started with, whatever its file says now
         rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)
         if rule.definition is not None:
@@ -157,8 +160,10 @@ def run(args: argparse.Namespace) -> int:
         feedback = None
         if args.api:
             feedback, rule = http_feedback(args, cfg, rule)
+            mark("run created")
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
+        mark("trainer built")  # envs, observation statistics, networks, replay
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
