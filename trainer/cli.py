@@ -7,6 +7,7 @@ import argparse
 import dataclasses
 import json
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -84,6 +85,22 @@ def config_from_args(args: argparse.Namespace) -> Config:
     return make_config(args.preset, args.env, **overrides)
 
 
+def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
+    """Until the service answers (`collie up` starts us beside it, before it serves)."""
+    from collie.client import Backoff, CollieClient, Unavailable
+
+    deadline = time.monotonic() + timeout_s
+    with CollieClient(api, token) as client:
+        for delay in Backoff(0.1, 1.0).delays():
+            try:
+                client.health()
+                return
+            except Unavailable:
+                if time.monotonic() + delay > deadline:
+                    raise ValueError(f"the labeling service at {api} did not answer in {timeout_s:.0f} s") from None
+                time.sleep(delay)
+
+
 def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple[HttpFeedback, RunRule]:
     """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
     (a restarted trainer rebuilds D0/D1/D2 from it; it follows the rule the service holds), else
@@ -97,6 +114,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         raise ValueError("--api needs a trainer token: --token-file, COLLIE_TOKEN or --token")
     if args.feedback_timeout is not None and not 0 < args.feedback_timeout <= MAX_FEEDBACK_TIMEOUT_S:
         raise ValueError(f"--feedback-timeout must be in (0, {MAX_FEEDBACK_TIMEOUT_S}] seconds")
+    wait_for_service(args.api, token)
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
