@@ -41,7 +41,8 @@ from pathlib import Path
 from record import record
 
 from collie.client import CollieClient
-from collie.startup import StartupMark, read_marks
+from collie.schemas import StartupMark
+from collie.startup import read_marks
 
 TIMEOUT_S = {"point": 600.0, "ant": 1800.0}  # ant: the first session is at epoch 360 (≈ 10 min quiet)
 TRAINER_KINDS = ("collect", "update", "evaluate", "checkpoint")  # summed over the epochs before the first session

@@ -18,13 +18,16 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from collie.client import CollieClient
-from collie.schemas import RunRead
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import TOKEN_ENV, write_secret
+
+if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
+    from collie.client import CollieClient
+    from collie.schemas import RunRead
 
 ROLES = ("operator", "trainer", "labeler")
 
@@ -193,6 +196,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     # OpenMP threads that sleep while idle (trainer/threads.py); `collie train` picks the thread count
     trainer_env = {**child_env(tokens["trainer"]), "OMP_WAIT_POLICY": "PASSIVE"}
     trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)  # it waits for the service itself
+    from collie.client import CollieClient
+
     with CollieClient(api, tokens["operator"]) as client:
         wait_healthy(client, service)
     mark("waited: service healthy")
@@ -289,6 +294,8 @@ class ProgressLine:
 def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: bool, stopping: dict) -> int:
     """Show the run's progress and keep every part alive until the run ends (or Ctrl-C). Returns 0
     when the trainer finished, 1 when a part could not be kept alive, 130 on Ctrl-C."""
+    from collie.client import CollieClient
+
     bar = ProgressLine()
     with CollieClient(api, token) as client:
         while not stopping["flag"]:
