@@ -21,7 +21,8 @@ JSON (runs/bench/first_segment.json, or first_segment_ENV.json for another env):
 (busy), first_segment_quiet_s, and per measured run (`busy`, `quiet`) its `parts` (part → what →
 wall s) and `parts_cpu` (the same in CPU s), `trainer` and `trainer_cpu` (its epochs summed by
 kind), `first_feedback_epoch`, `trainer_spawn_s`, `posted_s` (the trainer's post, since start),
-`pending_s`, and with --browser `on_screen_s`.
+`pending_s`, and with --browser `tab_open_s` (the page loaded), `claimed_s` (the tab's claim, seen
+on the service) and `on_screen_s` (its id on the page, sent with the first frame).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -53,36 +55,54 @@ def busy() -> None:
         pass
 
 
-def first_segment(tmp: Path, env: str, browser: bool) -> dict:
+def first_segment(tmp: Path, env: str, browser: bool, preset: str = "cpu") -> dict:
     """Seconds from `collie up` to a pending query on the service, and the timeline's split."""
     info = tmp / "info.json"
-    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", env, "--task", "north", "--preset", "cpu"]
+    cmd = [sys.executable, "-m", "collie.cli", "up", "--env", env, "--task", "north", "--preset", preset]
     cmd += ["--port", "0", "--ui-port", "0", "--out", str(tmp / "stack"), "--info-json", str(info)]
     timeout_s = TIMEOUT_S.get(env, 1800.0)
     t0_wall, start = time.time(), time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    page = None
     try:
         while not info.exists():
             if proc.poll() is not None or time.monotonic() - start > timeout_s:
                 raise RuntimeError(f"collie up did not come up (logs in {tmp / 'stack' / 'logs'})")
             time.sleep(0.2)
         meta = json.loads(info.read_text())
+        seen: dict[str, float | Exception] = {}
+
+        def watch_queue() -> None:  # in a thread: the browser's start must not delay this reading
+            try:
+                with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+                    while (queue := client.run(meta["run_id"]).queue).pending + queue.leased == 0:
+                        if proc.poll() is not None or time.monotonic() - start > timeout_s:
+                            raise RuntimeError("no segment to label in time")
+                        time.sleep(0.2)
+                    seen["pending"] = time.monotonic() - start
+                    while browser and client.run(meta["run_id"]).queue.leased == 0:  # the tab's claim
+                        if proc.poll() is not None or time.monotonic() - start > timeout_s:
+                            raise RuntimeError("the tab did not claim the segment in time")
+                        time.sleep(0.1)
+                    seen["claimed"] = time.monotonic() - start
+            except Exception as exc:  # re-raised below, in the bench's thread
+                seen["error"] = exc
+
+        watcher = threading.Thread(target=watch_queue, daemon=True)
+        watcher.start()
+        on_screen = None
         with tab(meta["labeling_ui"] if browser else None) as page:
-            with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
-                while (queue := client.run(meta["run_id"]).queue).pending + queue.leased == 0:
-                    if proc.poll() is not None or time.monotonic() - start > timeout_s:
-                        raise RuntimeError("no segment to label in time")
-                    time.sleep(0.2)
-            pending = time.monotonic() - start
-            on_screen = None
+            tab_open = time.monotonic() - start
             if page is not None:
                 from ui.page import wait_segment
 
-                wait_segment(page, timeout_s=max(1.0, timeout_s - pending))
+                wait_segment(page, timeout_s=max(1.0, timeout_s - (time.monotonic() - start)))
                 on_screen = time.monotonic() - start
+        watcher.join()
+        if "error" in seen:
+            raise seen["error"]
         result = split(read_marks(tmp / "stack" / "logs" / "startup.jsonl"), t0_wall)
-        return {**result, "pending_s": pending, **({"on_screen_s": on_screen} if on_screen is not None else {})}
+        shown = {"tab_open_s": tab_open, "claimed_s": seen["claimed"], "on_screen_s": on_screen} if browser else {}
+        return {**result, "pending_s": seen["pending"], **shown}
     finally:
         os.killpg(proc.pid, signal.SIGINT)
         try:
@@ -155,7 +175,9 @@ def split(marks: list[StartupMark], t0: float) -> dict:
 
 def show(name: str, r: dict) -> None:
     print(f"\n{name}: first segment pending after {r['pending_s']:.1f} s", end="")
-    print(f", on screen after {r['on_screen_s']:.1f} s" if "on_screen_s" in r else "")
+    if "on_screen_s" in r:
+        print(f"; tab loaded at {r['tab_open_s']:.1f} s, segment claimed at {r['claimed_s']:.1f} s", end="")
+    print(f", on screen at {r['on_screen_s']:.1f} s" if "on_screen_s" in r else "")
     print(f"  trainer spawned at {r['trainer_spawn_s']} s; segments posted at {r['posted_s']} s;", end=" ")
     print(f"first feedback epoch {r['first_feedback_epoch']}")
     print("  part: total wall s (CPU s) · each piece: wall s (CPU s)")
@@ -169,13 +191,14 @@ def show(name: str, r: dict) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--env", default="point", help="point (make demo's stack) or ant (issue 12)")
+    ap.add_argument("--preset", default="cpu", help="the trainer's preset (smoke: a quick check of the bench)")
     ap.add_argument("--runs", choices=("both", "quiet", "busy"), default="both", help="which of the two to measure")
     ap.add_argument("--browser", action="store_true", help="open the labeler tab in Chromium, no busy loop")
     args = ap.parse_args()
-    figures: dict = {"env": args.env, "browser": args.browser}
+    figures: dict = {"env": args.env, "preset": args.preset, "browser": args.browser}
     with tempfile.TemporaryDirectory() as tmp:
         if args.runs in ("both", "quiet"):
-            quiet = first_segment(Path(tmp) / "quiet", args.env, browser=False)
+            quiet = first_segment(Path(tmp) / "quiet", args.env, browser=False, preset=args.preset)
             show("quiet machine", quiet)
             figures.update(first_segment_quiet_s=quiet["pending_s"], quiet=quiet)
         if args.runs in ("both", "busy"):
@@ -184,7 +207,7 @@ def main() -> None:
                 loop = mp.Process(target=busy, daemon=True)
                 loop.start()
             try:
-                shared = first_segment(Path(tmp) / "busy", args.env, browser=args.browser)
+                shared = first_segment(Path(tmp) / "busy", args.env, browser=args.browser, preset=args.preset)
             finally:
                 if loop is not None:
                     loop.terminate()
