@@ -20,7 +20,7 @@ screen: the UI's claim and first frame (the browser is then the busy process: no
 JSON (runs/bench/first_segment.json, or first_segment_ENV.json for another env): first_segment_s
 (busy), first_segment_quiet_s, and per measured run (`busy`, `quiet`) its `parts` (part → what →
 wall s) and `parts_cpu` (the same in CPU s), `trainer` and `trainer_cpu` (its epochs summed by
-kind), `first_feedback_epoch`, `trainer_spawn_s`, `posted_s` (the trainer's post, since start),
+kind), `first_feedback_epoch`, `last_epoch`, `trainer_spawn_s`, `posted_s` (the trainer's post, since start),
 `pending_s`, and with --browser `tab_open_s` (the page loaded), `claimed_s` (the tab's claim, seen
 on the service) and `on_screen_s` (its id on the page, sent with the first frame).
 """
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import multiprocessing as mp
 import os
 import signal
@@ -55,12 +56,20 @@ def busy() -> None:
         pass
 
 
-def first_segment(tmp: Path, env: str, browser: bool, preset: str = "cpu") -> dict:
+class TimedOut(RuntimeError):
+    """No segment in time; `split` holds the timeline so far."""
+
+    def __init__(self, message: str, split: dict) -> None:
+        super().__init__(message)
+        self.split = split
+
+
+def first_segment(tmp: Path, env: str, browser: bool, preset: str = "cpu", timeout_s: float | None = None) -> dict:
     """Seconds from `collie up` to a pending query on the service, and the timeline's split."""
     info = tmp / "info.json"
     cmd = [sys.executable, "-m", "collie.cli", "up", "--env", env, "--task", "north", "--preset", preset]
     cmd += ["--port", "0", "--ui-port", "0", "--out", str(tmp / "stack"), "--info-json", str(info)]
-    timeout_s = TIMEOUT_S.get(env, 1800.0)
+    timeout_s = timeout_s or TIMEOUT_S.get(env, 1800.0)
     t0_wall, start = time.time(), time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
@@ -98,9 +107,9 @@ def first_segment(tmp: Path, env: str, browser: bool, preset: str = "cpu") -> di
                 wait_segment(page, timeout_s=max(1.0, timeout_s - (time.monotonic() - start)))
                 on_screen = time.monotonic() - start
         watcher.join()
-        if "error" in seen:
-            raise seen["error"]
         result = split(read_marks(tmp / "stack" / "logs" / "startup.jsonl"), t0_wall)
+        if "error" in seen:
+            raise TimedOut(str(seen["error"]), result)
         shown = {"tab_open_s": tab_open, "claimed_s": seen["claimed"], "on_screen_s": on_screen} if browser else {}
         return {**result, "pending_s": seen["pending"], **shown}
     finally:
@@ -168,6 +177,7 @@ def split(marks: list[StartupMark], t0: float) -> dict:
         "trainer": {k: round(trainer.get(f"epochs: {k}", 0.0), 2) for k in TRAINER_KINDS},
         "trainer_cpu": {k: round(trainer_cpu.get(f"epochs: {k}", 0.0), 2) for k in TRAINER_KINDS},
         "first_feedback_epoch": first_session,
+        "last_epoch": max((m.epoch or 0 for m in marks if m.part == "trainer"), default=0),
         "trainer_spawn_s": round(spawned["trainer"] - t0, 2) if "trainer" in spawned else None,
         "posted_s": round(posted, 2) if posted is not None else None,
     }
@@ -179,7 +189,7 @@ def show(name: str, r: dict) -> None:
         print(f"; tab loaded at {r['tab_open_s']:.1f} s, segment claimed at {r['claimed_s']:.1f} s", end="")
     print(f", on screen at {r['on_screen_s']:.1f} s" if "on_screen_s" in r else "")
     print(f"  trainer spawned at {r['trainer_spawn_s']} s; segments posted at {r['posted_s']} s;", end=" ")
-    print(f"first feedback epoch {r['first_feedback_epoch']}")
+    print(f"first feedback epoch {r['first_feedback_epoch']} (last epoch marked {r['last_epoch']})")
     print("  part: total wall s (CPU s) · each piece: wall s (CPU s)")
     for part, whats in r["parts"].items():
         cpu = r["parts_cpu"][part]
@@ -188,18 +198,32 @@ def show(name: str, r: dict) -> None:
         print(f"  {part:<12} {total:7.2f} s ({total_cpu:.2f})  {pieces}")
 
 
+def measured(name: str, *args: object, **kwargs: object) -> dict:
+    """One stack's figures, printed; a timed-out stack's split so far is printed before the error."""
+    try:
+        r = first_segment(*args, **kwargs)  # type: ignore[arg-type]
+    except TimedOut as exc:
+        print(f"\n{name}: {exc}; the timeline so far:")
+        show(name, {**exc.split, "pending_s": math.nan})
+        raise
+    show(name, r)
+    return r
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--env", default="point", help="point (make demo's stack) or ant (issue 12)")
     ap.add_argument("--preset", default="cpu", help="the trainer's preset (smoke: a quick check of the bench)")
+    ap.add_argument(
+        "--timeout-s", type=float, default=None, help="give up after this long (default: point 600, ant 1800)"
+    )
     ap.add_argument("--runs", choices=("both", "quiet", "busy"), default="both", help="which of the two to measure")
     ap.add_argument("--browser", action="store_true", help="open the labeler tab in Chromium, no busy loop")
     args = ap.parse_args()
     figures: dict = {"env": args.env, "preset": args.preset, "browser": args.browser}
     with tempfile.TemporaryDirectory() as tmp:
         if args.runs in ("both", "quiet"):
-            quiet = first_segment(Path(tmp) / "quiet", args.env, browser=False, preset=args.preset)
-            show("quiet machine", quiet)
+            quiet = measured("quiet machine", Path(tmp) / "quiet", args.env, False, args.preset, args.timeout_s)
             figures.update(first_segment_quiet_s=quiet["pending_s"], quiet=quiet)
         if args.runs in ("both", "busy"):
             loop = None
@@ -207,12 +231,13 @@ def main() -> None:
                 loop = mp.Process(target=busy, daemon=True)
                 loop.start()
             try:
-                shared = first_segment(Path(tmp) / "busy", args.env, browser=args.browser, preset=args.preset)
+                beside = "a browser tab" if args.browser else "one busy process"
+                shared = measured(
+                    f"beside {beside}", Path(tmp) / "busy", args.env, args.browser, args.preset, args.timeout_s
+                )
             finally:
                 if loop is not None:
                     loop.terminate()
-            beside = "a browser tab" if args.browser else "one busy process"
-            show(f"beside {beside}", shared)
             figures.update(first_segment_s=shared["pending_s"], busy=shared)
     if "first_segment_quiet_s" in figures:
         print(f"\nfirst segment to label, quiet machine: {figures['first_segment_quiet_s']:.1f} s")

@@ -63,4 +63,6 @@ def test_the_split_charges_each_piece_the_time_since_its_process_s_previous_mark
     }
     assert r["parts_cpu"]["trainer"]["imports"] == 2.7 and r["parts_cpu"]["trainer"]["epochs: collect"] == 1.0
     assert r["trainer"] == {"collect": 2.0, "update": 2.0, "evaluate": 0.0, "checkpoint": 0.0}
-    assert r["first_feedback_epoch"] == 2 and r["trainer_spawn_s"] == 1.0 and r["posted_s"] == 9.7
+    assert (
+        r["first_feedback_epoch"] == 2 and r["last_epoch"] == 2 and r["trainer_spawn_s"] == 1.0 and r["posted_s"] == 9.7
+    )
