@@ -96,6 +96,8 @@ def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
                 client.health()
                 return
             except Unavailable:
+                if delay == 0.1:  # the first miss: say what we wait for
+                    print(f"collie train: waiting for the labeling service at {api}", file=sys.stderr, flush=True)
                 if time.monotonic() + delay > deadline:
                     raise ValueError(f"the labeling service at {api} did not answer in {timeout_s:.0f} s") from None
                 time.sleep(delay)
