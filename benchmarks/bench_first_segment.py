@@ -56,8 +56,8 @@ def busy() -> None:
         pass
 
 
-class TimedOut(RuntimeError):
-    """No segment in time; `split` holds the timeline so far."""
+class NoSegment(RuntimeError):
+    """No segment (in time, or the stack failed); `split` holds the timeline so far."""
 
     def __init__(self, message: str, split: dict) -> None:
         super().__init__(message)
@@ -106,10 +106,11 @@ def first_segment(tmp: Path, env: str, browser: bool, preset: str = "cpu", timeo
 
                 wait_segment(page, timeout_s=max(1.0, timeout_s - (time.monotonic() - start)))
                 on_screen = time.monotonic() - start
-        watcher.join()
+        while watcher.is_alive():  # in steps: Ctrl-C still reaches this thread
+            watcher.join(0.5)
         result = split(read_marks(tmp / "stack" / "logs" / "startup.jsonl"), t0_wall)
         if "error" in seen:
-            raise TimedOut(str(seen["error"]), result)
+            raise NoSegment(str(seen["error"]), result)
         shown = {"tab_open_s": tab_open, "claimed_s": seen["claimed"], "on_screen_s": on_screen} if browser else {}
         return {**result, "pending_s": seen["pending"], **shown}
     finally:
@@ -199,10 +200,10 @@ def show(name: str, r: dict) -> None:
 
 
 def measured(name: str, *args: object, **kwargs: object) -> dict:
-    """One stack's figures, printed; a timed-out stack's split so far is printed before the error."""
+    """One stack's figures, printed; a failed or timed-out stack: its split so far, then the error."""
     try:
         r = first_segment(*args, **kwargs)  # type: ignore[arg-type]
-    except TimedOut as exc:
+    except NoSegment as exc:
         print(f"\n{name}: {exc}; the timeline so far:")
         show(name, {**exc.split, "pending_s": math.nan})
         raise
