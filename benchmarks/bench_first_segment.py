@@ -149,12 +149,16 @@ def split(marks: list[StartupMark], t0: float) -> dict:
     child's first from its spawn), the trainer's startup summed by kind, and the critical path."""
     parts: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
     cpu: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
-    spawned = {m.what.removeprefix("spawned "): m.t for m in marks if m.part == "up" and m.what.startswith("spawned ")}
+    spawns = [(m.what.removeprefix("spawned "), m.t) for m in marks if m.part == "up" and m.what.startswith("spawned ")]
+
+    def spawned_before(part: str, t: float) -> float:  # a restarted part: its latest spawn before t
+        return max((s for p, s in spawns if p == part and s <= t), default=t0)
+
     last: dict[int, tuple[float, float]] = {}  # pid → its previous mark's wall time and CPU time
     first_session = None
     posted = None
     for m in marks:
-        before, cpu_before = last.get(m.pid, (spawned.get(m.part, t0) if m.part != "up" else t0, 0.0))
+        before, cpu_before = last.get(m.pid, (spawned_before(m.part, m.t) if m.part != "up" else t0, 0.0))
         last[m.pid] = m.t, m.cpu
         if m.part == "up" and m.what.startswith("spawned "):
             continue
@@ -179,7 +183,7 @@ def split(marks: list[StartupMark], t0: float) -> dict:
         "trainer_cpu": {k: round(trainer_cpu.get(f"epochs: {k}", 0.0), 2) for k in TRAINER_KINDS},
         "first_feedback_epoch": first_session,
         "last_epoch": max((m.epoch or 0 for m in marks if m.part == "trainer"), default=0),
-        "trainer_spawn_s": round(spawned["trainer"] - t0, 2) if "trainer" in spawned else None,
+        "trainer_spawn_s": next((round(s - t0, 2) for p, s in spawns if p == "trainer"), None),
         "posted_s": round(posted, 2) if posted is not None else None,
     }
 

@@ -38,8 +38,7 @@ def run(args: argparse.Namespace) -> int:
     warm = tuple(e for e in args.warm.split(",") if e)
     unknown = [e for e in warm if e not in MODEL_NAMES]
     if unknown:
-        parser_error = f"collie label-ui: error: --warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}"
-        raise SystemExit(parser_error)
+        raise SystemExit(f"collie label-ui: error: --warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}")
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
     mark("serving")  # viser's server is up; models compile in the background
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)

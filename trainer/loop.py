@@ -522,6 +522,8 @@ class Trainer:
         (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
         (self.out / TASK_JSON).write_text(json.dumps(self.rule.to_json(), indent=2))
         self.rebuild_from_source()
+        if not self.method.asks_labels or len(self.labelled) >= self.cfg.total_queries:
+            startup.done()  # no feedback session will come: no first segment to time
         self._writer = self._tensorboard()
         self.reporter.status(StatusReport("training", self.epoch))
         startup.mark("run files, tensorboard")
