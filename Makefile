@@ -70,8 +70,10 @@ bench-contention: $(STAMP)
 	$(PY) benchmarks/bench_contention.py
 
 # The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
+# e.g. FIRST_SEGMENT_ARGS="--env ant --runs quiet" (issue 12's Ant stack), "--browser" (the segment on screen)
+FIRST_SEGMENT_ARGS ?=
 bench-first-segment: $(STAMP)
-	$(PY) benchmarks/bench_first_segment.py
+	$(PY) benchmarks/bench_first_segment.py $(FIRST_SEGMENT_ARGS)
 
 bench-gpu: $(STAMP)
 	$(PY) benchmarks/bench_gpu.py

@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import json
 import os
+import socket
 import sys
 from pathlib import Path
 
@@ -23,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=8000, help="port; 0 picks a free one (default 8000)")
     parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
+    parser.add_argument(
+        "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
+    )
     parser.add_argument("--tokens-json", type=Path, help="write {api, tokens: {operator, trainer, labeler}} here")
     parser.add_argument("--no-generate-tokens", action="store_true", help="only use tokens from the environment")
     parser.add_argument("--log-level", default="warning")
@@ -44,14 +48,29 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str]]:
     return Settings(**overrides), tokens  # type: ignore[arg-type]  # pydantic-settings validates the overrides
 
 
+def inherited(fd: int) -> tuple[socket.socket, str]:
+    """The listening socket a parent bound for us (`collie up` binds it before we start, so the
+    others can connect while we import: their requests queue until we serve), and its URL."""
+    try:
+        sock = socket.socket(fileno=fd)
+    except OSError as exc:
+        raise SystemExit(f"collie serve: error: --fd {fd} is not an open socket: {exc}") from None
+    host, port = sock.getsockname()[:2]
+    return sock, f"http://{f'[{host}]' if ':' in host else host}:{port}"
+
+
 def run(args: argparse.Namespace) -> int:
     from backend.main import create_app
     from backend.server import bind, uvicorn_server
+    from collie.startup import mark
+
+    mark("imports")  # FastAPI, SQLAlchemy, the routes
 
     settings, tokens = settings_from(args)
     generated = {r for r in tokens if f"COLLIE_{r.upper()}_TOKEN" not in os.environ}
     app = create_app(settings)
-    sock, url = bind(args.host, args.port)
+    mark("app built")  # the database opened and migrated
+    sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
         args.tokens_json.parent.mkdir(parents=True, exist_ok=True)
         partial = args.tokens_json.with_suffix(".partial")

@@ -727,3 +727,16 @@ class Health(Wire):
 
 class ErrorBody(Wire):
     detail: Any
+
+
+class StartupMark(Wire):
+    """One line of a stack's OUT/logs/startup.jsonl (collie/startup.py): `what` ended at wall time
+    `t` (seconds since the epoch) in `part`, when the process had used `cpu` seconds of CPU (all its
+    threads; on a busy machine the CPU split stays close to a quiet one's, the wall split stretches)."""
+
+    t: float
+    cpu: float
+    part: str
+    pid: int
+    what: str
+    epoch: int | None = None

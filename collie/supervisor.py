@@ -14,9 +14,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
+
+from collie.startup import PART_ENV, mark
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
+
+
+class Closeable(Protocol):
+    def close(self) -> None: ...
 
 
 class ChildFailed(RuntimeError):
@@ -29,6 +36,7 @@ class Child:
     args: Callable[[], list[str]]  # evaluated at each start (a restarted trainer adds --resume)
     env: dict[str, str]
     done_when_ok: bool  # exit 0 means its work is over (trainer, teacher): not restarted
+    pass_fds: tuple[int, ...] = ()  # inherited by each start (the service's listening socket)
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
     failures: int = 0  # deaths since it last stayed up stable_s
@@ -42,6 +50,7 @@ class Supervisor:
     def __init__(self, out: Path, max_restarts: int = 5, stable_s: float = 60.0) -> None:
         self.out, self.max_restarts, self.stable_s = out, max_restarts, stable_s
         self.children: dict[str, Child] = {}
+        self._after_stop: list[Closeable] = []  # closed once every child is down
         (out / "logs").mkdir(parents=True, exist_ok=True)
         self._log = open(out / "logs" / "up.log", "a")  # noqa: SIM115 - lives as long as the stack
 
@@ -51,24 +60,31 @@ class Supervisor:
         self._log.flush()
 
     def start(
-        self, name: str, args: Callable[[], list[str]], env: dict[str, str], done_when_ok: bool = False
+        self,
+        name: str,
+        args: Callable[[], list[str]],
+        env: dict[str, str],
+        done_when_ok: bool = False,
+        pass_fds: tuple[int, ...] = (),
     ) -> subprocess.Popen:
-        child = Child(name, args, env, done_when_ok)
+        child = Child(name, args, env, done_when_ok, pass_fds)
         self.children[name] = child
         return self._spawn(child)
 
     def _spawn(self, child: Child) -> subprocess.Popen:
         log = open(self.out / "logs" / f"{child.name}.log", "ab")  # noqa: SIM115 - lives as long as the child
-        env = {**child.env, "PYTHONUNBUFFERED": "1"}
+        env = {**child.env, "PYTHONUNBUFFERED": "1", PART_ENV: child.name}  # PART_ENV: its startup marks
         child.proc = subprocess.Popen(
             [sys.executable, "-m", "collie.cli", *child.args()],
             stdout=log,
             stderr=subprocess.STDOUT,
             env=env,
             start_new_session=True,  # our Ctrl-C is handled here, not by children
+            pass_fds=child.pass_fds,
         )
         log.close()  # the child holds its own copy
         child.started_at, child.restart_at = time.monotonic(), None
+        mark(f"spawned {child.name}")
         self.log(f"started {child.name} (pid {child.proc.pid})")
         self._write_pids()
         return child.proc
@@ -109,6 +125,10 @@ class Supervisor:
             print(f"collie up: {child.name} exited with {how}; restarting in {delay:.1f} s", file=sys.stderr)
             child.restart_at = now + delay
 
+    def closing(self, thing: Closeable) -> None:
+        """Close `thing` (e.g. the socket the service inherits) once the children are stopped."""
+        self._after_stop.append(thing)
+
     def finished(self, name: str) -> bool:
         child = self.children.get(name)
         return child is not None and child.finished
@@ -124,6 +144,8 @@ class Supervisor:
             except subprocess.TimeoutExpired:
                 child.proc.kill()
                 child.proc.wait()
+        for thing in self._after_stop:
+            thing.close()
         self.log("stopped")
         self._log.close()
 

@@ -13,16 +13,21 @@ import json
 import os
 import secrets
 import signal
+import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
-from urllib.parse import quote, urlsplit
+from typing import TYPE_CHECKING
+from urllib.parse import quote
 
-from collie.client import CollieClient
-from collie.schemas import RunRead
+from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import TOKEN_ENV, write_secret
+
+if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
+    from collie.client import CollieClient
+    from collie.schemas import RunRead
 
 ROLES = ("operator", "trainer", "labeler")
 
@@ -140,21 +145,23 @@ def child_env(token: str | None = None) -> dict[str, str]:
 
 
 def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, stopping: dict) -> int:
+    timeline = out / "logs" / "startup.jsonl"  # every part's startup marks (collie/startup.py), this start's only
+    timeline.unlink(missing_ok=True)
+    os.environ[LOG_ENV] = str(timeline.resolve())  # for our own marks and, through child_env, the parts'
+    mark("python start")
     tokens_file = out / "tokens.json"
     tokens = stack_tokens(tokens_file)
     write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
     service_env = {**child_env(), **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}
-    port = {"service": args.port, "labeling_ui": args.ui_port}  # after the first start: the bound ports
-
-    def service_args() -> list[str]:
-        where = ["--host", "127.0.0.1", "--port", str(port["service"])]
-        return ["serve", *where, "--db", str(db), "--tokens-json", str(tokens_file)]
-
-    service = stack.start("service", service_args, service_env)
-    api = wait_for(tokens_file, service, "the service", key="api")["api"]  # the service adds its URL
-    port["service"] = urlsplit(api).port or args.port
-    with CollieClient(api, tokens["operator"]) as client:
-        wait_healthy(client, service)
+    port = {"labeling_ui": args.ui_port}  # after the first start: the bound port
+    # We bind the service's socket and hand it over: its URL is known at once, so the trainer starts
+    # (and imports torch) while the service imports and migrates; requests queue until it serves,
+    # and a restarted service keeps the port.
+    sock = listening_socket(args.port)
+    stack.closing(sock)
+    api = f"http://127.0.0.1:{sock.getsockname()[1]}"
+    serve = ["serve", "--fd", str(sock.fileno()), "--db", str(db), "--tokens-json", str(tokens_file)]
+    service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
     trainer_out = out / "trainer"
     memo = trainer_out / "service_run.json"
     resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
@@ -188,8 +195,14 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
 
     # OpenMP threads that sleep while idle (trainer/threads.py); `collie train` picks the thread count
     trainer_env = {**child_env(tokens["trainer"]), "OMP_WAIT_POLICY": "PASSIVE"}
-    trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)
+    trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)  # it waits for the service itself
+    from collie.client import CollieClient
+
+    with CollieClient(api, tokens["operator"]) as client:
+        wait_healthy(client, service)
+    mark("waited: service healthy")
     run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
+    mark("waited: run created")
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
         teach += ["--seed", str(args.seed), *(["--rate", str(args.teacher_rate)] if args.teacher_rate else [])]
@@ -200,11 +213,12 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
         ui_info.unlink(missing_ok=True)
 
         def ui_args() -> list[str]:
-            where = ["--port", str(port["labeling_ui"]), "--info-json", str(ui_info)]
+            where = ["--port", str(port["labeling_ui"]), "--info-json", str(ui_info), "--warm", args.env]
             return ["label-ui", "--api", api, "--run", str(run_id), *where]
 
         ui = stack.start("labeling_ui", ui_args, child_env())
         ui_meta = wait_for(ui_info, ui, "the labeling UI")
+        mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
         labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])
     dashboard = f"{api}/?token={quote(tokens['operator'])}"
@@ -222,6 +236,19 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
     stack.log(f"stack up: run {run_id}, service {api}")
     return watch(api, tokens["operator"], run_id, stack, args.exit_when_done, stopping)
+
+
+def listening_socket(port: int) -> socket.socket:
+    """127.0.0.1:port (0: any free port), bound and listening; an error naming a port in use."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(("127.0.0.1", port))
+    except OSError as exc:
+        sock.close()
+        raise RuntimeError(f"cannot listen on 127.0.0.1:{port} for the service: {exc.strerror}") from None
+    sock.listen(128)
+    return sock
 
 
 def wait_healthy(client: CollieClient, service: subprocess.Popen, timeout_s: float = 60.0) -> None:
@@ -267,6 +294,8 @@ class ProgressLine:
 def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: bool, stopping: dict) -> int:
     """Show the run's progress and keep every part alive until the run ends (or Ctrl-C). Returns 0
     when the trainer finished, 1 when a part could not be kept alive, 130 on Ctrl-C."""
+    from collie.client import CollieClient
+
     bar = ProgressLine()
     with CollieClient(api, token) as client:
         while not stopping["flag"]:

@@ -11,12 +11,16 @@ from urllib.parse import quote
 
 import viser
 
+from collie.mjmodels import MODEL_NAMES
+from collie.startup import mark
 from labeling_ui.models import warm_models
 from labeling_ui.session import LabelerSession, UiConfig
 
 
 class LabelingApp:
-    def __init__(self, config: UiConfig, host: str = "127.0.0.1", port: int = 8090) -> None:
+    def __init__(
+        self, config: UiConfig, host: str = "127.0.0.1", port: int = 8090, warm: tuple[str, ...] = MODEL_NAMES
+    ) -> None:
         self.config = config
         self.host = host
         self.server = viser.ViserServer(host=host, port=port, label="collie labeling", verbose=False)
@@ -31,11 +35,14 @@ class LabelingApp:
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
         self.compile_s: dict[str, float] = {}  # env → seconds its model took to compile, once warm
+        self._warm_envs = warm  # compiled ahead of the first tab; the others on first use
         self._stopping = threading.Event()
-        self._warm = threading.Thread(
-            target=lambda: self.compile_s.update(warm_models(stop=self._stopping)), name="collie-warm"
-        )
+        self._warm = threading.Thread(target=self._warm_models, name="collie-warm")
         self._warm.start()
+
+    def _warm_models(self) -> None:
+        self.compile_s.update(warm_models(self._warm_envs, stop=self._stopping))
+        mark("models compiled")
 
     @property
     def port(self) -> int:

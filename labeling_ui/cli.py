@@ -8,6 +8,8 @@ import signal
 import threading
 from pathlib import Path
 
+from collie.mjmodels import MODEL_NAMES
+from collie.startup import mark
 from collie.tokens import resolve_token
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
@@ -22,12 +24,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token-file", type=Path, default=None, help="the same, with the token read from this file")
     parser.add_argument("--lease-s", type=float, default=60.0, help="claim length, renewed while a tab is open")
     parser.add_argument("--fps", type=float, default=20.0, help="segment frames per second at 1x")
+    parser.add_argument(
+        "--warm",
+        default=",".join(MODEL_NAMES),
+        help="envs whose models compile as the UI starts, comma-separated (the others on first use)",
+    )
     parser.add_argument("--info-json", type=Path, default=None, help="write the URL and port here once serving")
 
 
 def run(args: argparse.Namespace) -> int:
     config = UiConfig(api=args.api, run_id=args.run, lease_s=args.lease_s, fps=args.fps)
-    app = LabelingApp(config, host=args.host, port=args.port)
+    mark("imports")  # viser, mujoco, the UI's modules
+    warm = tuple(e for e in args.warm.split(",") if e)
+    unknown = [e for e in warm if e not in MODEL_NAMES]
+    if unknown:
+        raise SystemExit(f"collie label-ui: error: --warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}")
+    app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
+    mark("serving")  # viser's server is up; models compile in the background
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
     token = resolve_token(args, "labeler", from_env=False)
     if token:  # asked for by the person who started it: their terminal, not a log

@@ -9,6 +9,8 @@ import sys
 import pytest
 import torch
 
+from collie.startup import read_marks
+
 
 @pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: pixel segments travel packed
 def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path, env):
@@ -46,6 +48,12 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
 
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["epoch"] == summary["config"]["epochs"]
+    # every part marked its start (bench-first-segment's split), the trainer up to its first session only
+    marks = read_marks(tmp_path / "logs" / "startup.jsonl")
+    assert {m.part for m in marks} == {"up", "service", "trainer", "labeling_ui", "teacher"}
+    trainer = [m.what for m in marks if m.part == "trainer"]
+    assert trainer[:2] == ["python start", "imports"] and trainer[-2:] == ["query selection", "segments posted"]
+    assert trainer.count("segments posted") == 1
     n_total = summary["config"]["total_queries"]
     assert summary["n_labels"] == n_total  # every feedback session was answered
 

@@ -6,6 +6,7 @@ import contextlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -112,6 +113,47 @@ def test_a_teacher_and_labeling_ui_killed_mid_run_are_restarted_and_the_run_fini
     assert "labeling_ui exited with signal 9; restarting" in up_log
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
+
+
+def test_a_killed_service_comes_back_on_the_same_address_and_the_run_finishes(tmp_path):
+    """`collie up` holds the service's listening socket: a restarted service serves it again, and
+    the others' requests wait in its queue instead of being refused."""
+    proc = subprocess.Popen(
+        up_command(tmp_path, "--teacher-rate", "2"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
+    killed = None
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline and killed is None:
+            info = tmp_path / "info.json"
+            if info.exists():
+                meta = json.loads(info.read_text())
+                with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+                    run = client.run(meta["run_id"])
+                if 0 < run.n_labels < run.n_total:
+                    killed = children(tmp_path)["service"]
+                    os.kill(killed, signal.SIGKILL)
+            time.sleep(0.1)
+        assert proc.wait(timeout=300) == 0, proc.stdout.read().decode()[-3000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert killed is not None and children(tmp_path)["service"] != killed
+    assert "service exited with signal 9; restarting" in (tmp_path / "logs" / "up.log").read_text()
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
+
+
+def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        cmd = up_command(tmp_path)
+        cmd[cmd.index("--port") + 1] = str(port)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    assert f"cannot listen on 127.0.0.1:{port}" in proc.stderr
 
 
 def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):

@@ -7,9 +7,11 @@ import argparse
 import dataclasses
 import json
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from collie.startup import mark
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.config import PRESETS, Config, make_config
 from trainer.methods import METHODS
@@ -83,6 +85,24 @@ def config_from_args(args: argparse.Namespace) -> Config:
     return make_config(args.preset, args.env, **overrides)
 
 
+def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
+    """Until the service answers (`collie up` starts us beside it, before it serves)."""
+    from collie.client import Backoff, CollieClient, Unavailable
+
+    deadline = time.monotonic() + timeout_s
+    with CollieClient(api, token) as client:
+        for delay in Backoff(0.1, 1.0).delays():
+            try:
+                client.health()
+                return
+            except Unavailable:
+                if delay == 0.1:  # the first miss: say what we wait for
+                    print(f"collie train: waiting for the labeling service at {api}", file=sys.stderr, flush=True)
+                if time.monotonic() + delay > deadline:
+                    raise ValueError(f"the labeling service at {api} did not answer in {timeout_s:.0f} s") from None
+                time.sleep(delay)
+
+
 def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple[HttpFeedback, RunRule]:
     """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
     (a restarted trainer rebuilds D0/D1/D2 from it; it follows the rule the service holds), else
@@ -96,6 +116,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         raise ValueError("--api needs a trainer token: --token-file, COLLIE_TOKEN or --token")
     if args.feedback_timeout is not None and not 0 < args.feedback_timeout <= MAX_FEEDBACK_TIMEOUT_S:
         raise ValueError(f"--feedback-timeout must be in (0, {MAX_FEEDBACK_TIMEOUT_S}] seconds")
+    wait_for_service(args.api, token)
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
@@ -150,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer
 
+        mark("imports")  # torch, mujoco, the trainer's modules
+
         # a resumed run keeps the rule it started with, whatever its file says now
         rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)
         if rule.definition is not None:
@@ -157,8 +180,10 @@ def run(args: argparse.Namespace) -> int:
         feedback = None
         if args.api:
             feedback, rule = http_feedback(args, cfg, rule)
+            mark("run created")
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
+        mark("trainer built")  # envs, observation statistics, networks, replay
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from collie import startup
 from collie.labels import Label
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
@@ -243,6 +244,7 @@ class Trainer:
 
     def feedback_session(self) -> None:
         segments = self.make_segments()
+        startup.mark("query selection", self.epoch)
         self._waiting = True  # a signal now stops at once
         try:
             events = self.feedback.collect(self.session, self.epoch, segments)  # may swap in a session posted before
@@ -520,10 +522,14 @@ class Trainer:
         (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
         (self.out / TASK_JSON).write_text(json.dumps(self.rule.to_json(), indent=2))
         self.rebuild_from_source()
+        if not self.method.asks_labels or len(self.labelled) >= self.cfg.total_queries:
+            startup.done()  # no feedback session will come: no first segment to time
         self._writer = self._tensorboard()
         self.reporter.status(StatusReport("training", self.epoch))
+        startup.mark("run files, tensorboard")
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
+            startup.mark("evaluate", 0)
         bar = tqdm(
             total=self.cfg.epochs,
             initial=self.epoch,
@@ -543,6 +549,7 @@ class Trainer:
                 self.epoch += 1
                 bar.set_description("training")
                 self.collect_epoch()
+                startup.mark("collect", self.epoch)
                 if self.is_feedback_epoch():
                     bar.set_description("waiting for labels")
                     self.feedback_session()
@@ -550,8 +557,10 @@ class Trainer:
                 self.apply_labels(self.feedback.revisions())
                 self.train_epoch()
                 self.log_scalars()
+                startup.mark("update", self.epoch)
                 if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
                     record = self.evaluate()
+                    startup.mark("evaluate", self.epoch)
                     bar.set_postfix(
                         labels=len(self.labelled),
                         safe_cov=record.get("safe_coverage", "-"),  # absent without a rule
@@ -560,6 +569,7 @@ class Trainer:
                     )
                 if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
                     self.checkpoint()
+                    startup.mark("checkpoint", self.epoch)
                 bar.update(1)
                 self.report_progress()
                 if self._signalled is not None:

@@ -35,6 +35,7 @@ from typing import Any, Literal, TypeVar
 
 import numpy as np
 
+from collie import startup
 from collie.client import ApiError, Backoff, CollieClient, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
@@ -104,6 +105,8 @@ class HttpFeedback(FeedbackSource):
             self._swept = True
         body = SessionPost(session=session, epoch=epoch, queries=[to_wire(s) for s in segments])
         posted = self._retry(lambda: self.client.post_session(self.run_id, body))
+        startup.mark("segments posted", epoch)
+        startup.done()  # the start is over once a segment is out
         if posted.reused:  # this position was posted before (a resumed trainer): its queries, not new ones
             stored = [self._retry(functools.partial(self.client.query, self.run_id, q)) for q in posted.query_ids]
             given = {s.query_id: s for s in segments}
