@@ -6,7 +6,7 @@ it decided), one worker (every service call, in order, and every screen change),
 waiter (stream_waiter.py: long-polls the run's event stream while nothing is claimable or in watch
 mode, and wakes the worker), and the player (playback.py). While a segment is on screen the next
 one is already claimed and prepared (claims.py; the service lets a labeler hold two), so a label
-key shows it at once; presenter.py draws each state's screen.
+key shows it at once; presenter.py draws each state's screen, identity.py signs in and out.
 """
 
 from __future__ import annotations
@@ -22,21 +22,11 @@ import viser
 from collie.client import new_request_id
 from collie.labels import Label
 from collie.schemas import RunRead
-from labeling_ui.actions import (
-    Action,
-    Close,
-    Moved,
-    Relabel,
-    Send,
-    SignIn,
-    SignOut,
-    UiConfig,
-    UndoKey,
-    Wake,
-)
-from labeling_ui.browser import load_prefs, read_identity, remember_token, save_prefs
+from labeling_ui.actions import Action, Close, Moved, Relabel, Send, SignIn, SignOut, UiConfig, UndoKey, Wake
+from labeling_ui.browser import read_identity, save_prefs
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
+from labeling_ui.identity import Identity
 from labeling_ui.presenter import Presenter
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
@@ -65,8 +55,6 @@ class LabelerSession:
         self.tab = GuardedTab(state)
         self.screen = TabScreen(client, self, config.fps, state.frame_drawn)  # the player thread's only write
         self.panels, self.scene, self.player = self.screen.panels, self.screen.scene, self.screen.player
-        self.link: ServiceLink | None = None  # the worker's; None while signed out
-        self.stream_link: ServiceLink | None = None  # the stream waiter's
         self.timings = KeyTimings()
         self._actions: queue.Queue[Action] = queue.Queue()
         self._retry: Action | None = None
@@ -78,6 +66,7 @@ class LabelerSession:
         self.presenter = Presenter(
             self.tab, self.screen, self.claims, self.waiter, config.fps, config.wait_s, lambda key: on_show(self, key)
         )
+        self.identity = Identity(client, config, self.tab, self.claims, self.presenter, self.waiter)
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
 
     # ---------------------------------------------------------------- for the app and the tests
@@ -86,6 +75,11 @@ class LabelerSession:
     def state(self) -> TabState:
         """The state machine, read without its lock (tests poll it; the code goes through self.tab)."""
         return self.tab.unguarded
+
+    @property
+    def link(self) -> ServiceLink | None:
+        """The worker's link to the service (None while signed out)."""
+        return self.identity.link
 
     @property
     def who(self) -> str | None:
@@ -202,7 +196,7 @@ class LabelerSession:
         with self.tab as state:
             state.watch_run = identity.watch
         if identity.token:
-            self._use_token(identity.token)
+            self.identity.use_token(identity.token)
         else:
             self.panels.show_login("Paste the labeler token your operator gave you, then **Sign in**.")
         delay = 0.5
@@ -218,7 +212,7 @@ class LabelerSession:
                 self._closed.wait(delay)
                 delay = min(delay * 2, self.config.retry_max_s)
             except AuthRefused as exc:
-                self._sign_out(f"⚠️ **The service refused this token**: {exc}  \nCheck it and sign in again.")
+                self.identity.sign_out(f"⚠️ **The service refused this token**: {exc}  \nCheck it and sign in again.")
             except Rejected as exc:  # e.g. a pinned run that does not exist
                 self.presenter.show_waiting(f"The service said: {exc}")
                 self._closed.wait(self.config.wait_s)
@@ -241,7 +235,7 @@ class LabelerSession:
             case Step.SIGN_IN:
                 self._handle(self._actions.get())
             case Step.CHECK:
-                self._check_token()
+                self.identity.check_token()
             case Step.ATTEND:
                 waited = self._next_action(self.config.lease_s / 3)
                 if waited is None:
@@ -278,9 +272,9 @@ class LabelerSession:
         try:
             match action:
                 case SignIn(token):
-                    self._use_token(token)
+                    self.identity.use_token(token)
                 case SignOut():
-                    self._sign_out("Signed out. Paste a labeler token to sign in again.")
+                    self.identity.sign_out("Signed out. Paste a labeler token to sign in again.")
                 case _ if self.link is None:
                     return
                 case Send(Submit() as submit, at):
@@ -300,53 +294,6 @@ class LabelerSession:
         except ServiceDown:
             self._retry = action
             raise
-
-    # ---------------------------------------------------------------- signing in and out
-
-    def _use_token(self, token: str) -> None:
-        self.claims.release_all(self.link)
-        self._stop_link()
-        if not token:
-            self.panels.show_login("Type a token first.")
-            return
-        with self.tab as state:
-            state.use_token(token)
-        self.panels.show_message("Checking your token…")
-        self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
-        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
-        self.waiter.use(self.stream_link)
-        remember_token(self.client, token)
-
-    def _check_token(self) -> None:
-        assert self.link is not None
-        me = self.link.login()
-        with self.tab as state:
-            before = state.accepted(me.name, me.role)
-            watching = state.phase == Phase.WATCHING
-        self.panels.greet(me.name, me.role, before)
-        if before is not None:  # loud: this tab was someone else a moment ago
-            self.panels.notify("You are now " + me.name, f"this tab was signed in as {before}", "red")
-        self.presenter.use_prefs(load_prefs(self.client, me.name) if not watching else {})
-        if not watching:
-            self.panels.show_message("Looking for segments to label…")
-
-    def _sign_out(self, message: str) -> None:
-        """A sign-out, or a refused token: signs out this tab only (its own sessionStorage)."""
-        self.claims.release_all(self.link)
-        remember_token(self.client, None)
-        self._stop_link()
-        with self.tab as state:
-            state.signed_out()
-        self.panels.show_login(message)
-
-    def _stop_link(self) -> None:
-        self.waiter.use(None)
-        self.waiter.stop_following()
-        for link in (self.link, self.stream_link):
-            if link is not None:
-                link.close()
-        self.link = self.stream_link = None
-        self.presenter.clear()
 
     # ---------------------------------------------------------------- showing
 
