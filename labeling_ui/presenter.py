@@ -46,6 +46,27 @@ class Presenter:
 
     # ---------------------------------------------------------------- a segment
 
+    def show_next(self, link: ServiceLink, run: RunRead | None = None) -> bool:
+        """Show the next segment (the prepared one, else a fresh claim in `run`, else in the run the
+        service picks); False (and the waiting screen) when there is none."""
+        with self.tab as state:
+            ready = state.next_ready()
+        if ready is not None:
+            self.present(link, ready)
+            return True
+        claim = self.claims.claim(link, run) if run is not None else None
+        if claim is None:
+            run = link.pick_run()
+            if run is None:
+                self.wait_for(link, None, "No run is open on the service yet.")
+                return False
+            claim = self.claims.claim(link, run)
+        if claim is None:
+            self.wait_for(link, run, None)
+            return False
+        self.present(link, self.claims.prepare(*claim))
+        return True
+
     def present(self, link: ServiceLink, segment: Segment) -> None:
         run, query = segment.run, segment.query
         poser: Poser | None = segment.replay

@@ -6,7 +6,8 @@ it decided), one worker (every service call, in order, and every screen change),
 waiter (stream_waiter.py: long-polls the run's event stream while nothing is claimable or in watch
 mode, and wakes the worker), and the player (playback.py). While a segment is on screen the next
 one is already claimed and prepared (claims.py; the service lets a labeler hold two), so a label
-key shows it at once; presenter.py draws each state's screen, identity.py signs in and out.
+key shows it at once; presenter.py draws each state's screen, identity.py signs in and out,
+revisions.py brings one's own labels back (undo, relabel).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.identity import Identity
 from labeling_ui.presenter import Presenter
+from labeling_ui.revisions import Revisions
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
 from labeling_ui.stream_waiter import StreamWaiter
@@ -66,6 +68,7 @@ class LabelerSession:
         self.presenter = Presenter(
             self.tab, self.screen, self.claims, self.waiter, config.fps, config.wait_s, lambda key: on_show(self, key)
         )
+        self.revisions = Revisions(self.tab, self.claims, self.presenter)
         self.identity = Identity(client, config, self.tab, self.claims, self.presenter, self.waiter)
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
 
@@ -280,11 +283,11 @@ class LabelerSession:
                 case Send(Submit() as submit, at):
                     self._submit(submit, at)
                 case Send(Withdraw() as withdraw):
-                    self._withdraw(withdraw)
+                    self.revisions.withdraw(self.link, withdraw)
                 case UndoKey(request_id):
-                    self._undo(request_id)
+                    self.revisions.undo(self.link, request_id)
                 case Relabel(query_id):
-                    self._relabel(query_id)
+                    self.revisions.relabel(self.link, query_id)
                 case Moved(query_id):
                     self.panels.notify(
                         "Moved to another tab", f"segment {query_id} is open in another of your tabs", "orange"
@@ -298,27 +301,8 @@ class LabelerSession:
     # ---------------------------------------------------------------- showing
 
     def _show_next(self, run: RunRead | None = None) -> bool:
-        """Show the next segment (the prepared one, else a fresh claim); False (and the waiting
-        screen) when there is none."""
-        link = self.link
-        assert link is not None
-        with self.tab as state:
-            ready = state.next_ready()
-        if ready is not None:
-            self.presenter.present(link, ready)
-            return True
-        claim = self.claims.claim(link, run) if run is not None else None
-        if claim is None:
-            run = link.pick_run()
-            if run is None:
-                self.presenter.wait_for(link, None, "No run is open on the service yet.")
-                return False
-            claim = self.claims.claim(link, run)
-        if claim is None:
-            self.presenter.wait_for(link, run, None)
-            return False
-        self.presenter.present(link, self.claims.prepare(*claim))
-        return True
+        assert self.link is not None
+        return self.presenter.show_next(self.link, run)
 
     def _renew(self) -> None:
         if self.link is not None and (lost := self.claims.renew(self.link)) is not None:
@@ -370,42 +354,3 @@ class LabelerSession:
         shown = self.state.shown
         if shown is not None and shown.appeared is not None and reason is None:
             self.timings.append({"query_id": shown.query.query_id, "key_to_frame_s": shown.appeared - at})
-
-    def _undo(self, request_id: str) -> None:
-        mine = [(m.run_id, m.query_id) for m in self.presenter.mine if m.in_effect]
-        with self.tab as state:
-            decision = state.undo_target(mine, request_id)
-        if isinstance(decision, Refusal):
-            self.panels.notify(decision.title, decision.body, "gray")
-        elif isinstance(decision, Withdraw):
-            self._withdraw(decision)
-
-    def _withdraw(self, withdraw: Withdraw) -> None:
-        assert self.link is not None
-        try:
-            self.link.undo(withdraw.run_id, withdraw.query_id, withdraw.request_id)
-        except Rejected as exc:
-            with self.tab as state:
-                state.undo_refused(withdraw)
-            self.panels.notify("Cannot undo", str(exc), "red")
-            return
-        run = self.link.run(withdraw.run_id)
-        segment = self.claims.prepare(run, self.link.query(withdraw.run_id, withdraw.query_id))
-        with self.tab as state:
-            state.withdrawn(withdraw, segment)
-        self.player.pause()
-        self.panels.notify("Label withdrawn", f"segment {withdraw.query_id} is back: label it again", "blue")
-        self._show_next(run)
-
-    def _relabel(self, query_id: str) -> None:
-        """Replay one of this labeler's labelled segments; a label on it is a revision."""
-        assert self.link is not None
-        picked = next((m for m in self.presenter.mine if m.query_id == query_id), None)
-        if picked is None:
-            self.panels.notify("Not yours", f"segment {query_id} is not among your labels", "orange")
-            return
-        run = self.link.run(picked.run_id)
-        segment = self.claims.prepare(run, self.link.query(picked.run_id, query_id))
-        with self.tab as state:
-            state.relabelling(segment)
-        self.presenter.present(self.link, segment)
