@@ -214,7 +214,7 @@ class Panels:
         with gui.add_folder("Skills"):
             move = gui.add_button_group("Skill", options=["◀ previous", "next ▶"])
             auto = gui.add_checkbox("Next skill when one ends", initial_value=True)
-        move.on_click(lambda _: show.show(show.index + (-1 if move.value.startswith("◀") else 1)))
+        move.on_click(lambda _: show.step(-1 if move.value.startswith("◀") else 1))
         auto.on_update(lambda _: show.set_auto(bool(auto.value)))
 
     def show_segment(self, info: SegmentInfo, error: str | None = None) -> None:

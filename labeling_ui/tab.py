@@ -1,9 +1,10 @@
 """One labeling tab's state machine, pure: no threads, no I/O, no clock (every time is an argument).
 
-The driver (session.py) owns the threads and the calls to the service; it feeds this machine what
-happened (a claim came back, a frame was drawn, a key was pressed, the service answered) and does
-what it decides (submit this, show that, say why not). Every rule about *whether* a key may label
-lives here, so it is tested state by state without a browser (tests/ui/test_tab_state.py).
+The driver (session.py, and on its worker claims.py, presenter.py, identity.py, revisions.py) owns
+the threads and the calls to the service; it feeds this machine what happened (a claim came back,
+a frame was drawn, a key was pressed, the service answered) and does what it decides (submit this,
+show that, say why not, what to do next). Every rule about *whether* a key may label lives here,
+so it is tested state by state without a browser (tests/ui/test_tab_state.py).
 """
 
 from __future__ import annotations
