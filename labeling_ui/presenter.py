@@ -41,7 +41,8 @@ class Presenter:
         self.fps, self.wait_s = fps, wait_s
         self.on_show = on_show
         self.loop = True  # the labeler's loop setting (the skills between segments use their own)
-        self.mine: list[MyLabel] = []  # the labeler's labels in the shown run, newest first; the worker's only
+        # the labeler's labels in the shown run, newest first: replaced whole (the panels read it from viser's threads)
+        self.mine: tuple[MyLabel, ...] = ()
         self.skills: SkillShow | None = None
 
     # ---------------------------------------------------------------- a segment
@@ -118,7 +119,7 @@ class Presenter:
             self.load_mine(link, shown.run)
 
     def load_mine(self, link: ServiceLink, run: RunRead) -> None:
-        self.mine = link.my_labels(run.id)
+        self.mine = tuple(link.my_labels(run.id))
         task = self.screen.task_of(run)
         self.panels.show_mine(self.mine, lambda label: render_inset(task, np.asarray(label.xy, float), None))
 
@@ -173,7 +174,7 @@ class Presenter:
     def clear(self) -> None:
         """Signed out: nothing of the last identity stays on screen."""
         self.skills = None
-        self.mine = []
+        self.mine = ()
         self.screen.blank()
 
     # ---------------------------------------------------------------- the labeler's playback settings
