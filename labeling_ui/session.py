@@ -195,11 +195,11 @@ class LabelerSession:
     # ---------------------------------------------------------------- the worker
 
     def _work(self) -> None:
-        identity = read_identity(self.client)
+        opened = read_identity(self.client)  # the token and ?watch= the tab was opened with
         with self.tab as state:
-            state.watch_run = identity.watch
-        if identity.token:
-            self.identity.use_token(identity.token)
+            state.watch_run = opened.watch
+        if opened.token:
+            self.identity.use_token(opened.token)
         else:
             self.panels.show_login("Paste the labeler token your operator gave you, then **Sign in**.")
         delay = 0.5
