@@ -113,7 +113,7 @@ def label_latency(stack: Stack, browser: object, n: int, think_s: float) -> tupl
     time.sleep(0.2)
     in_page = [float(x) for x in page.evaluate("window.__lat")]
     session = next(iter(app.sessions.values()))
-    server = [1000 * float(t["key_to_frame_s"]) for t in session.timings]
+    server = [1000 * float(t["key_to_frame_s"]) for t in session.timings.snapshot()]
     page.context.close()
     return in_page, server
 

@@ -7,7 +7,7 @@ Panels only draw and forward clicks; what a click does is the session's business
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from typing import TYPE_CHECKING, Protocol
@@ -148,7 +148,7 @@ class Panels:
             replay_mine = gui.add_button("Replay and relabel", icon=viser.Icon.REPEAT, hint="a new label revises yours")
         replay_mine.on_click(lambda _: self._relabel_picked(actions))
         self.mine_pick.on_update(lambda _: self._show_mine_inset())
-        self._mine: list[MyLabel] = []
+        self._mine: Sequence[MyLabel] = ()  # replaced whole by the worker, read by the GUI threads
         self._mine_inset: Callable[[MyLabel], np.ndarray] | None = None
 
         with gui.add_folder("Account", expand_by_default=False, visible=False) as self.account:
@@ -214,7 +214,7 @@ class Panels:
         with gui.add_folder("Skills"):
             move = gui.add_button_group("Skill", options=["◀ previous", "next ▶"])
             auto = gui.add_checkbox("Next skill when one ends", initial_value=True)
-        move.on_click(lambda _: show.show(show.index + (-1 if move.value.startswith("◀") else 1)))
+        move.on_click(lambda _: show.step(-1 if move.value.startswith("◀") else 1))
         auto.on_update(lambda _: show.set_auto(bool(auto.value)))
 
     def show_segment(self, info: SegmentInfo, error: str | None = None) -> None:
@@ -265,7 +265,7 @@ class Panels:
     def show_speed(self, speed: float) -> None:
         self.speed_now.content = f"Speed **{speed:g}×**"
 
-    def show_mine(self, mine: list[MyLabel], inset: Callable[[MyLabel], np.ndarray]) -> None:
+    def show_mine(self, mine: Sequence[MyLabel], inset: Callable[[MyLabel], np.ndarray]) -> None:
         """This labeler's labels in the run, newest first, as the service keeps them."""
         self._mine, self._mine_inset = mine, inset
         rows = [

@@ -1,9 +1,10 @@
 """One labeling tab's state machine, pure: no threads, no I/O, no clock (every time is an argument).
 
-The driver (session.py) owns the threads and the calls to the service; it feeds this machine what
-happened (a claim came back, a frame was drawn, a key was pressed, the service answered) and does
-what it decides (submit this, show that, say why not). Every rule about *whether* a key may label
-lives here, so it is tested state by state without a browser (tests/ui/test_tab_state.py).
+The driver (session.py, and on its worker claims.py, presenter.py, identity.py, revisions.py) owns
+the threads and the calls to the service; it feeds this machine what happened (a claim came back,
+a frame was drawn, a key was pressed, the service answered) and does what it decides (submit this,
+show that, say why not, what to do next). Every rule about *whether* a key may label lives here,
+so it is tested state by state without a browser (tests/ui/test_tab_state.py).
 """
 
 from __future__ import annotations
@@ -12,9 +13,10 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-from collie.schemas import MAX_HOLD, QueryRead, RunRead, Submission
+from collie.schemas import FINISHED, MAX_HOLD, QueryRead, RunRead, Submission
 
 Key = tuple[int, str]  # (run id, query id)
+CLOSED_RECHECK_S = 3600.0  # a finished or stopping run has nothing to claim: its stream wakes the tab, if anything
 
 
 class Phase(StrEnum):
@@ -23,6 +25,17 @@ class Phase(StrEnum):
     WAITING = "waiting"  # signed in, nothing on screen (nothing claimable, or between segments)
     SHOWING = "showing"  # a segment on screen
     WATCHING = "watching"  # ?watch=RUN: the skills of a run, nothing to label
+
+
+class Step(StrEnum):
+    """What the worker does next (TabState.next_step)."""
+
+    SIGN_IN = "sign in"  # no token, or no link to the service: wait for a sign-in
+    CHECK = "check"  # ask the service who the token belongs to
+    WATCH = "watch"  # watch mode: play the run's skills, wait for its stream
+    FIND = "find"  # nothing on screen: show the next segment, else wait
+    IDLE = "idle"  # nothing claimable a moment ago: wait for the stream (or the recheck time)
+    ATTEND = "attend"  # a segment on screen: handle the keys, renew its lease when they pause
 
 
 @dataclass(frozen=True)
@@ -103,7 +116,33 @@ class TabState:
     moved: set[Key] = field(default_factory=set)  # segments another tab of this labeler took over
     labelled: list[Key] = field(default_factory=list)  # this tab's labels, newest last (undo walks back)
     waiting_on: tuple[int, int] | None = None  # (run, last event id) while nothing is claimable
+    recheck_at: float = 0.0  # while waiting: when to try a claim again without a wake-up (monotonic)
     watch_run: int | None = None
+
+    # ---------------------------------------------------------------- the worker's next step
+
+    def next_step(self, linked: bool, now: float) -> Step:
+        """`linked`: the driver holds a link to the service; `now` on the clock of `recheck_at`."""
+        if self.phase == Phase.SIGNED_OUT or not linked:
+            return Step.SIGN_IN
+        if self.phase == Phase.CHECKING:
+            return Step.CHECK
+        if self.phase == Phase.WATCHING:
+            return Step.WATCH
+        if self.shown is None:
+            return Step.FIND if now >= self.recheck_at else Step.IDLE
+        return Step.ATTEND
+
+    def woken(self) -> None:
+        """The run's stream carried something: try a claim at once."""
+        self.recheck_at = 0.0
+
+    @property
+    def idle_run(self) -> int | None:
+        """The run whose skills play (and whose stream wakes the tab) while nothing is labelled."""
+        if self.phase == Phase.WATCHING:
+            return self.watch_run
+        return self.waiting_on[0] if self.waiting_on else None
 
     # ---------------------------------------------------------------- identity
 
@@ -139,6 +178,14 @@ class TabState:
         self.held.add(segment.key)
         self.moved.discard(segment.key)
 
+    def may_show(self, key: Key) -> bool:
+        """A claim came back for `key`: false when another tab of this labeler shows it (the
+        service keeps claims per labeler, so it hands that one out again)."""
+        return key not in self.moved
+
+    def held_in(self, run_id: int) -> int:
+        return sum(1 for k in self.held if k[0] == run_id)
+
     def wants_preload(self, prefetch: bool) -> bool:
         return prefetch and self.shown is not None and not self.ahead and len(self.held) < MAX_HOLD
 
@@ -171,11 +218,26 @@ class TabState:
         if self.shown is not None:
             self.shown.played_to = max(self.shown.played_to, position)
 
-    def nothing_claimable(self, run_id: int | None, last_event: int) -> None:
+    def nothing_claimable(self, run: RunRead | None, now: float, wait_s: float) -> None:
+        """No segment to show: wait on `run`'s stream (None: no run is open), and try a claim again
+        `wait_s` after `now` without a wake-up (an hour for a run that is over)."""
         self.shown = None
-        self.waiting_on = None if run_id is None else (run_id, last_event)
+        self.waiting_on = None if run is None else (run.id, run.last_event_id)
+        over = run is not None and (run.status in FINISHED or run.control == "stop")
+        self.recheck_at = now + (CLOSED_RECHECK_S if over else wait_s)
         if self.phase != Phase.SIGNED_OUT:
             self.phase = Phase.WAITING
+
+    def failed(self) -> None:
+        """An unexpected error while showing: the segment on screen is dropped (its lease runs out)."""
+        self.shown = None
+
+    def hidden_by_outage(self, down_since: float) -> Segment | None:
+        """The service is back: the segment on screen if the outage screen hid it (it appeared before)."""
+        shown = self.shown
+        if shown is not None and (shown.appeared or 0.0) < down_since:
+            return shown
+        return None
 
     def leases(self, run_id: int, still: set[str]) -> list[Segment]:
         """The service says which queries of `run_id` this labeler still holds; the segments this tab
@@ -256,6 +318,18 @@ class TabState:
         if key is None:
             return Refusal("Nothing to undo", "you have no label in effect in this run")
         return Withdraw(key[0], key[1], request_id)
+
+    def undo_refused(self, withdraw: Withdraw) -> None:
+        """The service would not undo it (e.g. already revised elsewhere): undo walks past it."""
+        self.labelled = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
+
+    def relabelling(self, segment: Segment) -> None:
+        """One of this labeler's labelled segments is picked to replay: a label on it is a revision
+        (no lease); the segment on screen comes back after it."""
+        segment.revising = True
+        self.held.discard(segment.key)
+        if self.shown is not None and self.shown.key != segment.key:
+            self.ahead.insert(0, self.shown)
 
     def withdrawn(self, withdraw: Withdraw, segment: Segment) -> None:
         """The label is undone and its segment claimed again: it is shown next, before whatever

@@ -3,14 +3,17 @@ posted with it, one after another: watch mode (`?watch=RUN`, the dashboard's "wa
 link), and the waiting screen's 3D view while nothing is claimable. Nothing is claimed or labelled;
 a newer evaluation replaces the skills as it arrives.
 
-Driven by the tab's worker (reload on a stream wake-up, tick while idle); it draws through the
-tab's screen methods (show_skill, show_notice, replay_finished, set_replay_loop) and never
-touches the session's state. The trainer posts every `stride`-th state of each evaluation rollout
-(Rollout.stride), so a rollout replays at 1/stride of the segment frame rate to keep real time.
+Driven by the tab's worker (reload on a stream wake-up, tick while idle) and, in watch mode, by
+its own buttons (viser's threads: hence its lock); it draws through the tab's screen methods
+(show_skill, show_notice, replay_finished, set_replay_loop), never touches the session's state,
+and reaches the session only through the `watch_stream` method it is given. The trainer posts every
+`stride`-th state of each evaluation rollout (Rollout.stride), so a rollout replays at 1/stride of
+the segment frame rate to keep real time.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -40,6 +43,7 @@ class SkillShow:
         self.run: RunRead | None = None
         self.index = 0
         self.auto = True  # the next skill when one ends
+        self._lock = threading.Lock()  # the worker and the skill buttons (watch mode) both move it
         if self.watch:
             screen.panels.add_skill_controls(self)
 
@@ -56,22 +60,30 @@ class SkillShow:
                 self.watch,
             )
             return
-        self.run = run
-        if self.rollouts is not None and latest.id == self.rollouts.id:
-            return
-        self.rollouts = latest
-        self.show(self.index)
+        with self._lock:
+            self.run = run
+            if self.rollouts is not None and latest.id == self.rollouts.id:
+                return
+            self.rollouts = latest
+            self._show(self.index)
 
     def tick(self) -> None:
-        if self.auto and self.rollouts is not None and self.screen.replay_finished():
-            self.show(self.index + 1)
+        with self._lock:
+            if self.auto and self.rollouts is not None and self.screen.replay_finished():
+                self._show(self.index + 1)
 
     def set_auto(self, on: bool) -> None:
-        self.auto = on
-        self.screen.set_replay_loop(not on)
+        with self._lock:
+            self.auto = on
+            self.screen.set_replay_loop(not on)
 
-    def show(self, index: int) -> None:
-        """Replay skill `index` (wrapping around) of the latest evaluation."""
+    def step(self, by: int) -> None:
+        """The previous (-1) or next (+1) skill: watch mode's buttons."""
+        with self._lock:
+            self._show(self.index + by)
+
+    def _show(self, index: int) -> None:
+        """Replay skill `index` (wrapping around) of the latest evaluation (the lock held)."""
         if self.rollouts is None or self.run is None:
             return
         skills = [r for r in self.rollouts.rollouts if r.qpos]

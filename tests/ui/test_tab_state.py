@@ -8,7 +8,7 @@ from datetime import UTC, datetime
 import pytest
 
 from collie.schemas import EnvDims, QueryRead, QueueCounts, RunRead
-from labeling_ui.tab import Phase, Refusal, Rules, Segment, Submit, TabState, Withdraw
+from labeling_ui.tab import CLOSED_RECHECK_S, Phase, Refusal, Rules, Segment, Step, Submit, TabState, Withdraw
 
 NOW = datetime(2026, 12, 1, tzinfo=UTC)
 
@@ -171,3 +171,80 @@ def test_a_refused_label_drops_the_segment() -> None:
     assert isinstance(submit, Submit)
     state.refused(submit)
     assert state.shown is None and seg.key not in state.held and state.labelled == []
+
+
+def test_the_worker_steps_follow_the_phase() -> None:
+    state = TabState()
+    assert state.next_step(linked=False, now=0.0) == Step.SIGN_IN
+    state.use_token("t")
+    assert state.next_step(linked=False, now=0.0) == Step.SIGN_IN  # no link yet: a sign-in is awaited
+    assert state.next_step(linked=True, now=0.0) == Step.CHECK
+    state.accepted("ann", "labeler")
+    assert state.next_step(linked=True, now=0.0) == Step.FIND
+    seg = segment("a")
+    state.present(seg, 1.0)
+    assert state.next_step(linked=True, now=1.0) == Step.ATTEND
+    watcher = TabState(watch_run=7)
+    watcher.use_token("t")
+    watcher.accepted("ann", "labeler")
+    assert watcher.next_step(linked=True, now=0.0) == Step.WATCH and watcher.idle_run == 7
+
+
+def test_nothing_claimable_waits_on_the_stream_until_the_recheck_or_a_wake_up() -> None:
+    state = showing(segment("a"))
+    waiting = run(3).model_copy(update={"last_event_id": 41})
+    state.nothing_claimable(waiting, now=100.0, wait_s=10.0)
+    assert (state.shown, state.phase, state.waiting_on, state.idle_run) == (None, Phase.WAITING, (3, 41), 3)
+    assert state.next_step(linked=True, now=105.0) == Step.IDLE
+    assert state.next_step(linked=True, now=110.0) == Step.FIND
+    state.woken()
+    assert state.next_step(linked=True, now=101.0) == Step.FIND
+    state.nothing_claimable(None, now=100.0, wait_s=10.0)  # no run open at all
+    assert state.waiting_on is None and state.idle_run is None and state.recheck_at == 110.0
+
+
+def test_a_run_that_is_over_is_rechecked_rarely() -> None:
+    state = showing(segment("a"))
+    for over in (run().model_copy(update={"status": "finished"}), run().model_copy(update={"control": "stop"})):
+        state.nothing_claimable(over, now=0.0, wait_s=10.0)
+        assert state.recheck_at == CLOSED_RECHECK_S
+
+
+def test_a_claim_on_screen_in_another_tab_may_not_be_shown_here() -> None:
+    a, b = segment("a"), segment("b")
+    state = showing(a)
+    state.taken_elsewhere(b.key)
+    assert not state.may_show(b.key) and state.may_show(segment("c").key)
+    state.claimed(b)  # this tab claimed it again itself
+    assert state.may_show(b.key)
+    state.claimed(segment("x", run_id=2))
+    assert state.held_in(1) == 2 and state.held_in(2) == 1
+
+
+def test_a_relabel_comes_first_and_the_segment_on_screen_after_it() -> None:
+    a, mine = segment("a"), segment("m")
+    state = showing(a)
+    state.claimed(mine)
+    state.relabelling(mine)
+    assert mine.revising and mine.key not in state.held  # a revision needs no lease
+    assert state.next_ready() is a  # the one on screen comes back once the revision is shown
+
+
+def test_a_refused_undo_is_walked_past() -> None:
+    state = showing(segment("a", frames=1), Rules(0.0, 0.0), at=0.0)
+    submit = state.press(0, 1.0, "r")
+    assert isinstance(submit, Submit)
+    state.recorded(submit)
+    undo = state.undo_target([], "u")
+    assert isinstance(undo, Withdraw)
+    state.undo_refused(undo)
+    assert state.labelled == [] and isinstance(state.undo_target([], "u2"), Refusal)
+
+
+def test_after_an_outage_only_a_segment_it_hid_is_shown_again() -> None:
+    seg = segment("a")
+    state = showing(seg, at=10.0)
+    assert state.hidden_by_outage(down_since=12.0) is seg
+    assert state.hidden_by_outage(down_since=9.0) is None  # it appeared after the outage began
+    state.failed()
+    assert state.shown is None and state.hidden_by_outage(down_since=12.0) is None

@@ -1,0 +1,192 @@
+"""What a tab's screen shows, state by state, on the tab's worker: a segment (first frame first,
+its context after), the waiting screen with the run's forecast and the skills of its latest
+evaluation, watch mode's skills, the outage screen, the labeler's progress and own labels, and the
+labeler's playback settings. It draws through TabScreen and asks the service for what it shows."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from collie.schemas import RunRead
+from labeling_ui.claims import Claims
+from labeling_ui.guarded_tab import GuardedTab
+from labeling_ui.inset import render_inset
+from labeling_ui.models import ModelError, Poser
+from labeling_ui.panels import SegmentInfo
+from labeling_ui.screen import TabScreen
+from labeling_ui.service import MyLabel, ServiceLink
+from labeling_ui.stream_waiter import StreamWaiter
+from labeling_ui.tab import Key, Segment
+from labeling_ui.waiting import forecast, waiting_text
+from labeling_ui.watch import SkillShow
+
+
+class Presenter:
+    def __init__(
+        self,
+        tab: GuardedTab,
+        screen: TabScreen,
+        claims: Claims,
+        waiter: StreamWaiter,
+        fps: float,
+        wait_s: float,
+        on_show: Callable[[Key], None],
+    ) -> None:
+        """`on_show(key)`: a segment's first frame is out (the app takes it off this labeler's other tabs)."""
+        self.tab, self.screen, self.claims, self.waiter = tab, screen, claims, waiter
+        self.panels, self.scene, self.player = screen.panels, screen.scene, screen.player
+        self.fps, self.wait_s = fps, wait_s
+        self.on_show = on_show
+        self.loop = True  # the labeler's loop setting (the skills between segments use their own)
+        # the labeler's labels in the shown run, newest first: replaced whole (the panels read it from viser's threads)
+        self.mine: tuple[MyLabel, ...] = ()
+        self.skills: SkillShow | None = None
+
+    # ---------------------------------------------------------------- a segment
+
+    def show_next(self, link: ServiceLink, run: RunRead | None = None) -> bool:
+        """Show the next segment (the prepared one, else a fresh claim in `run`, else in the run the
+        service picks); False (and the waiting screen) when there is none."""
+        with self.tab as state:
+            ready = state.next_ready()
+        if ready is not None:
+            self.present(link, ready)
+            return True
+        claim = self.claims.claim(link, run) if run is not None else None
+        if claim is None:
+            run = link.pick_run()
+            if run is None:
+                self.wait_for(link, None, "No run is open on the service yet.")
+                return False
+            claim = self.claims.claim(link, run)
+        if claim is None:
+            self.wait_for(link, run, None)
+            return False
+        self.present(link, self.claims.prepare(*claim))
+        return True
+
+    def present(self, link: ServiceLink, segment: Segment) -> None:
+        run, query = segment.run, segment.query
+        poser: Poser | None = segment.replay
+        if poser is not None:
+            try:
+                self.scene.load(run.env)  # builds the robot when the env changes
+            except ModelError as exc:
+                poser, segment.error, segment.replay = None, str(exc), None
+        self.skills = None
+        self.waiter.stop_following()
+        self.player.fps = self.fps
+        if self.player.loop != self.loop:  # the skills shown while waiting may have changed it
+            self.player.loop = self.loop
+            self.panels.loop.value = self.loop  # type: ignore[misc]  # viser types .value read-only; it is settable
+        task = self.screen.task_of(run)
+        info = SegmentInfo(
+            query.query_id, run.id, run.env, run.task, run.method, query.epoch, query.session, query.start,
+            query.skill, len(query.qpos), segment.revising,
+        )  # fmt: skip
+        earlier = np.asarray(query.path_xy, float)[: query.start + 1] if query.path_xy else None
+        with self.tab as state:  # keys from now on apply to this segment
+            state.present(segment, time.perf_counter())
+        with self.screen.client.atomic():
+            if poser is not None:
+                self.scene.set_segment(poser, earlier)
+                self.player.load(poser.n_frames)
+            else:
+                self.screen.blank()
+            self.panels.show_segment(info, segment.error)
+        self.screen.client.flush()
+        with self.tab:  # time-per-label and the dwell count from the first frame sent
+            segment.appeared = time.perf_counter()
+        self.on_show(segment.key)
+        # what follows is context, sent after the first frame is out
+        if poser is not None:
+            self.screen.show_floor(run, task, np.asarray(query.xy, float))
+        self.screen.show_task(run, task)
+        self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
+        self.claims.preload(link)
+        self.show_progress(link)
+
+    def show_progress(self, link: ServiceLink) -> None:
+        with self.tab as state:
+            shown = state.shown
+        if shown is not None:
+            progress = link.progress(shown.run.id, shown.query.session)
+            self.panels.show_progress(progress)
+            self.panels.show_instructions(progress.instructions)  # an operator may have changed them
+            self.load_mine(link, shown.run)
+
+    def load_mine(self, link: ServiceLink, run: RunRead) -> None:
+        self.mine = tuple(link.my_labels(run.id))
+        task = self.screen.task_of(run)
+        self.panels.show_mine(self.mine, lambda label: render_inset(task, np.asarray(label.xy, float), None))
+
+    # ---------------------------------------------------------------- nothing to label
+
+    def wait_for(self, link: ServiceLink, run: RunRead | None, status: str | None) -> None:
+        """Nothing claimable in `run` (None: no run is open; `status` says so)."""
+        run = link.run(run.id) if run is not None else None  # fresh counts, after our own claims
+        with self.tab as state:
+            state.nothing_claimable(run, time.monotonic(), self.wait_s)
+            held_here = state.held_in(run.id) if run is not None else 0
+            waiting_on = state.waiting_on
+        if waiting_on is None:
+            self.waiter.stop_following()
+        else:
+            self.waiter.follow(*waiting_on)
+        if run is not None:
+            status = waiting_text(run, forecast(run, link.metrics(run.id)), held_here)
+            self.load_mine(link, run)
+        skills = self.skills
+        self.show_waiting(status or "", keep_skills=skills is not None and run is not None and skills.run_id == run.id)
+
+    def show_waiting(self, status: str, keep_skills: bool = False) -> None:
+        """The waiting screen; the skills of the run's latest evaluation keep playing if they are on."""
+        if not keep_skills:
+            self.skills = None
+            self.screen.blank()
+        self.panels.show_message(
+            f"☕ **Nothing to label right now.**  \n{status}  \nNew segments appear here by themselves.",
+            keep_replay=keep_skills,
+        )
+
+    def play_skills(self, link: ServiceLink, run_id: int, watching: bool) -> None:
+        """The run's latest skills play in 3D (watch mode's own screen, or the waiting screen's view)."""
+        if self.skills is None or self.skills.run_id != run_id:
+            self.skills = SkillShow(self.screen, run_id, self.fps, self.waiter.follow if watching else None)
+            self.skills.reload(link)
+        self.skills.tick()
+
+    def new_rollouts(self, link: ServiceLink) -> None:
+        if self.skills is not None:
+            self.skills.reload(link)
+
+    def show_outage(self, why: str, retry_s: float) -> None:
+        self.player.pause()
+        self.scene.hide()
+        self.panels.show_message(
+            f"⚠️ **The labeling service is unreachable** ({why}).  \n"
+            f"Retrying in {retry_s:.0f} s… nothing you labelled is lost."
+        )
+
+    def clear(self) -> None:
+        """Signed out: nothing of the last identity stays on screen."""
+        self.skills = None
+        self.mine = ()
+        self.screen.blank()
+
+    # ---------------------------------------------------------------- the labeler's playback settings
+
+    def use_prefs(self, prefs: dict[str, object]) -> None:
+        speed, loop = prefs.get("speed"), prefs.get("loop")
+        if isinstance(speed, int | float):
+            self.player.set_speed(float(speed))
+        if isinstance(loop, bool):
+            self.loop = self.player.loop = loop
+            self.panels.loop.value = loop  # type: ignore[misc]  # viser types .value read-only; it is settable
+        self.panels.show_speed(self.player.speed)
+
+    def prefs(self) -> dict[str, object]:
+        return {"speed": self.player.speed, "loop": self.loop}
