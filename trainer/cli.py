@@ -52,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             continue
         flag = "--" + f.name.replace("_", "-")
         if f.type in ("bool", bool):
-            # a bare `--compile` means true; `--compile false` still works
+            # a bare flag means true (`--compile`); `--compile false` still works
             group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True)
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
