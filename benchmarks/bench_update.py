@@ -2,12 +2,17 @@
 absolute numbers are printed for context only). JSON: runs/bench/update.json.
 
 1. Update cost: gradient steps/s of the full paper-size update (φ + λ + SAC + w with 800
-   labelled states, 2×1024 MLPs, batch 256) beside a plain SAC update of the same networks.
-   Keys `full_steps_per_s`, `sac_steps_per_s`, `cost_ratio` (goal ≤ 1.3).
+   labelled states, 2×1024 MLPs, batch 256) beside a plain SAC update of the same networks and
+   METRA's update (w ≡ 1). Keys `full_steps_per_s`, `sac_steps_per_s`, `metra_steps_per_s`,
+   `cost_ratio` (goal ≤ 1.3), and `cost_ratio_flops`: the same ratio in FLOPs, what the step costs
+   when every matmul runs at one rate (the floor of `cost_ratio` for the same mathematics).
 2. Update FLOP rate: the FLOPs of one full update (counted by torch's FlopCounterMode, forward and
    backward; key `update_gflop_<h>`) times its steps/s, ÷ this machine's rate for a (256 × h)·(h × h)
    matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
-   `flop_fraction_<h>` (goal ≥ 0.6).
+   `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_fused_<h>` the same with `--fused-adam`.
+   Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
+   i.e. compilation), `compile_speedup_<h>` (compiled ÷ eager steps/s, measured interleaved) and
+   `compile_break_even_steps_<h>` (steps before the compile time is paid back; inf if never).
 3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (physics overlapped with the
    policy as the trainer runs it) ÷ a single-thread raw `mj_step` loop over the same model, and
    the same rollout with serial physics. Keys `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`,
@@ -53,11 +58,18 @@ def timed(fn: Callable[[], None], steps: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def update_setup(env_name: str, hidden: int, dev: torch.device) -> tuple[Metra, Callable[[], None], Callable[[], None]]:
+Step = Callable[[], None]
+
+
+def update_setup(env_name: str, hidden: int, dev: torch.device, **options: bool) -> tuple[Metra, Step, Step, Step]:
+    """The agent and three steps on fixed batches: full COLLIE, plain SAC, METRA (w ≡ 1).
+    `options`: Config fields such as fused_adam=True or compile=True."""
     env = make_env(env_name)
-    cfg = make_config("paper", env_name, hidden=hidden)
+    cfg = make_config("paper", env_name, hidden=hidden, **options)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
     agent = Metra(env.obs_dim, env.action_dim, prior, cfg, dev)
+    if cfg.compile:
+        agent.compile()
     rng = np.random.default_rng(0)
     b = cfg.batch_size
 
@@ -87,41 +99,75 @@ def update_setup(env_name: str, hidden: int, dev: torch.device) -> tuple[Metra, 
     def plain_sac() -> None:
         agent.sac_update(batches[next(it) % 8], torch.randn(b, device=dev))
 
-    return agent, full, plain_sac
+    def metra() -> None:
+        agent.update(batches[next(it) % 8], None)
+
+    return agent, full, plain_sac, metra
+
+
+def flops(step: Step) -> int:
+    with FlopCounterMode(display=False) as counter:
+        step()
+    return counter.get_total_flops()
 
 
 def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
     dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    _, full, plain_sac = update_setup(env_name, 1024, dev)
-    timed(full, 3), timed(plain_sac, 3)  # warm-up
-    full_rates, sac_rates = [], []
-    for _ in range(rounds):  # interleaved, so both see the same machine load
-        full_rates.append(timed(full, steps))
-        sac_rates.append(timed(plain_sac, steps))
-    full_r, sac_r = float(np.median(full_rates)), float(np.median(sac_rates))
-    return {"full_steps_per_s": full_r, "sac_steps_per_s": sac_r, "cost_ratio": sac_r / full_r}
+    _, full, plain_sac, metra = update_setup(env_name, 1024, dev)
+    steps_fns = {"full": full, "sac": plain_sac, "metra": metra}
+    for fn in steps_fns.values():
+        timed(fn, 3)  # warm-up
+    rates: dict[str, list[float]] = {k: [] for k in steps_fns}
+    for _ in range(rounds):  # interleaved, so all see the same machine load
+        for k, fn in steps_fns.items():
+            rates[k].append(timed(fn, steps))
+    med = {k: float(np.median(v)) for k, v in rates.items()}
+    return {
+        "full_steps_per_s": med["full"],
+        "sac_steps_per_s": med["sac"],
+        "metra_steps_per_s": med["metra"],
+        "cost_ratio": med["sac"] / med["full"],
+        "cost_ratio_flops": flops(full) / flops(plain_sac),
+    }
 
 
-def bench_flops(env_name: str, steps: int, rounds: int) -> dict[str, float]:
-    """One thread, CPU: the update's FLOP rate against a plain matmul of the same width."""
+def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[str, float]:
+    """One thread, CPU: the update's FLOP rate against a plain matmul of the same width; the eager
+    default, `--fused-adam` and (if `compiled`) `--compile` timed interleaved."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
+    cpu = torch.device("cpu")
     out: dict[str, float] = {}
     try:
         for h in (256, 1024):
-            _, full, _ = update_setup(env_name, h, torch.device("cpu"))
-            with FlopCounterMode(display=False) as counter:
-                full()
-            flop = counter.get_total_flops()
+            variants = {
+                "eager": update_setup(env_name, h, cpu)[1],
+                "fused": update_setup(env_name, h, cpu, fused_adam=True)[1],
+            }
+            flop = flops(variants["eager"])
+            first: dict[str, float] = {}
+            if compiled:
+                variants["compiled"] = update_setup(env_name, h, cpu, compile=True)[1]
+            for k, fn in variants.items():  # the first 3 steps; for "compiled" they include compilation
+                first[k] = 3 / timed(fn, 3)
             a, w = torch.randn(256, h), torch.randn(h, h)
-            mm_rate, up_rate = [], []
+            mm_rate: list[float] = []
+            rates: dict[str, list[float]] = {k: [] for k in variants}
             for _ in range(rounds):
                 mm_rate.append(timed(lambda a=a, w=w: torch.mm(a, w), 20) * 2 * 256 * h * h)
-                up_rate.append(timed(full, steps) * flop)
+                for k, fn in variants.items():
+                    rates[k].append(timed(fn, steps))
+            med = {k: float(np.median(v)) for k, v in rates.items()}
             out[f"update_gflop_{h}"] = flop / 1e9
-            out[f"update_gflops_{h}"] = float(np.median(up_rate)) / 1e9
+            out[f"update_gflops_{h}"] = med["eager"] * flop / 1e9
             out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
             out[f"flop_fraction_{h}"] = out[f"update_gflops_{h}"] / out[f"matmul_gflops_{h}"]
+            out[f"flop_fraction_fused_{h}"] = med["fused"] * flop / 1e9 / out[f"matmul_gflops_{h}"]
+            if compiled:
+                saved = 1 / med["eager"] - 1 / med["compiled"]  # seconds per step
+                out[f"compile_s_{h}"] = first["compiled"] - 3 / med["compiled"]
+                out[f"compile_speedup_{h}"] = med["compiled"] / med["eager"]
+                out[f"compile_break_even_steps_{h}"] = out[f"compile_s_{h}"] / saved if saved > 0 else float("inf")
     finally:
         torch.set_num_threads(threads)
     return out
@@ -244,6 +290,7 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="gradient steps per timed block")
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = the trainer's default policy)")
+    p.add_argument("--no-compile", action="store_true", help="skip the compiled update (compilation takes minutes)")
     a = p.parse_args()
     torch.set_num_threads(resolve_threads(a.threads, 1024))
     dev = "cuda" if torch.cuda.is_available() else "cpu"
@@ -252,14 +299,20 @@ def main() -> None:
     print(f"update  ({a.env}, 2×1024, batch 256, 800 labelled states)")
     print(f"  full COLLIE step  {u['full_steps_per_s']:8.1f} steps/s")
     print(f"  plain SAC step    {u['sac_steps_per_s']:8.1f} steps/s")
-    print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×)")
-    f = bench_flops(a.env, a.steps, a.rounds)
+    print(f"  METRA step (w ≡ 1) {u['metra_steps_per_s']:7.1f} steps/s")
+    print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×; in FLOPs {u['cost_ratio_flops']:.2f}×)")
+    f = bench_flops(a.env, a.steps, a.rounds, compiled=not a.no_compile)
     for h in (256, 1024):
         print(
             f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
             f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
-            "(goal ≥ 60 %)"
+            f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %"
         )
+        if f"compile_s_{h}" in f:
+            print(
+                f"    --compile: {f[f'compile_s_{h}']:.0f} s to compile, {f[f'compile_speedup_{h}']:.2f}× eager's "
+                f"steps/s, pays back after {f[f'compile_break_even_steps_{h}']:.0f} steps"
+            )
     r: dict[str, float] = {}
     for env_name in ("ant", "half_cheetah"):
         r |= bench_rollout(env_name, a.rounds)

@@ -54,7 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             continue
         flag = "--" + f.name.replace("_", "-")
         if f.type in ("bool", bool):
-            group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL")
+            # a bare flag means true (`--compile`); `--compile false` still works
+            group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True)
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
             group.add_argument(flag, dest=f.name, default=None, type=kind)

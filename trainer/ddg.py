@@ -18,6 +18,7 @@ from trainer.config import Config
 from trainer.instruction import InstructionClassifier
 from trainer.metra import Metra
 from trainer.networks import SkillLatent
+from trainer.optim import adam
 
 
 class ProjectedLatent(nn.Module):
@@ -38,4 +39,4 @@ def attach_projection(agent: Metra, classifier: InstructionClassifier, cfg: Conf
     """Replace the agent's φ by head ∘ encoder; φ's optimiser then trains the head only."""
     phi = ProjectedLatent(classifier.net.encoder, cfg.projection_dim, agent.prior.dim, cfg.hidden, cfg.layers)
     agent.phi = phi.to(agent.device)  # type: ignore[assignment]  # a SkillLatent in all but its class
-    agent.phi_opt = torch.optim.Adam(phi.head.parameters(), lr=cfg.lr)
+    agent.phi_opt = adam(phi.head.parameters(), cfg.lr, cfg.fused_adam)

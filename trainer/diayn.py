@@ -31,6 +31,7 @@ from trainer.config import Config
 from trainer.encoders import feature_dim, is_pixels
 from trainer.metra import Metra, TorchBatch, WeightFn
 from trainer.networks import SkillLatent, mlp
+from trainer.optim import adam
 from trainer.skills import SkillPrior
 
 REFERENCE_ALPHA = 0.1  # the reference's DIAYN scripts: --alpha 0.1 with a zero α learning rate
@@ -88,7 +89,7 @@ class Diayn(Metra):
             self.phi = GaussianDiscriminator(
                 feature_dim(obs_shape), prior.dim, cfg.hidden, cfg.layers, cfg.init == "reference", encoder
             ).to(device)
-            self.phi_opt = torch.optim.Adam(self.phi.parameters(), lr=cfg.lr)
+            self.phi_opt = adam(self.phi.parameters(), cfg.lr, cfg.fused_adam)
             with torch.no_grad():
                 self.log_alpha.fill_(np.log(REFERENCE_ALPHA))
             self.learn_alpha = False

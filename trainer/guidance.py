@@ -16,8 +16,34 @@ EMPTY_CLASS_DISTANCE = 1e10  # an empty label class is "infinitely far" (as the 
 LABEL_VALUES = (0.0, 1.0, 2.0)  # [0, 1, 2]ᵀ in Eq. 8
 
 
+CDIST_MM_ROWS = 25  # torch.cdist computes p = 2 distances through one matmul above this many rows
+
+
 def class_distances(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tensor:
-    """d_φ(s, D_i) = min_{s0 ∈ D_i} ‖φ(s0) − φ(s)‖ for i = 0, 1, 2 (Eq. 7). z: (B, k) → (B, 3)."""
+    """d_φ(s, D_i) = min_{s0 ∈ D_i} ‖φ(s0) − φ(s)‖ for i = 0, 1, 2 (Eq. 7). z: (B, k) → (B, 3).
+
+    Squared distances are formed as torch.cdist forms them, ‖z‖² − 2 z·e + ‖e‖² in one augmented
+    matmul per class (the same shapes, so the same rounding), and the minimum is taken before the
+    clamp at 0 and the square root: both are monotone, so the result equals cdist's bit for bit
+    while the square root runs on (B, 3) values instead of (B, N). At most `CDIST_MM_ROWS` rows,
+    where cdist may take its direct kernel, still go through cdist."""
+    if z.shape[0] <= CDIST_MM_ROWS:
+        return _class_distances_cdist(z, labelled)
+    z_sq = z.pow(2).sum(-1, keepdim=True)
+    left = torch.cat([z.mul(-2), z_sq, torch.ones_like(z_sq)], -1)
+    empty = torch.full((z.shape[0],), EMPTY_CLASS_DISTANCE, dtype=z.dtype, device=z.device)
+    cols = []
+    for emb in labelled:
+        if emb.shape[0] == 0:
+            cols.append(empty)
+        else:
+            emb_sq = emb.pow(2).sum(-1, keepdim=True)
+            right = torch.cat([emb, torch.ones_like(emb_sq), emb_sq], -1)
+            cols.append(left.matmul(right.mT).amin(dim=1).clamp_min_(0).sqrt_())
+    return torch.stack(cols, dim=1)
+
+
+def _class_distances_cdist(z: torch.Tensor, labelled: list[torch.Tensor]) -> torch.Tensor:
     cols = []
     for emb in labelled:
         if emb.shape[0] == 0:

@@ -24,6 +24,7 @@ from torch.nn import functional as F
 from trainer.config import Config
 from trainer.guidance import LabelledSets
 from trainer.networks import mlp
+from trainer.optim import adam, restore_kernel
 
 TARGETS = (0.0, 0.5, 1.0)  # bad, neutral, good
 
@@ -44,7 +45,8 @@ class InstructionClassifier:
 
     def __init__(self, obs_dim: int, cfg: Config, device: torch.device) -> None:
         self.net = InstructionNet(obs_dim, cfg.hidden, cfg.layers, cfg.projection_dim).to(device)
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
+        self.opt = adam(self.net.parameters(), cfg.lr, cfg.fused_adam)
+        self.fused_adam = cfg.fused_adam
         self.steps, self.device = cfg.classifier_steps, device
         self.fitted: tuple | None = None  # the labelled set ψ was last fitted to (query id, label)
         self.last_loss = float("nan")
@@ -98,5 +100,6 @@ class InstructionClassifier:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])
         self.opt.load_state_dict(state["opt"])
+        restore_kernel(self.opt, self.fused_adam)
         self.fitted = None if state["fitted"] is None else tuple(tuple(x) for x in state["fitted"])
         self.last_loss = state["last_loss"]

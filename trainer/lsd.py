@@ -21,6 +21,7 @@ from trainer.config import Config
 from trainer.encoders import feature_dim, is_pixels
 from trainer.metra import Metra, TorchBatch, WeightFn, guided_reward
 from trainer.networks import SkillLatent
+from trainer.optim import adam
 from trainer.skills import SkillPrior
 
 
@@ -41,7 +42,7 @@ class Lsd(Metra):
             raise ValueError("LSD's Lipschitz φ (and COLLIE-L2) is for state observations, not pixels")
         super().__init__(obs_shape, action_dim, prior, cfg, device)
         self.phi = lipschitz_latent(feature_dim(obs_shape), prior.dim, cfg.hidden, cfg.layers).to(device)
-        self.phi_opt = torch.optim.Adam(self.phi.parameters(), lr=cfg.lr)
+        self.phi_opt = adam(self.phi.parameters(), cfg.lr, cfg.fused_adam)
 
     def update(self, b: TorchBatch, weight_fn: WeightFn | None) -> dict[str, torch.Tensor]:
         """One φ step on J^φ (no constraint term: φ is Lipschitz by construction), then SAC."""

@@ -125,5 +125,9 @@ def method(name: str) -> Method:
 def build_agent(
     cfg: Config, obs_shape: int | tuple[int, ...], action_dim: int, prior: SkillPrior, device: torch.device
 ) -> Learner:
-    """The learner for `cfg.method` and, for DoDont*/DDG*, its instruction classifier."""
-    return method(cfg.method).build(cfg, obs_shape, action_dim, prior, device)
+    """The learner for `cfg.method` and, for DoDont*/DDG*, its instruction classifier; with
+    `cfg.compile` its networks compiled once every learner has put its own in place."""
+    agent, classifier = method(cfg.method).build(cfg, obs_shape, action_dim, prior, device)
+    if cfg.compile:
+        agent.compile()
+    return agent, classifier

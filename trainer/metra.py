@@ -21,6 +21,7 @@ import torch
 from trainer.config import Config
 from trainer.encoders import PixelEncoder, feature_dim, is_pixels
 from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, init_like_reference
+from trainer.optim import adam, restore_kernel
 from trainer.skills import SkillPrior
 
 # weight_fn(φ(s), φ(s′)) → w, shape (B,); both arguments detached.
@@ -64,12 +65,11 @@ class Metra:
         self.log_alpha = torch.tensor(np.log(cfg.alpha_init), device=device, requires_grad=True)
         self.log_lambda = torch.tensor(np.log(cfg.lambda_init), device=device, requires_grad=True)
         self.target_entropy = cfg.target_entropy_scale * action_dim
-        adam = torch.optim.Adam
-        self.phi_opt = adam(self.phi.parameters(), lr=cfg.lr)
-        self.qf_opt = adam(self.qf.parameters(), lr=cfg.lr)
-        self.policy_opt = adam(self.policy.parameters(), lr=cfg.lr)
-        self.alpha_opt = adam([self.log_alpha], lr=cfg.lr)
-        self.lambda_opt = adam([self.log_lambda], lr=cfg.lr)
+        self.phi_opt = adam(self.phi.parameters(), cfg.lr, cfg.fused_adam)
+        self.qf_opt = adam(self.qf.parameters(), cfg.lr, cfg.fused_adam)
+        self.policy_opt = adam(self.policy.parameters(), cfg.lr, cfg.fused_adam)
+        self.alpha_opt = adam([self.log_alpha], cfg.lr, cfg.fused_adam)
+        self.lambda_opt = adam([self.log_lambda], cfg.lr, cfg.fused_adam)
         self.phi_version = 0  # bumped by every φ step; keys the labelled-embedding cache
 
     @staticmethod
@@ -89,6 +89,14 @@ class Metra:
             "policy": PixelEncoder(shape),
         }
 
+    def compile(self) -> None:
+        """`--compile`: torch.compile each network's forward in place (its backward follows through
+        AOTAutograd; state-dict keys are unchanged). The optimiser steps stay eager (`--fused-adam`
+        is their fast kernel), as do the losses between the networks. Off by default: on a busy
+        2-core CPU it compiled for minutes and stepped no faster (docs/training.md, `make bench-update`)."""
+        for net in (self.phi, self.qf, self.qf_target, self.policy):
+            net.compile()
+
     # ---- acting ---------------------------------------------------------------------------
     @torch.inference_mode()
     def act(self, obs: torch.Tensor, skill: torch.Tensor, deterministic: bool) -> torch.Tensor:
@@ -107,15 +115,15 @@ class Metra:
 
         guided = guided_reward(projection, w, self.cfg.reward_form)
         phi_loss = -(guided + lam * penalty).mean()  # Eq. 9, ascended
-        self.phi_opt.zero_grad(set_to_none=True)
-        phi_loss.backward()
-        self.phi_opt.step()
-        self.phi_version += 1
-
         lambda_loss = self.log_lambda * penalty.detach().mean()  # Eq. 10: λ rises while violated
+        # φ's and log λ's losses touch disjoint parameters (λ is detached in one, the penalty in the
+        # other): one backward pass gives each exactly the gradient of its own loss.
+        self.phi_opt.zero_grad(set_to_none=True)
         self.lambda_opt.zero_grad(set_to_none=True)
-        lambda_loss.backward()
+        (phi_loss + lambda_loss).backward()
+        self.phi_opt.step()
         self.lambda_opt.step()
+        self.phi_version += 1
 
         reward = guided.detach()  # Eq. 11
         info = self.sac_update(b, reward)
@@ -148,19 +156,19 @@ class Metra:
         q_pi = self.qf(b.obs, b.skill, action).min(0).values
         self.qf.requires_grad_(True)
         policy_loss = (alpha * logp - q_pi).mean()
+        # α's loss reads log π detached and π's reads α detached: one backward pass serves both.
+        actor_loss = policy_loss
         self.policy_opt.zero_grad(set_to_none=True)
-        policy_loss.backward()
-        self.policy_opt.step()
-
         if self.learn_alpha:
-            alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+            actor_loss = actor_loss - (self.log_alpha * (logp.detach() + self.target_entropy)).mean()
             self.alpha_opt.zero_grad(set_to_none=True)
-            alpha_loss.backward()
+        actor_loss.backward()
+        self.policy_opt.step()
+        if self.learn_alpha:
             self.alpha_opt.step()
 
-        with torch.no_grad():
-            for t, p in zip(self.qf_target.parameters(), self.qf.parameters(), strict=True):
-                t.lerp_(p, self.cfg.tau)
+        with torch.no_grad():  # Polyak averaging, one multi-tensor op
+            torch._foreach_lerp_(list(self.qf_target.parameters()), list(self.qf.parameters()), self.cfg.tau)
         return dict(
             qf_loss=qf_loss.detach(),
             policy_loss=policy_loss.detach(),
@@ -196,4 +204,6 @@ class Metra:
             self.log_lambda.copy_(state["log_lambda"])
         for name in ("phi", "qf", "qf_target", "policy", "phi_opt", "qf_opt", "policy_opt", "alpha_opt", "lambda_opt"):
             getattr(self, name).load_state_dict(state[name])
+        for opt in (self.phi_opt, self.qf_opt, self.policy_opt, self.alpha_opt, self.lambda_opt):
+            restore_kernel(opt, self.cfg.fused_adam)
         self.phi_version = int(state["phi_version"])

@@ -1,0 +1,204 @@
+"""The gradient step's faster paths compute what the plain path computes.
+
+`old_update` is the step as trainer/metra.py wrote it before (one backward pass and one optimiser
+step per loss, Adam's per-tensor loop, a Polyak loop, per-class torch.cdist): the default path must
+equal it bit for bit; the fused Adam kernel and the compiled networks to float tolerance.
+"""
+
+import copy
+
+import pytest
+import torch
+
+from trainer.config import make_config
+from trainer.guidance import CDIST_MM_ROWS, EMPTY_CLASS_DISTANCE, LabelledSets, class_distances, guidance_weight
+from trainer.metra import Metra, TorchBatch
+from trainer.skills import SkillPrior
+
+OBS, ACT, BATCH = 6, 3, 64
+
+
+def make_agent(**overrides: object) -> Metra:
+    torch.manual_seed(0)
+    cfg = make_config("smoke", "point", hidden=64, lr=1e-3, **overrides)
+    return Metra(OBS, ACT, SkillPrior(2, False), cfg, torch.device("cpu"))
+
+
+def make_batches(n: int) -> list[TorchBatch]:
+    g = torch.Generator().manual_seed(1)
+    out = []
+    for _ in range(n):
+        obs = torch.randn(BATCH, OBS, generator=g)
+        z = torch.nn.functional.normalize(torch.randn(BATCH, 2, generator=g), dim=1)
+        act = torch.rand(BATCH, ACT, generator=g) * 2 - 1
+        out.append(TorchBatch(obs, obs + 0.1 * torch.randn(BATCH, OBS, generator=g), act, z, z))
+    return out
+
+
+def labelled_states(sizes: tuple[int, int, int]) -> list[torch.Tensor]:
+    g = torch.Generator().manual_seed(2)
+    return [torch.randn(n, OBS, generator=g) for n in sizes]
+
+
+def old_update(agent: Metra, b: TorchBatch, sets: list[torch.Tensor]) -> dict[str, torch.Tensor]:
+    c = agent.cfg
+    lam = agent.log_lambda.exp().detach()
+    phi_s, phi_next = agent.phi(torch.cat([b.obs, b.next_obs])).chunk(2)
+    delta = phi_next - phi_s
+    with torch.no_grad():  # as LabelledSets.embeddings: the non-empty classes in one pass
+        emb = agent.phi(torch.cat([s for s in sets if len(s)])).split([len(s) for s in sets if len(s)])
+    it = iter(emb)
+    cols = [
+        torch.cdist(phi_next.detach(), next(it)).min(dim=1).values if len(s) else torch.full((BATCH,), 1e10)
+        for s in sets
+    ]
+    w = torch.softmax(-torch.stack(cols, 1), 1) @ torch.tensor([0.0, 1.0, 2.0])
+    projection = (delta * b.direction).sum(-1)
+    penalty = torch.clamp(1.0 - delta.pow(2).sum(-1), max=c.epsilon)
+    guided = w * projection
+    phi_loss = -(guided + lam * penalty).mean()
+    agent.phi_opt.zero_grad(set_to_none=True)
+    phi_loss.backward()
+    agent.phi_opt.step()
+    lambda_loss = agent.log_lambda * penalty.detach().mean()
+    agent.lambda_opt.zero_grad(set_to_none=True)
+    lambda_loss.backward()
+    agent.lambda_opt.step()
+    reward = guided.detach()
+
+    alpha = agent.log_alpha.exp().detach()
+    with torch.no_grad():
+        next_action, next_logp = agent.policy.sample(b.next_obs, b.skill)
+        q_next = agent.qf_target(b.next_obs, b.skill, next_action).min(0).values
+        target = reward + c.gamma * (q_next - alpha * next_logp)
+    q = agent.qf(b.obs, b.skill, b.action)
+    qf_loss = 0.5 * (q - target).pow(2).mean(1).sum()
+    agent.qf_opt.zero_grad(set_to_none=True)
+    qf_loss.backward()
+    agent.qf_opt.step()
+    action, logp = agent.policy.sample(b.obs, b.skill)
+    agent.qf.requires_grad_(False)
+    q_pi = agent.qf(b.obs, b.skill, action).min(0).values
+    agent.qf.requires_grad_(True)
+    policy_loss = (alpha * logp - q_pi).mean()
+    agent.policy_opt.zero_grad(set_to_none=True)
+    policy_loss.backward()
+    agent.policy_opt.step()
+    alpha_loss = -(agent.log_alpha * (logp.detach() + agent.target_entropy)).mean()
+    agent.alpha_opt.zero_grad(set_to_none=True)
+    alpha_loss.backward()
+    agent.alpha_opt.step()
+    with torch.no_grad():
+        for t, p in zip(agent.qf_target.parameters(), agent.qf.parameters(), strict=True):
+            t.lerp_(p, c.tau)
+    return dict(phi_loss=phi_loss, lambda_loss=lambda_loss, qf_loss=qf_loss, policy_loss=policy_loss)
+
+
+def new_update(agent: Metra, b: TorchBatch, sets: list[torch.Tensor]) -> dict[str, torch.Tensor]:
+    labelled = LabelledSets(lambda x: x, torch.device("cpu"))
+    for i, s in enumerate(sets):
+        if len(s):
+            labelled.set(f"q{i}", s.numpy(), i)
+
+    def w(_s: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        return guidance_weight(n, labelled.embeddings(agent.phi, agent.phi_version))
+
+    return agent.update(b, w)
+
+
+def run(agent: Metra, step, sets: list[torch.Tensor], n: int = 3) -> list[dict[str, torch.Tensor]]:
+    torch.manual_seed(123)  # the policy's sampling noise
+    return [{k: v.detach().clone() for k, v in step(agent, b, sets).items()} for b in make_batches(n)]
+
+
+def tensors(agent: Metra) -> dict[str, torch.Tensor]:
+    nets = ("phi", "qf", "qf_target", "policy")
+    out = {f"{net}.{k}": v for net in nets for k, v in getattr(agent, net).state_dict().items()}
+    return out | {"log_alpha": agent.log_alpha.detach(), "log_lambda": agent.log_lambda.detach()}
+
+
+def per_tensor_loop(agent: Metra) -> Metra:
+    """A copy whose optimisers step with Adam's per-tensor loop (torch's CPU default before)."""
+    old = copy.deepcopy(agent)
+    for opt in (old.phi_opt, old.qf_opt, old.policy_opt, old.alpha_opt, old.lambda_opt):
+        for group in opt.param_groups:
+            group.update(foreach=False, fused=None)
+    return old
+
+
+@pytest.mark.parametrize("sizes", [(40, 19, 30), (40, 0, 19)])
+def test_default_step_equals_the_old_path_bit_for_bit(sizes):
+    sets = labelled_states(sizes)
+    agent = make_agent()
+    old = per_tensor_loop(agent)
+    got, want = run(agent, new_update, sets), run(old, old_update, sets)
+    for g, o in zip(got, want, strict=True):
+        for k in o:
+            assert torch.equal(g[k], o[k]), k
+    ours, theirs = tensors(agent), tensors(old)
+    for k in theirs:
+        assert torch.equal(ours[k], theirs[k]), k
+
+
+def test_fused_adam_matches_the_old_path_to_float_tolerance():
+    """One step from the same gradients lands within float rounding; over several steps Adam's
+    normalisation can turn a rounding difference in a near-zero gradient into a visible one, so
+    there only the losses are compared."""
+    sets = labelled_states((40, 19, 30))
+    agent = make_agent(fused_adam=True)
+    assert all(g["fused"] for g in agent.qf_opt.param_groups)
+    old = per_tensor_loop(make_agent())
+    run(agent, new_update, sets, n=1), run(old, old_update, sets, n=1)
+    ours, theirs = tensors(agent), tensors(old)
+    for k in theirs:
+        torch.testing.assert_close(ours[k], theirs[k], rtol=1e-5, atol=1e-8)
+    agent, old = make_agent(fused_adam=True), per_tensor_loop(make_agent())
+    got, want = run(agent, new_update, sets, n=4), run(old, old_update, sets, n=4)
+    for g, o in zip(got, want, strict=True):
+        for k in o:
+            torch.testing.assert_close(g[k], o[k], rtol=1e-3, atol=1e-5)
+
+
+def test_a_loaded_optimiser_steps_with_the_runs_kernel():
+    fused, plain = make_agent(fused_adam=True), make_agent()
+    plain.load_state_dict(fused.state_dict())
+    assert all(g["foreach"] and not g["fused"] for g in plain.phi_opt.param_groups)
+    fused.load_state_dict(plain.state_dict())
+    assert all(g["fused"] for g in fused.phi_opt.param_groups)
+
+
+@pytest.mark.parametrize("sizes", [(300, 20, 1), (7, 0, 0), (0, 5, 40)])
+@pytest.mark.parametrize("rows", [CDIST_MM_ROWS, CDIST_MM_ROWS + 1, 256])
+def test_class_distances_equal_per_class_cdist(sizes, rows):
+    g = torch.Generator().manual_seed(3)
+    z = torch.randn(rows, 2, generator=g)
+    sets = [torch.randn(n, 2, generator=g) for n in sizes]
+    want = torch.stack(
+        [torch.cdist(z, s).min(dim=1).values if len(s) else torch.full((rows,), EMPTY_CLASS_DISTANCE) for s in sets],
+        dim=1,
+    )
+    assert torch.equal(class_distances(z, sets), want)
+
+
+@pytest.mark.slow
+def test_compiled_networks_match_eager_to_float_tolerance():
+    sets = labelled_states((40, 19, 30))
+    compiled, eager = make_agent(compile=True), make_agent()
+    compiled.compile()
+    got, want = run(compiled, new_update, sets), run(eager, new_update, sets)
+    for g, o in zip(got, want, strict=True):
+        for k in o:
+            torch.testing.assert_close(g[k], o[k], rtol=1e-3, atol=1e-5)
+    assert compiled.phi.state_dict().keys() == eager.phi.state_dict().keys()  # checkpoints unchanged
+
+
+def test_cli_compile_is_a_bare_flag():
+    import argparse
+
+    from trainer.cli import add_arguments
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    assert p.parse_args(["--compile"]).compile is True
+    assert p.parse_args(["--compile", "false"]).compile is False
+    assert p.parse_args([]).compile is None
