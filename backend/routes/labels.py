@@ -48,14 +48,15 @@ async def submit_label(
     settings: SettingsDep,
     next: Annotated[bool, Query(description="also claim the next query (one round trip per label)")] = False,
 ) -> Response:
-    """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision)."""
+    """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision).
+    A submission naming its `tab` is taken only from the tab holding the lease (409 NotHeld)."""
     body = await parse_body(request, LabelSubmit)
     with db.write() as conn:
         ack = labels.submit(conn, run_id, caller, body)
         if not next:
             return _ack_response(ack)
         try:  # in the same transaction: one commit per labeler round trip
-            following = leases.claim(conn, run_id, caller, settings.lease_s)
+            following = leases.claim(conn, run_id, caller, settings.lease_s, tab=body.tab)
         except ServiceError:  # e.g. the run is being stopped: the label stands, there is no next
             following = None
     return _ack_response(ack, following)
