@@ -79,6 +79,7 @@ class LabelerSession:
         self._recheck_at = 0.0  # while waiting: when to try a claim again without a wake-up
         self._stream: tuple[int, int] | None = None  # (run, after) the stream waiter long-polls
         self._grace = True
+        self._tab: str | None = None  # the browser tab's id (browser.read_identity)
         self._closed = threading.Event()
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
         self._waiter = threading.Thread(
@@ -195,6 +196,7 @@ class LabelerSession:
     def _work(self) -> None:
         identity = read_identity(self.client)
         self.state.watch_run = identity.watch
+        self._tab = identity.tab  # this tab's claims at the service are its own
         if identity.token:
             self._use_token(identity.token)
         else:
@@ -321,8 +323,8 @@ class LabelerSession:
         with self._lock:
             self.state.use_token(token)
         self.panels.show_message("Checking your token…")
-        self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
-        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
+        self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self._tab)
+        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self._tab)
         remember_token(self.client, token)
 
     def _check_token(self) -> None:
@@ -538,32 +540,17 @@ class LabelerSession:
 
     # ---------------------------------------------------------------- labels
 
-    def _still_held(self, submit: Submit) -> str | None:
-        """Why this tab may no longer label the segment (its lease is gone: another tab or UI of this
-        labeler labelled it, or it ran out and someone else took it), else None."""
-        segment = submit.segment
-        if segment.revising or not self.config.check_lease or self.link is None:
-            return None
-        try:
-            claimed = self.link.claim(segment.run.id)
-        except Rejected as exc:
-            return str(exc)
-        if claimed is None or segment.query.query_id not in claimed.held:
-            return f"this tab no longer holds segment {segment.query.query_id} (labelled elsewhere, or its claim ended)"
-        return None
-
     def _submit(self, submit: Submit, at: float) -> None:
         assert self.link is not None
         segment = submit.segment
         if self.state.shown is not segment:
             return  # a key pressed on a segment that is gone
-        reason = self._still_held(submit)
-        if reason is None:
-            try:
-                run_id, query_id = segment.key
-                self.link.submit(run_id, query_id, submit.value, submit.seconds, submit.request_id)
-            except Rejected as exc:
-                reason = str(exc)
+        reason = None
+        try:  # the service refuses it, saying why, unless this tab holds the segment (no lease check first)
+            run_id, query_id = segment.key
+            self.link.submit(run_id, query_id, submit.value, submit.seconds, submit.request_id, segment.revising)
+        except Rejected as exc:
+            reason = str(exc)
         with self._lock:
             if reason is None:
                 self.state.recorded(submit)
