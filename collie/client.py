@@ -339,9 +339,11 @@ class CollieClient:
         client_request_id: str | None = None,
         next: bool = False,
         tab: str | None = None,
+        hold: int = 1,
     ) -> LabelAck:
         """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely.
-        With next=True the answer also carries the labeler's next claimed query (ack.next). With a
+        With next=True the answer also carries the labeler's next claimed query (ack.next; with hold=2
+        the second they hold: the one to preload, taken in the label's transaction). With a
         `tab`, only that tab's claim may be labelled (NotHolding otherwise), and never as a revision."""
         body = LabelSubmit(
             query_id=query_id,
@@ -350,7 +352,8 @@ class CollieClient:
             client_request_id=client_request_id or new_request_id(),
             tab=tab,
         )
-        return self._post(LabelAck, f"/runs/{run_id}/labels", body, next="true" if next else None)
+        params = {"next": "true", "hold": hold if hold != 1 else None} if next else {}
+        return self._post(LabelAck, f"/runs/{run_id}/labels", body, **params)
 
     def release(self, run_id: int, query_id: str) -> Released:
         """Hand a held query back to the pool (records nothing, unlike a skip)."""

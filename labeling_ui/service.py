@@ -23,6 +23,7 @@ from collie.client import (
 )
 from collie.schemas import (
     FINISHED,
+    MAX_HOLD,
     ClaimRead,
     EventPage,
     LabelAck,
@@ -137,13 +138,17 @@ class ServiceLink:
         seconds: float | None,
         request_id: str,
         revision: bool = False,
+        preload: bool = False,
     ) -> LabelAck:
         """Label or skip; `request_id` makes a repeat of the same key press harmless. A first label
         names this tab, so the service refuses it (Rejected, saying why) unless this tab holds the
-        segment; a revision of one's own label needs no claim."""
-        tab = None if revision else self.tab
+        segment; a revision of one's own label needs no claim. With `preload`, the answer's `next`
+        is the segment to preload, claimed in the label's own transaction (no second round trip)."""
+        tab, next = (None, False) if revision else (self.tab, preload)
         return self._retrying(
-            lambda: self.client.submit(run_id, query_id, value, seconds=seconds, client_request_id=request_id, tab=tab)
+            lambda: self.client.submit(
+                run_id, query_id, value, seconds, request_id, next=next, tab=tab, hold=MAX_HOLD if next else 1
+            )
         )
 
     def undo(self, run_id: int, query_id: str, request_id: str) -> LabelAck:

@@ -22,7 +22,7 @@ import viser
 
 from collie.client import new_request_id
 from collie.labels import Label
-from collie.schemas import FINISHED, MAX_HOLD, QueryRead, RunRead
+from collie.schemas import FINISHED, MAX_HOLD, ClaimRead, QueryRead, RunRead
 from labeling_ui.actions import (
     Action,
     Close,
@@ -80,6 +80,7 @@ class LabelerSession:
         self._stream: tuple[int, int] | None = None  # (run, after) the stream waiter long-polls
         self._grace = True
         self._tab: str | None = None  # the browser tab's id (browser.read_identity)
+        self._next_claim: ClaimRead | None = None  # the preload a label's answer carried (for _preload)
         self._closed = threading.Event()
         self._worker = threading.Thread(target=self._work, name=f"collie-labeler-{client.client_id}", daemon=True)
         self._waiter = threading.Thread(
@@ -493,8 +494,10 @@ class LabelerSession:
         shown = self.state.shown
         if self.link is None or shown is None or not self.state.wants_preload(self.config.prefetch):
             return
+        claimed, self._next_claim = self._next_claim, None
         try:
-            claimed = self.link.claim(shown.run.id, hold=MAX_HOLD)
+            if claimed is None or claimed.query.query_id == shown.query.query_id:
+                claimed = self.link.claim(shown.run.id, hold=MAX_HOLD)
         except (Rejected, ServiceDown) as exc:
             log.info("no preload for run %s: %s", shown.run.id, exc)
             return
@@ -548,7 +551,9 @@ class LabelerSession:
         reason = None
         try:  # the service refuses it, saying why, unless this tab holds the segment (no lease check first)
             run_id, query_id = segment.key
-            self.link.submit(run_id, query_id, submit.value, submit.seconds, submit.request_id, segment.revising)
+            value, seconds, request_id = submit.value, submit.seconds, submit.request_id
+            ack = self.link.submit(run_id, query_id, value, seconds, request_id, segment.revising, self.config.prefetch)
+            self._next_claim = ack.next  # what to preload, claimed with the label (one round trip, one commit)
         except Rejected as exc:
             reason = str(exc)
         with self._lock:
@@ -559,6 +564,7 @@ class LabelerSession:
         if reason is not None:
             self.panels.notify("Not recorded", reason, "red")
         self._show_next(segment.run)
+        self._next_claim = None
         shown = self.state.shown
         if shown is not None and shown.appeared is not None and reason is None:
             self.timings.append({"query_id": shown.query.query_id, "key_to_frame_s": shown.appeared - at})

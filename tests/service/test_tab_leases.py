@@ -57,21 +57,21 @@ def test_each_tab_holds_its_own_queries(new_labeler: Callable[[str], CollieClien
     assert ack.query_status == "labelled" and ack.event.revises_event_id is None
 
 
+@pytest.mark.parametrize("redundancy", [1, 2])
 def test_a_tab_never_labels_what_was_labelled_elsewhere(
-    new_labeler: Callable[[str], CollieClient], trainer: CollieClient
+    new_labeler: Callable[[str], CollieClient], trainer: CollieClient, redundancy: int
 ) -> None:
-    for redundancy in (1, 2):
-        run = fresh_run(trainer, 3, redundancy)
-        who = new_labeler(f"stale-{redundancy}")
-        claim = who.claim(run.id, tab=TAB_A)
-        assert claim is not None
-        query_id = claim.query.query_id
-        who.submit(run.id, query_id, 1)  # another UI or client of the same labeler, without a tab
-        assert refused(lambda: who.submit(run.id, query_id, 2, tab=TAB_A)) == "labelled_by_you"
-        events = [e for e in trainer.label_events(run.id) if e.query_id == query_id]
-        assert [(e.value, e.revises_event_id) for e in events] == [(1, None)]
-        revision = who.submit(run.id, query_id, 2)  # from "my labels": a revision needs no lease
-        assert revision.event.revises_event_id == events[0].id
+    run = fresh_run(trainer, 3, redundancy)
+    who = new_labeler(f"stale-{redundancy}")
+    claim = who.claim(run.id, tab=TAB_A)
+    assert claim is not None
+    query_id = claim.query.query_id
+    who.submit(run.id, query_id, 1)  # another UI or client of the same labeler, without a tab
+    assert refused(lambda: who.submit(run.id, query_id, 2, tab=TAB_A)) == "labelled_by_you"
+    events = [e for e in trainer.label_events(run.id) if e.query_id == query_id]
+    assert [(e.value, e.revises_event_id) for e in events] == [(1, None)]
+    revision = who.submit(run.id, query_id, 2)  # from "my labels": a revision needs no lease
+    assert revision.event.revises_event_id == events[0].id
 
 
 def test_why_a_tab_may_not_label(new_labeler: Callable[[str], CollieClient], trainer: CollieClient) -> None:
@@ -135,3 +135,18 @@ def test_a_labeler_holds_at_most_max_tabs_tabs_worth(
             assert who.claim(run.id, tab=tab, hold=hold) is not None
     assert who.claim(run.id, tab=tabs[-1]) is None  # one tab too many: nothing more to hold
     assert trainer.run(run.id).queue.leased == MAX_HOLD * MAX_TABS
+
+
+def test_a_label_can_claim_the_tabs_next_preload(
+    new_labeler: Callable[[str], CollieClient], trainer: CollieClient
+) -> None:
+    run = fresh_run(trainer, 5)
+    who = new_labeler("label-and-preload")
+    shown = who.claim(run.id, tab=TAB_A)
+    ahead = who.claim(run.id, tab=TAB_A, hold=MAX_HOLD)
+    other = who.claim(run.id, tab=TAB_B)
+    assert shown is not None and ahead is not None and other is not None
+    ack = who.submit(run.id, shown.query.query_id, 1, tab=TAB_A, next=True, hold=MAX_HOLD)
+    assert ack.next is not None  # the tab shows `ahead` next; the label's answer brings the one after
+    assert ack.next.query.query_id not in (shown.query.query_id, ahead.query.query_id, other.query.query_id)
+    assert ack.next.held == [ahead.query.query_id, ack.next.query.query_id]
