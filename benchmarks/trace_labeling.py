@@ -6,7 +6,7 @@ Every label key is followed from the keydown in the page to the next segment's i
   segment before: preloading the next, refreshing progress and "my labels");
 - label POST: the label's round trip, and inside it the service's handler (services/labels.submit)
   and the time its request waited for the service's event loop;
-- claim on demand: a claim made after the key because no prepared segment was ready;
+- claims before the frame: a claim made after the key (a lease check, or no prepared segment ready);
 - present: from the label's answer to the next segment's first frame flushed to the browser;
 - browser: flushed → the page's DOM shows the new segment id (websocket, viser's client, layout);
 and the worker's work after the frame (what a fast next key waits on). Timers wrap our functions
@@ -97,8 +97,8 @@ def keys(found: dict[str, list[float]], pages: list[Page], apps_sessions: list[A
             found["queued behind the worker"].append(start - QUEUED.get((worker, start), start))
             found["label POST"].append(post[3] - post[2])
             found["  of it: service handler"].append(sum(s[3] - s[2] for s in handler))
-            found["claim on demand"].append(sum(s[3] - s[2] for s in on_demand))
-            found["keys that needed a claim on demand (share)"].append(float(bool(on_demand)))
+            found["claims before the frame"].append(sum(s[3] - s[2] for s in on_demand))
+            found["keys with a claim before the frame (share)"].append(float(bool(on_demand)))
             tail = [s for s in inside if present and s[2] >= present[2] and s[1] in ("_preload", "_show_progress")]
             found["after the frame: preload + progress"].append(sum(s[3] - s[2] for s in tail))
             found["_submit start → frame flushed, less POST"].append(
