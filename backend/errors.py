@@ -13,7 +13,7 @@ from fastapi.responses import JSONResponse
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException
 
-from backend.services.errors import ServiceError
+from backend.services.errors import ServiceError, TabNotHolding
 
 MAX_ECHO = 200
 
@@ -51,6 +51,8 @@ def plain_error(error: dict[str, Any]) -> dict[str, Any]:
 def install(app: FastAPI) -> None:
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
+        if isinstance(exc, TabNotHolding):  # typed: the reason is a value (collie.schemas.NotHeld)
+            return SafeJSONResponse(exc.body.model_dump(mode="json"), status_code=exc.status)
         return SafeJSONResponse({"detail": clean_text(exc.detail)}, status_code=exc.status)
 
     @app.exception_handler(RequestValidationError)

@@ -70,6 +70,8 @@ class Query(Base):
     status: Mapped[str] = mapped_column(String(16))
     lease_owner_id: Mapped[int | None] = mapped_column(ForeignKey("principals.id"), nullable=True)
     lease_expires_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    # the labeler's tab the lease is for (null: a claim made without one); only it may label the query
+    lease_tab: Mapped[str | None] = mapped_column(String(64), nullable=True)
     label: Mapped[int | None] = mapped_column(Integer, nullable=True)
     label_event_id: Mapped[int | None] = mapped_column(Integer, nullable=True)
     created_at: Mapped[float] = mapped_column(Float)

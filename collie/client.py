@@ -3,9 +3,10 @@
 Used by the trainer's HTTP feedback source, the oracle teacher, the labeling UI and the tests. Every
 method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (status and detail),
 typed by what a caller does about them: Unauthorized (401/403: a token problem), Conflict (409: the
-state does not allow it), and Unavailable — Unreachable (no answer) or Overloaded (5xx, 429) — the
-one kind worth retrying, with `retrying` and its Backoff: the one retry policy of every client
-(submissions are idempotent by client_request_id, so a retry never labels twice).
+state does not allow it; NotHolding when a tab's label was refused, with the typed reason), and
+Unavailable — Unreachable (no answer) or Overloaded (5xx, 429) — the one kind worth retrying, with
+`retrying` and its Backoff: the one retry policy of every client (submissions are idempotent by
+client_request_id, so a retry never labels twice).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from collie.schemas import (
     MetricsIn,
     MetricsRead,
     MyLabel,
+    NotHeld,
     QualitySettings,
     QueryRead,
     QuerySummary,
@@ -82,6 +84,14 @@ class Unauthorized(ApiError):
 
 class Conflict(ApiError):
     """409: the run's or query's state does not allow it (finished run, lease lost, …)."""
+
+
+class NotHolding(Conflict):
+    """409 on a label from a tab that does not hold the query: `refusal.reason` says why."""
+
+    def __init__(self, status: int, refusal: NotHeld) -> None:
+        super().__init__(status, refusal.detail)
+        self.refusal = refusal
 
 
 class Unavailable(Exception):
@@ -177,10 +187,14 @@ class CollieClient:
         except httpx.TransportError as exc:
             raise Unreachable(f"{method} {path}: {exc!r}") from exc
         if response.status_code >= 400:
+            error: Any
             try:
-                detail = response.json().get("detail")
+                error = response.json()
+                detail = error.get("detail") if isinstance(error, dict) else error
             except ValueError:
-                detail = response.text
+                error, detail = None, response.text
+            if response.status_code == 409 and isinstance(error, dict) and "reason" in error:
+                raise NotHolding(409, NotHeld.model_validate(error))
             raise api_error(response.status_code, detail)
         return response
 
@@ -293,12 +307,17 @@ class CollieClient:
     def query(self, run_id: int, query_id: str) -> QueryRead:
         return self._get(QueryRead, f"/runs/{run_id}/queries/{query_id}")
 
-    def claim(self, run_id: int, lease_s: float | None = None, hold: int = 1) -> ClaimRead | None:
+    def claim(
+        self, run_id: int, lease_s: float | None = None, hold: int = 1, tab: str | None = None
+    ) -> ClaimRead | None:
         """The next query under a lease, or None when nothing is claimable right now. With hold=2 a
-        second query is taken besides the one held (to preload it); every held lease is renewed."""
-        params: dict[str, float | int] = {"lease_s": lease_s} if lease_s is not None else {}
+        second query is taken besides the one held (to preload it); every held lease is renewed.
+        With a `tab`, the claim is that tab's: it sees only the queries held for it."""
+        params: dict[str, float | int | str] = {"lease_s": lease_s} if lease_s is not None else {}
         if hold != 1:
             params["hold"] = hold
+        if tab is not None:
+            params["tab"] = tab
         response = self._send("POST", f"/runs/{run_id}/claim", params=params)
         return None if response.status_code == 204 else ClaimRead.model_validate_json(response.content)
 
@@ -320,16 +339,22 @@ class CollieClient:
         seconds: float | None = None,
         client_request_id: str | None = None,
         next: bool = False,
+        tab: str | None = None,
+        hold: int = 1,
     ) -> LabelAck:
         """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely.
-        With next=True the answer also carries the labeler's next claimed query (ack.next)."""
+        With next=True the answer also carries the labeler's next claimed query (ack.next; with hold=2
+        the second they hold: the one to preload, taken in the label's transaction). With a
+        `tab`, only that tab's claim may be labelled (NotHolding otherwise), and never as a revision."""
         body = LabelSubmit(
             query_id=query_id,
             value=value,
             seconds=seconds,
             client_request_id=client_request_id or new_request_id(),
+            tab=tab,
         )
-        return self._post(LabelAck, f"/runs/{run_id}/labels", body, next="true" if next else None)
+        params = {"next": "true", "hold": hold if hold != 1 else None} if next else {}
+        return self._post(LabelAck, f"/runs/{run_id}/labels", body, **params)
 
     def release(self, run_id: int, query_id: str) -> Released:
         """Hand a held query back to the pool (records nothing, unlike a skip)."""
@@ -338,8 +363,11 @@ class CollieClient:
     def skip(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
         return self.submit(run_id, query_id, "skip", client_request_id=client_request_id)
 
-    def undo(self, run_id: int, query_id: str, client_request_id: str | None = None) -> LabelAck:
-        body = UndoRequest(query_id=query_id, client_request_id=client_request_id or new_request_id())
+    def undo(
+        self, run_id: int, query_id: str, client_request_id: str | None = None, tab: str | None = None
+    ) -> LabelAck:
+        """Withdraw the caller's label; it comes back to them (to `tab`) under a fresh lease."""
+        body = UndoRequest(query_id=query_id, client_request_id=client_request_id or new_request_id(), tab=tab)
         return self._post(LabelAck, f"/runs/{run_id}/undo", body)
 
     def label_events(self, run_id: int, after: int = 0, limit: int = 1000) -> list[LabelEventRead]:

@@ -53,6 +53,14 @@ FINISHED: frozenset[str] = frozenset({"finished", "failed"})
 Name = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
 QueryId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
 RequestId = Annotated[str, Field(min_length=1, max_length=128, pattern=r"^[\x21-\x7e]+$")]
+# A browser tab's own id (the labeling UI keeps it in the tab's sessionStorage: a reload keeps it,
+# another tab has its own). A claim made for a tab is that tab's: only it may label the query.
+TabId = Annotated[str, Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")]
+# Why a label from a tab was refused (409 NotHeld): the tab no longer holds the query because
+# another tab of the same labeler holds it, another labeler does, the caller labelled it already
+# (in another tab or client), someone else labelled it, the trainer withdrew it, or its claim
+# ended (released, or expired and taken back).
+NotHeldReason = Literal["other_tab", "other_labeler", "labelled_by_you", "labelled", "retired", "not_claimed"]
 
 
 def _no_nul(text: str) -> str:
@@ -78,7 +86,8 @@ GoldRate = Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)]
 MAX_CONFIG_BYTES = 64 * 1024
 MAX_EXTRA_BYTES = 16 * 1024
 MAX_PACKED_CHARS = 16 * 1024 * 1024  # one segment's packed image observations, base64
-MAX_HOLD = 2  # queries one labeler may hold at once in a run: the one on screen and the next
+MAX_HOLD = 2  # queries one tab may hold at once in a run: the one on screen and the next
+MAX_TABS = 4  # a labeler's tabs that hold queries at once in a run (they hold MAX_HOLD each)
 MAX_ROLLOUTS = 64
 MAX_ROLLOUT_POINTS = 2001
 MAX_QPOS_WIDTH = 128  # humanoid's nq is 28
@@ -406,6 +415,11 @@ class LabelSubmit(Wire):
     value: Submission
     seconds: FiniteFloat | None = Field(default=None, ge=0, le=86_400, description="time spent")
     client_request_id: RequestId
+    tab: TabId | None = Field(
+        default=None,
+        description="the tab that claimed the query: then only a tab holding its lease may label it (409 NotHeld "
+        "otherwise), never as a revision; null: any claim of the caller's, or a revision of their own label",
+    )
 
     @field_validator("value", mode="before")
     @classmethod
@@ -419,6 +433,7 @@ class LabelSubmit(Wire):
 class UndoRequest(Wire):
     query_id: QueryId
     client_request_id: RequestId
+    tab: TabId | None = Field(default=None, description="the tab the query comes back to, under a fresh lease")
 
 
 class LabelEventRead(Wire):
@@ -740,3 +755,11 @@ class StartupMark(Wire):
     pid: int
     what: str
     epoch: int | None = None
+
+
+class NotHeld(Wire):
+    """409 on a label from a tab that does not hold the query's lease: why, as a value a UI can word."""
+
+    detail: str
+    reason: NotHeldReason
+    query_id: QueryId

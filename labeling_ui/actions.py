@@ -22,7 +22,6 @@ class UiConfig:
     wait_s: float = 10.0  # long-poll length while waiting for work
     release_grace_s: float = 5.0  # a closed tab's claims wait this long for a reload of it
     retry_max_s: float = 5.0
-    check_lease: bool = True  # ask the service that the tab still holds a segment before labelling it
 
 
 # ---------------------------------------------------------------- what the worker is asked to do

@@ -1,9 +1,12 @@
-"""Who a tab is: the labeler's token, kept in the tab's own sessionStorage, never shared by tabs.
+"""Who a tab is: the labeler's token and the tab's own id, kept in the tab's sessionStorage,
+never shared by tabs.
 
 A token comes from the labeler URL (`?token=…`, which signs in only the tab it opens) or the
 sign-in field. sessionStorage belongs to one tab (it survives a reload of that tab; another tab,
 or a link opened in one, has its own), so an operator link opened beside a labeler's tab, or a
 wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` asks for watch mode.
+The tab id names the tab's claims at the service (a claim is one tab's: only it may label the
+segment); it survives a reload, so a reloaded tab gets its segment back.
 
 viser does not pass the page URL to the server and reads only localStorage, so a script (viser's
 RunJavascript message, the channel viser itself uses to ship plotly.js) moves the token from the
@@ -14,14 +17,17 @@ unique to this connection, which the server deletes as soon as it has read it.
 from __future__ import annotations
 
 import json
+import re
 import secrets
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import viser
 from viser import _messages
 
 TOKEN_KEY = "collie-token"
+TAB_KEY = "collie-tab"
 LEGACY_KEY = "viser-user:collie-token"  # where earlier versions kept it, shared by every tab
+TAB_ID = re.compile(r"tab-[0-9a-f]{24}")  # what the script above writes (collie.schemas.TabId allows it)
 _STORAGE_PREFIX = "viser-user:"  # what viser's client puts before keys written via its API
 
 _HANDOFF = """
@@ -32,17 +38,26 @@ if (token !== null) {
   url.searchParams.delete("token");
   window.history.replaceState(null, document.title, url.toString());
 }
+if (sessionStorage.getItem(%(tab)s) === null) {  // crypto.randomUUID needs https; this does not
+  const bytes = crypto.getRandomValues(new Uint8Array(12));
+  sessionStorage.setItem(%(tab)s, "tab-" + Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join(""));
+}
 localStorage.removeItem(%(legacy)s);
 localStorage.setItem(%(handoff)s, JSON.stringify({
-  token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch")
+  token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch"), tab: sessionStorage.getItem(%(tab)s)
 }));
 """
+
+
+def new_tab_id() -> str:
+    return f"tab-{secrets.token_hex(12)}"
 
 
 @dataclass(frozen=True)
 class TabIdentity:
     token: str | None
     watch: int | None  # ?watch=RUN: replay that run's skills instead of labeling
+    tab: str = field(default_factory=new_tab_id)  # the browser's, else one for this connection
 
 
 def _run(client: viser.ClientHandle, source: str) -> None:
@@ -54,6 +69,7 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
     handoff = f"collie-handoff-{secrets.token_hex(8)}"
     script = _HANDOFF % {
         "key": json.dumps(TOKEN_KEY),
+        "tab": json.dumps(TAB_KEY),
         "legacy": json.dumps(LEGACY_KEY),
         "handoff": json.dumps(_STORAGE_PREFIX + handoff),
     }
@@ -68,8 +84,12 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
         found = json.loads(raw) if raw else {}
     except json.JSONDecodeError:
         found = {}
-    watch = found.get("watch")
-    return TabIdentity(found.get("token") or None, int(watch) if isinstance(watch, str) and watch.isdigit() else None)
+    watch, tab = found.get("watch"), found.get("tab")
+    return TabIdentity(
+        found.get("token") or None,
+        int(watch) if isinstance(watch, str) and watch.isdigit() else None,
+        tab if isinstance(tab, str) and TAB_ID.fullmatch(tab) else new_tab_id(),
+    )
 
 
 def remember_token(client: viser.ClientHandle, token: str | None) -> None:

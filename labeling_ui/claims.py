@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from collie.schemas import MAX_HOLD, QueryRead, RunRead
+from collie.schemas import MAX_HOLD, ClaimRead, QueryRead, RunRead
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.screen import TabScreen
@@ -26,6 +26,7 @@ class Claims:
         self.tab = tab
         self.screen = screen
         self.prefetch = prefetch  # claim and prepare the next segment while one is on screen
+        self.next_claim: ClaimRead | None = None  # the preload a label's answer carried (used once)
 
     def claim(self, link: ServiceLink, run: RunRead) -> tuple[RunRead, QueryRead] | None:
         """A segment this tab may show: a fresh claim, or one this labeler holds that no other of
@@ -62,8 +63,10 @@ class Claims:
             wanted = shown is not None and state.wants_preload(self.prefetch)
         if shown is None or not wanted:
             return
+        claimed, self.next_claim = self.next_claim, None
         try:
-            claimed = link.claim(shown.run.id, hold=MAX_HOLD)
+            if claimed is None or claimed.query.query_id == shown.query.query_id:
+                claimed = link.claim(shown.run.id, hold=MAX_HOLD)
         except (Rejected, ServiceDown) as exc:
             log.info("no preload for run %s: %s", shown.run.id, exc)
             return

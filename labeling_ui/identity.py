@@ -32,6 +32,7 @@ class Identity:
         self.panels = presenter.panels
         self.link: ServiceLink | None = None  # the worker's; None while signed out
         self.stream_link: ServiceLink | None = None  # the stream waiter's
+        self.tab_id: str | None = None  # the browser tab's id: claims and labels name it
 
     def use_token(self, token: str) -> None:
         self.claims.release_all(self.link)
@@ -42,8 +43,8 @@ class Identity:
         with self.tab as state:
             state.use_token(token)
         self.panels.show_message("Checking your token…")
-        self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
-        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s)
+        self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self.tab_id)
+        self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self.tab_id)
         self.waiter.use(self.stream_link)
         remember_token(self.client, token)
 

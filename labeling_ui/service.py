@@ -11,15 +11,26 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
 
-from collie.client import ApiError, Backoff, CollieClient, Overloaded, Unauthorized, Unreachable, retrying
+from collie.client import (
+    ApiError,
+    Backoff,
+    CollieClient,
+    NotHolding,
+    Overloaded,
+    Unauthorized,
+    Unreachable,
+    retrying,
+)
 from collie.schemas import (
     FINISHED,
+    MAX_HOLD,
     ClaimRead,
     EventPage,
     LabelAck,
     Me,
     MetricsRead,
     MyLabel,
+    NotHeldReason,
     QueryRead,
     RolloutsRead,
     RunRead,
@@ -43,6 +54,17 @@ class Rejected(Exception):
     """The service answered but would not do it (conflict, gone, invalid)."""
 
 
+# Why the service refused this tab's label (collie.schemas.NotHeld), in the labeler's words.
+NOT_HELD: dict[NotHeldReason, str] = {
+    "other_tab": "another of your tabs holds it now",
+    "other_labeler": "its claim ran out and another labeler took it",
+    "labelled_by_you": "you labelled it already, in another tab or window (relabel it from My labels)",
+    "labelled": "someone else labelled it",
+    "retired": "the trainer withdrew it",
+    "not_claimed": "its claim ended",
+}
+
+
 @dataclass(frozen=True)
 class Progress:
     session: int
@@ -57,11 +79,14 @@ class ServiceLink:
     """Calls for one labeler token. Submissions are retried with the same client_request_id, so a
     retry after a dropped answer never labels twice."""
 
-    def __init__(self, api: str, token: str, run_id: int | None = None, lease_s: float = 60.0) -> None:
+    def __init__(
+        self, api: str, token: str, run_id: int | None = None, lease_s: float = 60.0, tab: str | None = None
+    ) -> None:
         self.api = api
         self.client = CollieClient(api, token, timeout_s=10.0)
         self.pinned_run = run_id
         self.lease_s = lease_s
+        self.tab = tab  # the browser tab's id: claims are this tab's, and the service labels only those
 
     def close(self) -> None:
         self.client.close()
@@ -75,6 +100,9 @@ class ServiceLink:
             raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
         except Unauthorized as exc:
             raise AuthRefused(str(exc.detail)) from exc
+        except NotHolding as exc:
+            refusal = exc.refusal
+            raise Rejected(f"this tab no longer holds segment {refusal.query_id}: {NOT_HELD[refusal.reason]}") from exc
         except ApiError as exc:
             raise Rejected(str(exc.detail)) from exc
 
@@ -100,16 +128,32 @@ class ServiceLink:
     def claim(self, run_id: int, hold: int = 1) -> ClaimRead | None:
         """The next query under a lease (or the newest this labeler holds); every lease they hold
         is renewed. hold=2 takes a second query to preload besides the one on screen."""
-        return self._call(lambda: self.client.claim(run_id, lease_s=self.lease_s, hold=hold))
+        return self._call(lambda: self.client.claim(run_id, lease_s=self.lease_s, hold=hold, tab=self.tab))
 
-    def submit(self, run_id: int, query_id: str, value: Submission, seconds: float | None, request_id: str) -> LabelAck:
-        """Label or skip; `request_id` makes a repeat of the same key press harmless."""
+    def submit(
+        self,
+        run_id: int,
+        query_id: str,
+        value: Submission,
+        seconds: float | None,
+        request_id: str,
+        revision: bool = False,
+        preload: bool = False,
+    ) -> LabelAck:
+        """Label or skip; `request_id` makes a repeat of the same key press harmless. A first label
+        names this tab, so the service refuses it (Rejected, saying why) unless this tab holds the
+        segment; a revision of one's own label needs no claim. With `preload`, the answer's `next`
+        is the segment to preload, claimed in the label's own transaction (no second round trip)."""
+        tab, next = (None, False) if revision else (self.tab, preload)
         return self._retrying(
-            lambda: self.client.submit(run_id, query_id, value, seconds=seconds, client_request_id=request_id)
+            lambda: self.client.submit(
+                run_id, query_id, value, seconds, request_id, next=next, tab=tab, hold=MAX_HOLD if next else 1
+            )
         )
 
     def undo(self, run_id: int, query_id: str, request_id: str) -> LabelAck:
-        return self._retrying(lambda: self.client.undo(run_id, query_id, client_request_id=request_id))
+        """Withdraw one's label; the segment comes back to this tab under a fresh claim."""
+        return self._retrying(lambda: self.client.undo(run_id, query_id, client_request_id=request_id, tab=self.tab))
 
     def release(self, run_id: int, query_id: str) -> None:
         """Hand a held query back to the pool (nothing is recorded: it was never judged)."""

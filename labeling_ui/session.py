@@ -195,9 +195,10 @@ class LabelerSession:
     # ---------------------------------------------------------------- the worker
 
     def _work(self) -> None:
-        opened = read_identity(self.client)  # the token and ?watch= the tab was opened with
+        opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         with self.tab as state:
             state.watch_run = opened.watch
+        self.identity.tab_id = opened.tab  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)
         else:
@@ -317,32 +318,19 @@ class LabelerSession:
 
     # ---------------------------------------------------------------- labels
 
-    def _still_held(self, submit: Submit) -> str | None:
-        """Why this tab may no longer label the segment (its lease is gone: another tab or UI of this
-        labeler labelled it, or it ran out and someone else took it), else None."""
-        segment = submit.segment
-        if segment.revising or not self.config.check_lease or self.link is None:
-            return None
-        try:
-            claimed = self.link.claim(segment.run.id)
-        except Rejected as exc:
-            return str(exc)
-        if claimed is None or segment.query.query_id not in claimed.held:
-            return f"this tab no longer holds segment {segment.query.query_id} (labelled elsewhere, or its claim ended)"
-        return None
-
     def _submit(self, submit: Submit, at: float) -> None:
         assert self.link is not None
         segment = submit.segment
         if self.state.shown is not segment:
             return  # a key pressed on a segment that is gone
-        reason = self._still_held(submit)
-        if reason is None:
-            try:
-                run_id, query_id = segment.key
-                self.link.submit(run_id, query_id, submit.value, submit.seconds, submit.request_id)
-            except Rejected as exc:
-                reason = str(exc)
+        reason = None
+        try:  # the service refuses it, saying why, unless this tab holds the segment (no lease check first)
+            run_id, query_id = segment.key
+            value, seconds, request_id = submit.value, submit.seconds, submit.request_id
+            ack = self.link.submit(run_id, query_id, value, seconds, request_id, segment.revising, self.config.prefetch)
+            self.claims.next_claim = ack.next  # what to preload, claimed with the label (one round trip, one commit)
+        except Rejected as exc:
+            reason = str(exc)
         with self.tab as state:
             if reason is None:
                 state.recorded(submit)
@@ -351,6 +339,7 @@ class LabelerSession:
         if reason is not None:
             self.panels.notify("Not recorded", reason, "red")
         self._show_next(segment.run)
+        self.claims.next_claim = None
         shown = self.state.shown
         if shown is not None and shown.appeared is not None and reason is None:
             self.timings.append({"query_id": shown.query.query_id, "key_to_frame_s": shown.appeared - at})

@@ -15,7 +15,8 @@ import torch
 
 
 def adam(params: Iterable[torch.nn.Parameter] | list[torch.Tensor], lr: float, fused: bool) -> torch.optim.Adam:
-    return torch.optim.Adam(params, lr=lr, **kernel(fused))
+    choice = kernel(fused)
+    return torch.optim.Adam(params, lr=lr, foreach=choice["foreach"], fused=choice["fused"])
 
 
 def kernel(fused: bool) -> dict[str, bool | None]:

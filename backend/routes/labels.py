@@ -18,7 +18,16 @@ from backend.routes.deps import (
 )
 from backend.services import export, labels, leases
 from backend.services.errors import ServiceError
-from collie.schemas import MAX_INT, EffectiveLabel, LabelAck, LabelEventRead, LabelSubmit, MyLabel, UndoRequest
+from collie.schemas import (
+    MAX_HOLD,
+    MAX_INT,
+    EffectiveLabel,
+    LabelAck,
+    LabelEventRead,
+    LabelSubmit,
+    MyLabel,
+    UndoRequest,
+)
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["labels"])
 
@@ -47,15 +56,19 @@ async def submit_label(
     db: DB,
     settings: SettingsDep,
     next: Annotated[bool, Query(description="also claim the next query (one round trip per label)")] = False,
+    hold: Annotated[
+        int, Query(ge=1, le=MAX_HOLD, description="with next: the held query to return (2: the one to preload)")
+    ] = 1,
 ) -> Response:
-    """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision)."""
+    """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision).
+    A submission naming its `tab` is taken only from the tab holding the lease (409 NotHeld)."""
     body = await parse_body(request, LabelSubmit)
     with db.write() as conn:
         ack = labels.submit(conn, run_id, caller, body)
         if not next:
             return _ack_response(ack)
         try:  # in the same transaction: one commit per labeler round trip
-            following = leases.claim(conn, run_id, caller, settings.lease_s)
+            following = leases.claim(conn, run_id, caller, settings.lease_s, hold, body.tab)
         except ServiceError:  # e.g. the run is being stopped: the label stands, there is no next
             following = None
     return _ack_response(ack, following)

@@ -34,6 +34,7 @@ from collie.schemas import (
     RetireRequest,
     SessionPost,
     SessionPosted,
+    TabId,
 )
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["queries"])
@@ -94,11 +95,12 @@ async def claim(
     settings: SettingsDep,
     lease_s: Annotated[float | None, Query(gt=0, le=3600, description="lease length; default from settings")] = None,
     hold: Annotated[int, Query(ge=1, le=MAX_HOLD, description="hold up to this many (2: preload the next)")] = 1,
+    tab: Annotated[TabId | None, Query(description="the browser tab the claim is for: only it may label it")] = None,
 ) -> Response:
-    """Renew every lease the caller holds here and return their `hold`-th query, taking the oldest
-    pending one when they hold fewer (204: none to take now)."""
+    """Renew every lease the caller holds here and return their `hold`-th query (of those held for
+    `tab`), taking the oldest pending one when they hold fewer (204: none to take now)."""
     with db.write() as conn:
-        claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s, hold)
+        claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s, hold, tab)
     if claimed is None:
         return Response(status_code=204)
     return Response(claimed, media_type="application/json")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collie.schemas import NotHeld, NotHeldReason
+
 
 class ServiceError(Exception):
     status = 400
@@ -21,3 +23,11 @@ class Conflict(ServiceError):
 
 class Invalid(ServiceError):
     status = 422
+
+
+class TabNotHolding(Conflict):
+    """A label from a tab that does not hold the query's lease; the answer is a NotHeld body."""
+
+    def __init__(self, query_id: str, reason: NotHeldReason, detail: str) -> None:
+        super().__init__(detail)
+        self.body = NotHeld(detail=detail, reason=reason, query_id=query_id)

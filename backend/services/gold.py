@@ -46,8 +46,8 @@ def due(conn: Connection, run_id: int, me: int, rate: float) -> bool:
     return served < rate * (served + real + 1)
 
 
-def serve_if_due(conn: Connection, run_id: int, caller: Caller, expires: float) -> int | None:
-    """The primary key of a gold copy newly leased to `caller` until `expires`, or None (gold off,
+def serve_if_due(conn: Connection, run_id: int, caller: Caller, expires: float, tab: str | None = None) -> int | None:
+    """The primary key of a gold copy newly leased to `caller` (for their `tab`) until `expires`, or None (gold off,
     not due, no real work pending, or no earlier segment the rule can judge)."""
     run = conn.execute(select(Run.id, Run.task, Run.env, Run.config, Run.gold_rate).where(Run.id == run_id)).first()
     if run is None or run.gold_rate <= 0 or not due(conn, run_id, caller.id, run.gold_rate):
@@ -92,6 +92,7 @@ def serve_if_due(conn: Connection, run_id: int, caller: Caller, expires: float) 
                 score=c.score,
                 status="leased",
                 lease_owner_id=caller.id,
+                lease_tab=tab,
                 lease_expires_at=expires,
                 created_at=time.time(),
                 gold_of=c.id,

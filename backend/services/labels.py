@@ -8,7 +8,9 @@ labelled query goes back to the pool for the next labeler (never one who voted o
 and nothing reaches the stream: the trainer hears a query once it counts, then only changes of its
 effective label. Who may write:
 - label: the holder of the live lease; a labeler with a vote on the query (a revision); or the
-  last lease holder after the lease ran out, as long as nobody else has claimed the query since;
+  last lease holder after the lease ran out, as long as nobody else has claimed the query since.
+  A submission that names its tab is a first label from that tab: only the tab the lease is for
+  may give it (live or late), never as a revision; otherwise a typed 409 (NotHeld) says why;
 - undo: a labeler withdraws their own vote (the query comes back to them under a fresh lease, to
   relabel at once, within MAX_HOLD: their last preloaded query goes back to the pool); an operator
   without a vote withdraws every vote (the query returns to the pool);
@@ -27,7 +29,7 @@ from sqlalchemy import Connection, bindparam, delete, insert, select, update
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import consensus, events, leases, runs
 from backend.services.auth import Caller
-from backend.services.errors import Conflict, NotFound
+from backend.services.errors import Conflict, NotFound, TabNotHolding
 from collie.schemas import (
     FINISHED,
     EffectiveLabel,
@@ -37,6 +39,7 @@ from collie.schemas import (
     LabelSubmit,
     LabelWithdrawn,
     MyLabel,
+    NotHeldReason,
     UndoRequest,
 )
 
@@ -65,6 +68,7 @@ _LOOKUP = (
         Query.label_event_id,
         Query.lease_owner_id,
         Query.lease_expires_at,
+        Query.lease_tab,
         Query.gold_of,
         Run.status.label("run_status"),
         Run.redundancy,
@@ -175,6 +179,24 @@ def _announce(
     events.append(conn, run_id, data, now, labels_delta=delta)
 
 
+def _not_held(conn: Connection, q: Any, caller: Caller, tab: str, live: bool) -> TabNotHolding:
+    """Why `tab` of `caller` may not label `q` (it does not hold the lease)."""
+    reason: NotHeldReason
+    if live and q.lease_owner_id != caller.id:
+        reason, detail = "other_labeler", "is leased to someone else"
+    elif q.lease_owner_id == caller.id and q.status in ("leased", "pending") and q.lease_tab != tab:
+        reason, detail = "other_tab", "is held by another tab of yours"
+    elif conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first() is not None:
+        reason, detail = "labelled_by_you", "was labelled by you already (in another tab or client)"
+    elif q.status == "labelled":
+        reason, detail = "labelled", "was labelled by someone else"
+    elif q.status == "retired":
+        reason, detail = "retired", "was withdrawn by the trainer"
+    else:
+        reason, detail = "not_claimed", "is not claimed by this tab (released, or its claim ran out)"
+    return TabNotHolding(q.query_id, reason, f"query '{q.query_id}' {detail}")
+
+
 def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> LabelAck:
     kind, value = ("skip", None) if body.value == "skip" else ("label", int(body.value))
     repeat = _repeat(conn, run_id, caller, body.client_request_id, (body.query_id, kind, value))
@@ -184,6 +206,12 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
     now = time.time()
     live = q.status == "leased" and q.lease_expires_at > now
     holder = live and q.lease_owner_id == caller.id
+    if body.tab is not None and q.lease_tab != body.tab and q.lease_owner_id == caller.id:
+        holder = False  # the lease is another tab's (or a tab-less claim's) of this labeler
+    if body.tab is not None and not holder:
+        late = not live and q.status in ("leased", "pending") and q.lease_owner_id == caller.id
+        if kind == "skip" or not (late and q.lease_tab == body.tab):
+            raise _not_held(conn, q, caller, body.tab, live)
     if kind == "skip":
         if not holder:
             raise Conflict(
@@ -199,7 +227,8 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
         return LabelAck(event=event, label=q.label, query_status="pending", duplicate=False)
     mine = conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first()
     late = not live and q.status in ("leased", "pending") and q.lease_owner_id == caller.id  # nobody took it since
-    revision = mine is not None and q.status != "retired"
+    late = late and body.tab in (None, q.lease_tab)
+    revision = mine is not None and q.status != "retired" and body.tab is None  # a tab's label is never one
     if not (holder or late or revision):
         if live:
             raise Conflict(f"query '{body.query_id}' is leased to someone else")
@@ -240,6 +269,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     live_other = q.status == "leased" and q.lease_expires_at > now and q.lease_owner_id != caller.id
     owner: int | None
     expires: float | None
+    tab: str | None
     if mine is not None:
         if live_other:
             raise Conflict(
@@ -249,8 +279,8 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": caller.id})
         # your own label comes back to you under a fresh lease, to relabel at once; it counts against
         # MAX_HOLD like a claimed one: the preloaded query goes back to the pool
-        status, owner, expires = "leased", caller.id, now + lease_s
-        leases.make_room(conn, run_id, caller, now)
+        status, owner, expires, tab = "leased", caller.id, now + lease_s, body.tab  # to the tab that undid it
+        leases.make_room(conn, run_id, caller, now, body.tab)
     elif caller.role == "operator":
         revises = q.label_event_id if q.label_event_id is not None else max(v.event_id for v in votes)
         conn.execute(_DROP_VOTES, {"pk": q.id})
@@ -259,6 +289,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         status = "leased" if live_other else "pending"
         owner = q.lease_owner_id if keep else None
         expires = q.lease_expires_at if keep else None
+        tab = q.lease_tab if keep else None
     else:
         raise Conflict(f"query '{body.query_id}' was labelled by someone else")
     event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)
@@ -266,6 +297,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         "status": status,
         "lease_owner_id": owner,
         "lease_expires_at": expires,
+        "lease_tab": tab,
         "label": None,
         "label_event_id": None,
     }

@@ -4,9 +4,15 @@ leases go back to the pool at the next claim in their run (keeping their last ho
 still hand in a late label while nobody else has the query); a released query keeps no holder.
 Queries a labeler skipped come to them last; a query they voted on never comes to them again
 (redundancy: r distinct labelers), and gold copies (services/gold.py) are never in the pool: a due
-one is served to its labeler instead. A labeler may hold up to MAX_HOLD queries (the one on screen
-and the next, preloaded); a claim renews every lease they hold. Statements are built once: this is
-the hottest path of the service."""
+one is served to its labeler instead. A claim renews every lease the labeler holds in the run.
+
+A claim may name the browser tab it is for: the lease records it, and a label that names a tab
+is taken only from the tab holding the lease (services/labels.py), so a stale tab never labels a
+segment another tab of the same labeler shows. Each tab holds up to MAX_HOLD queries (the one on
+screen and the next, preloaded) and sees only its own; a labeler's tabs hold at most
+MAX_HOLD × MAX_TABS. A claim without a tab is the labeler's as a whole (an API client): it sees
+every query they hold and may hold MAX_HOLD. Statements are built once: this is the hottest path
+of the service."""
 
 from __future__ import annotations
 
@@ -22,7 +28,7 @@ from backend.models import LabelEvent, LabelVote, Query, QueryData, Run
 from backend.services import gold
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
-from collie.schemas import FINISHED, MAX_HOLD, QueryStatus
+from collie.schemas import FINISHED, MAX_HOLD, MAX_TABS, QueryStatus
 
 _RETURNED = (
     Query.id,
@@ -33,6 +39,7 @@ _RETURNED = (
     Query.start,
     Query.score,
     Query.created_at,
+    Query.lease_tab,
 )
 _DATA = select(QueryData.frames, QueryData.extra).where(QueryData.query_pk == bindparam("pk"))
 _RUN_OPEN = exists().where(Run.id == bindparam("run"), Run.status.not_in(tuple(FINISHED)), Run.control != "stop")
@@ -54,10 +61,10 @@ _RENEW = (
 _RELEASE = (
     update(Query)
     .where(Query.id == bindparam("pk"), Query.status == "leased", Query.lease_owner_id == bindparam("me"))
-    .values(status="pending", lease_owner_id=None, lease_expires_at=bindparam("now"))
+    .values(status="pending", lease_owner_id=None, lease_tab=None, lease_expires_at=bindparam("now"))
 )
 _HELD = (
-    select(Query.id)
+    select(Query.id, Query.lease_tab)
     .where(
         Query.run_id == bindparam("run"),
         Query.status == "leased",
@@ -84,7 +91,12 @@ def _take(avoid_skipped: bool) -> Update:
     return (
         update(Query)
         .where(Query.id == oldest_id, Query.status == "pending", _RUN_OPEN)
-        .values(status="leased", lease_owner_id=bindparam("me"), lease_expires_at=bindparam("expires"))
+        .values(
+            status="leased",
+            lease_owner_id=bindparam("me"),
+            lease_tab=bindparam("tab"),
+            lease_expires_at=bindparam("expires"),
+        )
         .returning(*_RETURNED)
     )
 
@@ -92,21 +104,26 @@ def _take(avoid_skipped: bool) -> Update:
 _TAKE = (_take(avoid_skipped=True), _take(avoid_skipped=False))
 
 
-def claim(conn: Connection, run_id: int, caller: Caller, lease_s: float, hold: int = 1) -> bytes | None:
-    """ClaimRead JSON for the caller's `hold`-th query (by session, then posting order): every lease
-    they hold in the run is renewed; with fewer than `hold` held, the oldest pending query is taken
-    and returned. None when one is needed and none is claimable right now."""
+def claim(
+    conn: Connection, run_id: int, caller: Caller, lease_s: float, hold: int = 1, tab: str | None = None
+) -> bytes | None:
+    """ClaimRead JSON for the caller's `hold`-th query (by session, then posting order) among those
+    they hold for `tab` (with no tab: among all they hold): every lease they hold in the run is
+    renewed; with fewer than `hold` held, the oldest pending query is taken (for `tab`) and
+    returned. None when one is needed and none is claimable right now."""
     now = time.time()
-    params = {"run": run_id, "me": caller.id, "now": now, "expires": now + lease_s}
+    params = {"run": run_id, "me": caller.id, "now": now, "expires": now + lease_s, "tab": tab}
     conn.execute(_SWEEP, params)
-    held = sorted(conn.execute(_RENEW, params).all(), key=lambda r: (r.session, r.id))
+    renewed = sorted(conn.execute(_RENEW, params).all(), key=lambda r: (r.session, r.id))
+    held = [r for r in renewed if r.lease_tab == tab] if tab is not None else renewed
     row = held[hold - 1] if len(held) >= hold else None
+    room = tab is None or len(renewed) < MAX_HOLD * MAX_TABS  # no more tabs' worth than that
     # PostgreSQL: a concurrent claim may win our candidate (the re-checked WHERE then fails); try again.
     attempts = 1 if conn.dialect.name == "sqlite" else 4
-    if row is None and (gold_pk := gold.serve_if_due(conn, run_id, caller, now + lease_s)) is not None:
+    if row is None and room and (gold_pk := gold.serve_if_due(conn, run_id, caller, now + lease_s, tab)) is not None:
         row = conn.execute(select(*_RETURNED).where(Query.id == gold_pk)).one()
         held.append(row)
-    for take in [*_TAKE] * attempts:
+    for take in [*_TAKE] * attempts if room else []:
         if row is not None:
             break
         row = conn.execute(take, params).first()
@@ -139,11 +156,12 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
     return row.status
 
 
-def make_room(conn: Connection, run_id: int, caller: Caller, now: float) -> list[str]:
-    """Before a query comes back to the caller outside a claim (an undo of their label): release
-    the last ones they hold in claim order (the preloaded) so they hold at most MAX_HOLD with it.
-    Returns the released query ids."""
-    held = conn.execute(_HELD, {"run": run_id, "me": caller.id, "now": now}).scalars().all()
+def make_room(conn: Connection, run_id: int, caller: Caller, now: float, tab: str | None = None) -> list[str]:
+    """Before a query comes back to the caller's `tab` outside a claim (an undo of their label):
+    release the last ones that tab holds (with no tab: they hold) in claim order (the preloaded) so
+    it holds at most MAX_HOLD with it. Returns the released query ids."""
+    rows = conn.execute(_HELD, {"run": run_id, "me": caller.id, "now": now})
+    held = [r.id for r in rows if tab in (None, r.lease_tab)]
     extra = held[: max(0, len(held) - (MAX_HOLD - 1))]
     released = []
     for pk in extra:

@@ -6,10 +6,9 @@
 import { ago, escapeHtml, num, of, percent } from "./format.js";
 import { CLASS_COLOURS, FILL, regionPath } from "./regions.js";
 
-export const LABEL_NAMES = ["bad", "neutral", "good"];
-
-const labelTag = (v) => (v == null ? '<span class="muted">—</span>'
-  : `<span class="label-tag" style="--c:${CLASS_COLOURS[v]}">${LABEL_NAMES[v]}</span>`);
+// `names`: the label words in value order, as the API gives them (RunPage.labels); no copy here.
+const labelTag = (v, names) => (v == null ? '<span class="muted">—</span>'
+  : `<span class="label-tag" style="--c:${CLASS_COLOURS[v]}">${escapeHtml(names[v] ?? String(v))}</span>`);
 
 const COLUMN_HELP = [
   ["labels", "queries they hold a label on now: a revision replaces their label, an undo withdraws it"],
@@ -90,7 +89,7 @@ export function pathSvg(xy, task, size = [132, 88]) {
     </g></svg>`;
 }
 
-export function renderDisagreements(element, count, view, task) {
+export function renderDisagreements(element, count, view, task, names) {
   const s = view.labeling;
   count.textContent = s.n_disagreements ? `(${s.n_disagreements}${s.n_disagreements > s.disagreements.length ? `, newest ${s.disagreements.length} shown` : ""})` : "";
   if (!s.disagreements.length) {
@@ -100,8 +99,8 @@ export function renderDisagreements(element, count, view, task) {
   element.innerHTML = `<table><thead><tr><th>query</th><th>session</th><th>labels</th><th>counts as</th><th>oracle</th><th>path</th></tr></thead><tbody>
     ${s.disagreements.map((d) => `<tr data-query="${escapeHtml(d.query_id)}">
       <td>${escapeHtml(d.query_id)}</td><td>${d.session}</td>
-      <td>${Object.entries(d.labels).map(([who, v]) => `${escapeHtml(who)} ${labelTag(v)}`).join("<br>")}</td>
-      <td>${d.effective == null ? '<span class="muted">not yet</span>' : labelTag(d.effective)}</td>
-      <td>${labelTag(d.oracle)}</td><td>${pathSvg(d.xy, task)}</td></tr>`).join("")}
+      <td>${Object.entries(d.labels).map(([who, v]) => `${escapeHtml(who)} ${labelTag(v, names)}`).join("<br>")}</td>
+      <td>${d.effective == null ? '<span class="muted">not yet</span>' : labelTag(d.effective, names)}</td>
+      <td>${labelTag(d.oracle, names)}</td><td>${pathSvg(d.xy, task)}</td></tr>`).join("")}
   </tbody></table>`;
 }

@@ -48,6 +48,7 @@ export class RunPage {
     this.root.querySelector("#run-title").textContent = `Run #${runId} · ${page.run.env} ${page.run.task} · ${page.run.method}`;
     this.setWatchLink(watchUrl, runId);
     this.task = page.task;
+    this.labelNames = page.labels.map((l) => l.name); // in value order: the API's words for 0, 1, 2
     this.showRun(page.run);
     const rule = this.root.querySelector("#run-rule"); // the instruction (no rule) or the rule's own words
     rule.textContent = page.run.instruction != null ? `Instruction (no task rule): ${page.run.instruction}`
@@ -109,7 +110,7 @@ export class RunPage {
 
   renderLabeling(view) {
     renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
-    renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task);
+    renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task, this.labelNames ?? []);
   }
 
   seeEpoch(epoch) {
