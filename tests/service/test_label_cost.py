@@ -12,8 +12,8 @@ import pytest
 from sqlalchemy import event
 
 from backend.server import BackgroundServer
-from collie.client import CollieClient
-from collie.schemas import RunRead
+from collie.client import ApiError, CollieClient
+from collie.schemas import LabelChangedEvent, RunRead
 
 from .conftest import both_databases, make_run_spec, make_session
 
@@ -78,3 +78,21 @@ def test_statements_per_revision_and_repeat(live: BackgroundServer, labeler: Col
         repeat = labeler.submit(fresh_run.id, query_id, 2, client_request_id="rev-2")
     assert repeat.duplicate and repeat.event.id == revised.event.id and repeat.label == 2
     assert len(statements) == REPEAT, "\n".join(statements)
+
+
+def test_statements_per_event_page(live: BackgroundServer, labeler: CollieClient, fresh_run: RunRead) -> None:
+    """The trainer's long poll reads the log once for a page that has events (no separate run
+    lookup), and still answers 404 for an unknown run."""
+    held = labeler.claim(fresh_run.id)
+    assert held is not None
+    after = labeler.run(fresh_run.id).last_event_id
+    labeler.submit(fresh_run.id, held.query.query_id, 2)
+    with counted(live) as statements:
+        page = labeler.events(fresh_run.id, after=after, wait_s=5.0)
+    assert [(type(e), e.data.query_id) for e in page.events if isinstance(e, LabelChangedEvent)] == [
+        (LabelChangedEvent, held.query.query_id)
+    ]
+    assert len(statements) == 1, "\n".join(statements)
+    with pytest.raises(ApiError) as unknown:
+        labeler.events(fresh_run.id + 1000, after=0, wait_s=1.0)
+    assert unknown.value.status == 404
