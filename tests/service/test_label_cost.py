@@ -13,6 +13,7 @@ from sqlalchemy import event
 
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
+from collie.labels import Label
 from collie.schemas import LabelChangedEvent, RunRead
 
 from .conftest import both_databases, make_run_spec, make_session
@@ -53,13 +54,13 @@ def test_statements_per_label(live: BackgroundServer, labeler: CollieClient, fre
     held = labeler.claim(fresh_run.id)  # also resolves the token: the token cache answers from here on
     assert held is not None
     with counted(live) as statements:
-        ack = labeler.submit(fresh_run.id, held.query.query_id, 2, client_request_id="cost-1", next=True)
+        ack = labeler.submit(fresh_run.id, held.query.query_id, Label.GOOD, client_request_id="cost-1", next=True)
     assert ack.label == 2 and ack.next is not None
     assert len(statements) == LABEL + CLAIM, "\n".join(statements)
 
     following = ack.next.query.query_id
     with counted(live) as statements:
-        ack = labeler.submit(fresh_run.id, following, 0, client_request_id="cost-2")
+        ack = labeler.submit(fresh_run.id, following, Label.BAD, client_request_id="cost-2")
     assert ack.label == 0 and ack.query_status == "labelled"
     assert len(statements) == LABEL, "\n".join(statements)
 
@@ -68,14 +69,14 @@ def test_statements_per_revision_and_repeat(live: BackgroundServer, labeler: Col
     held = labeler.claim(fresh_run.id)
     assert held is not None
     query_id = held.query.query_id
-    first = labeler.submit(fresh_run.id, query_id, 1, client_request_id="rev-1")
+    first = labeler.submit(fresh_run.id, query_id, Label.NEUTRAL, client_request_id="rev-1")
     with counted(live) as statements:
-        revised = labeler.submit(fresh_run.id, query_id, 2, client_request_id="rev-2")
+        revised = labeler.submit(fresh_run.id, query_id, Label.GOOD, client_request_id="rev-2")
     assert revised.label == 2 and revised.event.revises_event_id == first.event.id
     assert len(statements) == LABEL, "\n".join(statements)  # the vote is updated in place, not deleted and re-added
 
     with counted(live) as statements:
-        repeat = labeler.submit(fresh_run.id, query_id, 2, client_request_id="rev-2")
+        repeat = labeler.submit(fresh_run.id, query_id, Label.GOOD, client_request_id="rev-2")
     assert repeat.duplicate and repeat.event.id == revised.event.id and repeat.label == 2
     assert len(statements) == REPEAT, "\n".join(statements)
 
@@ -86,7 +87,7 @@ def test_statements_per_event_page(live: BackgroundServer, labeler: CollieClient
     held = labeler.claim(fresh_run.id)
     assert held is not None
     after = labeler.run(fresh_run.id).last_event_id
-    labeler.submit(fresh_run.id, held.query.query_id, 2)
+    labeler.submit(fresh_run.id, held.query.query_id, Label.GOOD)
     with counted(live) as statements:
         page = labeler.events(fresh_run.id, after=after, wait_s=5.0)
     assert [(type(e), e.data.query_id) for e in page.events if isinstance(e, LabelChangedEvent)] == [
