@@ -32,12 +32,14 @@ from pydantic import (
 from collie.labels import Label
 from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
 
+_LABELS: dict[int, Label] = {int(v): v for v in Label}  # built once: every label crosses this check
+
 
 def _exact_label(value: object) -> Label:
     # only the integers 0, 1, 2 (or a Label): no "2", 2.0 or true, which lax enum checks would take
-    if isinstance(value, bool) or not isinstance(value, int) or value not in {int(v) for v in Label}:
+    if isinstance(value, bool) or not isinstance(value, int) or value not in _LABELS:
         raise ValueError(f"a label is the integer {', '.join(str(int(v)) for v in Label)}, got {value!r}")
-    return Label(value)
+    return _LABELS[value]
 
 
 LabelValue = Annotated[Label, BeforeValidator(_exact_label)]  # on the wire the integer: 0 bad, 1 neutral, 2 good

@@ -15,7 +15,7 @@ import asyncio
 from collections.abc import AsyncIterator
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials
 
@@ -30,7 +30,7 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["stream"])
 HEARTBEAT_S = 15.0
 
 
-@router.get("/events")
+@router.get("/events", response_model=EventPage)
 async def events_page(
     run_id: RunId,
     _: AnyCaller,
@@ -40,17 +40,21 @@ async def events_page(
     after: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
     limit: Annotated[int, Query(ge=1, le=events.MAX_PAGE)] = events.MAX_PAGE,
     wait_s: Annotated[float, Query(ge=0, le=60)] = 0.0,
-) -> EventPage:
+) -> Response:
     loop = asyncio.get_running_loop()
     deadline = loop.time() + wait_s
-    with db.read() as conn:
-        events.last_id(conn, run_id)  # 404 for an unknown run
+    checked = False
     while True:
-        with db.read() as conn:
+        with db.read() as conn:  # one read per wakeup; the run is looked up only while its page is empty
             page = events.read_after(conn, run_id, after, limit)
+            if not page and not checked:
+                events.last_id(conn, run_id)  # 404 for an unknown run
+                checked = True
         remaining = deadline - loop.time()
         if page or remaining <= 0:
-            return EventPage(events=page, last_id=page[-1].id if page else after)
+            # written straight from the typed page: FastAPI would turn it into dicts, then JSON
+            body = EventPage(events=page, last_id=page[-1].id if page else after).model_dump_json()
+            return Response(body, media_type="application/json")
         await hub.wait(run_id, after, min(remaining, settings.stream_poll_s))
 
 

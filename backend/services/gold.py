@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import secrets
 import time
-from typing import Any
 
-from sqlalchemy import Connection, func, insert, select
+from sqlalchemy import Connection, bindparam, func, insert, select
 
 from backend.models import LabelVote, Query, QueryData, Run
 from backend.services import runs
@@ -31,51 +30,54 @@ from backend.services.label_stats import decode
 CANDIDATES = 50  # earlier segments decoded at most per serving (the oldest first)
 
 
-def _mine(run_id: int, me: int) -> Any:
-    return (Query.run_id == run_id) & Query.gold_of.is_not(None) & (Query.lease_owner_id == me)
+# Built once: every claim asks whether gold is due, and most runs have none (gold_rate 0).
+_GOLD_RATE = select(Run.gold_rate).where(Run.id == bindparam("run"))
+_MINE = (Query.run_id == bindparam("run")) & Query.gold_of.is_not(None) & (Query.lease_owner_id == bindparam("me"))
+_SERVED = select(func.count()).where(_MINE)
+_REAL = (
+    select(func.count())
+    .select_from(LabelVote)
+    .join(Query, Query.id == LabelVote.query_pk)
+    .where(Query.run_id == bindparam("run"), Query.gold_of.is_(None), LabelVote.labeler_id == bindparam("me"))
+)
+_VOTED = select(LabelVote.query_pk).where(LabelVote.labeler_id == bindparam("me"))
+_CURRENT = select(func.min(Query.session)).where(
+    Query.run_id == bindparam("run"), Query.status == "pending", Query.gold_of.is_(None), Query.id.not_in(_VOTED)
+)
 
 
 def due(conn: Connection, run_id: int, me: int, rate: float) -> bool:
-    served = conn.execute(select(func.count()).where(_mine(run_id, me))).scalar_one()
-    real = conn.execute(
-        select(func.count())
-        .select_from(LabelVote)
-        .join(Query, Query.id == LabelVote.query_pk)
-        .where(Query.run_id == run_id, Query.gold_of.is_(None), LabelVote.labeler_id == me)
-    ).scalar_one()
+    params = {"run": run_id, "me": me}
+    served = conn.execute(_SERVED, params).scalar_one()
+    real = conn.execute(_REAL, params).scalar_one()
     return served < rate * (served + real + 1)
 
 
 def serve_if_due(conn: Connection, run_id: int, caller: Caller, expires: float, tab: str | None = None) -> int | None:
     """The primary key of a gold copy newly leased to `caller` (for their `tab`) until `expires`, or None (gold off,
     not due, no real work pending, or no earlier segment the rule can judge)."""
-    run = conn.execute(select(Run.id, Run.task, Run.env, Run.config, Run.gold_rate).where(Run.id == run_id)).first()
-    if run is None or run.gold_rate <= 0 or not due(conn, run_id, caller.id, run.gold_rate):
+    rate = conn.execute(_GOLD_RATE, {"run": run_id}).scalar()
+    if rate is None or rate <= 0 or not due(conn, run_id, caller.id, rate):
         return None
-    voted = select(LabelVote.query_pk).where(LabelVote.labeler_id == caller.id)
-    current = conn.execute(
-        select(func.min(Query.session)).where(
-            Query.run_id == run_id, Query.status == "pending", Query.gold_of.is_(None), Query.id.not_in(voted)
-        )
-    ).scalar()
+    current = conn.execute(_CURRENT, {"run": run_id, "me": caller.id}).scalar()
     if current is None:
         return None
     task = task_of(runs.get(conn, run_id))[0]  # the rule as stored with the run (or none)
     if task is None:
         return None
-    served = select(Query.gold_of).where(_mine(run_id, caller.id))
     candidates = conn.execute(
         select(Query, QueryData.frames, QueryData.extra)
         .join(QueryData, QueryData.query_pk == Query.id)
         .where(
-            Query.run_id == run_id,
+            Query.run_id == bindparam("run"),
             Query.gold_of.is_(None),
             Query.session < current,
-            Query.id.not_in(voted),
-            Query.id.not_in(served),
+            Query.id.not_in(_VOTED),
+            Query.id.not_in(select(Query.gold_of).where(_MINE)),
         )
         .order_by(Query.id)
-        .limit(CANDIDATES)
+        .limit(CANDIDATES),
+        {"run": run_id, "me": caller.id},
     )
     for c in candidates:
         answer = decode(c.frames, task).oracle

@@ -24,7 +24,7 @@ import json
 import time
 from typing import Any
 
-from sqlalchemy import Connection, bindparam, delete, insert, select, update
+from sqlalchemy import Connection, and_, bindparam, delete, insert, select, update
 
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import consensus, events, leases, runs
@@ -57,7 +57,13 @@ _EVENT_COLUMNS = (
     LabelEvent.revises_event_id,
     LabelEvent.created_at,
 )
-# Built once: submitting a label is the service's hottest write.
+# Built once: submitting a label is the service's hottest write. The lookup also brings the
+# caller's own vote on the query and whether their client_request_id was seen (one read, not three).
+_REQUEST_SEEN = (
+    select(LabelEvent.id)
+    .where(LabelEvent.labeler_id == bindparam("me"), LabelEvent.client_request_id == bindparam("request_id"))
+    .scalar_subquery()
+)
 _LOOKUP = (
     select(
         Query.id,
@@ -72,8 +78,11 @@ _LOOKUP = (
         Query.gold_of,
         Run.status.label("run_status"),
         Run.redundancy,
+        LabelVote.event_id.label("my_vote_event_id"),
+        _REQUEST_SEEN.label("seen_event_id"),
     )
     .join(Run, Run.id == Query.run_id)
+    .outerjoin(LabelVote, and_(LabelVote.query_pk == Query.id, LabelVote.labeler_id == bindparam("me")))
     .where(Query.run_id == bindparam("run"), Query.query_id == bindparam("query_id"))
 )
 _SEEN = (
@@ -89,6 +98,11 @@ _VOTES = select(LabelVote.value, LabelVote.event_id).where(LabelVote.query_pk ==
 _DROP_MY_VOTE = delete(LabelVote).where(LabelVote.query_pk == bindparam("pk"), LabelVote.labeler_id == bindparam("me"))
 _DROP_VOTES = delete(LabelVote).where(LabelVote.query_pk == bindparam("pk"))
 _INSERT_VOTE = insert(LabelVote)
+_REVISE_VOTE = (
+    update(LabelVote)
+    .where(LabelVote.query_pk == bindparam("pk"), LabelVote.labeler_id == bindparam("me"))
+    .values(value=bindparam("value"), event_id=bindparam("event_id"))
+)
 _SET_QUERY = update(Query).where(Query.id == bindparam("pk"))  # SET from the parameters given
 
 
@@ -116,16 +130,6 @@ def _repeat(
         raise Conflict(f"client_request_id '{request_id}' was already used for another submission")
     row = conn.execute(_event_select().add_columns(Query.label, Query.status).where(LabelEvent.id == seen.id)).one()
     return LabelAck(event=_event_read(row), label=row.label, query_status=row.status, duplicate=True)
-
-
-def _query(conn: Connection, run_id: int, query_id: str) -> Any:
-    found = conn.execute(_LOOKUP, {"run": run_id, "query_id": query_id}).first()
-    if found is None:
-        runs.row(conn, run_id)
-        raise NotFound(f"no query '{query_id}' in run {run_id}")
-    if found.run_status in FINISHED:
-        raise Conflict(f"run {run_id} is {found.run_status}")
-    return found
 
 
 def _record(
@@ -186,7 +190,7 @@ def _not_held(conn: Connection, q: Any, caller: Caller, tab: str, live: bool) ->
         reason, detail = "other_labeler", "is leased to someone else"
     elif q.lease_owner_id == caller.id and q.status in ("leased", "pending") and q.lease_tab != tab:
         reason, detail = "other_tab", "is held by another tab of yours"
-    elif conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first() is not None:
+    elif q.my_vote_event_id is not None:
         reason, detail = "labelled_by_you", "was labelled by you already (in another tab or client)"
     elif q.status == "labelled":
         reason, detail = "labelled", "was labelled by someone else"
@@ -197,12 +201,30 @@ def _not_held(conn: Connection, q: Any, caller: Caller, tab: str, live: bool) ->
     return TabNotHolding(q.query_id, reason, f"query '{q.query_id}' {detail}")
 
 
+def _lookup_or_repeat(
+    conn: Connection, run_id: int, caller: Caller, query_id: str, request_id: str, key: tuple[str, str, int | None]
+) -> Any:
+    """The query row (with the caller's vote), or the LabelAck of a repeated request: one read for a
+    new request; the repeat is looked at as before when the request id was seen or the query not found."""
+    found = conn.execute(_LOOKUP, {"run": run_id, "query_id": query_id, "me": caller.id, "request_id": request_id})
+    q = found.first()
+    if q is None or q.seen_event_id is not None:
+        repeat = _repeat(conn, run_id, caller, request_id, key)
+        if repeat is not None:
+            return repeat
+    if q is None:
+        runs.row(conn, run_id)
+        raise NotFound(f"no query '{query_id}' in run {run_id}")
+    if q.run_status in FINISHED:
+        raise Conflict(f"run {run_id} is {q.run_status}")
+    return q
+
+
 def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> LabelAck:
     kind, value = ("skip", None) if body.value == "skip" else ("label", int(body.value))
-    repeat = _repeat(conn, run_id, caller, body.client_request_id, (body.query_id, kind, value))
-    if repeat is not None:
-        return repeat
-    q = _query(conn, run_id, body.query_id)
+    q = _lookup_or_repeat(conn, run_id, caller, body.query_id, body.client_request_id, (body.query_id, kind, value))
+    if isinstance(q, LabelAck):
+        return q
     now = time.time()
     live = q.status == "leased" and q.lease_expires_at > now
     holder = live and q.lease_owner_id == caller.id
@@ -225,7 +247,7 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
             return LabelAck(event=event, label=None, query_status="retired", duplicate=False)
         conn.execute(_SET_QUERY, {"pk": q.id, "status": "pending", "lease_owner_id": None, "lease_expires_at": None})
         return LabelAck(event=event, label=q.label, query_status="pending", duplicate=False)
-    mine = conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first()
+    mine = q.my_vote_event_id  # the caller's current vote (its event), from the lookup
     late = not live and q.status in ("leased", "pending") and q.lease_owner_id == caller.id  # nobody took it since
     late = late and body.tab in (None, q.lease_tab)
     revision = mine is not None and q.status != "retired" and body.tab is None  # a tab's label is never one
@@ -236,10 +258,12 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
             q.status, "is not claimed by you"
         )
         raise Conflict(f"query '{body.query_id}' {reason}; claim a query before labelling it")
-    revises = mine.event_id if mine is not None else None
+    revises = mine
     event = _record(conn, run_id, q, caller, kind, value, body.seconds, body.client_request_id, now, revises)
-    conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": caller.id})
-    conn.execute(_INSERT_VOTE, {"query_pk": q.id, "labeler_id": caller.id, "value": value, "event_id": event.id})
+    if mine is None:
+        conn.execute(_INSERT_VOTE, {"query_pk": q.id, "labeler_id": caller.id, "value": value, "event_id": event.id})
+    else:  # a revision replaces the caller's vote in place
+        conn.execute(_REVISE_VOTE, {"pk": q.id, "me": caller.id, "value": value, "event_id": event.id})
     votes = conn.execute(_VOTES, {"pk": q.id}).scalars().all()
     label = consensus.effective(votes, 1 if q.gold_of is not None else q.redundancy)
     if label is not None:
@@ -257,10 +281,9 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
 
 
 def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease_s: float) -> LabelAck:
-    repeat = _repeat(conn, run_id, caller, body.client_request_id, (body.query_id, "undo", None))
-    if repeat is not None:
-        return repeat
-    q = _query(conn, run_id, body.query_id)
+    q = _lookup_or_repeat(conn, run_id, caller, body.query_id, body.client_request_id, (body.query_id, "undo", None))
+    if isinstance(q, LabelAck):
+        return q
     now = time.time()
     mine = conn.execute(_MY_VOTE, {"pk": q.id, "me": caller.id}).first()
     votes = conn.execute(_VOTES, {"pk": q.id}).all()
