@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -52,6 +52,10 @@ lint: $(STAMP)
 
 test: $(STAMP) lint
 	$(VENV)/bin/pytest -q --durations=15
+
+# `--compile`'s networks equal the eager ones (pyproject's `compile` marker; inductor takes minutes here).
+test-compile: $(STAMP)
+	$(VENV)/bin/pytest -q -m compile tests/core/test_update_paths.py
 
 # The settings docs/results.md's point-mass numbers were measured with, before the reference's
 # initialisation, policy log-std floor and DIAYN variant became the defaults (docs/algorithm.md).

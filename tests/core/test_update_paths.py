@@ -180,7 +180,7 @@ def test_class_distances_equal_per_class_cdist(sizes, rows):
     assert torch.equal(class_distances(z, sets), want)
 
 
-@pytest.mark.slow
+@pytest.mark.compile
 def test_compiled_networks_match_eager_to_float_tolerance():
     sets = labelled_states((40, 19, 30))
     compiled, eager = make_agent(compile=True), make_agent()
