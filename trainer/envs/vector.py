@@ -2,13 +2,16 @@
 
 All episodes have the same length and never end early, so there is no auto-reset: the trainer
 resets every env at the start of an epoch with seeds it chooses, which makes rollouts
-reproducible (same seeds and actions ⇒ same observations). One tight loop over the envs writes
-straight into the batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
+reproducible (same seeds and actions ⇒ same observations). Stepping writes straight into the
+batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
 
-`mj_step` releases the GIL, so `step_rows` may run for disjoint groups of envs in the worker
-threads of `submit`: the trainer's rollout steps one group's physics while the policy acts for
-the next (trainer/rollout.py). Each env owns its MjData, so the result does not depend on the
-order or the threads. Pixel envs render through one shared GL context and stay on one thread.
+Plain envs (`SkillEnv.batched_physics`: Ant, HalfCheetah, point) step as one `mujoco.batch` call
+on `physics_threads` threads of MuJoCo's own pool (trainer/envs/batched.py), bit-identical to
+stepping each env. The others step in one Python loop; there `mj_step` releases the GIL, so
+`step_rows` may run for disjoint groups of envs in the worker threads of `submit`: the trainer's
+rollout steps one group's physics while the policy acts for the next (trainer/rollout.py). Each
+env owns its MjData, so the result does not depend on the order or the threads. Pixel envs
+render through one shared GL context and stay on one thread.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trainer.envs.base import SkillEnv
+from trainer.envs.batched import BatchedPhysics
 from trainer.envs.registry import make_env
 
 
@@ -88,11 +92,21 @@ class VectorEnv:
         bounds = np.linspace(0, num_envs, self.physics_threads + 1).round().astype(int)
         self.groups = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
         self._pool: ThreadPoolExecutor | None = None
+        # the batch holds the state between resets; the envs draw each reset
+        batched = first.batched_physics and not pixels
+        self._physics = BatchedPhysics(self.envs, self.physics_threads) if batched else None
+        self._t = -1
+
+    @property
+    def pipelined(self) -> bool:
+        """True when the rollout should overlap groups of `step_rows` with the policy (Python-loop
+        envs with more than one physics thread); batched envs spread each step over the threads."""
+        return self._physics is None and self.physics_threads > 1
 
     @property
     def t(self) -> int:
         """Steps taken in the current episodes; -1 before the first reset."""
-        return self.envs[0].t
+        return self._t if self._physics is not None else self.envs[0].t
 
     @property
     def truncated(self) -> bool:
@@ -103,6 +117,9 @@ class VectorEnv:
             raise ValueError(f"need {self.num_envs} seeds, got {len(seeds)}")
         for env, seed in zip(self.envs, seeds, strict=True):
             env.reset(seed=int(seed))
+        if self._physics is not None:
+            self._physics.load()
+            self._t = 0
         return self._collect(None)
 
     def step(self, actions: np.ndarray, out: StepBatch | None = None) -> StepBatch:
@@ -110,13 +127,24 @@ class VectorEnv:
         if actions.shape != (self.num_envs, self.action_dim):
             expected = (self.num_envs, self.action_dim)
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        for env, action in zip(self.envs, actions, strict=True):
-            env.advance(action)
+        if self._physics is None:
+            for env, action in zip(self.envs, actions, strict=True):
+                env.advance(action)
+            return self._collect(out)
+        if self._t < 0:
+            raise RuntimeError(f"{self.name}: call reset() before step()")
+        if self._t >= self.episode_steps:
+            raise RuntimeError(f"{self.name}: episode over after {self.episode_steps} steps; call reset()")
+        self._physics.step(actions)
+        self._t += 1
         return self._collect(out)
 
     def step_rows(self, rows: slice, actions: np.ndarray, out: StepBatch) -> None:
         """Step the envs `rows` once with `actions` (one row each) and write their new state into
-        the same rows of `out`. Safe in parallel for disjoint rows (see the module docstring)."""
+        the same rows of `out`. Safe in parallel for disjoint rows (see the module docstring); for
+        Python-loop envs only (`pipelined`)."""
+        if self._physics is not None:
+            raise RuntimeError(f"{self.name}: batched envs step all rows at once; use step()")
         for env, action in zip(self.envs[rows], actions, strict=True):
             env.advance(action)
         self._collect(out, rows)
@@ -129,6 +157,9 @@ class VectorEnv:
 
     def _collect(self, out: StepBatch | None, rows: slice = slice(None)) -> StepBatch:
         b = out if out is not None else StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
+        if self._physics is not None:
+            self._physics.collect(b)
+            return b
         for i, env in zip(range(self.num_envs)[rows], self.envs[rows], strict=True):
             env.observe_into(b.obs[i])
             env.xy_into(b.xy[i])
