@@ -5,13 +5,13 @@ resets every env at the start of an epoch with seeds it chooses, which makes rol
 reproducible (same seeds and actions ⇒ same observations). Stepping writes straight into the
 batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
 
-Plain envs (`SkillEnv.batched_physics`: Ant, HalfCheetah, point) step as one `mujoco.batch` call
-on `physics_threads` threads of MuJoCo's own pool (trainer/envs/batched.py), bit-identical to
-stepping each env. The others step in one Python loop; there `mj_step` releases the GIL, so
-`step_rows` may run for disjoint groups of envs in the worker threads of `submit`: the trainer's
-rollout steps one group's physics while the policy acts for the next (trainer/rollout.py). Each
-env owns its MjData, so the result does not depend on the order or the threads. Pixel envs
-render through one shared GL context and stay on one thread.
+The envs form `physics_threads` groups. `mj_step` releases the GIL, so `step_rows` may run for
+disjoint groups in the worker threads of `submit`: the trainer's rollout steps one group's
+physics while the policy acts for the next (trainer/rollout.py). Plain envs
+(`SkillEnv.batched_physics`: Ant, HalfCheetah, point) step a group as one `mujoco.batch` call
+(trainer/envs/batched.py), bit-identical to stepping each env; the others loop over the group's
+envs in Python. Each env has its own state, so the result does not depend on the order or the
+threads. Pixel envs render through one shared GL context and stay on one thread.
 """
 
 from __future__ import annotations
@@ -92,21 +92,19 @@ class VectorEnv:
         bounds = np.linspace(0, num_envs, self.physics_threads + 1).round().astype(int)
         self.groups = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
         self._pool: ThreadPoolExecutor | None = None
-        # the batch holds the state between resets; the envs draw each reset
+        # one batch per group holds the state between resets; the envs draw each reset
         batched = first.batched_physics and not pixels
-        self._physics = BatchedPhysics(self.envs, self.physics_threads) if batched else None
-        self._t = -1
+        self._physics = [BatchedPhysics(self.envs[g], g) for g in self.groups] if batched else None
 
     @property
     def pipelined(self) -> bool:
-        """True when the rollout should overlap groups of `step_rows` with the policy (Python-loop
-        envs with more than one physics thread); batched envs spread each step over the threads."""
-        return self._physics is None and self.physics_threads > 1
+        """True when the rollout should overlap the groups' `step_rows` with the policy."""
+        return self.physics_threads > 1
 
     @property
     def t(self) -> int:
         """Steps taken in the current episodes; -1 before the first reset."""
-        return self._t if self._physics is not None else self.envs[0].t
+        return self._physics[0].t if self._physics is not None else self.envs[0].t
 
     @property
     def truncated(self) -> bool:
@@ -118,8 +116,8 @@ class VectorEnv:
         for env, seed in zip(self.envs, seeds, strict=True):
             env.reset(seed=int(seed))
         if self._physics is not None:
-            self._physics.load()
-            self._t = 0
+            for group in self._physics:
+                group.load()
         return self._collect(None)
 
     def step(self, actions: np.ndarray, out: StepBatch | None = None) -> StepBatch:
@@ -127,27 +125,23 @@ class VectorEnv:
         if actions.shape != (self.num_envs, self.action_dim):
             expected = (self.num_envs, self.action_dim)
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        if self._physics is None:
-            for env, action in zip(self.envs, actions, strict=True):
-                env.advance(action)
-            return self._collect(out)
-        if self._t < 0:
-            raise RuntimeError(f"{self.name}: call reset() before step()")
-        if self._t >= self.episode_steps:
-            raise RuntimeError(f"{self.name}: episode over after {self.episode_steps} steps; call reset()")
-        self._physics.step(actions)
-        self._t += 1
-        return self._collect(out)
+        b = out if out is not None else self._empty()
+        for rows in self.groups:
+            self.step_rows(rows, actions[rows], b)
+        return b
 
     def step_rows(self, rows: slice, actions: np.ndarray, out: StepBatch) -> None:
         """Step the envs `rows` once with `actions` (one row each) and write their new state into
-        the same rows of `out`. Safe in parallel for disjoint rows (see the module docstring); for
-        Python-loop envs only (`pipelined`)."""
-        if self._physics is not None:
-            raise RuntimeError(f"{self.name}: batched envs step all rows at once; use step()")
-        for env, action in zip(self.envs[rows], actions, strict=True):
-            env.advance(action)
-        self._collect(out, rows)
+        the same rows of `out`. `rows` is one of `groups`; different groups may step in parallel
+        (see the module docstring)."""
+        if self._physics is None:
+            for env, action in zip(self.envs[rows], actions, strict=True):
+                env.advance(action)
+            self._collect(out, rows)
+            return
+        group = self._physics[self.groups.index(rows)]
+        group.step(actions)
+        group.collect(out)
 
     def submit(self, fn: Callable[..., None], *args: object) -> Future:
         """Run fn(*args) on one of `physics_threads` worker threads."""
@@ -155,10 +149,14 @@ class VectorEnv:
             self._pool = ThreadPoolExecutor(self.physics_threads, thread_name_prefix=f"physics-{self.name}")
         return self._pool.submit(fn, *args)
 
+    def _empty(self) -> StepBatch:
+        return StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
+
     def _collect(self, out: StepBatch | None, rows: slice = slice(None)) -> StepBatch:
-        b = out if out is not None else StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
+        b = out if out is not None else self._empty()
         if self._physics is not None:
-            self._physics.collect(b)
+            for group in self._physics:
+                group.collect(b)
             return b
         for i, env in zip(range(self.num_envs)[rows], self.envs[rows], strict=True):
             env.observe_into(b.obs[i])
