@@ -103,7 +103,15 @@ def fits(agent: Metra) -> bool:
     )
 
 
-def actor(agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool) -> Acting:
-    """The fastest acting path this agent allows."""
-    cls = Actor if fits(agent) else TorchActor
+# Off by default: with `Actor` a run stopped by SIGTERM and resumed no longer reproduces the
+# uninterrupted run bit for bit (tests/core/test_checkpoints.py; cause not found yet), although
+# its actions equal the policy's to float tolerance and straight runs are deterministic.
+FAST_ACTING = False
+
+
+def actor(
+    agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool, fast: bool = FAST_ACTING
+) -> Acting:
+    """`Actor` where asked for and possible, else the general torch path."""
+    cls = Actor if fast and fits(agent) else TorchActor
     return cls(agent, skills, normalise, deterministic)
