@@ -13,9 +13,10 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
    i.e. compilation), `compile_speedup_<h>` (compiled ÷ eager steps/s, measured interleaved) and
    `compile_break_even_steps_<h>` (steps before the compile time is paid back; inf if never).
-3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (physics overlapped with the
-   policy as the trainer runs it) ÷ a single-thread raw `mj_step` loop over the same model, and
-   the same rollout with serial physics. Keys `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`,
+3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (physics threads as the trainer
+   runs it by default) ÷ a single-thread raw `mj_step` loop over the same model, and the same
+   rollout with serial physics and with 2 physics threads pipelined with the policy. Keys
+   `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`, `rollout_fraction_pipelined_<env>`,
    `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9).
 4. Device data path: 32 batches gathered, normalised and made tensors by the device path
    (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
@@ -189,26 +190,33 @@ def raw_mj_step_rate(env_name: str, steps: int, seed: int) -> float:
 def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     cfg = make_config("cpu", env_name)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
-    overlapped, serial = VectorEnv(env_name, cfg.episodes_per_epoch), VectorEnv(env_name, 8, physics_threads=1)
+    envs = {
+        "overlapped": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default physics threads
+        "serial": VectorEnv(env_name, 8, physics_threads=1),
+        "pipelined": VectorEnv(env_name, 8, physics_threads=2),
+    }
+    overlapped = envs["overlapped"]
     agent = Metra(overlapped.obs_dim, overlapped.action_dim, prior, cfg, torch.device("cpu"))
     norm = Normaliser(overlapped.obs_mean, overlapped.obs_std)
     rng = np.random.default_rng(0)
     n = 8 * overlapped.episode_steps
-    rates: dict[str, list[float]] = {"overlapped": [], "serial": [], "raw": []}
+    rates: dict[str, list[float]] = {"overlapped": [], "serial": [], "pipelined": [], "raw": []}
     for r in range(rounds):  # interleaved
         skills = prior.sample(8, rng)
-        for kind, env in (("overlapped", overlapped), ("serial", serial)):
+        for kind, env in envs.items():
             start = time.perf_counter()
             rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False)
             rates[kind].append(n / (time.perf_counter() - start))
         rates["raw"].append(raw_mj_step_rate(env_name, n, r))
     med = {k: float(np.median(v)) for k, v in rates.items()}
-    overlapped.close()
+    for env in envs.values():
+        env.close()
     return {
         f"rollout_steps_per_s_{env_name}": med["overlapped"],
         f"raw_steps_per_s_{env_name}": med["raw"],
         f"rollout_fraction_{env_name}": med["overlapped"] / med["raw"],
         f"rollout_fraction_serial_{env_name}": med["serial"] / med["raw"],
+        f"rollout_fraction_pipelined_{env_name}": med["pipelined"] / med["raw"],
         f"physics_threads_{env_name}": overlapped.physics_threads,
     }
 
@@ -320,7 +328,8 @@ def main() -> None:
             f"rollout ({env_name}, 8 episodes × 200 steps, cpu-preset policy, "
             f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
             f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
-            f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %; goal ≥ 90 %)"
+            f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %, 2 threads pipelined "
+            f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %; goal ≥ 90 %)"
         )
     s = bench_sampling(a.rounds)
     print(f"device data path on the CPU: {s['device_sampling_ratio']:.2f}× the host path's time (goal ≤ 1)")

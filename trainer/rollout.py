@@ -1,10 +1,13 @@
 """Collecting trajectories: all episodes of an epoch step together (Algorithm 1, line 3).
 
-When the VectorEnv has more than one physics thread, its envs form groups and the loop is a
-pipeline: the policy acts for group g while the physics of the other groups runs in C on the
-worker threads (mj_step releases the GIL), so a second core carries physics. Each env's
-trajectory depends only on its seed and its own actions, so the groups change no observation;
-the policy's noise is drawn per group, in a fixed order, so a run stays deterministic per seed."""
+Each step the policy acts for every env (trainer/acting.py: the policy's forward in a few torch
+calls) and the VectorEnv steps them, writing straight into the trajectory arrays. Plain envs
+(Ant, HalfCheetah, point) step as one mujoco.batch call spread over the physics threads. For the
+other state envs with more than one physics thread the loop is a pipeline: the policy acts for
+group g while the physics of the other groups runs in C on the worker threads (mj_step releases
+the GIL). Each env's trajectory depends only on its seed and its own actions, so neither changes
+an observation; the policy's noise is drawn per call, in a fixed order, so a run stays
+deterministic per seed."""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from trainer.acting import actor
 from trainer.envs import StepBatch, VectorEnv
 from trainer.metra import Metra
 
@@ -59,17 +63,16 @@ def rollout(
         obs[:, t], xy[:, t], pitch[:, t], qpos[:, t], qvel[:, t] = b.obs, b.xy, b.pitch, b.qpos, b.qvel
 
     store(0, env.reset(seeds))
-    z = torch.as_tensor(skills, dtype=torch.float32, device=agent.device)
+    policy = actor(agent, skills, normalise, deterministic)
 
     def act(rows: slice, t: int) -> np.ndarray:
-        o = torch.as_tensor(normalise(obs[rows, t]), device=agent.device)
-        action[rows, t] = agent.act(o, z[rows], deterministic).cpu().numpy()
+        policy(obs[rows, t], rows, action[rows, t])
         return action[rows, t]
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # batch-of-8 forwards: extra threads only add sync cost (10–80× on a busy CPU)
     try:
-        if isinstance(env, VectorEnv) and env.physics_threads > 1:
+        if isinstance(env, VectorEnv) and env.pipelined:
             views = [StepBatch(obs[:, t], xy[:, t], pitch[:, t], qpos[:, t], qvel[:, t]) for t in range(t_max + 1)]
             pending: list[Future | None] = [None] * len(env.groups)
             try:
@@ -83,9 +86,11 @@ def rollout(
                 for f in pending:
                     if f is not None:
                         f.result()
-        else:  # one thread (pixel envs, wrappers such as NoisyObservations)
-            for t in range(t_max):
-                store(t + 1, env.step(act(slice(None), t)))
+        else:  # batched physics (its own threads), pixel envs, wrappers such as NoisyObservations
+            every = slice(None)
+            for t in range(t_max):  # `out` writes into the trajectory; store() copies what a wrapper replaced
+                out = StepBatch(obs[:, t + 1], xy[:, t + 1], pitch[:, t + 1], qpos[:, t + 1], qvel[:, t + 1])
+                store(t + 1, env.step(act(every, t), out=out))
     finally:
         torch.set_num_threads(threads)
     return Trajectories(obs, action, skills.astype(np.float32), xy, pitch, qpos, qvel)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from trainer.config import make_config
-from trainer.envs import VectorEnv
+from trainer.envs import VectorEnv, make_env
 from trainer.metra import Metra
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
@@ -76,3 +76,28 @@ def test_overlapped_rollouts_are_deterministic_per_seed() -> None:
 def test_physics_threads_must_be_positive() -> None:
     with pytest.raises(ValueError, match="physics_threads"):
         VectorEnv("point", 2, physics_threads=0)
+
+
+@pytest.mark.parametrize("name", ["point", "ant", "half_cheetah"])
+def test_batched_physics_equals_stepping_each_env(name: str) -> None:
+    """A plain env's group steps as one mujoco.batch call: bit-identical to each env's own step."""
+    vec = VectorEnv(name, 4, episode_steps=STEPS, physics_threads=2)
+    assert vec._physics is not None  # the batched path is under test
+    singles = [make_env(name, episode_steps=STEPS) for _ in range(4)]
+    seeds = [3, 4, 5, 6]
+    b = vec.reset(seeds)
+    first = [env.reset(seed=s) for env, s in zip(singles, seeds, strict=True)]
+    np.testing.assert_array_equal(b.obs, np.stack([o for o, _ in first]))
+    actions = np.random.default_rng(2).uniform(-1.2, 1.2, (STEPS, 4, vec.action_dim))  # beyond ctrlrange too
+    for a in actions:
+        b = vec.step(a)
+        steps = [env.step(u) for env, u in zip(singles, a, strict=True)]
+        np.testing.assert_array_equal(b.obs, np.stack([s[0] for s in steps]))
+        np.testing.assert_array_equal(b.qpos, np.stack([s[4]["qpos"] for s in steps]))
+        np.testing.assert_array_equal(b.qvel, np.stack([s[4]["qvel"] for s in steps]))
+        np.testing.assert_array_equal(b.xy, np.stack([s[4]["xy"] for s in steps]))
+        np.testing.assert_allclose(b.pitch, [s[4]["pitch"] for s in steps], rtol=0, atol=1e-12)
+    assert vec.truncated and singles[0].t == STEPS
+    with pytest.raises(RuntimeError, match="episode over"):
+        vec.step(actions[0])
+    vec.close()

@@ -27,6 +27,7 @@ class AntEnv(GymnasiumMujocoEnv):
     name = "ant"
     position_dims = 2
     asset = "ant.xml"
+    batched_physics = True
     # From `python -m trainer.envs.normalizer --env ant` (random-action rollouts; see normalizer.py).
     obs_mean = np.array(
         [
@@ -110,3 +111,9 @@ class AntEnv(GymnasiumMujocoEnv):
     def pitch(self) -> float:
         w, x, y, z = self.data.qpos[3:7]
         return quat_pitch(float(w), float(x), float(y), float(z))
+
+    @classmethod
+    def pitch_rows(cls, qpos: np.ndarray) -> np.ndarray:
+        w, x, y, z = qpos[:, 3:7].T
+        norm2 = w * w + x * x + y * y + z * z  # as quat_pitch
+        return np.arctan2(2.0 * (w * y - x * z) / norm2, 1.0 - 2.0 * (x * x + y * y) / norm2)

@@ -29,6 +29,9 @@ class SkillEnv(abc.ABC):
     obs_std: np.ndarray
     metric_bin_size: ClassVar[float] = 1.0  # side of the coverage metric's x-y bins
     has_layout: ClassVar[bool] = False  # True: the constructor takes a `layout_seed` (random scenery)
+    # True: SkillEnv's own advance/observe_into/xy_into and a `pitch_rows` equal to `pitch`, so that
+    # VectorEnv may step many copies in one mujoco.batch call (trainer/envs/batched.py)
+    batched_physics: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -80,6 +83,11 @@ class SkillEnv(abc.ABC):
     def pitch(self) -> float:
         """Body pitch in radians; nan where the robot has no orientation."""
         return math.nan
+
+    @classmethod
+    def pitch_rows(cls, qpos: np.ndarray) -> np.ndarray:
+        """`pitch` of many states at once, from their (n, nq) qpos (envs with `batched_physics`)."""
+        return np.full(len(qpos), math.nan)
 
     # -- the shared mechanics (also used directly by VectorEnv's tight loop) -----------------
 

@@ -17,6 +17,7 @@ class HalfCheetahEnv(GymnasiumMujocoEnv):
     name = "half_cheetah"
     position_dims = 1
     asset = "half_cheetah.xml"
+    batched_physics = True
     # From `python -m trainer.envs.normalizer --env half_cheetah` (see normalizer.py).
     obs_mean = np.array(
         [
@@ -76,3 +77,7 @@ class HalfCheetahEnv(GymnasiumMujocoEnv):
         """rooty wrapped to [-π, π): the hinge is unbounded, and a cheetah that rolled a full
         turn is upright again, so |pitch| > π/2 means "on its back" (Not-Flip) at any time."""
         return (float(self.data.qpos[2]) + math.pi) % (2.0 * math.pi) - math.pi
+
+    @classmethod
+    def pitch_rows(cls, qpos: np.ndarray) -> np.ndarray:
+        return (qpos[:, 2] + math.pi) % (2.0 * math.pi) - math.pi

@@ -24,6 +24,7 @@ class PointEnv(SkillEnv):
     obs_mean = np.zeros(4, dtype=np.float32)
     obs_std = np.array([10.0, 10.0, 5.0, 5.0], dtype=np.float32)
     reset_noise = 0.1
+    batched_physics = True
 
     def __init__(self, episode_steps: int = 200, seed: int | None = None) -> None:
         model = self.load_model()

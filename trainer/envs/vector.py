@@ -2,13 +2,16 @@
 
 All episodes have the same length and never end early, so there is no auto-reset: the trainer
 resets every env at the start of an epoch with seeds it chooses, which makes rollouts
-reproducible (same seeds and actions ⇒ same observations). One tight loop over the envs writes
-straight into the batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
+reproducible (same seeds and actions ⇒ same observations). Stepping writes straight into the
+batch arrays, avoiding Gymnasium's vector wrappers and per-step info dicts.
 
-`mj_step` releases the GIL, so `step_rows` may run for disjoint groups of envs in the worker
-threads of `submit`: the trainer's rollout steps one group's physics while the policy acts for
-the next (trainer/rollout.py). Each env owns its MjData, so the result does not depend on the
-order or the threads. Pixel envs render through one shared GL context and stay on one thread.
+The envs form `physics_threads` groups. `mj_step` releases the GIL, so `step_rows` may run for
+disjoint groups in the worker threads of `submit`: the trainer's rollout steps one group's
+physics while the policy acts for the next (trainer/rollout.py). Plain envs
+(`SkillEnv.batched_physics`: Ant, HalfCheetah, point) step a group as one `mujoco.batch` call
+(trainer/envs/batched.py), bit-identical to stepping each env; the others loop over the group's
+envs in Python. Each env has its own state, so the result does not depend on the order or the
+threads. Pixel envs render through one shared GL context and stay on one thread.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trainer.envs.base import SkillEnv
+from trainer.envs.batched import BatchedPhysics
 from trainer.envs.registry import make_env
 
 
@@ -46,7 +50,7 @@ class StepBatch:
 
 
 # Envs whose physics outweighs the threads' hand-over cost (Ant's step is ≈ 5× HalfCheetah's and
-# ≈ 30× the point's); `make bench-update` prints `rollout_fraction_<env>` for both ways.
+# ≈ 30× the point's); `make bench-update` prints `rollout_fraction_<env>` serial and pipelined.
 OVERLAP_BY_DEFAULT = frozenset({"ant"})
 
 
@@ -88,11 +92,19 @@ class VectorEnv:
         bounds = np.linspace(0, num_envs, self.physics_threads + 1).round().astype(int)
         self.groups = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
         self._pool: ThreadPoolExecutor | None = None
+        # one batch per group holds the state between resets; the envs draw each reset
+        batched = first.batched_physics and not pixels
+        self._physics = [BatchedPhysics(self.envs[g], g) for g in self.groups] if batched else None
+
+    @property
+    def pipelined(self) -> bool:
+        """True when the rollout should overlap the groups' `step_rows` with the policy."""
+        return self.physics_threads > 1
 
     @property
     def t(self) -> int:
         """Steps taken in the current episodes; -1 before the first reset."""
-        return self.envs[0].t
+        return self._physics[0].t if self._physics is not None else self.envs[0].t
 
     @property
     def truncated(self) -> bool:
@@ -103,6 +115,9 @@ class VectorEnv:
             raise ValueError(f"need {self.num_envs} seeds, got {len(seeds)}")
         for env, seed in zip(self.envs, seeds, strict=True):
             env.reset(seed=int(seed))
+        if self._physics is not None:
+            for group in self._physics:
+                group.load()
         return self._collect(None)
 
     def step(self, actions: np.ndarray, out: StepBatch | None = None) -> StepBatch:
@@ -110,16 +125,23 @@ class VectorEnv:
         if actions.shape != (self.num_envs, self.action_dim):
             expected = (self.num_envs, self.action_dim)
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        for env, action in zip(self.envs, actions, strict=True):
-            env.advance(action)
-        return self._collect(out)
+        b = out if out is not None else self._empty()
+        for rows in self.groups:
+            self.step_rows(rows, actions[rows], b)
+        return b
 
     def step_rows(self, rows: slice, actions: np.ndarray, out: StepBatch) -> None:
         """Step the envs `rows` once with `actions` (one row each) and write their new state into
-        the same rows of `out`. Safe in parallel for disjoint rows (see the module docstring)."""
-        for env, action in zip(self.envs[rows], actions, strict=True):
-            env.advance(action)
-        self._collect(out, rows)
+        the same rows of `out`. `rows` is one of `groups`; different groups may step in parallel
+        (see the module docstring)."""
+        if self._physics is None:
+            for env, action in zip(self.envs[rows], actions, strict=True):
+                env.advance(action)
+            self._collect(out, rows)
+            return
+        group = self._physics[self.groups.index(rows)]
+        group.step(actions)
+        group.collect(out)
 
     def submit(self, fn: Callable[..., None], *args: object) -> Future:
         """Run fn(*args) on one of `physics_threads` worker threads."""
@@ -127,8 +149,15 @@ class VectorEnv:
             self._pool = ThreadPoolExecutor(self.physics_threads, thread_name_prefix=f"physics-{self.name}")
         return self._pool.submit(fn, *args)
 
+    def _empty(self) -> StepBatch:
+        return StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
+
     def _collect(self, out: StepBatch | None, rows: slice = slice(None)) -> StepBatch:
-        b = out if out is not None else StepBatch.empty(self.num_envs, self.obs_shape, self.nq, self.nv, self.obs_dtype)
+        b = out if out is not None else self._empty()
+        if self._physics is not None:
+            for group in self._physics:
+                group.collect(b)
+            return b
         for i, env in zip(range(self.num_envs)[rows], self.envs[rows], strict=True):
             env.observe_into(b.obs[i])
             env.xy_into(b.xy[i])

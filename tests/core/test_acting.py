@@ -1,0 +1,84 @@
+"""The rollout's acting path (trainer/acting.py) gives the policy's own actions: for the same
+observations, skills and torch seed (the same noise draw) `Actor` equals TanhGaussianPolicy.act
+on normalised inputs, for whole batches and for row groups, sampled and deterministic."""
+
+import numpy as np
+import pytest
+import torch
+
+from trainer.acting import Actor, TorchActor, actor, fits
+from trainer.config import make_config
+from trainer.envs import make_env
+from trainer.metra import Metra
+from trainer.rollout import Normaliser
+from trainer.skills import SkillPrior
+
+
+def setup(env_name: str, preset: str = "cpu") -> tuple[Metra, np.ndarray, np.ndarray, Normaliser]:
+    env = make_env(env_name)
+    cfg = make_config(preset, env_name)
+    prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+    agent = Metra(env.obs_dim, env.action_dim, prior, cfg, torch.device("cpu"))
+    rng = np.random.default_rng(0)
+    with torch.no_grad():  # trained-looking weights: non-zero biases, larger log-stds
+        for p in agent.policy.parameters():
+            p.add_(0.02 * torch.randn_like(p))
+    obs = (env.obs_mean + env.obs_std * rng.normal(size=(8, env.obs_dim))).astype(np.float32)
+    return agent, obs, prior.sample(8, rng), Normaliser(env.obs_mean, env.obs_std)
+
+
+def reference(agent: Metra, obs: np.ndarray, skills: np.ndarray, norm: Normaliser, det: bool) -> np.ndarray:
+    return agent.act(torch.as_tensor(norm(obs)), torch.as_tensor(skills), det).numpy()
+
+
+@pytest.mark.parametrize("env_name", ["ant", "half_cheetah", "point"])
+@pytest.mark.parametrize("deterministic", [False, True])
+def test_actor_equals_the_policy_forward(env_name: str, deterministic: bool) -> None:
+    agent, obs, skills, norm = setup(env_name)
+    assert fits(agent)
+    fast = Actor(agent, skills, norm, deterministic)
+    for seed in range(3):
+        torch.manual_seed(seed)
+        want = reference(agent, obs, skills, norm, deterministic)
+        torch.manual_seed(seed)
+        got = np.empty_like(want)
+        fast(obs, slice(None), got)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+        assert np.abs(got).max() <= 1 and np.ptp(got) > 0.1  # real actions, not a constant
+        obs = obs + 0.5  # a new step through the same buffers
+
+
+def test_actor_rows_draw_the_noise_per_call() -> None:
+    """The pipeline acts per group of rows; each call draws that group's noise, as the policy would."""
+    agent, obs, skills, norm = setup("ant")
+    fast = Actor(agent, skills, norm, deterministic=False)
+    torch.manual_seed(4)
+    want = np.concatenate([reference(agent, obs[r], skills[r], norm, False) for r in (slice(0, 3), slice(3, 8))])
+    torch.manual_seed(4)
+    got = np.empty_like(want)
+    for r in (slice(0, 3), slice(3, 8)):
+        fast(obs[r], r, got[r])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+
+
+def test_actor_reads_the_current_weights() -> None:
+    agent, obs, skills, norm = setup("half_cheetah")
+    before = np.empty((8, agent.policy.trunk[-1].out_features // 2), np.float32)
+    actor(agent, skills, norm, True, fast=True)(obs, slice(None), before)
+    with torch.no_grad():
+        agent.policy.trunk[-1].bias.add_(1.0)  # as an optimiser step does, in place
+    after = np.empty_like(before)
+    actor(agent, skills, norm, True, fast=True)(obs, slice(None), after)
+    np.testing.assert_allclose(after, reference(agent, obs, skills, norm, True), rtol=0, atol=1e-5)
+    assert not np.allclose(after, before)
+
+
+def test_pixel_policies_act_through_the_torch_path() -> None:
+    cfg = make_config("smoke", "quadruped")
+    prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
+    agent = Metra((9, 64, 64), 12, prior, cfg, torch.device("cpu"))
+    assert not fits(agent)
+    norm = Normaliser(np.float32(0), np.float32(255))
+    assert isinstance(actor(agent, prior.sample(2, np.random.default_rng(0)), norm, True, fast=True), TorchActor)
+    with pytest.raises(ValueError, match="Actor needs"):
+        Actor(agent, prior.sample(2, np.random.default_rng(0)), norm, True)
