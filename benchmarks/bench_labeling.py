@@ -118,12 +118,24 @@ def label_latency(stack: Stack, browser: object, n: int, think_s: float) -> tupl
     return in_page, server
 
 
+def label_rounds(pages: list[Page], current: list[str], n: int, think_s: float) -> None:
+    """`n` rounds in which every labeler presses a label key in the same moment, then each page
+    waits for its next segment (`current` holds the segment ids on screen, updated in place)."""
+    for i in range(n):
+        time.sleep(think_s / len(pages))
+        for k, p in enumerate(pages):
+            p.keyboard.press("12"[(i + k) % 2])
+        for k, p in enumerate(pages):
+            current[k] = wait_segment(p, current[k], timeout_s=30)
+
+
 def crowd_latency(
     stack: Stack, browser: object, n: int, think_s: float, labelers: int = 3, redundancy: int = 2
 ) -> tuple[list[float], int]:
-    """`labelers` people labelling one ant run at once (their keys interleaved, each in their own
-    browser context), each query wanted `redundancy` times: in-page key → next segment ms over
-    every labeler, and the redundancy actually used (1 where the service has no such setting)."""
+    """`labelers` people labelling one ant run at once (each in their own browser context; each
+    round their keys are pressed in the same moment), each query wanted `redundancy` times:
+    in-page key → next segment ms over every labeler, and the redundancy actually used (1 where
+    the service has no such setting)."""
     try:
         run = stack.post_run("ant", n * labelers + labelers, seed=13, redundancy=redundancy)
     except ValueError:
@@ -137,12 +149,7 @@ def crowd_latency(
     current = [wait_segment(p, timeout_s=60) for p in pages]
     for p in pages:
         p.evaluate(TIMING_JS)
-    for i in range(n):
-        time.sleep(think_s / labelers)
-        for k, p in enumerate(pages):
-            p.keyboard.press("12"[(i + k) % 2])
-        for k, p in enumerate(pages):
-            current[k] = wait_segment(p, current[k], timeout_s=30)
+    label_rounds(pages, current, n, think_s)
     time.sleep(0.2)
     found = [float(x) for p in pages for x in p.evaluate("window.__lat")]
     for p in pages:

@@ -31,7 +31,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_labeling import TIMING_JS
+from bench_labeling import TIMING_JS, label_rounds
 from chromium import chromium
 from playwright.sync_api import Page
 from ui.page import open_labeler, wait_segment
@@ -122,12 +122,7 @@ def crowd(stack: Stack, browser: Any, n: int, think_s: float, labelers: int, red
     for p in pages:
         p.evaluate(TIMING_JS)
     SPANS.clear()
-    for i in range(n):
-        time.sleep(think_s / labelers)
-        for k, p in enumerate(pages):
-            p.keyboard.press("12"[(i + k) % 2])
-        for k, p in enumerate(pages):
-            current[k] = wait_segment(p, current[k], timeout_s=30)
+    label_rounds(pages, current, n, think_s)
     time.sleep(0.5)
     found: dict[str, list[float]] = defaultdict(list)
     keys(found, pages, list(app.sessions.values()))
