@@ -291,21 +291,26 @@ class ProgressLine:
             sys.stderr.flush()
 
 
+WATCH_TIMEOUT_S = 2.0  # the progress line's request; a restart of a dead part waits at most this long
+
+
 def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: bool, stopping: dict) -> int:
     """Show the run's progress and keep every part alive until the run ends (or Ctrl-C). Returns 0
     when the trainer finished, 1 when a part could not be kept alive, 130 on Ctrl-C."""
     from collie.client import CollieClient
 
     bar = ProgressLine()
-    with CollieClient(api, token) as client:
+    # A short timeout: while the service is dead, our listening socket still accepts the request and it
+    # hangs until the service is back, which only `stack.check()` below can bring about.
+    with CollieClient(api, token, timeout_s=WATCH_TIMEOUT_S) as client:
         while not stopping["flag"]:
-            with contextlib.suppress(Exception):  # the service may be restarting; keep watching
-                bar.show(client.run(run_id))
             try:
                 stack.check()
             except ChildFailed:
                 bar.close()
                 raise
+            with contextlib.suppress(Exception):  # the service may be restarting; keep watching
+                bar.show(client.run(run_id))
             if stack.finished("trainer"):
                 bar.close()
                 print(f"collie up: trainer finished; outputs in {stack.out / 'trainer'}")
