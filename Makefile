@@ -50,8 +50,12 @@ lint: $(STAMP)
 	$(VENV)/bin/mypy
 	$(VENV)/bin/pytest -q -p no:cacheprovider tests/lint
 
+# Two workers, one file each at a time (module fixtures stay in one process), one OpenMP thread
+# each: the suite waits on subprocesses and browsers as much as it computes.
+TEST_WORKERS ?= 2
 test: $(STAMP) lint
-	$(VENV)/bin/pytest -q --durations=15
+	OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 OMP_WAIT_POLICY=PASSIVE \
+	  $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=15
 
 # `--compile`'s networks equal the eager ones (pyproject's `compile` marker; inductor takes minutes here).
 test-compile: $(STAMP)

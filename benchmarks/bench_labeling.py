@@ -35,6 +35,7 @@ import numpy as np
 from playwright.sync_api import Page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import ui.page
 from chromium import chromium
 from record import record
 from ui.page import open_labeler, wait_segment
@@ -172,8 +173,29 @@ def replay_rates(stack: Stack, browser: object, seconds: float) -> dict[str, flo
         rates[f"server {speed:g}x"] = n / (time.perf_counter() - start)
         rates[f"server work per update {speed:g}x (ms)"] = 1000 * (session.player.tick_work_s - work) / max(n, 1)
         rates[f"browser {speed:g}x"] = browser_fps
+    session.toggle_play()  # paused: the same scene, no pose updates
+    rates["browser, ant paused"] = float(page.evaluate(FPS_JS, seconds * 1000))
     page.context.close()
+    rates["browser, empty viser scene"] = empty_scene_fps(browser, seconds)
     return rates
+
+
+def empty_scene_fps(browser: object, seconds: float) -> float:
+    """The page's frame rate for a viser server with nothing added: the most any replay can draw in
+    this browser, whatever the scene and the server do."""
+    import viser
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        page: Page = browser.new_page(viewport=ui.page.VIEWPORT)  # type: ignore[attr-defined]
+        page.goto(f"http://127.0.0.1:{server.get_port()}/")
+        page.wait_for_selector("canvas", timeout=60_000)
+        page.wait_for_timeout(1000)  # past the first frames' shader compiles
+        fps = float(page.evaluate(FPS_JS, seconds * 1000))
+        page.context.close()
+        return fps
+    finally:
+        server.stop()
 
 
 def main() -> int:
@@ -183,8 +205,6 @@ def main() -> int:
     parser.add_argument("--fps-s", type=float, default=3.0, help="seconds to count replay frames")
     parser.add_argument("--viewport", default="1280x800")
     args = parser.parse_args()
-    import ui.page
-
     width, height = (int(v) for v in args.viewport.split("x"))
     ui.page.VIEWPORT = {"width": width, "height": height}
 
@@ -216,6 +236,7 @@ def main() -> int:
             row(name, rate, "fps", "30 fps", rate / 30)
         else:
             row(name, rate, "fps", "≥ 25 fps (software WebGL here)" if name == "browser 1x" else "(info)")
+    print("  (the empty scene is this browser's ceiling: a replay cannot draw faster than viser's bare page)")
     wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
     print("UI overhead per label:")
     row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)

@@ -17,3 +17,10 @@ def scratch_cwd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
         yield
     finally:
         os.chdir(before)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Files marked `slow` first (a stable sort keeps each file's order): `make test` runs the files
+    on two workers (`-n 2 --dist loadfile`), and a long file handed out last would run alone while
+    the other worker idles."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -16,6 +16,8 @@ from trainer.envs import load_model, make_env, model_xml
 from trainer.envs.lidar import pseudo_lidar
 from trainer.metrics import coverage_metrics
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 
 def test_layout_is_reproducible_from_the_seed_and_well_placed() -> None:
     a = hazard_layout(7)

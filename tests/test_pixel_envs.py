@@ -17,6 +17,8 @@ from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
 from trainer.skills import SkillPrior
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 PIXEL_ENVS = {"quadruped": (12, 23), "humanoid": (21, 28)}  # action_dim, nq
 OBS_SHAPE = (9, 64, 64)
 

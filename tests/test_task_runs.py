@@ -28,6 +28,8 @@ from labeling_ui.regions import region_outline, tint_meshes
 from labeling_ui.rule import rule_text, run_task
 from trainer.metrics import coverage_metrics
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 RULE_METRICS = (
     "safe_coverage",
     "safe_ratio",

@@ -9,9 +9,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import torch
 
 from collie.client import CollieClient
+
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
 TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": "lb-" + "l" * 30}
 

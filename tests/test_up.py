@@ -11,6 +11,8 @@ import torch
 
 from collie.startup import read_marks
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 
 @pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: pixel segments travel packed
 def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path, env):

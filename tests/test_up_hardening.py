@@ -12,7 +12,11 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from collie.client import CollieClient
+
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
 
 def up_command(out: Path, *more: str) -> list[str]:

@@ -13,6 +13,8 @@ from trainer.downstream.__main__ import run_downstream
 from trainer.loop import Trainer
 from trainer.lsd import Lsd
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 
 def smoke(out, **kw) -> Trainer:
     return Trainer(make_config("smoke", kw.pop("env", "point"), out=str(out), **kw), progress=False)

@@ -18,6 +18,8 @@ from pathlib import Path
 import pytest
 import ray  # noqa: F401 - the `sweep` extra: a missing Ray is an error, not a skip
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

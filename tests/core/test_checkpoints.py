@@ -10,12 +10,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from trainer.config import make_config
 from trainer.loop import Trainer
 from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.replay_log import ReplayLog
+
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
 
 def replay(size: int = 5) -> TrajectoryReplay:

@@ -14,6 +14,8 @@ import torch
 from trainer.config import make_config
 from trainer.loop import Trainer, TrainingDiverged
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 
 def smoke(out: Path, **kw) -> Trainer:
     cfg = make_config("smoke", kw.pop("env", "point"), out=str(out), **kw)

@@ -17,6 +17,8 @@ from collie.client import CollieClient
 
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
 
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
 
 @pytest.fixture(scope="module")
 def fuzzed(both_databases: str) -> Iterator[BackgroundServer]:
