@@ -23,6 +23,7 @@ from typing import Any, TypeVar
 import httpx
 from pydantic import BaseModel, TypeAdapter
 
+from collie.dashboard_schemas import QueryReview
 from collie.schemas import (
     STREAM_EVENT,
     ClaimRead,
@@ -306,6 +307,10 @@ class CollieClient:
 
     def query(self, run_id: int, query_id: str) -> QueryRead:
         return self._get(QueryRead, f"/runs/{run_id}/queries/{query_id}")
+
+    def query_review(self, run_id: int, query_id: str) -> QueryReview:
+        """One query's segment and labels by labeler, for an operator's review (operators only)."""
+        return self._get(QueryReview, f"/dashboard/runs/{run_id}/queries/{query_id}/review")
 
     def claim(
         self, run_id: int, lease_s: float | None = None, hold: int = 1, tab: str | None = None

@@ -9,7 +9,7 @@ from typing import Any
 from pydantic import ConfigDict, Field
 
 from collie.labels import Label
-from collie.schemas import Control, LabelValue, QueueCounts, RolloutsRead, RunRead, RunStatus, Wire
+from collie.schemas import Control, LabelValue, QueryRead, QueueCounts, RolloutsRead, RunRead, RunStatus, Wire
 
 MAX_HISTORY_POINTS = 5000  # the largest metric history one request may ask for
 DEFAULT_HISTORY_POINTS = 1000
@@ -101,6 +101,18 @@ class Disagreement(Read):
     effective: LabelValue | None = Field(description="null until the run's redundancy is reached")
     oracle: LabelValue | None
     xy: list[list[float]]
+
+
+class QueryReview(Read):
+    """One query for an operator's review in 3D (the dashboard's "replay in 3D", the labeling UI's
+    review mode): its segment with the simulator states, each labeler's current label, the label
+    it counts as, and the task rule's."""
+
+    query: QueryRead
+    labels: dict[str, LabelValue] = Field(description="labeler → their current label")
+    effective: LabelValue | None = Field(description="null until the run's redundancy is reached")
+    oracle: LabelValue | None = Field(description="the task rule's label; null without a rule or where it cannot judge")
+    has_rule: bool = Field(description="the run has a task rule (else only an instruction, or an unreadable rule)")
 
 
 class LabelingStats(Read):

@@ -4,7 +4,8 @@ never shared by tabs.
 A token comes from the labeler URL (`?token=…`, which signs in only the tab it opens) or the
 sign-in field. sessionStorage belongs to one tab (it survives a reload of that tab; another tab,
 or a link opened in one, has its own), so an operator link opened beside a labeler's tab, or a
-wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` asks for watch mode.
+wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` asks for watch mode,
+`?review=RUN&query=ID` for an operator's review of one query (the dashboard's "replay in 3D").
 The tab id names the tab's claims at the service (a claim is one tab's: only it may label the
 segment); it survives a reload, so a reloaded tab gets its segment back.
 
@@ -44,7 +45,8 @@ if (sessionStorage.getItem(%(tab)s) === null) {  // crypto.randomUUID needs http
 }
 localStorage.removeItem(%(legacy)s);
 localStorage.setItem(%(handoff)s, JSON.stringify({
-  token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch"), tab: sessionStorage.getItem(%(tab)s)
+  token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch"), tab: sessionStorage.getItem(%(tab)s),
+  review: url.searchParams.get("review"), query: url.searchParams.get("query")
 }));
 """
 
@@ -58,6 +60,8 @@ class TabIdentity:
     token: str | None
     watch: int | None  # ?watch=RUN: replay that run's skills instead of labeling
     tab: str = field(default_factory=new_tab_id)  # the browser's, else one for this connection
+    # ?review=RUN&query=ID: replay that query for an operator, label nothing (as given: review.py checks it)
+    review: tuple[int, str] | None = None
 
 
 def _run(client: viser.ClientHandle, source: str) -> None:
@@ -85,11 +89,17 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
     except json.JSONDecodeError:
         found = {}
     watch, tab = found.get("watch"), found.get("tab")
+    run, query = found.get("review"), found.get("query")
     return TabIdentity(
         found.get("token") or None,
-        int(watch) if isinstance(watch, str) and watch.isdigit() else None,
+        _run_id(watch),
         tab if isinstance(tab, str) and TAB_ID.fullmatch(tab) else new_tab_id(),
+        None if run is None else (_run_id(run) or 0, query if isinstance(query, str) else ""),  # 0: no run
     )
+
+
+def _run_id(raw: object) -> int | None:
+    return int(raw) if isinstance(raw, str) and raw.isdigit() else None
 
 
 def remember_token(client: viser.ClientHandle, token: str | None) -> None:

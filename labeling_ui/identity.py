@@ -54,8 +54,8 @@ class Identity:
         me = self.link.login()
         with self.tab as state:
             before = state.accepted(me.name, me.role)
-            watching = state.phase == Phase.WATCHING
-        self.panels.greet(me.name, me.role, before)
+            watching = state.phase in (Phase.WATCHING, Phase.REVIEWING)
+        self.panels.greet(me.name, me.role, before, labels=not watching)
         if before is not None:  # loud: this tab was someone else a moment ago
             self.panels.notify("You are now " + me.name, f"this tab was signed in as {before}", "red")
         self.presenter.use_prefs(load_prefs(self.client, me.name) if not watching else {})

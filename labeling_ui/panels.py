@@ -200,6 +200,18 @@ class Panels:
             self.frame.max = max(n_frames - 1, 1)
             self.segment.content = detail
 
+    def show_review(self, status: str, detail: str, n_frames: int) -> None:
+        """Review mode: one query's replay and its context (labels by labeler), nothing to label."""
+        with self.client.atomic():
+            self._screen(status, replay=True)
+            self.rule.visible = True
+            self.frame.max = max(n_frames - 1, 1)
+            self.segment.content = detail
+
+    def show_alone(self, message: str) -> None:
+        """Only the status line (and the account): no label buttons, no replay."""
+        self._screen(message)
+
     def show_skills_while_waiting(self, detail: str, n_frames: int) -> None:
         """The waiting screen keeps its status; the 3D view plays the latest evaluation's skills."""
         with self.client.atomic():
@@ -309,9 +321,13 @@ class Panels:
             self.play.label = "Pause" if playing else "Play"
             self.play.icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
 
-    def greet(self, name: str, role: str, before: str | None = None) -> None:
-        """Who this tab is, always on screen; an operator is marked, a change of identity is loud."""
-        marker = " · ⚠️ **operator**: your labels count as the operator's" if role == "operator" else ""
+    def greet(self, name: str, role: str, before: str | None = None, labels: bool = True) -> None:
+        """Who this tab is, always on screen; an operator is marked, a change of identity is loud.
+        `labels`: this tab may label (not watch or review mode)."""
+        marker = (
+            " · ⚠️ **operator**: your labels count as the operator's" if labels else " · operator (labels nothing here)"
+        )
+        marker = marker if role == "operator" else ""
         changed = f"  \n🔴 **This tab was signed in as {before}**: it is now {name}." if before else ""
         self.title.content = f"**collie · labeling** — signed in as **{name}**{marker}{changed}"
 

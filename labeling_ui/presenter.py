@@ -16,6 +16,7 @@ from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.inset import render_inset
 from labeling_ui.models import ModelError, Poser
 from labeling_ui.panels import SegmentInfo
+from labeling_ui.review import show_review
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import MyLabel, ServiceLink
 from labeling_ui.stream_waiter import StreamWaiter
@@ -44,6 +45,7 @@ class Presenter:
         # the labeler's labels in the shown run, newest first: replaced whole (the panels read it from viser's threads)
         self.mine: tuple[MyLabel, ...] = ()
         self.skills: SkillShow | None = None
+        self.reviewed: Key | None = None  # the query review mode shows (or said it cannot)
 
     # ---------------------------------------------------------------- a segment
 
@@ -159,6 +161,12 @@ class Presenter:
             self.skills.reload(link)
         self.skills.tick()
 
+    def review(self, link: ServiceLink, key: Key, role: str | None) -> None:
+        """Review mode: replay the query `key` with its labels, once (it then loops by itself)."""
+        if self.reviewed != key:
+            show_review(self.screen, link, role, *key)
+            self.reviewed = key
+
     def new_rollouts(self, link: ServiceLink) -> None:
         if self.skills is not None:
             self.skills.reload(link)
@@ -174,6 +182,7 @@ class Presenter:
     def clear(self) -> None:
         """Signed out: nothing of the last identity stays on screen."""
         self.skills = None
+        self.reviewed = None
         self.mine = ()
         self.screen.blank()
 

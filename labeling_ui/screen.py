@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 import viser
 
+from collie.dashboard_schemas import QueryReview
 from collie.schemas import RunRead
 from collie.tasks import Task
 from labeling_ui.inset import render_inset
@@ -89,6 +90,29 @@ class TabScreen:
         self.show_floor(run, task, xy)
         self.show_task(run, task)
         self.panels.show_inset(render_inset(task, xy, None))
+
+    def show_review(self, run: RunRead, poser: Poser, review: QueryReview, status: str, detail: str) -> None:
+        """Replay one query for an operator's review, on loop (review.py)."""
+        query = review.query
+        xy = np.asarray(query.xy, float)
+        earlier = np.asarray(query.path_xy, float)[: query.start + 1] if query.path_xy else None
+        self.scene.load(run.env)
+        self.player.loop = True
+        with self.client.atomic():
+            self.scene.set_segment(poser, earlier)
+            self.player.load(poser.n_frames)
+            self.panels.show_review(status, detail, poser.n_frames)
+            self.panels.loop.value = True  # type: ignore[misc]  # viser types .value read-only; it is settable
+        self.client.flush()
+        task = self.task_of(run)
+        self.show_floor(run, task, xy)
+        self.show_task(run, task)
+        self.panels.show_inset(render_inset(task, xy, earlier))
+
+    def show_alone(self, message: str) -> None:
+        """Only a message: no robot, no label buttons (a review that cannot be shown)."""
+        self.blank()
+        self.panels.show_alone(message)
 
     def show_notice(self, message: str, watching: bool) -> None:
         self.blank()

@@ -21,6 +21,7 @@ from collie.client import (
     Unreachable,
     retrying,
 )
+from collie.dashboard_schemas import QueryReview
 from collie.schemas import (
     FINISHED,
     MAX_HOLD,
@@ -179,6 +180,10 @@ class ServiceLink:
 
     def query(self, run_id: int, query_id: str) -> QueryRead:
         return self._call(lambda: self.client.query(run_id, query_id))
+
+    def review(self, run_id: int, query_id: str) -> QueryReview:
+        """One query's segment and labels by labeler, for an operator's review (operators only)."""
+        return self._call(lambda: self.client.query_review(run_id, query_id))
 
     def my_labels(self, run_id: int) -> list[MyLabel]:
         """This labeler's labels in the run, newest first (the service keeps them: they survive reloads)."""

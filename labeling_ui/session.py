@@ -188,7 +188,7 @@ class LabelerSession:
 
     def _save_prefs(self) -> None:
         with self.tab as state:
-            who, watching = state.who, state.phase == Phase.WATCHING
+            who, watching = state.who, state.phase in (Phase.WATCHING, Phase.REVIEWING)
         if who is not None and not watching:
             save_prefs(self.client, who, self.presenter.prefs())
 
@@ -197,7 +197,7 @@ class LabelerSession:
     def _work(self) -> None:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         with self.tab as state:
-            state.watch_run = opened.watch
+            state.watch_run, state.review = opened.watch, opened.review
         self.identity.tab_id = opened.tab  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)
@@ -246,6 +246,12 @@ class LabelerSession:
                     self._renew()
                 else:
                     self._handle(waited)
+            case Step.REVIEW:
+                with self.tab as state:
+                    key, role = state.review, state.role
+                if key is not None and self.link is not None:
+                    self.presenter.review(self.link, key, role)
+                self._handle(self._next_action(POLL_S))
             case _:  # WATCH, FIND, IDLE
                 if step == Step.FIND and self._show_next():
                     return

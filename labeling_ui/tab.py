@@ -25,6 +25,7 @@ class Phase(StrEnum):
     WAITING = "waiting"  # signed in, nothing on screen (nothing claimable, or between segments)
     SHOWING = "showing"  # a segment on screen
     WATCHING = "watching"  # ?watch=RUN: the skills of a run, nothing to label
+    REVIEWING = "reviewing"  # ?review=RUN&query=ID: one query replayed for an operator, nothing to label
 
 
 class Step(StrEnum):
@@ -33,6 +34,7 @@ class Step(StrEnum):
     SIGN_IN = "sign in"  # no token, or no link to the service: wait for a sign-in
     CHECK = "check"  # ask the service who the token belongs to
     WATCH = "watch"  # watch mode: play the run's skills, wait for its stream
+    REVIEW = "review"  # review mode: replay the query under review, wait for the tab's buttons
     FIND = "find"  # nothing on screen: show the next segment, else wait
     IDLE = "idle"  # nothing claimable a moment ago: wait for the stream (or the recheck time)
     ATTEND = "attend"  # a segment on screen: handle the keys, renew its lease when they pause
@@ -118,6 +120,7 @@ class TabState:
     waiting_on: tuple[int, int] | None = None  # (run, last event id) while nothing is claimable
     recheck_at: float = 0.0  # while waiting: when to try a claim again without a wake-up (monotonic)
     watch_run: int | None = None
+    review: Key | None = None  # the query an operator reviews in this tab (it never labels)
 
     # ---------------------------------------------------------------- the worker's next step
 
@@ -129,6 +132,8 @@ class TabState:
             return Step.CHECK
         if self.phase == Phase.WATCHING:
             return Step.WATCH
+        if self.phase == Phase.REVIEWING:
+            return Step.REVIEW
         if self.shown is None:
             return Step.FIND if now >= self.recheck_at else Step.IDLE
         return Step.ATTEND
@@ -155,7 +160,10 @@ class TabState:
         (the page says so, loudly), else None."""
         before = self.who or self.was
         self.who, self.role, self.was = name, role, name
-        self.phase = Phase.WATCHING if self.watch_run is not None else Phase.WAITING
+        if self.review is not None:
+            self.phase = Phase.REVIEWING
+        else:
+            self.phase = Phase.WATCHING if self.watch_run is not None else Phase.WAITING
         return before if before is not None and before != name else None
 
     def signed_out(self) -> None:
@@ -274,6 +282,8 @@ class TabState:
 
     def press(self, value: Submission, now: float, request_id: str) -> Decision:
         """A label or skip key at `now`, against the segment on screen at that moment."""
+        if self.phase == Phase.REVIEWING:
+            return self._review_only()
         shown = self.shown
         if shown is None or self.phase != Phase.SHOWING or shown.appeared is None:
             return None
@@ -314,10 +324,16 @@ class TabState:
     def undo_target(self, mine: list[tuple[int, str]], request_id: str) -> Decision:
         """Undo the newest label: this tab's, else the newest of `mine` (the labeler's labels still
         in effect, newest first, as the service keeps them: undo works across reloads)."""
+        if self.phase == Phase.REVIEWING:
+            return self._review_only()
         key = self.labelled[-1] if self.labelled else (mine[0] if mine else None)
         if key is None:
             return Refusal("Nothing to undo", "you have no label in effect in this run")
         return Withdraw(key[0], key[1], request_id)
+
+    def _review_only(self) -> Refusal:
+        query = self.review[1] if self.review else "?"
+        return Refusal("Review only", f"this tab replays segment {query} for your review: it sends no label")
 
     def undo_refused(self, withdraw: Withdraw) -> None:
         """The service would not undo it (e.g. already revised elsewhere): undo walks past it."""

@@ -1,11 +1,14 @@
-"""The operators' dashboard API: read-only views for web/ (any role may read; run control stays
-with /api/runs/{id}/pause|resume|stop, operators only).
+"""The operators' dashboard API: read-only views for web/ (any role may read them, but for one
+query's review, which names who labelled what: operators only; run control stays with
+/api/runs/{id}/pause|resume|stop, operators only).
 
 - GET /dashboard/runs — the runs list, as a long poll (?after=VERSION&wait_s=S answers as soon as
   any run's log grows): the page keeps one request open, as the trainer does with /events;
 - GET /dashboard/runs/{id} — the whole run page in one read, with the stream id to follow it from;
 - GET /dashboard/runs/{id}/metrics — the metric history, thinned to at most max_points rows;
-- GET /dashboard/runs/{id}/labeling — the labeling panel and labelled states, after label events.
+- GET /dashboard/runs/{id}/labeling — the labeling panel and labelled states, after label events;
+- GET /dashboard/runs/{id}/queries/{query_id}/review — one query's segment and labels by labeler,
+  for the labeling UI's review mode (the disagreement list's "replay in 3D").
 """
 
 from __future__ import annotations
@@ -16,18 +19,19 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Query, Request, Response
 from pydantic import BaseModel
 
-from backend.routes.deps import DB, AnyCaller, RunId
-from backend.services import dashboard
+from backend.routes.deps import DB, AnyCaller, OperatorCaller, RunId
+from backend.services import dashboard, review
 from backend.services.label_stats import SegmentCache
 from collie.dashboard_schemas import (
     DEFAULT_HISTORY_POINTS,
     MAX_HISTORY_POINTS,
     LabelingView,
     MetricHistory,
+    QueryReview,
     RunDashboard,
     RunsPage,
 )
-from collie.schemas import MAX_INT
+from collie.schemas import MAX_INT, QueryId
 
 router = APIRouter(prefix="/dashboard", tags=["dashboard"])
 
@@ -96,3 +100,11 @@ def metric_history(run_id: RunId, _: AnyCaller, db: DB, max_points: Points = DEF
 def labeling(run_id: RunId, _: AnyCaller, db: DB, cache: Cache) -> LabelingView:
     with db.read() as conn:
         return dashboard.labeling_view(conn, run_id, cache)
+
+
+@router.get("/runs/{run_id}/queries/{query_id}/review", response_model=QueryReview)
+def query_review(run_id: RunId, query_id: QueryId, _: OperatorCaller, db: DB) -> Response:
+    """One query's segment (with its simulator states) and its labels by labeler: what the labeling
+    UI replays when an operator follows a disagreement's "replay in 3D". Operators only."""
+    with db.read() as conn:
+        return as_json(review.review(conn, run_id, query_id))

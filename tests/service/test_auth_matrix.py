@@ -62,6 +62,7 @@ POLICY: dict[tuple[str, str], str] = {
     ("GET", "/api/dashboard/runs/{run_id}"): ANY,
     ("GET", "/api/dashboard/runs/{run_id}/metrics"): ANY,
     ("GET", "/api/dashboard/runs/{run_id}/labeling"): ANY,
+    ("GET", "/api/dashboard/runs/{run_id}/queries/{query_id}/review"): OPERATOR,
 }
 
 

@@ -248,3 +248,15 @@ def test_after_an_outage_only_a_segment_it_hid_is_shown_again() -> None:
     assert state.hidden_by_outage(down_since=9.0) is None  # it appeared after the outage began
     state.failed()
     assert state.shown is None and state.hidden_by_outage(down_since=12.0) is None
+
+
+def test_review_mode_is_its_own_phase_and_never_labels() -> None:
+    state = TabState(Rules(0.0, 0.0), review=(4, "0-1"))
+    state.use_token("t")
+    state.accepted("op", "operator")
+    assert state.phase == Phase.REVIEWING and state.next_step(linked=True, now=0.0) == Step.REVIEW
+    for key in (0, 1, 2, "skip"):
+        refused = state.press(key, 5.0, "r")  # type: ignore[arg-type]
+        assert isinstance(refused, Refusal) and refused.title == "Review only" and "0-1" in refused.body
+    refused = state.undo_target([(4, "0-0")], "u")  # even with a label of the operator's in effect
+    assert isinstance(refused, Refusal) and refused.title == "Review only"

@@ -1,7 +1,7 @@
 """The dashboard for the people who run labeling, in Debian's Chromium against a live service:
 labeler management (create → a one-time token and a labeler link, list, revoke), the labeling
 panel's counts (revisions are no labels), agreement and explanations, the list of disagreements
-with their paths, the run's quality settings, and the legends of the charts."""
+with their paths and replay links, the run's quality settings, and the legends of the charts."""
 
 from __future__ import annotations
 
@@ -106,6 +106,15 @@ def test_disagreements_are_listed_with_their_paths(page: Any) -> None:
     assert len(points.split()) == DIMS.horizon
     assert row.locator("svg.path-view path").count() >= 1  # the task's regions under the path
     assert "(2)" in page.text_content("#disagreements-count")
+
+
+def test_each_disagreement_links_to_its_replay_in_3d(page: Any, run: RunRead) -> None:
+    """The labeling UI's review mode (tests/ui/test_review.py follows the link), signed in with
+    this page's token in the tab it opens only."""
+    link = page.locator('#disagreements-body tr[data-query="0-1"] a.replay-3d')
+    assert link.text_content() == "replay in 3D" and link.get_attribute("target") == "_blank"
+    assert link.get_attribute("href") == f"{UI}?review={run.id}&query=0-1&token={TOKENS['operator']}"
+    assert page.locator("#disagreements-body a.replay-3d").count() == 2  # one per listed query
 
 
 def test_the_quality_settings_are_set_from_the_panel(page: Any, trainer: CollieClient, run: RunRead) -> None:

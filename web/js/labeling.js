@@ -1,7 +1,8 @@
 // The labeling panel: queue health, pace, per-labeler counts and median seconds per label,
 // agreement with the oracle (the task rule, exact) where the task can judge, agreement between
 // labelers (Krippendorff's α), gold accuracy — each with a one-line explanation — and the list of
-// queries where labelers or the oracle disagree, each with its path drawn over the task's regions.
+// queries where labelers or the oracle disagree, each with its path drawn over the task's regions
+// and, when the labeling UI's address is known, a link that replays it in 3D there.
 
 import { ago, escapeHtml, num, of, percent } from "./format.js";
 import { CLASS_COLOURS, FILL, regionPath } from "./regions.js";
@@ -89,18 +90,20 @@ export function pathSvg(xy, task, size = [132, 88]) {
     </g></svg>`;
 }
 
-export function renderDisagreements(element, count, view, task, names) {
+// `replayHref(queryId)`: the labeling UI's review of that query (run.js), or null without a UI address.
+export function renderDisagreements(element, count, view, task, names, replayHref = null) {
   const s = view.labeling;
   count.textContent = s.n_disagreements ? `(${s.n_disagreements}${s.n_disagreements > s.disagreements.length ? `, newest ${s.disagreements.length} shown` : ""})` : "";
   if (!s.disagreements.length) {
     element.innerHTML = '<p class="muted">none: every labelled query has agreeing labels</p>';
     return;
   }
-  element.innerHTML = `<table><thead><tr><th>query</th><th>session</th><th>labels</th><th>counts as</th><th>oracle</th><th>path</th></tr></thead><tbody>
+  element.innerHTML = `<table><thead><tr><th>query</th><th>session</th><th>labels</th><th>counts as</th><th>oracle</th><th>path</th>${replayHref ? "<th>3D</th>" : ""}</tr></thead><tbody>
     ${s.disagreements.map((d) => `<tr data-query="${escapeHtml(d.query_id)}">
       <td>${escapeHtml(d.query_id)}</td><td>${d.session}</td>
       <td>${Object.entries(d.labels).map(([who, v]) => `${escapeHtml(who)} ${labelTag(v, names)}`).join("<br>")}</td>
       <td>${d.effective == null ? '<span class="muted">not yet</span>' : labelTag(d.effective, names)}</td>
-      <td>${labelTag(d.oracle, names)}</td><td>${pathSvg(d.xy, task)}</td></tr>`).join("")}
+      <td>${labelTag(d.oracle, names)}</td><td>${pathSvg(d.xy, task)}</td>${replayHref
+        ? `<td><a class="replay-3d" href="${escapeHtml(replayHref(d.query_id))}" target="_blank" rel="noopener">replay in 3D</a></td>` : ""}</tr>`).join("")}
   </tbody></table>`;
 }

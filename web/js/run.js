@@ -84,12 +84,16 @@ export class RunPage {
 
   setWatchLink(watchUrl, runId) {
     const link = this.root.querySelector("#watch-3d");
+    this.watchUrl = watchUrl;
     link.hidden = !watchUrl;
     // the labeling UI's watch mode (labeling_ui/watch.py) signs in with this page's token
-    if (watchUrl) {
-      const query = new URLSearchParams({ watch: runId, token: token() });
-      link.href = `${watchUrl}${watchUrl.includes("?") ? "&" : "?"}${query}`;
-    }
+    if (watchUrl) link.href = this.uiLink({ watch: runId });
+  }
+
+  // A link into the labeling UI that signs in (only the tab it opens) with this page's token.
+  uiLink(params) {
+    const query = new URLSearchParams({ ...params, token: token() });
+    return `${this.watchUrl}${this.watchUrl.includes("?") ? "&" : "?"}${query}`;
   }
 
   showRun(run) {
@@ -110,7 +114,9 @@ export class RunPage {
 
   renderLabeling(view) {
     renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
-    renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task, this.labelNames ?? []);
+    // the labeling UI's review mode (labeling_ui/review.py) replays one query, labelling nothing
+    const replay = this.watchUrl ? (queryId) => this.uiLink({ review: this.runId, query: queryId }) : null;
+    renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task, this.labelNames ?? [], replay);
   }
 
   seeEpoch(epoch) {
