@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -94,6 +94,10 @@ bench-dashboard: $(STAMP)
 
 bench-labeling: $(STAMP)
 	$(PY) benchmarks/bench_labeling.py
+
+# The browser's own limit: viser pages with nothing of ours, still and with one node moved at 30 Hz.
+bench-browser-ceiling: $(STAMP)
+	$(PY) benchmarks/bench_browser_ceiling.py
 
 bench-pixels: $(STAMP)
 	$(PY) benchmarks/bench_pixels.py

@@ -1,0 +1,99 @@
+"""What limits the labeling page's frame rate in this machine's browser (issue 15's "≥ 25 fps, or
+the measured limit with its reason"): viser pages with nothing of ours in them, in the same
+headless Chromium (software WebGL) and viewport as `bench_labeling.py`.
+
+For each case, frames the page draws per second (requestAnimationFrame) while the server either
+sends nothing or moves one node at `--hz` (one message per update, as a replay tick is one
+batch):
+  - an empty scene, still and with one box moved;
+  - `--static` boxes that never move beside the moved box (the labeling page's ant scene has
+    about 30 nodes: 14 frames, 9 mesh batches, 6 line sets, the grid, a label, the floor).
+If a moved node costs frames in proportion to the nodes that did not move, the browser's work per
+update, not the scene's drawing, is the ceiling.
+
+    python benchmarks/bench_browser_ceiling.py          # make bench-browser-ceiling
+Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case below.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+
+import viser
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from bench_labeling import FPS_JS
+from chromium import chromium
+from record import record
+
+
+def page_fps(browser: object, n_static: int, moving: bool, hz: float, seconds: float, viewport: dict) -> float:
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    server.scene.configure_environment_map(hdri=None)  # as the labeling UI does
+    server.scene.configure_default_lights(cast_shadow=False)
+    for i in range(n_static):
+        server.scene.add_box(
+            f"/still/b{i}",
+            dimensions=(0.1,) * 3,
+            position=(0.15 * i, 0.5, 0.0),
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+    mover = server.scene.add_box("/mover", dimensions=(0.3,) * 3, cast_shadow=False, receive_shadow=False)
+    stop = threading.Event()
+
+    def move() -> None:
+        tick = 0
+        while moving and not stop.wait(1.0 / hz):
+            tick += 1
+            mover.position = (0.01 * (tick % 100), 0.0, 0.0)
+
+    thread = threading.Thread(target=move, daemon=True)
+    thread.start()
+    try:
+        page = browser.new_page(viewport=viewport)  # type: ignore[attr-defined]
+        page.goto(f"http://127.0.0.1:{server.get_port()}/")
+        page.wait_for_selector("canvas", timeout=60_000)
+        page.wait_for_timeout(1500)  # past the first frames' shader compiles
+        fps = float(page.evaluate(FPS_JS, seconds * 1000))
+        page.context.close()
+        return fps
+    finally:
+        stop.set()
+        thread.join(2.0)
+        server.stop()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--static", type=int, default=30, help="nodes that never move, beside the moved one")
+    parser.add_argument("--hz", type=float, default=30.0, help="updates per second of the moved node (a 1x replay)")
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds to count frames, per case")
+    parser.add_argument("--viewport", default="1280x800")
+    args = parser.parse_args()
+    width, height = (int(v) for v in args.viewport.split("x"))
+    viewport = {"width": width, "height": height}
+    cases = {
+        "empty_still": (0, False),
+        "empty_one_moved": (0, True),
+        f"static{args.static}_still": (args.static, False),
+        f"static{args.static}_one_moved": (args.static, True),
+    }
+    figures: dict[str, float | int | str] = {"hz": args.hz, "static": args.static, "viewport": args.viewport}
+    with chromium() as browser:
+        print(f"bench-browser-ceiling · chromium {browser.version} · viewport {args.viewport} · {args.hz:g} Hz")
+        for name, (n_static, moving) in cases.items():
+            start = time.perf_counter()
+            fps = page_fps(browser, n_static, moving, args.hz, args.seconds, viewport)
+            figures[f"{name}_fps"] = fps
+            print(f"  {name:<24} {fps:6.1f} frames/s   ({time.perf_counter() - start:.0f} s)", flush=True)
+    record("browser_ceiling", figures)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
