@@ -8,8 +8,9 @@ buffer that already holds the skills (no cat), each layer is one addmm into its 
 in-place tanh, and the Gaussian's few numbers are finished in numpy. The noise is torch.randn of
 the rows' shape from torch's global generator, the same draw as TanhGaussianPolicy.act's
 randn_like, so for the same seed the actions equal the policy's own to float tolerance
-(tests/core/test_acting.py). Anything else (a CNN encoder, another device) acts through
-`Metra.act` (`TorchActor`).
+(tests/core/test_acting.py); not bit for bit (numpy's exp/tanh are not torch's), so a run's
+rollouts are deterministic per seed and across a resume, but differ at float level from
+`TorchActor`'s. Anything else (a CNN encoder, another device) acts through `Metra.act` (`TorchActor`).
 """
 
 from __future__ import annotations
@@ -103,15 +104,7 @@ def fits(agent: Metra) -> bool:
     )
 
 
-# Off by default: with `Actor` a run stopped by SIGTERM and resumed no longer reproduces the
-# uninterrupted run bit for bit (tests/core/test_checkpoints.py; cause not found yet), although
-# its actions equal the policy's to float tolerance and straight runs are deterministic.
-FAST_ACTING = False
-
-
-def actor(
-    agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool, fast: bool = FAST_ACTING
-) -> Acting:
-    """`Actor` where asked for and possible, else the general torch path."""
-    cls = Actor if fast and fits(agent) else TorchActor
+def actor(agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool) -> Acting:
+    """`Actor` wherever it fits the agent's policy, else the general torch path."""
+    cls = Actor if fits(agent) else TorchActor
     return cls(agent, skills, normalise, deterministic)

@@ -64,13 +64,18 @@ def test_actor_rows_draw_the_noise_per_call() -> None:
 def test_actor_reads_the_current_weights() -> None:
     agent, obs, skills, norm = setup("half_cheetah")
     before = np.empty((8, agent.policy.trunk[-1].out_features // 2), np.float32)
-    actor(agent, skills, norm, True, fast=True)(obs, slice(None), before)
+    actor(agent, skills, norm, True)(obs, slice(None), before)
     with torch.no_grad():
         agent.policy.trunk[-1].bias.add_(1.0)  # as an optimiser step does, in place
     after = np.empty_like(before)
-    actor(agent, skills, norm, True, fast=True)(obs, slice(None), after)
+    actor(agent, skills, norm, True)(obs, slice(None), after)
     np.testing.assert_allclose(after, reference(agent, obs, skills, norm, True), rtol=0, atol=1e-5)
     assert not np.allclose(after, before)
+
+
+def test_state_mlp_policies_act_through_actor() -> None:
+    agent, _, skills, norm = setup("point", "smoke")
+    assert isinstance(actor(agent, skills, norm, False), Actor)
 
 
 def test_pixel_policies_act_through_the_torch_path() -> None:
@@ -79,6 +84,6 @@ def test_pixel_policies_act_through_the_torch_path() -> None:
     agent = Metra((9, 64, 64), 12, prior, cfg, torch.device("cpu"))
     assert not fits(agent)
     norm = Normaliser(np.float32(0), np.float32(255))
-    assert isinstance(actor(agent, prior.sample(2, np.random.default_rng(0)), norm, True, fast=True), TorchActor)
+    assert isinstance(actor(agent, prior.sample(2, np.random.default_rng(0)), norm, True), TorchActor)
     with pytest.raises(ValueError, match="Actor needs"):
         Actor(agent, prior.sample(2, np.random.default_rng(0)), norm, True)
