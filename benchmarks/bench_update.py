@@ -19,7 +19,9 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`, `rollout_fraction_pipelined_<env>`,
    `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9);
    `rollout_fraction_torch_<env>`: the default rollout acting through the general torch path
-   (`TorchActor`) instead of `Actor`, what the fast acting path gains. `--only rollout` runs just this part.
+   (`TorchActor`) instead of `Actor`, what the fast acting path gains; `rollout_fraction_batch2_<env>`:
+   serial, but each step's mujoco.batch call on 2 MuJoCo threads (`batch_threads=2`, bit-identical
+   rollouts). `--only rollout` runs just this part.
 4. Device data path: 32 batches gathered, normalised and made tensors by the device path
    (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
    Key `device_sampling_ratio` (≤ 1: costs nothing on the CPU).
@@ -198,6 +200,7 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
         "torch": VectorEnv(env_name, cfg.episodes_per_epoch),  # the same, acting through TorchActor
         "serial": VectorEnv(env_name, 8, physics_threads=1),
         "pipelined": VectorEnv(env_name, 8, physics_threads=2),
+        "batch2": VectorEnv(env_name, 8, physics_threads=1, batch_threads=2),  # one group, 2 MuJoCo threads
     }
     overlapped = envs["overlapped"]
     agent = Metra(overlapped.obs_dim, overlapped.action_dim, prior, cfg, torch.device("cpu"))
@@ -223,6 +226,7 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
         f"rollout_fraction_serial_{env_name}": med["serial"] / med["raw"],
         f"rollout_fraction_pipelined_{env_name}": med["pipelined"] / med["raw"],
         f"rollout_fraction_torch_{env_name}": med["torch"] / med["raw"],
+        f"rollout_fraction_batch2_{env_name}": med["batch2"] / med["raw"],
         f"physics_threads_{env_name}": overlapped.physics_threads,
     }
 
@@ -348,7 +352,8 @@ def main() -> None:
                 f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
                 f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
                 f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %, 2 threads pipelined "
-                f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %, acting through TorchActor "
+                f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %, one batch call on 2 threads "
+                f"{100 * r[f'rollout_fraction_batch2_{env_name}']:.0f} %, acting through TorchActor "
                 f"{100 * r[f'rollout_fraction_torch_{env_name}']:.0f} %; goal ≥ 90 %)"
             )
     if "sampling" in parts:

@@ -127,14 +127,18 @@ def test_actor_is_bit_identical_to_its_plain_arithmetic(deterministic: bool) -> 
         np.testing.assert_array_equal(g, w)
 
 
-@pytest.mark.parametrize(("env_name", "physics_threads"), [("half_cheetah", 1), ("ant", 2), ("point", 1)])
-def test_rollout_is_bit_identical_to_acting_and_stepping_written_out(env_name: str, physics_threads: int) -> None:
+@pytest.mark.parametrize(
+    ("env_name", "physics_threads", "batch_threads"), [("half_cheetah", 1, 1), ("half_cheetah", 1, 2), ("ant", 2, 1)]
+)
+def test_rollout_is_bit_identical_to_acting_and_stepping_written_out(
+    env_name: str, physics_threads: int, batch_threads: int
+) -> None:
     """The rollout loop (batched or pipelined) adds nothing to the plain loop: act per group of
     rows, step, store; every field bit for bit."""
     torch.manual_seed(0)
     agent, _, skills, norm = setup(env_name)
     steps, seeds = 25, list(range(10, 18))
-    env = VectorEnv(env_name, 8, episode_steps=steps, physics_threads=physics_threads)
+    env = VectorEnv(env_name, 8, episode_steps=steps, physics_threads=physics_threads, batch_threads=batch_threads)
     torch.manual_seed(7)
     traj = rollout(env, agent, skills, seeds, norm, deterministic=False)
 
