@@ -17,7 +17,11 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    runs it by default) ÷ a single-thread raw `mj_step` loop over the same model, and the same
    rollout with serial physics and with 2 physics threads pipelined with the policy. Keys
    `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`, `rollout_fraction_pipelined_<env>`,
-   `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9).
+   `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9);
+   `rollout_fraction_torch_<env>`: the default rollout acting through the general torch path
+   (`TorchActor`) instead of `Actor`, what the fast acting path gains; `rollout_fraction_batch2_<env>`:
+   serial, but each step's mujoco.batch call on 2 MuJoCo threads (`batch_threads=2`, bit-identical
+   rollouts). `--only rollout` runs just this part.
 4. Device data path: 32 batches gathered, normalised and made tensors by the device path
    (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
    Key `device_sampling_ratio` (≤ 1: costs nothing on the CPU).
@@ -40,6 +44,7 @@ import torch
 from record import record
 from torch.utils.flop_counter import FlopCounterMode
 
+from trainer.acting import TorchActor, actor
 from trainer.config import make_config
 from trainer.device_replay import DeviceReplay
 from trainer.envs import VectorEnv, make_env
@@ -192,20 +197,23 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
     envs = {
         "overlapped": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default physics threads
+        "torch": VectorEnv(env_name, cfg.episodes_per_epoch),  # the same, acting through TorchActor
         "serial": VectorEnv(env_name, 8, physics_threads=1),
         "pipelined": VectorEnv(env_name, 8, physics_threads=2),
+        "batch2": VectorEnv(env_name, 8, physics_threads=1, batch_threads=2),  # one group, 2 MuJoCo threads
     }
     overlapped = envs["overlapped"]
     agent = Metra(overlapped.obs_dim, overlapped.action_dim, prior, cfg, torch.device("cpu"))
     norm = Normaliser(overlapped.obs_mean, overlapped.obs_std)
     rng = np.random.default_rng(0)
     n = 8 * overlapped.episode_steps
-    rates: dict[str, list[float]] = {"overlapped": [], "serial": [], "pipelined": [], "raw": []}
+    rates: dict[str, list[float]] = {kind: [] for kind in (*envs, "raw")}
     for r in range(rounds):  # interleaved
         skills = prior.sample(8, rng)
         for kind, env in envs.items():
             start = time.perf_counter()
-            rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False)
+            acting = TorchActor if kind == "torch" else actor
+            rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False, acting=acting)
             rates[kind].append(n / (time.perf_counter() - start))
         rates["raw"].append(raw_mj_step_rate(env_name, n, r))
     med = {k: float(np.median(v)) for k, v in rates.items()}
@@ -217,6 +225,8 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
         f"rollout_fraction_{env_name}": med["overlapped"] / med["raw"],
         f"rollout_fraction_serial_{env_name}": med["serial"] / med["raw"],
         f"rollout_fraction_pipelined_{env_name}": med["pipelined"] / med["raw"],
+        f"rollout_fraction_torch_{env_name}": med["torch"] / med["raw"],
+        f"rollout_fraction_batch2_{env_name}": med["batch2"] / med["raw"],
         f"physics_threads_{env_name}": overlapped.physics_threads,
     }
 
@@ -292,6 +302,9 @@ def bench_checkpoint() -> dict[str, float]:
         }
 
 
+PARTS = ("update", "flops", "rollout", "sampling", "checkpoint")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", default="ant", help="env of the update benchmarks")
@@ -299,46 +312,63 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = the trainer's default policy)")
     p.add_argument("--no-compile", action="store_true", help="skip the compiled update (compilation takes minutes)")
+    p.add_argument(
+        "--only", choices=PARTS, action="append", help="run only these parts (repeatable; JSON: update-<part>.json)"
+    )
     a = p.parse_args()
+    parts = a.only or list(PARTS)
     torch.set_num_threads(resolve_threads(a.threads, 1024))
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}")
-    u = bench_update(a.env, a.steps, a.rounds)
-    print(f"update  ({a.env}, 2×1024, batch 256, 800 labelled states)")
-    print(f"  full COLLIE step  {u['full_steps_per_s']:8.1f} steps/s")
-    print(f"  plain SAC step    {u['sac_steps_per_s']:8.1f} steps/s")
-    print(f"  METRA step (w ≡ 1) {u['metra_steps_per_s']:7.1f} steps/s")
-    print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×; in FLOPs {u['cost_ratio_flops']:.2f}×)")
-    f = bench_flops(a.env, a.steps, a.rounds, compiled=not a.no_compile)
-    for h in (256, 1024):
-        print(
-            f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
-            f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
-            f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %"
-        )
-        if f"compile_s_{h}" in f:
+    figures: dict[str, float] = {}
+    if "update" in parts:
+        u = bench_update(a.env, a.steps, a.rounds)
+        figures |= u
+        print(f"update  ({a.env}, 2×1024, batch 256, 800 labelled states)")
+        print(f"  full COLLIE step  {u['full_steps_per_s']:8.1f} steps/s")
+        print(f"  plain SAC step    {u['sac_steps_per_s']:8.1f} steps/s")
+        print(f"  METRA step (w ≡ 1) {u['metra_steps_per_s']:7.1f} steps/s")
+        print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×; in FLOPs {u['cost_ratio_flops']:.2f}×)")
+    if "flops" in parts:
+        f = bench_flops(a.env, a.steps, a.rounds, compiled=not a.no_compile)
+        figures |= f
+        for h in (256, 1024):
             print(
-                f"    --compile: {f[f'compile_s_{h}']:.0f} s to compile, {f[f'compile_speedup_{h}']:.2f}× eager's "
-                f"steps/s, pays back after {f[f'compile_break_even_steps_{h}']:.0f} steps"
+                f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
+                f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
+                f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %"
             )
-    r: dict[str, float] = {}
-    for env_name in ("ant", "half_cheetah"):
-        r |= bench_rollout(env_name, a.rounds)
+            if f"compile_s_{h}" in f:
+                print(
+                    f"    --compile: {f[f'compile_s_{h}']:.0f} s to compile, {f[f'compile_speedup_{h}']:.2f}× eager's "
+                    f"steps/s, pays back after {f[f'compile_break_even_steps_{h}']:.0f} steps"
+                )
+    if "rollout" in parts:
+        for env_name in ("ant", "half_cheetah"):
+            r = bench_rollout(env_name, a.rounds)
+            figures |= r
+            print(
+                f"rollout ({env_name}, 8 episodes × 200 steps, cpu-preset policy, "
+                f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
+                f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
+                f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %, 2 threads pipelined "
+                f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %, one batch call on 2 threads "
+                f"{100 * r[f'rollout_fraction_batch2_{env_name}']:.0f} %, acting through TorchActor "
+                f"{100 * r[f'rollout_fraction_torch_{env_name}']:.0f} %; goal ≥ 90 %)"
+            )
+    if "sampling" in parts:
+        s = bench_sampling(a.rounds)
+        figures |= s
+        print(f"device data path on the CPU: {s['device_sampling_ratio']:.2f}× the host path's time (goal ≤ 1)")
+    if "checkpoint" in parts:
+        c = bench_checkpoint()
+        figures |= c
         print(
-            f"rollout ({env_name}, 8 episodes × 200 steps, cpu-preset policy, "
-            f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
-            f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
-            f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %, 2 threads pipelined "
-            f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %; goal ≥ 90 %)"
+            f"periodic checkpoint (ant, cpu preset): {c['checkpoint_s']:.2f} s, {c['checkpoint_mb']:.1f} MB written "
+            f"(goal < 1 s, < 50 MB; the whole replay is {c['replay_mb']:.0f} MB)"
         )
-    s = bench_sampling(a.rounds)
-    print(f"device data path on the CPU: {s['device_sampling_ratio']:.2f}× the host path's time (goal ≤ 1)")
-    c = bench_checkpoint()
-    print(
-        f"periodic checkpoint (ant, cpu preset): {c['checkpoint_s']:.2f} s, {c['checkpoint_mb']:.1f} MB written "
-        f"(goal < 1 s, < 50 MB; the whole replay is {c['replay_mb']:.0f} MB)"
-    )
-    record("update", {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **u, **f, **r, **s, **c})
+    name = "update" if a.only is None else "-".join(["update", *parts])  # a partial run keeps the full file
+    record(name, {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **figures})
 
 
 if __name__ == "__main__":

@@ -8,8 +8,9 @@ buffer that already holds the skills (no cat), each layer is one addmm into its 
 in-place tanh, and the Gaussian's few numbers are finished in numpy. The noise is torch.randn of
 the rows' shape from torch's global generator, the same draw as TanhGaussianPolicy.act's
 randn_like, so for the same seed the actions equal the policy's own to float tolerance
-(tests/core/test_acting.py). Anything else (a CNN encoder, another device) acts through
-`Metra.act` (`TorchActor`).
+(tests/core/test_acting.py); not bit for bit (numpy's exp/tanh are not torch's), so a run's
+rollouts are deterministic per seed and across a resume, but differ at float level from
+`TorchActor`'s. Anything else (a CNN encoder, another device) acts through `Metra.act` (`TorchActor`).
 """
 
 from __future__ import annotations
@@ -56,37 +57,58 @@ class Actor:
             raise ValueError("Actor needs a CPU policy without an encoder whose trunk is Linear/Tanh layers")
         policy = agent.policy
         linears = [m for m in policy.trunk if isinstance(m, nn.Linear)]
-        n, self.obs_dim = len(skills), linears[0].in_features - skills.shape[1]
-        self.weights = [(m.weight.detach().t(), m.bias.detach()) for m in linears]  # as F.linear multiplies
-        self.x = torch.empty(n, linears[0].in_features)
-        self.x.numpy()[:, self.obs_dim :] = skills
-        self.hidden = [torch.empty(n, m.out_features) for m in linears]
+        self.n, self.obs_dim = len(skills), linears[0].in_features - skills.shape[1]
+        # detached views of the parameters (as F.linear multiplies): no autograd, and an optimiser
+        # step or load_state_dict (both in place) is seen by the next call
+        self.weights = [(m.weight.detach().t(), m.bias.detach()) for m in linears]
+        self.widths = [linears[0].in_features, *(m.out_features for m in linears)]
         self.action_dim = linears[-1].out_features // 2
-        self.noise = torch.empty(n, self.action_dim)
+        self.skills = np.asarray(skills, np.float32)
         self.mean, self.std = np.asarray(normalise.mean, np.float32), np.asarray(normalise.std, np.float32)
         self.log_std_min, self.deterministic = policy.log_std_min, deterministic
+        self.groups: dict[tuple[int, int, int], _Buffers] = {}
 
-    @torch.inference_mode()
     def __call__(self, obs: np.ndarray, rows: slice, out: np.ndarray) -> None:
-        x = self.x[rows]
-        s = x.numpy()[:, : self.obs_dim]
-        np.subtract(obs, self.mean, out=s)  # (s − μ) / σ, as Normaliser
-        np.divide(s, self.std, out=s)
-        for i, (w, b) in enumerate(self.weights):
-            h = self.hidden[i][rows]
-            torch.addmm(b, x, w, out=h)
-            if i < len(self.weights) - 1:
+        key = rows.indices(self.n)
+        b = self.groups.get(key) or self.groups.setdefault(key, _Buffers(self, rows))
+        np.subtract(obs, self.mean, out=b.s)  # (s − μ) / σ, as Normaliser
+        np.divide(b.s, self.std, out=b.s)
+        x, last = b.x, len(self.weights) - 1
+        for i, ((w, bias), h) in enumerate(zip(self.weights, b.hidden, strict=True)):
+            torch.addmm(bias, x, w, out=h)
+            if i < last:
                 h.tanh_()
             x = h
-        y = x.numpy()
-        mean = y[:, : self.action_dim]
         if self.deterministic:
-            np.tanh(mean, out=out)
+            np.tanh(b.mean, out=out)
             return
-        noise = self.noise[rows]
-        torch.randn(noise.shape, out=noise)
-        std = np.exp(np.clip(y[:, self.action_dim :], self.log_std_min, LOG_STD_MAX))
-        np.tanh(mean + std * noise.numpy(), out=out)
+        b.noise.normal_()  # torch.randn's draw, from the global generator
+        t = b.tail  # tanh(μ + exp(clip(log σ)) · ε), in place
+        np.maximum(b.log_std, self.log_std_min, out=t)
+        np.minimum(t, LOG_STD_MAX, out=t)
+        np.exp(t, out=t)
+        np.multiply(t, b.noise_np, out=t)
+        np.add(b.mean, t, out=t)
+        np.tanh(t, out=out)
+
+
+class _Buffers:
+    """One row group's own tensors, allocated fresh and contiguous: addmm's float result for a row
+    depends on where its input sits in memory (a view at an odd row offset rounds differently), so
+    each group computes exactly as a batch of its rows alone would."""
+
+    def __init__(self, actor: Actor, rows: slice) -> None:
+        m = len(range(*rows.indices(actor.n)))
+        self.x = torch.empty(m, actor.widths[0])
+        x = self.x.numpy()
+        x[:, actor.obs_dim :] = actor.skills[rows]
+        self.s = x[:, : actor.obs_dim]
+        self.hidden = [torch.empty(m, w) for w in actor.widths[1:]]
+        y, a = self.hidden[-1].numpy(), actor.action_dim
+        self.mean, self.log_std = y[:, :a], y[:, a:]
+        self.noise = torch.empty(m, a)
+        self.noise_np = self.noise.numpy()
+        self.tail = np.empty((m, a), np.float32)
 
 
 def fits(agent: Metra) -> bool:
@@ -103,15 +125,7 @@ def fits(agent: Metra) -> bool:
     )
 
 
-# Off by default: with `Actor` a run stopped by SIGTERM and resumed no longer reproduces the
-# uninterrupted run bit for bit (tests/core/test_checkpoints.py; cause not found yet), although
-# its actions equal the policy's to float tolerance and straight runs are deterministic.
-FAST_ACTING = False
-
-
-def actor(
-    agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool, fast: bool = FAST_ACTING
-) -> Acting:
-    """`Actor` where asked for and possible, else the general torch path."""
-    cls = Actor if fast and fits(agent) else TorchActor
+def actor(agent: Metra, skills: np.ndarray, normalise: Normalising, deterministic: bool) -> Acting:
+    """`Actor` wherever it fits the agent's policy, else the general torch path."""
+    cls = Actor if fits(agent) else TorchActor
     return cls(agent, skills, normalise, deterministic)

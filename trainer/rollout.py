@@ -11,13 +11,14 @@ deterministic per seed."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from trainer.acting import actor
+from trainer.acting import Acting, actor
 from trainer.envs import StepBatch, VectorEnv
 from trainer.metra import Metra
 
@@ -46,9 +47,16 @@ class Normaliser:
 
 
 def rollout(
-    env: VectorEnv, agent: Metra, skills: np.ndarray, seeds: list[int], normalise: Normaliser, deterministic: bool
+    env: VectorEnv,
+    agent: Metra,
+    skills: np.ndarray,
+    seeds: list[int],
+    normalise: Normaliser,
+    deterministic: bool,
+    acting: Callable[[Metra, np.ndarray, Normaliser, bool], Acting] = actor,
 ) -> Trajectories:
-    """Run one episode per env with skill `skills[i]`; returns the full trajectories."""
+    """Run one episode per env with skill `skills[i]`; returns the full trajectories. `acting` builds
+    the policy's path (trainer/acting.py; benchmarks pass TorchActor to compare)."""
     n, t_max = env.num_envs, env.episode_steps
     if skills.shape[0] != n:
         raise ValueError(f"need {n} skills, got {skills.shape[0]}")
@@ -63,7 +71,7 @@ def rollout(
         obs[:, t], xy[:, t], pitch[:, t], qpos[:, t], qvel[:, t] = b.obs, b.xy, b.pitch, b.qpos, b.qvel
 
     store(0, env.reset(seeds))
-    policy = actor(agent, skills, normalise, deterministic)
+    policy = acting(agent, skills, normalise, deterministic)
 
     def act(rows: slice, t: int) -> np.ndarray:
         policy(obs[rows, t], rows, action[rows, t])

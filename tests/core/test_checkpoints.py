@@ -19,6 +19,7 @@ from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.replay_log import ReplayLog
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+ROOT = Path(__file__).resolve().parents[2]  # the checkout under test (tests run in a scratch cwd)
 
 
 def replay(size: int = 5) -> TrajectoryReplay:
@@ -90,7 +91,7 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
 
     cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(stopped), "--no-progress"]
     cmd += [f"--{k.replace('_', '-')}={v}" for k, v in common.items()]
-    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": str(Path.cwd())}, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": str(ROOT)}, stderr=subprocess.PIPE, text=True)
     metrics = stopped / "metrics.jsonl"
     deadline = time.monotonic() + 300
     while not (metrics.exists() and len(metrics.read_text().splitlines()) >= 2):  # epoch 0 and epoch 4

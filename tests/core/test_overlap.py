@@ -76,13 +76,17 @@ def test_overlapped_rollouts_are_deterministic_per_seed() -> None:
 def test_physics_threads_must_be_positive() -> None:
     with pytest.raises(ValueError, match="physics_threads"):
         VectorEnv("point", 2, physics_threads=0)
+    with pytest.raises(ValueError, match="batch_threads"):
+        VectorEnv("point", 2, batch_threads=0)
 
 
+@pytest.mark.parametrize("batch_threads", [1, 2])
 @pytest.mark.parametrize("name", ["point", "ant", "half_cheetah"])
-def test_batched_physics_equals_stepping_each_env(name: str) -> None:
-    """A plain env's group steps as one mujoco.batch call: bit-identical to each env's own step."""
-    vec = VectorEnv(name, 4, episode_steps=STEPS, physics_threads=2)
-    assert vec._physics is not None  # the batched path is under test
+def test_batched_physics_equals_stepping_each_env(name: str, batch_threads: int) -> None:
+    """A plain env's group steps as one mujoco.batch call (on 1 or 2 MuJoCo threads): bit-identical
+    to each env's own step."""
+    vec = VectorEnv(name, 4, episode_steps=STEPS, physics_threads=2, batch_threads=batch_threads)
+    assert vec._physics is not None and vec._physics[0].batch.nthread == batch_threads  # the batched path
     singles = [make_env(name, episode_steps=STEPS) for _ in range(4)]
     seeds = [3, 4, 5, 6]
     b = vec.reset(seeds)

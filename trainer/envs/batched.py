@@ -6,7 +6,9 @@ batch's state is read as (n, ·) arrays: no Python loop per env. The envs themse
 each reset (Gymnasium's reset noise, the same as stepping them one by one); their whole
 integration state, warm start included, then moves into the batch, whose steps are bit-identical
 to `mj_step` on each env's MjData (MuJoCo's guarantee; tests/core/test_overlap.py checks it).
-The batch runs on its caller's thread only (nthread 1): VectorEnv's worker threads step the groups.
+By default the batch runs on its caller's thread only (nthread 1): VectorEnv's worker threads step
+the groups; `nthread` > 1 spreads one group's envs over MuJoCo's own threads within the call
+(bit-identical at any count, and no policy-side change: the rows still act as one group).
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ def check_plain(env: SkillEnv) -> None:
 
 
 class BatchedPhysics:
-    def __init__(self, envs: Sequence[SkillEnv], rows: slice) -> None:
-        """`envs`: the group; `rows`: its rows in the VectorEnv's StepBatch."""
+    def __init__(self, envs: Sequence[SkillEnv], rows: slice, nthread: int = 1) -> None:
+        """`envs`: the group; `rows`: its rows in the VectorEnv's StepBatch; `nthread`: threads of
+        each batch call, the caller's included."""
         first = envs[0]
         for env in envs:
             check_plain(env)
@@ -45,7 +48,7 @@ class BatchedPhysics:
         self.frame_skip = first.frame_skip
         self.nq, self.position_dims = first.nq, first.position_dims
         self.rows = rows
-        self.batch = Batch(first.model, len(envs), nthread=1)  # the caller's thread only
+        self.batch = Batch(first.model, len(envs), nthread=min(nthread, len(envs)))
         self.qpos, self.qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
         self.ctrl = self.batch.bind("ctrl")
         self.episode_steps = first.episode_steps

@@ -67,13 +67,18 @@ class VectorEnv:
         episode_steps: int = 200,
         layout_seed: int | None = None,
         physics_threads: int | None = None,
+        batch_threads: int = 1,
     ) -> None:
         """`physics_threads`: groups of envs stepped in parallel by `rollout` (None = the default
-        above; 1 = serial, as `step`; pixel envs are always serial)."""
+        above; 1 = serial, as `step`; pixel envs are always serial). `batch_threads`: MuJoCo threads
+        within each group's `mujoco.batch` call (envs with batched physics only; 1 = the calling
+        thread; bit-identical at any count)."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if physics_threads is not None and physics_threads < 1:
             raise ValueError(f"physics_threads must be >= 1, got {physics_threads}")
+        if batch_threads < 1:
+            raise ValueError(f"batch_threads must be >= 1, got {batch_threads}")
         self.envs: list[SkillEnv] = [
             make_env(name, episode_steps=episode_steps, layout_seed=layout_seed) for _ in range(num_envs)
         ]
@@ -94,7 +99,7 @@ class VectorEnv:
         self._pool: ThreadPoolExecutor | None = None
         # one batch per group holds the state between resets; the envs draw each reset
         batched = first.batched_physics and not pixels
-        self._physics = [BatchedPhysics(self.envs[g], g) for g in self.groups] if batched else None
+        self._physics = [BatchedPhysics(self.envs[g], g, batch_threads) for g in self.groups] if batched else None
 
     @property
     def pipelined(self) -> bool:
