@@ -13,9 +13,10 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
    i.e. compilation), `compile_speedup_<h>` (compiled ÷ eager steps/s, measured interleaved) and
    `compile_break_even_steps_<h>` (steps before the compile time is paid back; inf if never).
-3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (physics threads as the trainer
-   runs it by default) ÷ a single-thread raw `mj_step` loop over the same model, and the same
-   rollout with serial physics and with 2 physics threads pipelined with the policy. Keys
+3. Rollouts: an 8-episode rollout with the `cpu`-preset policy (threads as the trainer runs it by
+   default: one group, its mujoco.batch call on 2 MuJoCo threads) ÷ a single-thread raw `mj_step`
+   loop over the same model, and the same rollout with serial physics and with 2 physics threads
+   pipelined with the policy. Keys
    `rollout_fraction_<env>`, `rollout_fraction_serial_<env>`, `rollout_fraction_pipelined_<env>`,
    `rollout_steps_per_s_<env>`, `raw_steps_per_s_<env>` for ant and half_cheetah (goal ≥ 0.9);
    `rollout_fraction_torch_<env>`: the default rollout acting through the general torch path
@@ -196,9 +197,9 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     cfg = make_config("cpu", env_name)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
     envs = {
-        "overlapped": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default physics threads
+        "overlapped": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default threads
         "torch": VectorEnv(env_name, cfg.episodes_per_epoch),  # the same, acting through TorchActor
-        "serial": VectorEnv(env_name, 8, physics_threads=1),
+        "serial": VectorEnv(env_name, 8, physics_threads=1, batch_threads=1),
         "pipelined": VectorEnv(env_name, 8, physics_threads=2),
         "batch2": VectorEnv(env_name, 8, physics_threads=1, batch_threads=2),  # one group, 2 MuJoCo threads
     }
@@ -228,6 +229,7 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
         f"rollout_fraction_torch_{env_name}": med["torch"] / med["raw"],
         f"rollout_fraction_batch2_{env_name}": med["batch2"] / med["raw"],
         f"physics_threads_{env_name}": overlapped.physics_threads,
+        f"batch_threads_{env_name}": overlapped.batch_threads,
     }
 
 
@@ -349,7 +351,8 @@ def main() -> None:
             figures |= r
             print(
                 f"rollout ({env_name}, 8 episodes × 200 steps, cpu-preset policy, "
-                f"{r[f'physics_threads_{env_name}']} physics threads): {r[f'rollout_steps_per_s_{env_name}']:.0f} env "
+                f"{r[f'physics_threads_{env_name}']} group(s) × {r[f'batch_threads_{env_name}']} MuJoCo threads): "
+                f"{r[f'rollout_steps_per_s_{env_name}']:.0f} env "
                 f"steps/s = {100 * r[f'rollout_fraction_{env_name}']:.0f} % of a one-thread mj_step loop "
                 f"(serial physics {100 * r[f'rollout_fraction_serial_{env_name}']:.0f} %, 2 threads pipelined "
                 f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %, one batch call on 2 threads "

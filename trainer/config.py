@@ -41,7 +41,7 @@ class Config:
     seed: int = 0
     device: str = "auto"  # auto → cuda when available
     threads: int = 0  # torch intra-op threads; 0 = auto (trainer/threads.py: 1 on ≤ 4 cores or small nets)
-    physics_threads: int = 0  # rollout physics threads; 0 = auto (trainer/envs/vector.py), 1 = serial
+    physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
     compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
     fused_adam: bool = False  # Adam's fused kernel (trainer/optim.py): faster, rounds differently from foreach
     # networks and optimisation (Table 5)

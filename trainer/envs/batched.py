@@ -6,9 +6,8 @@ batch's state is read as (n, ·) arrays: no Python loop per env. The envs themse
 each reset (Gymnasium's reset noise, the same as stepping them one by one); their whole
 integration state, warm start included, then moves into the batch, whose steps are bit-identical
 to `mj_step` on each env's MjData (MuJoCo's guarantee; tests/core/test_overlap.py checks it).
-By default the batch runs on its caller's thread only (nthread 1): VectorEnv's worker threads step
-the groups; `nthread` > 1 spreads one group's envs over MuJoCo's own threads within the call
-(bit-identical at any count, and no policy-side change: the rows still act as one group).
+`nthread` > 1 spreads the group's envs over MuJoCo's own threads within the call (VectorEnv's
+default, 2: bit-identical at any count, and no policy-side change: the rows still act as one group).
 """
 
 from __future__ import annotations

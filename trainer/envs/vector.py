@@ -49,14 +49,15 @@ class StepBatch:
         )
 
 
-# Envs whose physics outweighs the threads' hand-over cost (Ant's step is ≈ 5× HalfCheetah's and
-# ≈ 30× the point's); `make bench-update` prints `rollout_fraction_<env>` serial and pipelined.
-OVERLAP_BY_DEFAULT = frozenset({"ant"})
+# The default: one group, whose `mujoco.batch` call spreads its envs over 2 MuJoCo threads (the
+# policy needs the rest of a 2-core machine). Measured on 2 quiet cores (`make bench-update`,
+# docs/results.md): HalfCheetah 68 % of a raw mj_step loop serial, 59 % pipelined, 97 % so; Ant
+# 71 % serial, 96 % pipelined, 110 % so. Bit-identical at any count (tests/core/test_overlap.py).
+DEFAULT_BATCH_THREADS = 2
 
 
-def default_physics_threads(name: str, num_envs: int) -> int:
-    """Physics worker threads: 2 (the policy needs the rest of a 2-core machine) for heavy physics, else 1."""
-    return max(1, min(2, os.cpu_count() or 1, num_envs)) if name in OVERLAP_BY_DEFAULT else 1
+def default_batch_threads(num_envs: int) -> int:
+    return max(1, min(DEFAULT_BATCH_THREADS, os.cpu_count() or 1, num_envs))
 
 
 class VectorEnv:
@@ -67,16 +68,18 @@ class VectorEnv:
         episode_steps: int = 200,
         layout_seed: int | None = None,
         physics_threads: int | None = None,
-        batch_threads: int = 1,
+        batch_threads: int | None = None,
     ) -> None:
-        """`physics_threads`: groups of envs stepped in parallel by `rollout` (None = the default
-        above; 1 = serial, as `step`; pixel envs are always serial). `batch_threads`: MuJoCo threads
-        within each group's `mujoco.batch` call (envs with batched physics only; 1 = the calling
-        thread; bit-identical at any count)."""
+        """`physics_threads`: groups of envs stepped in parallel by `rollout`, each by a worker
+        thread overlapping the policy (None or 1 = one group, serial, as `step`; pixel envs are
+        always serial). `batch_threads`: MuJoCo threads within each group's `mujoco.batch` call
+        (envs with batched physics only; None = the default above, 1 = the calling thread)."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if physics_threads is not None and physics_threads < 1:
             raise ValueError(f"physics_threads must be >= 1, got {physics_threads}")
+        if batch_threads is None:
+            batch_threads = default_batch_threads(num_envs) if (physics_threads or 1) == 1 else 1
         if batch_threads < 1:
             raise ValueError(f"batch_threads must be >= 1, got {batch_threads}")
         self.envs: list[SkillEnv] = [
@@ -92,14 +95,14 @@ class VectorEnv:
         self.position_dims, self.nq, self.nv = first.position_dims, first.nq, first.nv
         self.obs_mean, self.obs_std = first.obs_mean, first.obs_std
         pixels = len(self.obs_shape) > 1
-        threads = default_physics_threads(name, num_envs) if physics_threads is None else physics_threads
-        self.physics_threads = 1 if pixels else min(threads, num_envs)
+        self.physics_threads = 1 if pixels else min(physics_threads or 1, num_envs)
         bounds = np.linspace(0, num_envs, self.physics_threads + 1).round().astype(int)
         self.groups = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
         self._pool: ThreadPoolExecutor | None = None
         # one batch per group holds the state between resets; the envs draw each reset
         batched = first.batched_physics and not pixels
         self._physics = [BatchedPhysics(self.envs[g], g, batch_threads) for g in self.groups] if batched else None
+        self.batch_threads = self._physics[0].batch.nthread if self._physics else 1
 
     @property
     def pipelined(self) -> bool:
