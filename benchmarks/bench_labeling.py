@@ -8,8 +8,9 @@ Measures, in one run:
   first pose (target ≤ 300 ms); also the server's share (key received → first frame flushed);
 - replay rate for ant: pose updates the server sends per second while a segment loops at 1× and
   4× (target 30 fps), and the server's work per update against the 33 ms a 30 fps frame allows
-  (what holds on a busy machine); the browser's own frame rate is printed too, but on a machine
-  without a GPU it measures software WebGL, not the UI;
+  (what holds on a busy machine); the browser's own frame rate is printed too, playing, paused,
+  and on viser's empty page (on a machine without a GPU it measures software WebGL and viser's
+  page; `bench_browser_ceiling.py` measures what each update costs there);
 - the same key → next segment with three labelers at once and redundancy 2 (target ≤ 200 ms;
   redundancy is a run setting of the service where it exists, else the bench says r = 1);
 - UI overhead per label: the median wait above, as a share of the ≈ 3.6 s per label the
@@ -18,7 +19,8 @@ Measures, in one run:
 
 Needs Debian's chromium (`apt-get install -y chromium`) and `pip install playwright`.
 JSON (runs/bench/labeling.json): one key per printed row, its name in snake case with the unit
-(e.g. `in_page_median_ms`, `ant_scene_build_ms`, `server_updates_at_1x_fps`).
+(e.g. `in_page_median_ms`, `three_labelers_in_page_median_ms`, `ant_scene_build_ms`,
+`server_updates_at_1x_fps`, `browser_ant_paused_fps`).
 """
 
 from __future__ import annotations
@@ -181,8 +183,8 @@ def replay_rates(stack: Stack, browser: object, seconds: float) -> dict[str, flo
 
 
 def empty_scene_fps(browser: object, seconds: float) -> float:
-    """The page's frame rate for a viser server with nothing added: the most any replay can draw in
-    this browser, whatever the scene and the server do."""
+    """The page's frame rate for a viser server with nothing added and nothing sent: what drawing
+    alone allows in this browser (bench_browser_ceiling.py adds the cost of updates)."""
     import viser
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
@@ -226,8 +228,8 @@ def main() -> int:
     row("in page, p95", pct(in_page, 95), "ms", "≤ 300 ms", pct(in_page, 95) / 300)
     row("server share (key → frame flushed), median", pct(server, 50), "ms", "(info)")
     print(f"the same with three labelers at once, redundancy {redundancy} (ant):")
-    row("in page, median", pct(crowd, 50), "ms", "≤ 200 ms", pct(crowd, 50) / 200)
-    row("in page, p95", pct(crowd, 95), "ms", "(info)")
+    row("three labelers, in page, median", pct(crowd, 50), "ms", "≤ 200 ms", pct(crowd, 50) / 200)
+    row("three labelers, in page, p95", pct(crowd, 95), "ms", "(info)")
     print("replay rate for ant (pose updates per second):")
     for name, rate in rates.items():
         if "work" in name:
@@ -236,7 +238,7 @@ def main() -> int:
             row(name, rate, "fps", "30 fps", rate / 30)
         else:
             row(name, rate, "fps", "≥ 25 fps (software WebGL here)" if name == "browser 1x" else "(info)")
-    print("  (the empty scene is this browser's ceiling: a replay cannot draw faster than viser's bare page)")
+    print("  (paused and empty: drawing is cheap here; each pose update costs the page: make bench-browser-ceiling)")
     wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
     print("UI overhead per label:")
     row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
