@@ -3,13 +3,14 @@ the measured limit with its reason"): viser pages with nothing of ours in them, 
 headless Chromium (software WebGL) and viewport as `bench_labeling.py`.
 
 For each case, frames the page draws per second (requestAnimationFrame) while the server either
-sends nothing or moves one node at `--hz` (one message per update, as a replay tick is one
-batch):
+sends nothing or moves nodes at `--hz` (one atomic batch per tick, as a replay tick is):
   - an empty scene, still and with one box moved;
-  - `--static` boxes that never move beside the moved box (the labeling page's ant scene has
-    about 30 nodes: 14 frames, 9 mesh batches, 6 line sets, the grid, a label, the floor).
-If a moved node costs frames in proportion to the nodes that did not move, the browser's work per
-update, not the scene's drawing, is the ceiling.
+  - `--static` boxes that never move beside one moved box (the labeling page's ant scene has
+    about 30 nodes: 14 frames, 9 mesh batches, 6 line sets, the grid, a label, the floor);
+  - the same with `--moved` boxes moved per tick (an ant tick updates about 20 properties: 9 mesh
+    batches' positions and orientations, the trail, the followed frame).
+If the frame rate falls with what each tick changes while drawing the still scene is cheap, the
+browser's work per update, not the drawing, is the ceiling.
 
     python benchmarks/bench_browser_ceiling.py          # make bench-browser-ceiling
 Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case below.
@@ -31,7 +32,7 @@ from chromium import chromium
 from record import record
 
 
-def page_fps(browser: object, n_static: int, moving: bool, hz: float, seconds: float, viewport: dict) -> float:
+def page_fps(browser: object, n_static: int, n_moved: int, hz: float, seconds: float, viewport: dict) -> float:
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     server.scene.configure_environment_map(hdri=None)  # as the labeling UI does
     server.scene.configure_default_lights(cast_shadow=False)
@@ -43,14 +44,19 @@ def page_fps(browser: object, n_static: int, moving: bool, hz: float, seconds: f
             cast_shadow=False,
             receive_shadow=False,
         )
-    mover = server.scene.add_box("/mover", dimensions=(0.3,) * 3, cast_shadow=False, receive_shadow=False)
+    movers = [
+        server.scene.add_box(f"/mover{i}", dimensions=(0.1,) * 3, position=(0.15 * i, 0.0, 0.0), cast_shadow=False)
+        for i in range(max(n_moved, 1))
+    ]
     stop = threading.Event()
 
     def move() -> None:
         tick = 0
-        while moving and not stop.wait(1.0 / hz):
+        while n_moved and not stop.wait(1.0 / hz):
             tick += 1
-            mover.position = (0.01 * (tick % 100), 0.0, 0.0)
+            with server.atomic():  # one batch per tick, as a replay tick is
+                for i, mover in enumerate(movers):
+                    mover.position = (0.15 * i, 0.0, 0.01 * (tick % 100))
 
     thread = threading.Thread(target=move, daemon=True)
     thread.start()
@@ -71,24 +77,27 @@ def page_fps(browser: object, n_static: int, moving: bool, hz: float, seconds: f
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--static", type=int, default=30, help="nodes that never move, beside the moved one")
+    parser.add_argument("--moved", type=int, default=20, help="nodes moved per tick in the last case (ant: ≈ 20)")
     parser.add_argument("--hz", type=float, default=30.0, help="updates per second of the moved node (a 1x replay)")
     parser.add_argument("--seconds", type=float, default=3.0, help="seconds to count frames, per case")
     parser.add_argument("--viewport", default="1280x800")
     args = parser.parse_args()
     width, height = (int(v) for v in args.viewport.split("x"))
     viewport = {"width": width, "height": height}
+    n = args.static
     cases = {
-        "empty_still": (0, False),
-        "empty_one_moved": (0, True),
-        f"static{args.static}_still": (args.static, False),
-        f"static{args.static}_one_moved": (args.static, True),
+        "empty_still": (0, 0),
+        "empty_one_moved": (0, 1),
+        f"static{n}_still": (n, 0),
+        f"static{n}_one_moved": (n, 1),
+        f"static{n}_{args.moved}_moved": (n, args.moved),
     }
     figures: dict[str, float | int | str] = {"hz": args.hz, "static": args.static, "viewport": args.viewport}
     with chromium() as browser:
         print(f"bench-browser-ceiling · chromium {browser.version} · viewport {args.viewport} · {args.hz:g} Hz")
-        for name, (n_static, moving) in cases.items():
+        for name, (n_static, n_moved) in cases.items():
             start = time.perf_counter()
-            fps = page_fps(browser, n_static, moving, args.hz, args.seconds, viewport)
+            fps = page_fps(browser, n_static, n_moved, args.hz, args.seconds, viewport)
             figures[f"{name}_fps"] = fps
             print(f"  {name:<24} {fps:6.1f} frames/s   ({time.perf_counter() - start:.0f} s)", flush=True)
     record("browser_ceiling", figures)
