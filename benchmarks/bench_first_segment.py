@@ -47,7 +47,7 @@ from collie.client import CollieClient
 from collie.schemas import StartupMark
 from collie.startup import read_marks
 
-TIMEOUT_S = {"point": 600.0, "ant": 1800.0}  # ant: the first session is at epoch 360 (≈ 10 min quiet)
+TIMEOUT_S = {"point": 600.0, "ant": 1800.0}  # ant: the first session is at epoch 240 (≈ 9 min quiet)
 TRAINER_KINDS = ("collect", "update", "evaluate", "checkpoint")  # summed over the epochs before the first session
 
 

@@ -281,17 +281,16 @@ def feedback_schedule(epochs: int, sessions: int = 8) -> dict[str, int]:
     return dict(warmup=warmup, feedback_every=every)
 
 
-# Ant and HalfCheetah on 2 cores (`cpu` preset), about an hour per run with two runs sharing the
-# machine (one torch thread each). Chosen by reasoning from one calibration (REFERENCE_NOTES §5:
-# Ant, this shape with 32 gradient steps per epoch: 1200 epochs = 38 k gradient steps took 1505 s
-# and reached 163 bins, median final distance 5.6; 16 gradient steps per epoch reached only 57 bins
-# in the same epochs, so progress follows gradient steps). From it an epoch costs ≈ 0.57 s of
-# rollout plus ≈ 0.021 s per gradient step here. We take the paper's 50 gradient steps per epoch
-# (its update-to-data ratio) and as many epochs as fit: Ant 1800 epochs (2.9 M env steps, 90 k
-# gradient steps, ≈ 49 min estimated), HalfCheetah, whose physics is ≈ 5× cheaper, 2400 epochs
-# (3.8 M env steps, 120 k gradient steps, ≈ 50 min estimated). Both keep the calibrated 2×256
-# networks, lr 1e-3 and batch 256; the paper's are 2×1024 and 1e-4 over 10 000 epochs (16 M env
-# steps, 500 k gradient steps). `make bench-robots` measures whether this reaches the targets.
+# Ant and HalfCheetah on 2 cores (`cpu` preset), chosen by experiment (docs/results.md, "Real robots
+# at CPU scale"): METRA on Ant North (seed 0) with the paper's 50 gradient steps per epoch and
+# 2×256 nets reached a median final distance of 9.0 / 9.8 / 13.1 units and 251 / 332 / 518 bins at
+# epochs 1000 / 1100 / 1200, at ≈ 2.25–2.4 s per epoch alone on a quiet machine (1.55 s of it
+# gradient steps). So Ant gets 1200 epochs (1.9 M env steps, 60 k gradient steps, ≈ 47 min for
+# METRA, ≈ 54 min for COLLIE, whose guided update costs 1.4×). HalfCheetah's final-x spread passed
+# 20 m by epoch 400 (49 m) and was 113 m at 700; its epoch costs ≈ 1.7 s (physics ≈ 5× cheaper),
+# so 1600 epochs (2.6 M env steps, 80 k gradient steps) fit the hour with COLLIE's update. Both keep
+# lr 1e-3 and batch 256; the paper's are 2×1024 and 1e-4 over 10 000 epochs (16 M env steps,
+# 500 k gradient steps).
 ROBOT_CPU: dict[str, dict[str, Any]] = {
     env: dict(
         epochs=epochs,
@@ -302,7 +301,7 @@ ROBOT_CPU: dict[str, dict[str, Any]] = {
         checkpoint_every=100,
         **feedback_schedule(epochs),
     )
-    for env, epochs in (("ant", 1800), ("half_cheetah", 2400))
+    for env, epochs in (("ant", 1200), ("half_cheetah", 1600))
 }
 PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
     preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()

@@ -12,7 +12,7 @@ from trainer.loop import Trainer
 from trainer.obs_stats import REFERENCE_STATS
 
 
-@pytest.mark.parametrize(("env", "epochs"), [("ant", 1800), ("half_cheetah", 2400)])
+@pytest.mark.parametrize(("env", "epochs"), [("ant", 1200), ("half_cheetah", 1600)])
 def test_cpu_robot_budget_and_feedback_proportions(env: str, epochs: int) -> None:
     c = make_config("cpu", env)
     assert (c.epochs, c.grad_steps, c.hidden, c.layers, c.lr, c.batch_size) == (epochs, 50, 256, 2, 1e-3, 256)
