@@ -52,7 +52,10 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # either way, tabs hand their claims back first
         signal.signal(sig, lambda *_: stop.set())
-    stop.wait()
+    # Wait in short steps: a signal the kernel hands to one of viser's threads runs our handler only
+    # when the main thread next runs Python, which a plain wait() never does.
+    while not stop.wait(0.2):
+        pass
     app.stop()
     return 0
 
