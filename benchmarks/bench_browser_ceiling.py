@@ -27,9 +27,14 @@ from pathlib import Path
 import viser
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from bench_labeling import FPS_JS
 from chromium import chromium
 from record import record
+
+FPS_JS = """(ms) => new Promise((done) => {
+  let n = 0; const t0 = performance.now();
+  const tick = (t) => { n += 1; if (t - t0 < ms) requestAnimationFrame(tick); else done(n / ((t - t0) / 1000)); };
+  requestAnimationFrame(tick);
+})"""  # frames the page draws per second over `ms`
 
 
 def page_fps(browser: object, n_static: int, n_moved: int, hz: float, seconds: float, viewport: dict) -> float:
@@ -46,7 +51,7 @@ def page_fps(browser: object, n_static: int, n_moved: int, hz: float, seconds: f
         )
     movers = [
         server.scene.add_box(f"/mover{i}", dimensions=(0.1,) * 3, position=(0.15 * i, 0.0, 0.0), cast_shadow=False)
-        for i in range(max(n_moved, 1))
+        for i in range(n_moved)
     ]
     stop = threading.Event()
 

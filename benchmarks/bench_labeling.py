@@ -38,6 +38,7 @@ from playwright.sync_api import Page
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import ui.page
+from bench_browser_ceiling import FPS_JS, page_fps
 from chromium import chromium
 from record import record
 from ui.page import open_labeler, wait_segment
@@ -60,12 +61,6 @@ TIMING_JS = """() => {
     if (id !== null && id !== last) { last = id; window.__lat.push(performance.now() - window.__keyAt); }
   }).observe(document.body, {subtree: true, childList: true, characterData: true});
 }"""
-
-FPS_JS = """(ms) => new Promise((done) => {
-  let n = 0; const t0 = performance.now();
-  const tick = (t) => { n += 1; if (t - t0 < ms) requestAnimationFrame(tick); else done(n / ((t - t0) / 1000)); };
-  requestAnimationFrame(tick);
-})"""
 
 
 def pct(values: list[float], q: float) -> float:
@@ -178,26 +173,9 @@ def replay_rates(stack: Stack, browser: object, seconds: float) -> dict[str, flo
     session.toggle_play()  # paused: the same scene, no pose updates
     rates["browser, ant paused"] = float(page.evaluate(FPS_JS, seconds * 1000))
     page.context.close()
-    rates["browser, empty viser scene"] = empty_scene_fps(browser, seconds)
+    # viser's page with nothing of ours and nothing sent: what drawing alone allows in this browser
+    rates["browser, empty viser scene"] = page_fps(browser, 0, 0, 30.0, seconds, ui.page.VIEWPORT)
     return rates
-
-
-def empty_scene_fps(browser: object, seconds: float) -> float:
-    """The page's frame rate for a viser server with nothing added and nothing sent: what drawing
-    alone allows in this browser (bench_browser_ceiling.py adds the cost of updates)."""
-    import viser
-
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        page: Page = browser.new_page(viewport=ui.page.VIEWPORT)  # type: ignore[attr-defined]
-        page.goto(f"http://127.0.0.1:{server.get_port()}/")
-        page.wait_for_selector("canvas", timeout=60_000)
-        page.wait_for_timeout(1000)  # past the first frames' shader compiles
-        fps = float(page.evaluate(FPS_JS, seconds * 1000))
-        page.context.close()
-        return fps
-    finally:
-        server.stop()
 
 
 def main() -> int:
