@@ -14,7 +14,6 @@ from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.presenter import Presenter
 from labeling_ui.service import ServiceLink
 from labeling_ui.stream_waiter import StreamWaiter
-from labeling_ui.tab import Phase
 
 
 class Identity:
@@ -54,7 +53,7 @@ class Identity:
         me = self.link.login()
         with self.tab as state:
             before = state.accepted(me.name, me.role)
-            watching = state.phase in (Phase.WATCHING, Phase.REVIEWING)
+            watching = state.replay_only
         self.panels.greet(me.name, me.role, before, labels=not watching)
         if before is not None:  # loud: this tab was someone else a moment ago
             self.panels.notify("You are now " + me.name, f"this tab was signed in as {before}", "red")

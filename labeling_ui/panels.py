@@ -192,19 +192,12 @@ class Panels:
             for element in self.segment_only:
                 element.visible = False
 
-    def show_watch(self, status: str, detail: str, n_frames: int) -> None:
-        """Watch mode: the replay and its context, nothing to label."""
+    def show_replay_only(self, status: str, detail: str, n_frames: int, rule: bool = False) -> None:
+        """Watch or review mode: the replay and its context, nothing to label; `rule`: the task's
+        mixed-segment rule stays on screen (a review judges one segment, watch mode none)."""
         with self.client.atomic():
             self._screen(status, replay=True)
-            self.rule.visible = False
-            self.frame.max = max(n_frames - 1, 1)
-            self.segment.content = detail
-
-    def show_review(self, status: str, detail: str, n_frames: int) -> None:
-        """Review mode: one query's replay and its context (labels by labeler), nothing to label."""
-        with self.client.atomic():
-            self._screen(status, replay=True)
-            self.rule.visible = True
+            self.rule.visible = rule
             self.frame.max = max(n_frames - 1, 1)
             self.segment.content = detail
 
@@ -324,10 +317,11 @@ class Panels:
     def greet(self, name: str, role: str, before: str | None = None, labels: bool = True) -> None:
         """Who this tab is, always on screen; an operator is marked, a change of identity is loud.
         `labels`: this tab may label (not watch or review mode)."""
-        marker = (
-            " · ⚠️ **operator**: your labels count as the operator's" if labels else " · operator (labels nothing here)"
-        )
-        marker = marker if role == "operator" else ""
+        marker = ""
+        if role == "operator" and labels:
+            marker = " · ⚠️ **operator**: your labels count as the operator's"
+        elif role == "operator":
+            marker = " · operator (labels nothing here)"
         changed = f"  \n🔴 **This tab was signed in as {before}**: it is now {name}." if before else ""
         self.title.content = f"**collie · labeling** — signed in as **{name}**{marker}{changed}"
 

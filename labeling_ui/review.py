@@ -6,18 +6,17 @@ Runs on the tab's worker; draws through the tab's screen."""
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
+from pydantic import TypeAdapter, ValidationError
 
 from collie.dashboard_schemas import QueryReview
-from collie.schemas import RunRead
+from collie.schemas import QueryId, RunRead
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import LABEL_NAMES, skill_text
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import Rejected, ServiceLink
 
-QUERY_ID = re.compile(r"[A-Za-z0-9_.:-]{1,64}")  # collie.schemas.QueryId
+QUERY_ID: TypeAdapter[str] = TypeAdapter(QueryId)
 
 
 def _word(value: int | None) -> str:
@@ -50,7 +49,9 @@ def show_review(screen: TabScreen, link: ServiceLink, role: str | None, run_id: 
     if role != "operator":
         screen.show_alone(f"⚠️ **A review needs an operator token**: this tab is signed in as a {role}.")
         return
-    if not QUERY_ID.fullmatch(query_id):
+    try:
+        QUERY_ID.validate_python(query_id)
+    except ValidationError:
         screen.show_alone(f"⚠️ **Cannot replay {where}**: `{query_id}` is not a query id.")
         return
     try:

@@ -82,7 +82,7 @@ class TabScreen:
             self.scene.set_segment(poser, None)
             self.player.load(poser.n_frames)
             if watching:
-                self.panels.show_watch(status, detail, poser.n_frames)
+                self.panels.show_replay_only(status, detail, poser.n_frames)
             else:
                 self.panels.show_skills_while_waiting(detail, poser.n_frames)
         self.client.flush()
@@ -101,7 +101,7 @@ class TabScreen:
         with self.client.atomic():
             self.scene.set_segment(poser, earlier)
             self.player.load(poser.n_frames)
-            self.panels.show_review(status, detail, poser.n_frames)
+            self.panels.show_replay_only(status, detail, poser.n_frames, rule=True)
             self.panels.loop.value = True  # type: ignore[misc]  # viser types .value read-only; it is settable
         self.client.flush()
         task = self.task_of(run)

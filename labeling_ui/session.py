@@ -188,7 +188,7 @@ class LabelerSession:
 
     def _save_prefs(self) -> None:
         with self.tab as state:
-            who, watching = state.who, state.phase in (Phase.WATCHING, Phase.REVIEWING)
+            who, watching = state.who, state.replay_only
         if who is not None and not watching:
             save_prefs(self.client, who, self.presenter.prefs())
 

@@ -122,6 +122,11 @@ class TabState:
     watch_run: int | None = None
     review: Key | None = None  # the query an operator reviews in this tab (it never labels)
 
+    @property
+    def replay_only(self) -> bool:
+        """Watch or review mode: the tab replays and labels nothing (no prefs, no label buttons)."""
+        return self.phase in (Phase.WATCHING, Phase.REVIEWING)
+
     # ---------------------------------------------------------------- the worker's next step
 
     def next_step(self, linked: bool, now: float) -> Step:
