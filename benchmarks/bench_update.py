@@ -197,17 +197,17 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     cfg = make_config("cpu", env_name)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
     envs = {
-        "overlapped": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default threads
+        "default": VectorEnv(env_name, cfg.episodes_per_epoch),  # the default threads
         "torch": VectorEnv(env_name, cfg.episodes_per_epoch),  # the same, acting through TorchActor
         "serial": VectorEnv(env_name, 8, physics_threads=1, batch_threads=1),
         "pipelined": VectorEnv(env_name, 8, physics_threads=2),
         "batch2": VectorEnv(env_name, 8, physics_threads=1, batch_threads=2),  # one group, 2 MuJoCo threads
     }
-    overlapped = envs["overlapped"]
-    agent = Metra(overlapped.obs_dim, overlapped.action_dim, prior, cfg, torch.device("cpu"))
-    norm = Normaliser(overlapped.obs_mean, overlapped.obs_std)
+    default = envs["default"]
+    agent = Metra(default.obs_dim, default.action_dim, prior, cfg, torch.device("cpu"))
+    norm = Normaliser(default.obs_mean, default.obs_std)
     rng = np.random.default_rng(0)
-    n = 8 * overlapped.episode_steps
+    n = 8 * default.episode_steps
     rates: dict[str, list[float]] = {kind: [] for kind in (*envs, "raw")}
     for r in range(rounds):  # interleaved
         skills = prior.sample(8, rng)
@@ -221,15 +221,15 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     for env in envs.values():
         env.close()
     return {
-        f"rollout_steps_per_s_{env_name}": med["overlapped"],
+        f"rollout_steps_per_s_{env_name}": med["default"],
         f"raw_steps_per_s_{env_name}": med["raw"],
-        f"rollout_fraction_{env_name}": med["overlapped"] / med["raw"],
+        f"rollout_fraction_{env_name}": med["default"] / med["raw"],
         f"rollout_fraction_serial_{env_name}": med["serial"] / med["raw"],
         f"rollout_fraction_pipelined_{env_name}": med["pipelined"] / med["raw"],
         f"rollout_fraction_torch_{env_name}": med["torch"] / med["raw"],
         f"rollout_fraction_batch2_{env_name}": med["batch2"] / med["raw"],
-        f"physics_threads_{env_name}": overlapped.physics_threads,
-        f"batch_threads_{env_name}": overlapped.batch_threads,
+        f"physics_threads_{env_name}": default.physics_threads,
+        f"batch_threads_{env_name}": default.batch_threads,
     }
 
 
