@@ -9,17 +9,27 @@ sends nothing or moves nodes at `--hz` (one atomic batch per tick, as a replay t
     about 30 nodes: 14 frames, 9 mesh batches, 6 line sets, the grid, a label, the floor);
   - the same with `--moved` boxes moved per tick (an ant tick updates about 20 properties: 9 mesh
     batches' positions and orientations, the trail, the followed frame).
-If the frame rate falls with what each tick changes while drawing the still scene is cheap, the
-browser's work per update, not the drawing, is the ceiling.
+viser draws on demand (react-three-fiber's frameloop="demand"): a page with nothing changing
+draws nothing, so a still page's rate is requestAnimationFrame's, not a drawing rate. Every
+update makes the page draw the whole scene once.
+
+Then the labeling page itself (a real service and labeling UI, an ant segment at 1×), with its
+parts taken away one after another while it plays: as labelers see it; without the floor grid;
+and without the paths and the region tint; and without the robot (the followed world frame still
+moves every tick, so the page still draws every tick). Last, the page as labelers see it at half
+the pixels per side (viser's `?fixedDpr=0.5`). What each removal gains is what that part costs
+a frame.
 
     python benchmarks/bench_browser_ceiling.py          # make bench-browser-ceiling
-Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case below.
+Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case below, and `ant_as_seen_fps`,
+`ant_no_grid_fps`, `ant_no_grid_paths_fps`, `ant_no_robot_fps`, `ant_half_resolution_fps`.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -27,8 +37,11 @@ from pathlib import Path
 import viser
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import ui.page
 from chromium import chromium
 from record import record
+from ui.page import open_labeler, wait_segment
+from ui.stack import real_stack
 
 FPS_JS = """(ms) => new Promise((done) => {
   let n = 0; const t0 = performance.now();
@@ -79,6 +92,39 @@ def page_fps(browser: object, n_static: int, n_moved: int, hz: float, seconds: f
         server.stop()
 
 
+def ant_parts(browser: object, seconds: float) -> dict[str, float]:
+    """Frames the labeling page draws for an ant segment at 1×, its parts taken away one by one."""
+    rates: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack:
+        run = stack.post_run("ant", 1, seed=12)
+        app = stack.ui(run.id)
+        url = app.labeler_url(stack.new_labeler("ceiling"))
+        for name, query in (("as_seen", ""), ("half_resolution", "&fixedDpr=0.5")):
+            page = open_labeler(browser, url + query)
+            wait_segment(page, timeout_s=90)
+            page.wait_for_timeout(1500)
+            rates[name] = float(page.evaluate(FPS_JS, seconds * 1000))
+            if name == "as_seen":
+                session = app.sessions[max(app.sessions)]  # this page's
+                scene = session.scene
+                # the grid is mjviser's floor plane; a node added under its name replaces it
+                scene.client.scene.add_grid("/fixed_bodies/world/floor", visible=False)
+                rates["no_grid"] = _fps_after(page, seconds)
+                for handle in scene._overlays + scene._floor:
+                    handle.visible = False
+                rates["no_grid_paths"] = _fps_after(page, seconds)
+                for group in scene._mj._mesh_groups:
+                    group.handle.visible = False
+                rates["no_robot"] = _fps_after(page, seconds)
+            page.context.close()
+    return rates
+
+
+def _fps_after(page: object, seconds: float) -> float:
+    page.wait_for_timeout(1500)  # type: ignore[attr-defined]  # the change has reached the page
+    return float(page.evaluate(FPS_JS, seconds * 1000))  # type: ignore[attr-defined]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--static", type=int, default=30, help="nodes that never move, beside the moved one")
@@ -105,6 +151,11 @@ def main() -> int:
             fps = page_fps(browser, n_static, n_moved, args.hz, args.seconds, viewport)
             figures[f"{name}_fps"] = fps
             print(f"  {name:<24} {fps:6.1f} frames/s   ({time.perf_counter() - start:.0f} s)", flush=True)
+        ui.page.VIEWPORT = viewport
+        print("the labeling page, an ant segment playing at 1x (parts taken away one after another):")
+        for name, fps in ant_parts(browser, args.seconds).items():
+            figures[f"ant_{name}_fps"] = fps
+            print(f"  ant {name:<20} {fps:6.1f} frames/s", flush=True)
     record("browser_ceiling", figures)
     return 0
 

@@ -10,7 +10,7 @@ Measures, in one run:
   4× (target 30 fps), and the server's work per update against the 33 ms a 30 fps frame allows
   (what holds on a busy machine); the browser's own frame rate is printed too, playing, paused,
   and on viser's empty page (on a machine without a GPU it measures software WebGL and viser's
-  page; `bench_browser_ceiling.py` measures what each update costs there);
+  page; `bench_browser_ceiling.py` measures what each part of the scene costs a frame there);
 - the same key → next segment with three labelers at once and redundancy 2 (target ≤ 200 ms;
   redundancy is a run setting of the service where it exists, else the bench says r = 1);
 - UI overhead per label: the median wait above, as a share of the ≈ 3.6 s per label the
@@ -216,7 +216,7 @@ def main() -> int:
             row(name, rate, "fps", "30 fps", rate / 30)
         else:
             row(name, rate, "fps", "≥ 25 fps (software WebGL here)" if name == "browser 1x" else "(info)")
-    print("  (paused and empty: drawing is cheap here; each pose update costs the page: make bench-browser-ceiling)")
+    print("  (paused, viser draws nothing: not a drawing rate; make bench-browser-ceiling: what each part costs)")
     wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
     print("UI overhead per label:")
     row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
