@@ -20,12 +20,15 @@ Measures, in one run:
 Needs Debian's chromium (`apt-get install -y chromium`) and `pip install playwright`.
 JSON (runs/bench/labeling.json): one key per printed row, its name in snake case with the unit
 (e.g. `in_page_median_ms`, `three_labelers_in_page_median_ms`, `ant_scene_build_ms`,
-`server_updates_at_1x_fps`, `browser_ant_paused_fps`).
+`server_updates_at_1x_fps`, `browser_ant_paused_fps`); `--only-crowd` writes only the
+three-labeler rows, to runs/bench/labeling_crowd.json. The `three_labelers_segments_still_*`
+rows are a diagnostic: the same crowd with each segment held on its first frame.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import re
 import statistics
 import sys
@@ -128,12 +131,20 @@ def label_rounds(pages: list[Page], current: list[str], n: int, think_s: float) 
 
 
 def crowd_latency(
-    stack: Stack, browser: object, n: int, think_s: float, labelers: int = 3, redundancy: int = 2
+    stack: Stack,
+    browser: object,
+    n: int,
+    think_s: float,
+    labelers: int = 3,
+    redundancy: int = 2,
+    playing: bool = True,
 ) -> tuple[list[float], int]:
     """`labelers` people labelling one ant run at once (each in their own browser context; each
     round their keys are pressed in the same moment), each query wanted `redundancy` times:
     in-page key → next segment ms over every labeler, and the redundancy actually used (1 where
-    the service has no such setting)."""
+    the service has no such setting). `playing=False` (a diagnostic, not what labelers get):
+    every segment stays on its first frame, so the pages draw once per segment instead of at
+    every replay tick, which separates the browsers' drawing from the rest of the path."""
     try:
         run = stack.post_run("ant", n * labelers + labelers, seed=13, redundancy=redundancy)
     except ValueError:
@@ -141,10 +152,15 @@ def crowd_latency(
         run = stack.post_run("ant", n * labelers + labelers, seed=13)
     app = stack.ui(run.id, min_dwell_s=0.05, min_played=0.0)
     pages: list[Page] = [
-        open_labeler(browser, app.labeler_url(stack.new_labeler(f"crowd-{i}")))  # type: ignore[arg-type]
+        open_labeler(browser, app.labeler_url(stack.new_labeler(f"{'crowd' if playing else 'still'}-{i}")))  # type: ignore[arg-type]
         for i in range(labelers)
     ]
     current = [wait_segment(p, timeout_s=60) for p in pages]
+    if not playing:
+        for session in app.sessions.values():
+            player = session.player
+            player.load = functools.partial(type(player).load, player, play=False)  # type: ignore[method-assign]
+            player.pause()
     for p in pages:
         p.evaluate(TIMING_JS)
     label_rounds(pages, current, n, think_s)
@@ -184,44 +200,53 @@ def main() -> int:
     parser.add_argument("--think-s", type=float, default=0.6, help="pause before each key (a fast labeler)")
     parser.add_argument("--fps-s", type=float, default=3.0, help="seconds to count replay frames")
     parser.add_argument("--viewport", default="1280x800")
+    parser.add_argument("--only-crowd", action="store_true", help="only the three-labeler rows (playing and still)")
     args = parser.parse_args()
     width, height = (int(v) for v in args.viewport.split("x"))
     ui.page.VIEWPORT = {"width": width, "height": height}
 
     with tempfile.TemporaryDirectory() as tmp, real_stack(Path(tmp) / "bench.db") as stack, chromium() as browser:
-        builds = scene_builds(stack, browser, list(ENV_NAMES))
-        in_page, server = label_latency(stack, browser, args.labels, args.think_s)
+        everything = not args.only_crowd
+        builds = scene_builds(stack, browser, list(ENV_NAMES)) if everything else {}
+        in_page, server = label_latency(stack, browser, args.labels, args.think_s) if everything else ([], [])
         crowd, redundancy = crowd_latency(stack, browser, args.labels, args.think_s)
-        rates = replay_rates(stack, browser, args.fps_s)
+        still, _ = crowd_latency(stack, browser, args.labels, args.think_s, playing=False)
+        rates = replay_rates(stack, browser, args.fps_s) if everything else {}
         renderer = browser.version
 
     print(f"\nbench-labeling · chromium {renderer} · viewport {args.viewport} · {args.labels} labels")
-    print("model compile (once, as the UI starts), scene build (mjviser → viser), page open → segment shown:")
-    for env, (compile_s, build_s, shown_s) in builds.items():
-        row(f"{env} model compile at UI start", 1000 * compile_s, "ms", "(info)")
-        row(f"{env} scene build", 1000 * build_s, "ms", "≤ 1000 ms", build_s / 1.0)
-        row(f"{env} page open → segment on screen", 1000 * shown_s, "ms", "(info)")
-    print("next segment's first frame after the label key (ant):")
-    row("in page, median", pct(in_page, 50), "ms", "≤ 300 ms", pct(in_page, 50) / 300)
-    row("in page, p95", pct(in_page, 95), "ms", "≤ 300 ms", pct(in_page, 95) / 300)
-    row("server share (key → frame flushed), median", pct(server, 50), "ms", "(info)")
+    if everything:
+        print("model compile (once, as the UI starts), scene build (mjviser → viser), page open → segment shown:")
+        for env, (compile_s, build_s, shown_s) in builds.items():
+            row(f"{env} model compile at UI start", 1000 * compile_s, "ms", "(info)")
+            row(f"{env} scene build", 1000 * build_s, "ms", "≤ 1000 ms", build_s / 1.0)
+            row(f"{env} page open → segment on screen", 1000 * shown_s, "ms", "(info)")
+        print("next segment's first frame after the label key (ant):")
+        row("in page, median", pct(in_page, 50), "ms", "≤ 300 ms", pct(in_page, 50) / 300)
+        row("in page, p95", pct(in_page, 95), "ms", "≤ 300 ms", pct(in_page, 95) / 300)
+        row("server share (key → frame flushed), median", pct(server, 50), "ms", "(info)")
     print(f"the same with three labelers at once, redundancy {redundancy} (ant):")
     row("three labelers, in page, median", pct(crowd, 50), "ms", "≤ 200 ms", pct(crowd, 50) / 200)
     row("three labelers, in page, p95", pct(crowd, 95), "ms", "(info)")
-    print("replay rate for ant (pose updates per second):")
-    for name, rate in rates.items():
-        if "work" in name:
-            row(name.removesuffix(" (ms)"), rate, "ms", "≤ 33 ms", rate / (1000 / 30))
-        elif name.startswith("server"):
-            row(name, rate, "fps", "30 fps", rate / 30)
-        else:
-            row(name, rate, "fps", "≥ 25 fps (software WebGL here)" if name == "browser 1x" else "(info)")
-    print("  (paused, viser draws nothing: not a drawing rate; make bench-browser-ceiling: what each part costs)")
-    wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
-    print("UI overhead per label:")
-    row("wait per label (median key → next segment)", 1000 * wait_s, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
-    row("own time per label that still makes 1000 / h", HUMAN_S - wait_s, "s", "(info)")
-    record("labeling", FIGURES)
+    row("three labelers, segments still, median", pct(still, 50), "ms", "(diagnostic)", pct(still, 50) / 200)
+    row("three labelers, segments still, p95", pct(still, 95), "ms", "(info)")
+    print("  (still: each page draws once per segment, not per replay tick; labelers get the playing rows)")
+    if everything:
+        print("replay rate for ant (pose updates per second):")
+        for name, rate in rates.items():
+            if "work" in name:
+                row(name.removesuffix(" (ms)"), rate, "ms", "≤ 33 ms", rate / (1000 / 30))
+            elif name.startswith("server"):
+                row(name, rate, "fps", "30 fps", rate / 30)
+            else:
+                row(name, rate, "fps", "≥ 25 fps (software WebGL here)" if name == "browser 1x" else "(info)")
+        print("  (paused, viser draws nothing: not a drawing rate; make bench-browser-ceiling: what each part costs)")
+        wait_s = statistics.median(in_page) / 1000 if in_page else float("nan")
+        print("UI overhead per label:")
+        wait_ms = 1000 * wait_s
+        row("wait per label (median key → next segment)", wait_ms, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
+        row("own time per label that still makes 1000 / h", HUMAN_S - wait_s, "s", "(info)")
+    record("labeling" if everything else "labeling_crowd", FIGURES)
     return 0
 
 
