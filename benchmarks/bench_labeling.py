@@ -28,7 +28,6 @@ rows are a diagnostic: the same crowd with each segment held on its first frame.
 from __future__ import annotations
 
 import argparse
-import functools
 import re
 import statistics
 import sys
@@ -158,9 +157,8 @@ def crowd_latency(
     current = [wait_segment(p, timeout_s=60) for p in pages]
     if not playing:
         for session in app.sessions.values():
-            player = session.player
-            player.load = functools.partial(type(player).load, player, play=False)  # type: ignore[method-assign]
-            player.pause()
+            session.player.autoplay = False
+            session.player.pause()
     for p in pages:
         p.evaluate(TIMING_JS)
     label_rounds(pages, current, n, think_s)

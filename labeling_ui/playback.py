@@ -33,6 +33,7 @@ class Player:
         self.tick_s = 1.0 / min(max_hz, MAX_HZ)
         self.speed = 1.0
         self.loop = True
+        self.autoplay = True  # a new segment starts playing (bench_labeling's diagnostic turns it off)
         self.n_frames = 0
         self.position = 0.0
         self.playing = False
@@ -52,7 +53,7 @@ class Player:
         with self._wake:
             self.n_frames = n_frames
             self.position = 0.0
-            self.playing = play and n_frames > 1
+            self.playing = play and self.autoplay and n_frames > 1
             self._shown = -1.0
             self._draw()
             self._wake.notify()

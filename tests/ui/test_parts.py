@@ -106,6 +106,9 @@ def test_player_step_seek_speed_and_stop_at_end() -> None:
     while player.playing and time.monotonic() < deadline:
         time.sleep(0.02)
     assert not player.playing and player.position == 9.0
+    player.autoplay = False  # a new segment then waits on its first frame
+    player.load(10)
+    assert not player.playing and player.position == 0.0 and rec.positions[-1] == 0.0
     player.close()
 
 
