@@ -12,11 +12,12 @@ from fastapi import FastAPI
 
 
 def bind(host: str, port: int) -> tuple[socket.socket, str]:
-    """A listening-ready socket and its URL (port 0 → a free port)."""
+    """A listening socket and its URL (port 0 → a free port)."""
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
+    sock.listen(128)  # listening before the banner says so: early clients queue until uvicorn serves
     bound_host, bound_port = sock.getsockname()[:2]
     shown = f"[{bound_host}]" if family == socket.AF_INET6 else bound_host
     return sock, f"http://{shown}:{bound_port}"

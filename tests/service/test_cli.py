@@ -8,6 +8,7 @@ import io
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -95,3 +96,16 @@ def test_migrations_build_exactly_the_models(tmp_path: Path) -> None:
         )
     assert modes == ("wal", 1)
     db.dispose()
+
+
+def test_the_bound_socket_accepts_connections_before_the_server_runs() -> None:
+    """`collie serve` prints its banner after `bind` and before uvicorn starts: a client that
+    connects at once must queue, not be refused."""
+    from backend.server import bind
+
+    sock, url = bind("127.0.0.1", 0)
+    try:
+        with socket.create_connection(("127.0.0.1", sock.getsockname()[1]), timeout=2):
+            assert url.startswith("http://127.0.0.1:")
+    finally:
+        sock.close()
