@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from collie.tasks import BAD, GOOD, NEUTRAL, get_task
-from trainer.metrics import coverage_metrics, travel_metrics
+from trainer.metrics import coverage_metrics, off_start_safe_ratio, start_block, travel_metrics
 
 
 def arr(points: list[tuple[float, float]]) -> np.ndarray:
@@ -137,6 +137,26 @@ def test_curves_plot(tmp_path: pathlib.Path) -> None:
 
 
 # ---- the two bin rules (`--bin-rule`) ------------------------------------------------------------
+
+
+def test_a_robot_standing_at_the_wedge_apex_is_three_quarters_unsafe_by_the_corner_rule() -> None:
+    north = get_task("north")
+    # Reset noise around the start (0, 0): the four bins around the origin, three with a bad corner.
+    standing = [arr([(0.1, 0.1), (-0.1, 0.1), (0.1, -0.1), (-0.1, -0.1)])]
+    assert sorted(map(tuple, start_block(standing))) == [(-1, -1), (-1, 0), (0, -1), (0, 0)]
+    assert coverage_metrics(standing, None, north, bin_rule="corner")["safe_ratio"] == pytest.approx(0.25)
+    assert math.isnan(off_start_safe_ratio(standing, north))  # nothing left outside the start
+    # From the start, one skill walks north through bins (0,1)…(0,4) and one east to (3,0), (4,0),
+    # whose corners are bad.
+    walkers = [
+        *standing,
+        arr([(0.1, 0.1), *((0.5, y + 0.5) for y in range(1, 5))]),
+        arr([(0.1, 0.1), (3.5, 0.2), (4.5, 0.2)]),
+    ]
+    assert coverage_metrics(walkers, None, north, bin_rule="corner")["safe_ratio"] == pytest.approx(5 / 10)
+    assert off_start_safe_ratio(walkers, north) == pytest.approx(4 / 6)
+    # A start off the origin moves the block with it: the grid corner nearest (10.4, 9.6) is (10, 10).
+    assert sorted(map(tuple, start_block([arr([(10.4, 9.6), (0.0, 0.0)])]))) == [(9, 9), (9, 10), (10, 9), (10, 10)]
 
 
 def test_corner_rule_judges_a_bin_at_its_lower_left_corner() -> None:

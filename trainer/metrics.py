@@ -25,6 +25,7 @@ coverage, n_bins) and n_states; the rule's scores are left out, not zeroed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -160,3 +161,29 @@ def travel_metrics(xy_trajs: Sequence[np.ndarray]) -> dict[str, float]:
         "max_final_distance": float(distance.max()),
         "final_x_spread": float(final_x.max() - final_x.min()),
     }
+
+
+def start_block(xy_trajs: Sequence[np.ndarray], bin_size: float = 1.0) -> np.ndarray:
+    """(n, 2) int64: for each skill's start, the 2×2 bins around the grid corner nearest it (all
+    skills of one body start in the same four). Reset noise puts a robot that stands still in all
+    four, and the corner rule judges three of them at a corner south or west of the start, which
+    for a wedge whose apex is the start lies outside it."""
+    corners = {tuple(np.round(_positions(t)[0] / bin_size).astype(np.int64)) for t in xy_trajs}
+    block = {(cx + dx, cy + dy) for cx, cy in corners for dx in (-1, 0) for dy in (-1, 0)}
+    return np.array(sorted(block), dtype=np.int64).reshape(-1, 2)
+
+
+def off_start_safe_ratio(xy_trajs: Sequence[np.ndarray], task: Task, bin_size: float = 1.0) -> float:
+    """A diagnostic, not the paper's metric: the corner rule's safe ratio over the visited 2-D bins
+    outside `start_block`. At a few dozen bins those 4 move the ratio by up to 3/n; at the paper's
+    ~1300 they do not (nan when no bin lies outside them, or for a pitch rule)."""
+    if len(xy_trajs) == 0 or task.uses_pitch:
+        return math.nan
+    xy = np.concatenate([_positions(t) for t in xy_trajs])
+    bins, _ = _unique_bins(xy, bin_size, 2)
+    block = start_block(xy_trajs, bin_size)
+    away = ~(bins[:, None, :] == block[None, :, :]).all(axis=2).any(axis=1)
+    if not away.any():
+        return math.nan
+    per_bin = task.classify(corner_points(bins[away], bin_size))
+    return float((per_bin != BAD).mean())

@@ -9,6 +9,10 @@ CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
     figures/skills_<env>_<task>.png   one panel per method: its lowest seed's final evaluation
                     skills over the task's shaded regions
 
+The diagnostic "safe ratio outside the start's 2×2 bins" (2-D bodies, from eval_latest.npz;
+`trainer.metrics.off_start_safe_ratio`) leaves out the four bins a robot standing at the start
+visits, three of which the corner rule judges at a corner outside a wedge whose apex is the start.
+
 A run folder is any folder with summary.json; runs not "finished" are listed and left out. ± is the
 sample standard deviation over seeds (as the paper's tables); a single seed shows its value alone.
 
@@ -31,7 +35,10 @@ from typing import Any
 
 import numpy as np
 
+from collie.tasks import Task, get_task
+from trainer.metrics import off_start_safe_ratio
 from trainer.paper_results import paper_cell
+from trainer.task_choice import saved_rule
 
 METRICS: tuple[tuple[str, str, int], ...] = (
     ("safe_coverage", "Safe state coverage (Table 1)", 2),
@@ -41,6 +48,11 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("median_final_distance", "Median final distance of the skills from the start", 2),
     ("final_x_spread", "Spread of the skills' final x (max − min)", 2),
     ("wall_s", "Wall time per run (s)", 0),
+    (
+        "off_start_safe_ratio",
+        "Safe ratio outside the start's 2×2 bins (a diagnostic, corner rule; not a paper metric)",
+        3,
+    ),
 )
 CORNER_METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage")
 VISITED_MARK = "†"  # a cell with a run that logged no corner-rule figures
@@ -99,6 +111,25 @@ def load_run(folder: Path) -> RunResult:
         variant,
         json.loads(down.read_text()) if down.exists() else {},
     )
+
+
+def run_task(run: RunResult) -> Task | None:
+    """The rule the run was judged by: its own saved rule (task files; None for an instruction
+    alone), else the built-in task."""
+    saved = saved_rule(run.path)
+    return saved.task if saved is not None else get_task(run.task, run.env, layout_seed=run.seed)
+
+
+def add_off_start_ratio(run: RunResult) -> None:
+    """Put the diagnostic into `run.metrics` for a 2-D body whose final evaluation was saved."""
+    from trainer.envs import env_class  # MuJoCo: only for reports that have such runs
+
+    saved, task = run.path / "eval_latest.npz", run_task(run)
+    if task is None or not saved.exists() or env_class(run.env).position_dims != 2:
+        return
+    with np.load(saved) as f:
+        xy = f["xy"]
+    run.metrics["off_start_safe_ratio"] = off_start_safe_ratio(list(xy), task)
 
 
 def find_runs(roots: list[Path]) -> list[RunResult]:
@@ -250,6 +281,8 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     every = [r for r in find_runs(roots) if out not in r.path.parents]
     runs = [r for r in every if r.status == "finished"]
     skipped = [r for r in every if r.status != "finished"]
+    for r in runs:
+        add_off_start_ratio(r)
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
     if figures and runs:

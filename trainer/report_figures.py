@@ -11,11 +11,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from collie.tasks import get_task
 from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
-from trainer.report import RunResult
-from trainer.task_choice import saved_rule
+from trainer.report import RunResult, run_task
 
 MAX_COLUMNS = 4  # panels per row
 
@@ -60,8 +58,7 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
         fig = Figure(figsize=(3.4 * cols, (3.6 if dims == 2 else 3.0) * rows))
         for i, run in enumerate(first):
             xy, skill = final_skills(run)
-            saved = saved_rule(run.path)  # the run's own rule (task files, runs without a rule)
-            task = saved.task if saved is not None else get_task(task_name, env, layout_seed=run.seed)
+            task = run_task(run)
             ax = fig.add_subplot(rows, cols, i + 1)
             cov = run.metrics.get("safe_coverage", float("nan"))
             draw_skill_panel(

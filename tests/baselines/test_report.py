@@ -108,3 +108,17 @@ def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
     runs_csv = list(csv.DictReader((tmp_path / "report" / "runs.csv").read_text().splitlines()))
     row = next(r for r in runs_csv if r["method"] == "collie" and r["env"] == "ant" and r["seed"] == "0")
     assert float(row["safe_coverage"]) == 950.0 and float(row["visited_safe_coverage"]) == 900.0
+
+
+def test_report_shows_the_safe_ratio_outside_the_start_bins_for_2d_bodies(tmp_path):
+    runs = tmp_path / "runs"
+    ant = fake_run(runs, "ant", "north", "collie", 0, 1.0)
+    fake_run(runs, "half_cheetah", "right", "collie", 0, 1.0)  # a 1-D body: no start block
+    standing = [(0.1, 0.1), (-0.1, 0.1), (0.1, -0.1), (-0.1, -0.1), (0.1, 0.1)]
+    north = [(0.1, 0.1), (0.5, 1.5), (0.5, 2.5), (0.5, 3.5), (0.5, 4.5)]
+    east = [(0.1, 0.1), (3.5, 0.2), (4.5, 0.2), (4.5, 0.2), (4.5, 0.2)]
+    np.savez(ant / "eval_latest.npz", xy=np.array([standing, north, east]), skill=np.eye(3)[:, :2], epoch=1)
+    md = write_report([runs], tmp_path / "report", figures=False)["markdown"].read_text()
+    table = md.split("## Safe ratio outside the start's 2×2 bins")[1].split("##")[0]
+    # Outside the four start bins: (0,1)…(0,4) safe, (3,0) and (4,0) bad by their corners.
+    assert "| COLLIE | 0.667 | – |" in table, table
