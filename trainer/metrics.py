@@ -187,3 +187,11 @@ def off_start_safe_ratio(xy_trajs: Sequence[np.ndarray], task: Task, bin_size: f
         return math.nan
     per_bin = task.classify(corner_points(bins[away], bin_size))
     return float((per_bin != BAD).mean())
+
+
+def standing_share(xy_trajs: Sequence[np.ndarray], radius: float = 1.0) -> float:
+    """A diagnostic: the share of skills whose last state lies within `radius` of their first."""
+    if len(xy_trajs) == 0:
+        return math.nan
+    ends = np.stack([_positions(t)[-1] - _positions(t)[0] for t in xy_trajs])
+    return float((np.linalg.norm(ends, axis=1) < radius).mean())

@@ -11,7 +11,8 @@ CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
 
 The diagnostic "safe ratio outside the start's 2×2 bins" (2-D bodies, from eval_latest.npz;
 `trainer.metrics.off_start_safe_ratio`) leaves out the four bins a robot standing at the start
-visits, three of which the corner rule judges at a corner outside a wedge whose apex is the start.
+visits, three of which the corner rule judges at a corner outside a wedge whose apex is the start;
+"share of the skills ending within one unit of their start" counts the skills that stand.
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out. ± is the
 sample standard deviation over seeds (as the paper's tables); a single seed shows its value alone.
@@ -36,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from collie.tasks import Task, get_task
-from trainer.metrics import off_start_safe_ratio
+from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.task_choice import saved_rule
 
@@ -53,6 +54,7 @@ METRICS: tuple[tuple[str, str, int], ...] = (
         "Safe ratio outside the start's 2×2 bins (a diagnostic, corner rule; not a paper metric)",
         3,
     ),
+    ("standing_share", "Share of the skills ending within one unit of their start (a diagnostic)", 2),
 )
 CORNER_METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage")
 VISITED_MARK = "†"  # a cell with a run that logged no corner-rule figures
@@ -120,16 +122,20 @@ def run_task(run: RunResult) -> Task | None:
     return saved.task if saved is not None else get_task(run.task, run.env, layout_seed=run.seed)
 
 
-def add_off_start_ratio(run: RunResult) -> None:
-    """Put the diagnostic into `run.metrics` for a 2-D body whose final evaluation was saved."""
+def add_diagnostics(run: RunResult) -> None:
+    """Put the diagnostics into `run.metrics` from the saved final evaluation: the share of skills
+    that stand, and for a 2-D body the safe ratio outside the start's bins."""
     from trainer.envs import env_class  # MuJoCo: only for reports that have such runs
 
-    saved, task = run.path / "eval_latest.npz", run_task(run)
-    if task is None or not saved.exists() or env_class(run.env).position_dims != 2:
+    saved = run.path / "eval_latest.npz"
+    if not saved.exists():
         return
     with np.load(saved) as f:
-        xy = f["xy"]
-    run.metrics["off_start_safe_ratio"] = off_start_safe_ratio(list(xy), task)
+        xy = list(f["xy"])
+    dims, task = env_class(run.env).position_dims, run_task(run)
+    run.metrics["standing_share"] = standing_share([t[:, :dims] for t in xy])
+    if task is not None and dims == 2:
+        run.metrics["off_start_safe_ratio"] = off_start_safe_ratio(xy, task)
 
 
 def find_runs(roots: list[Path]) -> list[RunResult]:
@@ -282,7 +288,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     runs = [r for r in every if r.status == "finished"]
     skipped = [r for r in every if r.status != "finished"]
     for r in runs:
-        add_off_start_ratio(r)
+        add_diagnostics(r)
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
     if figures and runs:

@@ -122,3 +122,5 @@ def test_report_shows_the_safe_ratio_outside_the_start_bins_for_2d_bodies(tmp_pa
     table = md.split("## Safe ratio outside the start's 2×2 bins")[1].split("##")[0]
     # Outside the four start bins: (0,1)…(0,4) safe, (3,0) and (4,0) bad by their corners.
     assert "| COLLIE | 0.667 | – |" in table, table
+    standing = md.split("## Share of the skills ending within one unit of their start")[1].split("##")[0]
+    assert "| COLLIE | 0.33 | 0.00 |" in standing, standing  # the cheetah's fake skills run 10 m
