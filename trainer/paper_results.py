@@ -1,4 +1,4 @@
-"""The paper's published results (Tables 1 and 2 of the COLLIE paper, `shared/seed/`), as data, so that
+"""The paper's published results (Tables 1, 2 and 3 of the COLLIE paper, `shared/seed/`), as data, so that
 `collie report` can print them beside ours. Mean ± std over the paper's seeds, at its budget (2×1024
 networks, 10 000 epochs for Ant/HalfCheetah, 5000 for the pixel bodies), bins judged by the
 reference code's corner rule. Transcribed by hand from the paper's LaTeX tables.
@@ -6,7 +6,8 @@ reference code's corner rule. Transcribed by hand from the paper's LaTeX tables.
 Keys are (env, task) → method → (mean, std). Table 1 is safe state coverage; for the tasks with
 "good" states its two columns are the composite (①, +1 good +1 neutral −1 bad, which equals safe
 coverage by definition) and the weighted composite (②, +2 good) coverage. Table 2 is the safe
-state ratio, here as a fraction. The Safety-Gym Hazard column is left out (collie's `car` rebuilds
+state ratio, here as a fraction. Table 3 is the zero-shot Ant motion return, average and best
+(`zero_shot_mean`, `zero_shot_best`). The Safety-Gym Hazard column is left out (collie's `car` rebuilds
 the scene but is not the paper's Safety-Gym).
 """
 
@@ -173,11 +174,55 @@ SAFE_RATIO = _columns(
     scale=0.01,
 )
 
+# Table 3: zero-shot Ant motion, the average and the best return over the sampled skills.
+_T3 = [("ant", "hole"), ("ant", "north"), ("ant", "range")]
+_T3_ROWS: dict[str, list[tuple[Cell, Cell]]] = {  # per task: (average, best)
+    "oracle": [
+        ((938.23, 201.76), (1165.42, 89.36)),
+        ((1111.08, 257.30), (1521.60, 91.41)),
+        ((-595.66, 801.53), (717.70, 28.89)),
+    ],
+    "diayn": [
+        ((209.85, 5.78), (243.62, 17.53)),
+        ((-2833.11, 1539.28), (215.07, 1.37)),
+        ((210.09, 5.86), (244.73, 19.49)),
+    ],
+    "lsd": [
+        ((-34.05, 777.39), (1112.01, 386.15)),
+        ((-2017.02, 1493.83), (1054.53, 467.55)),
+        ((-894.28, 455.99), (474.65, 180.11)),
+    ],
+    "metra": [
+        ((224.07, 555.11), (1193.03, 30.62)),
+        ((-1897.47, 1431.75), (1249.26, 104.01)),
+        ((-1149.32, 275.56), (265.29, 474.71)),
+    ],
+    "ddg": [
+        ((43.78, 395.34), (923.51, 321.67)),
+        ((-2123.80, 1078.94), (349.83, 1523.92)),
+        ((-717.89, 582.27), (489.06, 111.92)),
+    ],
+    "dodont": [
+        ((333.40, 633.35), (1155.58, 48.08)),
+        ((277.15, 1519.21), (1397.12, 45.58)),
+        ((-1045.95, 374.46), (540.25, 62.46)),
+    ],
+    "collie": [
+        ((650.67, 637.03), (1251.92, 72.67)),
+        ((1054.25, 376.79), (1460.44, 53.12)),
+        ((-913.48, 715.64), (673.55, 65.86)),
+    ],
+}
+ZERO_SHOT_MEAN = _columns(_T3, {m: [avg for avg, _ in v] for m, v in _T3_ROWS.items()})
+ZERO_SHOT_BEST = _columns(_T3, {m: [best for _, best in v] for m, v in _T3_ROWS.items()})
+
 PAPER: dict[str, Table] = {
     "safe_coverage": SAFE_COVERAGE,
     "safe_ratio": SAFE_RATIO,
     "composite_coverage": COMPOSITE_COVERAGE,
     "weighted_composite_coverage": WEIGHTED_COMPOSITE_COVERAGE,
+    "zero_shot_mean": ZERO_SHOT_MEAN,
+    "zero_shot_best": ZERO_SHOT_BEST,
 }
 
 

@@ -205,10 +205,20 @@ def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
     if zs:
         rows, columns = _rows_and_columns(zs)
         cells: dict[tuple[str, str], str] = {}
+        published: set[str] = set()
         for (label, col), g in _group(zs).items():
-            cells[(label, f"{col} (avg)")] = format_cell([r.downstream["zero_shot"]["mean"] for r in g], 2)
-            cells[(label, f"{col} (best)")] = format_cell([r.downstream["zero_shot"]["best"] for r in g], 2)
-        cols = [f"{c} (avg)" for c in columns] + [f"{c} (best)" for c in columns]
+            for kind, key in (("avg", "mean"), ("best", "best")):
+                cells[(label, f"{col} ({kind})")] = format_cell([r.downstream["zero_shot"][key] for r in g], 2)
+                paper = paper_cell(f"zero_shot_{key}", g[0].env, g[0].task, g[0].method) if not g[0].variant else None
+                if paper is not None:
+                    cells[(label, f"{col} ({kind}, paper)")] = f"{paper[0]:.2f} ± {paper[1]:.2f}"
+                    published.add(col)
+        cols = [
+            c
+            for kind in ("avg", "best")
+            for col in columns
+            for c in ((f"{col} ({kind})", f"{col} ({kind}, paper)") if col in published else (f"{col} ({kind})",))
+        ]
         out.append(("Zero-shot motion return (Table 3)", _table(rows, cols, cells)))
     hi = [r for r in runs if "hierarchical" in r.downstream]
     if hi:

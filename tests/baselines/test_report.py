@@ -124,3 +124,22 @@ def test_report_shows_the_safe_ratio_outside_the_start_bins_for_2d_bodies(tmp_pa
     assert "| COLLIE | 0.667 | – |" in table, table
     standing = md.split("## Share of the skills ending within one unit of their start")[1].split("##")[0]
     assert "| COLLIE | 0.33 | 0.00 |" in standing, standing  # the cheetah's fake skills run 10 m
+
+
+def test_the_zero_shot_table_prints_the_papers_table_3_beside_ours(tmp_path):
+    runs = tmp_path / "runs"
+    for seed, mean in enumerate([-1600.0, -1700.0]):
+        zero_shot = {"zero_shot": {"mean": mean, "best": 400.0 + seed}}
+        fake_run(runs, "ant", "north", "collie", seed, 1.0, downstream=zero_shot)
+    fake_run(runs, "point", "north", "collie", 0, 1.0, downstream={"zero_shot": {"mean": 5.0, "best": 6.0}})
+    md = write_report([runs], tmp_path / "report", figures=False)["markdown"].read_text()
+    table = md.split("## Zero-shot motion return (Table 3)")[1].split("##")[0]
+    lines = table.strip().splitlines()
+    assert lines[0] == (
+        "| method | ant north (avg) | ant north (avg, paper) | point north (avg) "
+        "| ant north (best) | ant north (best, paper) | point north (best) |"
+    )
+    # COLLIE's North cells of the paper's Table 3: average 1054.25 ± 376.79, best 1460.44 ± 53.12
+    assert (
+        lines[2] == "| COLLIE | -1650.00 ± 70.71 | 1054.25 ± 376.79 | 5.00 | 400.50 ± 0.71 | 1460.44 ± 53.12 | 6.00 |"
+    )
