@@ -17,6 +17,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "export": ("backend.export", "print a run's label events (or effective labels) as JSON or CSV"),
     "sweep": ("trainer.sweep", "run methods × tasks × seeds of `collie train` (resumable; local pool or Ray)"),
     "report": ("trainer.report", "turn run folders into the paper's tables (markdown, CSV) and skill figures"),
+    "rescore": ("trainer.rescore", "judge finished METRA / LSD / DIAYN runs by another task's rule, without training"),
 }
 
 

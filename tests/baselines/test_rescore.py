@@ -1,0 +1,62 @@
+"""`collie rescore`: a task-free run's final skills judged by another task's rule."""
+
+import json
+
+import numpy as np
+import pytest
+
+from collie.cli import main
+from collie.tasks import get_task
+from trainer.metrics import coverage_metrics
+from trainer.report import write_report
+from trainer.rescore import RescoreError, rescore
+
+
+def finished_run(root, method="metra", status="finished"):
+    d = root / f"ant-north-{method}-s0"
+    d.mkdir(parents=True)
+    cfg = {"env": "ant", "task": "north", "method": method, "seed": 0, "bin_rule": "corner"}
+    (d / "summary.json").write_text(json.dumps({"status": status, "safe_coverage": -1.0, "config": cfg}))
+    # six skills walking 25 units in six directions: Range (a disc of radius 20 about (0, 5)) loses
+    # their far ends, North keeps only the one heading north
+    angles = np.linspace(0, 2 * np.pi, 6, endpoint=False) + np.pi / 2
+    xy = np.stack([np.cos(angles), np.sin(angles)], 1)[:, None, :] * np.linspace(0, 25, 51)[None, :, None]
+    np.savez(d / "eval_latest.npz", xy=xy, pitch=np.zeros(xy.shape[:2]), skill=np.zeros((6, 2)), epoch=5)
+    return d, list(xy)
+
+
+def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_run(tmp_path):
+    source, xy = finished_run(tmp_path / "runs")
+    out = rescore(source, "range")
+    assert out == source.parent / "ant-range-metra-s0"
+    summary = json.loads((out / "summary.json").read_text())
+    expected = coverage_metrics(xy, None, get_task("range", "ant"), bin_rule="corner")
+    assert summary["safe_coverage"] == expected["safe_coverage"] == expected["corner_safe_coverage"]
+    assert summary["corner_n_bad_bins"] == expected["corner_n_bad_bins"] > 0  # the far ends left the disc
+    assert summary["config"]["task"] == "range" and summary["rescored_from"] == str(source)
+    assert json.loads((out / "task.json").read_text())["definition"]["name"] == "range"
+    md = write_report([tmp_path / "runs"], tmp_path / "report", figures=False)["markdown"].read_text()
+    assert "| method | ant north | ant north (paper) | ant range | ant range (paper) |" in md
+
+
+@pytest.mark.parametrize(
+    ("method", "status", "message"),
+    [
+        ("collie", "finished", "reads its task"),
+        ("oracle", "finished", "reads its task"),
+        ("metra", "running", "not finished"),
+    ],
+)
+def test_runs_that_cannot_be_rescored_are_refused_with_the_reason(tmp_path, method, status, message):
+    source, _ = finished_run(tmp_path, method, status)
+    with pytest.raises(RescoreError, match=message):
+        rescore(source, "range")
+
+
+def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsys):
+    source, _ = finished_run(tmp_path)
+    assert main(["rescore", str(source), "--task", "nowhere"]) == 2
+    assert "unknown task 'nowhere'" in capsys.readouterr().err
+    assert main(["rescore", str(source), "--task", "hole"]) == 0
+    assert main(["rescore", str(source), "--task", "hole"]) == 2
+    assert "already holds a run" in capsys.readouterr().err

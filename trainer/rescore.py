@@ -1,0 +1,97 @@
+"""`collie rescore RUN --task TASK`: judge a finished run of a task-free method (METRA, LSD, DIAYN:
+no labels, w ≡ 1) by another task's rule, without training it again.
+
+Such a method never reads its task while it trains: the task enters only the evaluation. So its run
+on Ant North and its run on Ant Range with the same seed learn the same skills (checked: the Range
+and North METRA runs of seed 0 log the same median distance and bins at every evaluation), and the
+Range figures are the North run's final skills judged by the Range rule. This writes a run folder
+`collie report` reads like any other: summary.json with the coverage figures recomputed (both bin
+rules), the config naming the new task and `rescored_from`, task.json, and the same eval_latest.npz.
+Only the final evaluation is rescored; metrics.jsonl's history is not copied.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from collie.tasks import get_task
+from trainer.config import Config
+from trainer.envs import env_class
+from trainer.methods import METHODS
+from trainer.metrics import coverage_metrics
+from trainer.task_choice import TASK_JSON, choose_rule
+
+
+class RescoreError(ValueError):
+    """The run cannot be judged by another rule (its method reads the task, it is not finished…)."""
+
+
+def task_free(method: str) -> bool:
+    m = METHODS.get(method)
+    return m is not None and not m.asks_labels and m.guidance == "one"
+
+
+def rescore(source: Path, task: str, out: Path | None = None) -> Path:
+    """Write `source`'s final evaluation judged by `task` into `out` (default: the sweep's folder
+    name for it, beside `source`); returns the folder."""
+    summary_path = source / "summary.json"
+    if not summary_path.exists():
+        raise RescoreError(f"{source} is not a run folder: it has no summary.json")
+    summary: dict[str, Any] = json.loads(summary_path.read_text())
+    cfg = dict(summary["config"])
+    if summary.get("status") != "finished":
+        raise RescoreError(f"{source} is not finished (status {summary.get('status')!r})")
+    if not task_free(cfg["method"]):
+        raise RescoreError(
+            f"method {cfg['method']!r} reads its task while it trains (labels or a rule for w); "
+            "only METRA, LSD and DIAYN runs can be judged by another task's rule"
+        )
+    if cfg.get("instruction") or cfg.get("task_file"):
+        raise RescoreError(f"{source} was judged by an instruction or a task file, not a built-in task")
+    saved = source / "eval_latest.npz"
+    if not saved.exists():
+        raise RescoreError(f"{source} has no eval_latest.npz (its final skills were not saved)")
+    rule = get_task(task, cfg["env"], layout_seed=int(cfg["seed"]))  # fails with the valid task names
+    out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
+    if (out / "summary.json").exists():
+        raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
+    with np.load(saved) as f:
+        xy, pitch = list(f["xy"].astype(np.float64)), list(f["pitch"].astype(np.float64))
+    cfg.update(task=task)
+    config, env = Config.from_stored(cfg), env_class(cfg["env"])
+    figures = coverage_metrics(
+        xy, pitch, rule, bin_size=env.metric_bin_size, position_dims=env.position_dims, bin_rule=config.bin_rule
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(saved, out / "eval_latest.npz")
+    (out / TASK_JSON).write_text(json.dumps(choose_rule(config).to_json(), indent=2))
+    rescored = {**summary, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
+    (out / "summary.json").write_text(json.dumps(rescored, indent=2))
+    return out
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("runs", nargs="+", help="finished run folders of METRA, LSD or DIAYN")
+    p.add_argument("--task", required=True, help="the built-in task whose rule judges them")
+    p.add_argument("--out", default=None, help="output folder (one run only; default: beside each run)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.out and len(args.runs) > 1:
+        print("collie rescore: error: --out takes one run", file=sys.stderr)
+        return 2
+    for source in args.runs:
+        try:
+            out = rescore(Path(source), args.task, Path(args.out) if args.out else None)
+        except (ValueError, KeyError) as exc:  # RescoreError, or an unknown task
+            print(f"collie rescore: error: {exc}", file=sys.stderr)
+            return 2
+        print(f"{source} judged by {args.task}: {out}")
+    return 0
