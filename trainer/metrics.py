@@ -148,14 +148,18 @@ def coverage_metrics(
     return out
 
 
+def final_distances(xy_trajs: Sequence[np.ndarray]) -> np.ndarray:
+    """(n,) each trajectory's distance from its first state to its last."""
+    return np.linalg.norm(np.stack([_positions(t)[-1] - _positions(t)[0] for t in xy_trajs]), axis=1)
+
+
 def travel_metrics(xy_trajs: Sequence[np.ndarray]) -> dict[str, float]:
     """How far the skills go: median and max distance from each trajectory's start to its end, and
     the spread (max − min) of the final x over skills — the robot targets of issue 12."""
     if len(xy_trajs) == 0:
         return {"median_final_distance": 0.0, "max_final_distance": 0.0, "final_x_spread": 0.0}
-    ends = np.stack([_positions(t)[-1] - _positions(t)[0] for t in xy_trajs])
     final_x = np.array([_positions(t)[-1, 0] for t in xy_trajs])
-    distance = np.linalg.norm(ends, axis=1)
+    distance = final_distances(xy_trajs)
     return {
         "median_final_distance": float(np.median(distance)),
         "max_final_distance": float(distance.max()),
@@ -193,5 +197,4 @@ def standing_share(xy_trajs: Sequence[np.ndarray], radius: float = 1.0) -> float
     """A diagnostic: the share of skills whose last state lies within `radius` of their first."""
     if len(xy_trajs) == 0:
         return math.nan
-    ends = np.stack([_positions(t)[-1] - _positions(t)[0] for t in xy_trajs])
-    return float((np.linalg.norm(ends, axis=1) < radius).mean())
+    return float((final_distances(xy_trajs) < radius).mean())

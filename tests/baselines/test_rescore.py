@@ -16,7 +16,8 @@ def finished_run(root, method="metra", status="finished"):
     d = root / f"ant-north-{method}-s0"
     d.mkdir(parents=True)
     cfg = {"env": "ant", "task": "north", "method": method, "seed": 0, "bin_rule": "corner"}
-    (d / "summary.json").write_text(json.dumps({"status": status, "safe_coverage": -1.0, "config": cfg}))
+    summary = {"status": status, "safe_coverage": -1.0, "wall_s": 3000.0, "config": cfg}
+    (d / "summary.json").write_text(json.dumps(summary))
     # six skills walking 25 units in six directions: Range (a disc of radius 20 about (0, 5)) loses
     # their far ends, North keeps only the one heading north
     angles = np.linspace(0, 2 * np.pi, 6, endpoint=False) + np.pi / 2
@@ -34,6 +35,7 @@ def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_
     assert summary["safe_coverage"] == expected["safe_coverage"] == expected["corner_safe_coverage"]
     assert summary["corner_n_bad_bins"] == expected["corner_n_bad_bins"] > 0  # the far ends left the disc
     assert summary["config"]["task"] == "range" and summary["rescored_from"] == str(source)
+    assert "wall_s" not in summary  # no training time was spent on Range
     assert json.loads((out / "task.json").read_text())["definition"]["name"] == "range"
     md = write_report([tmp_path / "runs"], tmp_path / "report", figures=False)["markdown"].read_text()
     assert "| method | ant north | ant north (paper) | ant range | ant range (paper) |" in md
