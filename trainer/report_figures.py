@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
-from trainer.report import RunResult, run_task
+from trainer.report import VISITED_MARK, RunResult, metric_value, run_task
 
 MAX_COLUMNS = 4  # panels per row
 
@@ -60,7 +60,8 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
             xy, skill = final_skills(run)
             task = run_task(run)
             ax = fig.add_subplot(rows, cols, i + 1)
-            cov = run.metrics.get("safe_coverage", float("nan"))
+            cov = metric_value(run, "safe_coverage")  # the tables' value: corner rule where logged
+            mark = "" if "corner_safe_coverage" in run.metrics else VISITED_MARK
             draw_skill_panel(
                 ax,
                 list(xy),
@@ -68,7 +69,7 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
                 skills=skill,
                 position_dims=dims,
                 legend=False,
-                title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}",
+                title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}{mark}",
             )
             ax.tick_params(labelsize=7)
         fig.suptitle(f"{env} {task_name}", fontsize=11)

@@ -5,9 +5,10 @@ Such a method never reads its task while it trains: the task enters only the eva
 on Ant North and its run on Ant Range with the same seed learn the same skills (checked: the Range
 and North METRA runs of seed 0 log the same median distance and bins at every evaluation), and the
 Range figures are the North run's final skills judged by the Range rule. This writes a run folder
-`collie report` reads like any other: summary.json with the coverage figures recomputed (both bin
-rules), the config naming the new task and `rescored_from`, task.json, and the same eval_latest.npz.
-Only the final evaluation is rescored; metrics.jsonl's history is not copied.
+`collie report` and `python -m trainer.downstream` read like any other: summary.json with the
+coverage figures recomputed (both bin rules), config.json naming the new task, `rescored_from`,
+task.json, and the source's eval_latest.npz and checkpoint.pt (so the downstream tasks run with the
+new task's safety rule). Only the final evaluation is rescored; metrics.jsonl's history is not copied.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,10 @@ from trainer.config import Config
 from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
+from trainer.sweep import downstream_done
 from trainer.task_choice import TASK_JSON, choose_rule
+
+CHECKPOINT = "checkpoint.pt"
 
 
 class RescoreError(ValueError):
@@ -38,9 +43,10 @@ def task_free(method: str) -> bool:
     return m is not None and not m.asks_labels and m.guidance == "one"
 
 
-def rescore(source: Path, task: str, out: Path | None = None) -> Path:
+def rescore(source: Path, task: str, out: Path | None = None, keep_existing: bool = False) -> Path:
     """Write `source`'s final evaluation judged by `task` into `out` (default: the sweep's folder
-    name for it, beside `source`); returns the folder."""
+    name for it, beside `source`); returns the folder. `keep_existing`: a folder already rescored
+    from `source` is left as it is (so a bench can be rerun to continue)."""
     summary_path = source / "summary.json"
     if not summary_path.exists():
         raise RescoreError(f"{source} is not a run folder: it has no summary.json")
@@ -61,6 +67,9 @@ def rescore(source: Path, task: str, out: Path | None = None) -> Path:
     rule = get_task(task, cfg["env"], layout_seed=int(cfg["seed"]))  # fails with the valid task names
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
     if (out / "summary.json").exists():
+        held = json.loads((out / "summary.json").read_text())
+        if keep_existing and held.get("rescored_from") == str(source):
+            return out
         raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
     with np.load(saved) as f:
         xy, pitch = list(f["xy"].astype(np.float64)), list(f["pitch"].astype(np.float64))
@@ -71,6 +80,9 @@ def rescore(source: Path, task: str, out: Path | None = None) -> Path:
     )
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(saved, out / "eval_latest.npz")
+    if (source / CHECKPOINT).exists():
+        shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
+    (out / "config.json").write_text(json.dumps(cfg, indent=2))
     (out / TASK_JSON).write_text(json.dumps(choose_rule(config).to_json(), indent=2))
     kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
     rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
@@ -82,6 +94,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", help="finished run folders of METRA, LSD or DIAYN")
     p.add_argument("--task", required=True, help="the built-in task whose rule judges them")
     p.add_argument("--out", default=None, help="output folder (one run only; default: beside each run)")
+    p.add_argument(
+        "--keep-existing", action="store_true", help="leave a folder already rescored from the same run as it is"
+    )
+    p.add_argument(
+        "--downstream", action="store_true", help="then run the downstream task (unless downstream.json has it)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -90,9 +108,17 @@ def run(args: argparse.Namespace) -> int:
         return 2
     for source in args.runs:
         try:
-            out = rescore(Path(source), args.task, Path(args.out) if args.out else None)
+            out = rescore(Path(source), args.task, Path(args.out) if args.out else None, args.keep_existing)
         except (ValueError, KeyError) as exc:  # RescoreError, or an unknown task
             print(f"collie rescore: error: {exc}", file=sys.stderr)
             return 2
         print(f"{source} judged by {args.task}: {out}")
+        if args.downstream and not downstream_done(out):
+            if not (out / CHECKPOINT).exists():
+                print(f"collie rescore: error: {source} has no {CHECKPOINT}; no downstream task", file=sys.stderr)
+                return 2
+            done = subprocess.run([sys.executable, "-m", "trainer.downstream", str(out)], check=False)
+            if done.returncode != 0:
+                print(f"collie rescore: error: the downstream task of {out} failed", file=sys.stderr)
+                return 2
     return 0

@@ -7,6 +7,8 @@ import pytest
 
 from collie.cli import main
 from collie.tasks import get_task
+from trainer.config import make_config
+from trainer.loop import Trainer
 from trainer.metrics import coverage_metrics
 from trainer.report import write_report
 from trainer.rescore import RescoreError, rescore
@@ -62,3 +64,21 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     assert main(["rescore", str(source), "--task", "hole"]) == 0
     assert main(["rescore", str(source), "--task", "hole"]) == 2
     assert "already holds a run" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new_rule(tmp_path, capsys):
+    source = tmp_path / "point-north-metra-s0"
+    cfg = make_config("smoke", "point", method="metra", task="north", epochs=2, out=str(source))
+    Trainer(cfg, progress=False).run()
+    args = ["rescore", str(source), "--task", "range", "--keep-existing", "--downstream"]
+    assert main(args) == 0
+    out = tmp_path / "point-range-metra-s0"
+    zero_shot = json.loads((out / "downstream.json").read_text())["zero_shot"]
+    assert zero_shot["task"] == "range"  # the motion task's safety rule is the new task's
+    assert json.loads((out / "config.json").read_text())["task"] == "range"
+    written = (out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns
+    assert main(args) == 0  # a rerun continues: nothing rescored or evaluated again
+    assert ((out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns) == written
+    assert main(["rescore", str(out), "--task", "hole", "--out", str(out), "--keep-existing"]) == 2
+    assert "already holds a run" in capsys.readouterr().err  # rescored from another run: still refused
