@@ -8,7 +8,8 @@ Range figures are the North run's final skills judged by the Range rule. This wr
 `collie report` and `python -m trainer.downstream` read like any other: summary.json with the
 coverage figures recomputed (both bin rules), config.json naming the new task, `rescored_from`,
 task.json, and the source's eval_latest.npz and checkpoint.pt (so the downstream tasks run with the
-new task's safety rule). Only the final evaluation is rescored; metrics.jsonl's history is not copied.
+new task's safety rule; the Goal task's result, which reads no task, is copied). Only the final
+evaluation is rescored; metrics.jsonl's history is not copied.
 """
 
 from __future__ import annotations
@@ -32,6 +33,10 @@ from trainer.sweep import downstream_done
 from trainer.task_choice import TASK_JSON, choose_rule
 
 CHECKPOINT = "checkpoint.pt"
+# Downstream results that do not depend on the run's task, copied from the source: the hierarchical
+# Goal task judges flips by the Not-Flip rule whatever the task (trainer/downstream/goal.py).
+# Zero-shot motion takes the run's task as its safety rule, so it is run again on the new task.
+TASK_FREE_DOWNSTREAM = ("hierarchical",)
 
 
 class RescoreError(ValueError):
@@ -83,6 +88,11 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     if (source / CHECKPOINT).exists():
         shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
     (out / "config.json").write_text(json.dumps(cfg, indent=2))
+    if (source / "downstream.json").exists():
+        done = json.loads((source / "downstream.json").read_text())
+        kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
+        if kept_results:
+            (out / "downstream.json").write_text(json.dumps(kept_results, indent=2))
     (out / TASK_JSON).write_text(json.dumps(choose_rule(config).to_json(), indent=2))
     kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
     rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}

@@ -30,6 +30,11 @@ def finished_run(root, method="metra", status="finished"):
 
 def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_run(tmp_path):
     source, xy = finished_run(tmp_path / "runs")
+    done = {
+        "zero_shot": {"task": "north", "mean": 1.0, "best": 3.0},
+        "hierarchical": {"mean": 2.0, "random_skills_mean": 0.5},
+    }
+    (source / "downstream.json").write_text(json.dumps(done))
     out = rescore(source, "range")
     assert out == source.parent / "ant-range-metra-s0"
     summary = json.loads((out / "summary.json").read_text())
@@ -39,6 +44,8 @@ def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_
     assert summary["config"]["task"] == "range" and summary["rescored_from"] == str(source)
     assert "wall_s" not in summary  # no training time was spent on Range
     assert json.loads((out / "task.json").read_text())["definition"]["name"] == "range"
+    # the Goal task reads no task, so its result carries over; zero-shot used North's rule, so not
+    assert json.loads((out / "downstream.json").read_text()) == {"hierarchical": done["hierarchical"]}
     md = write_report([tmp_path / "runs"], tmp_path / "report", figures=False)["markdown"].read_text()
     assert "| method | ant north | ant north (paper) | ant range | ant range (paper) |" in md
 
