@@ -48,6 +48,14 @@ def task_free(method: str) -> bool:
     return m is not None and not m.asks_labels and m.guidance == "one"
 
 
+def same_run(recorded: str | None, source: Path) -> bool:
+    """Whether `recorded` (a `rescored_from`) names `source`: the same path, or the same run folder
+    name (a rerun from another directory, or of a moved tree)."""
+    if recorded is None:
+        return False
+    return Path(recorded).resolve() == source.resolve() or Path(recorded).name == source.resolve().name
+
+
 def rescore(source: Path, task: str, out: Path | None = None, keep_existing: bool = False) -> Path:
     """Write `source`'s final evaluation judged by `task` into `out` (default: the sweep's folder
     name for it, beside `source`); returns the folder. `keep_existing`: a folder already rescored
@@ -73,7 +81,7 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
     if (out / "summary.json").exists():
         held = json.loads((out / "summary.json").read_text())
-        if keep_existing and held.get("rescored_from") == str(source):
+        if keep_existing and same_run(held.get("rescored_from"), source):
             return out
         raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
     with np.load(saved) as f:

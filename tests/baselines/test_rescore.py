@@ -74,7 +74,7 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
 
 
 @pytest.mark.slow
-def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new_rule(tmp_path, capsys):
+def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new_rule(tmp_path, capsys, monkeypatch):
     source = tmp_path / "point-north-metra-s0"
     cfg = make_config("smoke", "point", method="metra", task="north", epochs=2, out=str(source))
     Trainer(cfg, progress=False).run()
@@ -86,6 +86,8 @@ def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new
     assert json.loads((out / "config.json").read_text())["task"] == "range"
     written = (out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns
     assert main(args) == 0  # a rerun continues: nothing rescored or evaluated again
+    monkeypatch.chdir(tmp_path)  # also when the rerun names the run by another path
+    assert main(["rescore", source.name, "--task", "range", "--keep-existing", "--downstream"]) == 0
     assert ((out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns) == written
     assert main(["rescore", str(out), "--task", "hole", "--out", str(out), "--keep-existing"]) == 2
     assert "already holds a run" in capsys.readouterr().err  # rescored from another run: still refused
