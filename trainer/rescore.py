@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from trainer.config import Config
 from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
-from trainer.sweep import downstream_done
+from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
 CHECKPOINT = "checkpoint.pt"
@@ -135,8 +134,10 @@ def run(args: argparse.Namespace) -> int:
             if not (out / CHECKPOINT).exists():
                 print(f"collie rescore: error: {source} has no {CHECKPOINT}; no downstream task", file=sys.stderr)
                 return 2
-            done = subprocess.run([sys.executable, "-m", "trainer.downstream", str(out)], check=False)
-            if done.returncode != 0:
-                print(f"collie rescore: error: the downstream task of {out} failed", file=sys.stderr)
+            try:
+                run_downstream_task(out)  # as `collie sweep --downstream` runs it
+            except RuntimeError as exc:
+                print(f"collie rescore: error: the downstream task {exc}", file=sys.stderr)
                 return 2
+            print(f"  downstream task: {out / 'downstream.json'}")
     return 0

@@ -109,6 +109,12 @@ def _call(cmd: list[str], log: Path) -> None:
         raise RuntimeError(f"failed ({proc.returncode}): {shlex.join(cmd)} — see {log}")
 
 
+def run_downstream_task(out: Path, flags: tuple[str, ...] = ()) -> None:
+    """`python -m trainer.downstream OUT` in its own one-thread process, logged beside the run folder
+    (OUT.downstream.log); raises RuntimeError naming the log if it fails."""
+    _call([sys.executable, "-m", "trainer.downstream", str(out), *flags], out.with_suffix(".downstream.log"))
+
+
 def run_one(spec: RunSpec) -> dict[str, Any]:
     """Train (or resume, or skip) one run, then its downstream task if asked; returns summary.json."""
     out = Path(spec.out)
@@ -117,10 +123,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
         _call(train_command(spec), out.with_suffix(".log"))
     if spec.downstream and not downstream_done(out):
-        _call(
-            [sys.executable, "-m", "trainer.downstream", str(out), *spec.downstream_flags],
-            out.with_suffix(".downstream.log"),
-        )
+        run_downstream_task(out, spec.downstream_flags)
     return json.loads((out / "summary.json").read_text())
 
 

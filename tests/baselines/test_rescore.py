@@ -91,3 +91,10 @@ def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new
     assert ((out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns) == written
     assert main(["rescore", str(out), "--task", "hole", "--out", str(out), "--keep-existing"]) == 2
     assert "already holds a run" in capsys.readouterr().err  # rescored from another run: still refused
+
+
+def test_a_downstream_task_without_a_checkpoint_is_refused_with_the_reason(tmp_path, capsys):
+    source, _ = finished_run(tmp_path)  # summary and final skills, but no checkpoint.pt
+    assert main(["rescore", str(source), "--task", "range", "--downstream"]) == 2
+    assert "has no checkpoint.pt; no downstream task" in capsys.readouterr().err
+    assert (tmp_path / "ant-range-metra-s0" / "summary.json").exists()  # the rescore itself is kept
