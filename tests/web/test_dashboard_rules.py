@@ -21,7 +21,9 @@ def open_run(browser: Any, live: BackgroundServer, run_id: int) -> Any:
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
     page.set_default_timeout(WAIT_MS)
     page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run_id}")
-    page.wait_for_function("document.querySelector('#curves').dataset.renderedAt")
+    # a selector, not wait_for_function: Playwright evaluates a string predicate with eval when it
+    # polls, which the dashboard's content security policy refuses (a failure only when it polls)
+    page.wait_for_selector('#curves[data-rendered-at]:not([data-rendered-at=""])', state="attached")
     return page
 
 
