@@ -7,7 +7,9 @@ Keys are (env, task) → method → (mean, std). Table 1 is safe state coverage;
 "good" states its two columns are the composite (①, +1 good +1 neutral −1 bad, which equals safe
 coverage by definition) and the weighted composite (②, +2 good) coverage. Table 2 is the safe
 state ratio, here as a fraction. Table 3 is the zero-shot Ant motion return, average and best
-(`zero_shot_mean`, `zero_shot_best`). The Safety-Gym Hazard column is left out (collie's `car` rebuilds
+(`zero_shot_mean`, `zero_shot_best`). Table 4 is the HalfCheetah Goal task's return of a controller
+over the frozen skills of the Not-Flip runs (`hierarchical_mean`; Appendix: "in HalfCheetah Not-flip
+tasks"). The Safety-Gym Hazard column is left out (collie's `car` rebuilds
 the scene but is not the paper's Safety-Gym).
 """
 
@@ -216,6 +218,18 @@ _T3_ROWS: dict[str, list[tuple[Cell, Cell]]] = {  # per task: (average, best)
 ZERO_SHOT_MEAN = _columns(_T3, {m: [avg for avg, _ in v] for m, v in _T3_ROWS.items()})
 ZERO_SHOT_BEST = _columns(_T3, {m: [best for _, best in v] for m, v in _T3_ROWS.items()})
 
+HIERARCHICAL_MEAN: Table = {
+    ("half_cheetah", "not_flip"): {
+        "oracle": (47.46, 33.27),
+        "diayn": (10.43, 4.61),
+        "lsd": (32.73, 31.94),
+        "metra": (21.58, 25.53),
+        "ddg": (21.57, 45.27),
+        "dodont": (30.44, 37.84),
+        "collie": (45.26, 15.78),
+    }
+}
+
 PAPER: dict[str, Table] = {
     "safe_coverage": SAFE_COVERAGE,
     "safe_ratio": SAFE_RATIO,
@@ -223,6 +237,7 @@ PAPER: dict[str, Table] = {
     "weighted_composite_coverage": WEIGHTED_COMPOSITE_COVERAGE,
     "zero_shot_mean": ZERO_SHOT_MEAN,
     "zero_shot_best": ZERO_SHOT_BEST,
+    "hierarchical_mean": HIERARCHICAL_MEAN,
 }
 
 

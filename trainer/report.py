@@ -224,12 +224,21 @@ def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
     if hi:
         rows, columns = _rows_and_columns(hi)
         cells = {}
+        published = set()
         for (label, col), g in _group(hi).items():
             cells[(label, col)] = format_cell([r.downstream["hierarchical"]["mean"] for r in g], 2)
+            paper = paper_cell("hierarchical_mean", g[0].env, g[0].task, g[0].method) if not g[0].variant else None
+            if paper is not None:
+                cells[(label, f"{col} (paper)")] = f"{paper[0]:.2f} ± {paper[1]:.2f}"
+                published.add(col)
             cells[(label, f"{col} (random skills)")] = format_cell(
                 [r.downstream["hierarchical"]["random_skills_mean"] for r in g], 2
             )
-        cols = [c for col in columns for c in (col, f"{col} (random skills)")]
+        cols = [
+            c
+            for col in columns
+            for c in ((col, f"{col} (paper)") if col in published else (col,)) + (f"{col} (random skills)",)
+        ]
         out.append(("Hierarchical Goal return, PPO over frozen skills (Table 4)", _table(rows, cols, cells)))
     return out
 

@@ -143,3 +143,20 @@ def test_the_zero_shot_table_prints_the_papers_table_3_beside_ours(tmp_path):
     assert (
         lines[2] == "| COLLIE | -1650.00 ± 70.71 | 1054.25 ± 376.79 | 5.00 | 400.50 ± 0.71 | 1460.44 ± 53.12 | 6.00 |"
     )
+
+
+def test_the_goal_table_prints_the_papers_table_4_beside_not_flip(tmp_path):
+    runs = tmp_path / "runs"
+    for task in ("right", "not_flip"):
+        for seed, mean in enumerate([6.0, 8.0]):
+            goal = {"hierarchical": {"mean": mean, "random_skills_mean": -900.0 - seed}}
+            fake_run(runs, "half_cheetah", task, "metra", seed, 1.0, downstream=goal)
+    md = write_report([runs], tmp_path / "report", figures=False)["markdown"].read_text()
+    table = md.split("## Hierarchical Goal return, PPO over frozen skills (Table 4)")[1].split("##")[0]
+    lines = table.strip().splitlines()
+    # the paper ran its Goal task on the Not-Flip skills only, so only that column has a paper cell
+    assert lines[0] == (
+        "| method | half_cheetah not_flip | half_cheetah not_flip (paper) | half_cheetah not_flip (random skills) "
+        "| half_cheetah right | half_cheetah right (random skills) |"
+    )
+    assert lines[2] == "| METRA | 7.00 ± 1.41 | 21.58 ± 25.53 | -900.50 ± 0.71 | 7.00 ± 1.41 | -900.50 ± 0.71 |"
