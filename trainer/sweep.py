@@ -165,7 +165,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point")
     p.add_argument("--tasks", default="north,range,hole_north", help="comma-separated task names")
     p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)}")
-    p.add_argument("--seeds", type=int, default=3, help="seeds 0 … N−1")
+    p.add_argument("--seeds", type=int, default=3, help="how many seeds: FIRST … FIRST+N−1")
+    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST", help="the lowest seed (default 0)")
     p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
     p.add_argument("--out", default="runs/sweep", help="root folder of the run folders")
     p.add_argument("--variant", default="", help="name of this ablation (folder suffix and report label)")
@@ -188,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
         if bad
         else "--seeds must be ≥ 1"
         if args.seeds < 1
+        else "--first-seed must be ≥ 0"
+        if args.first_seed < 0
         else "--variant: letters, digits and _ only"
         if bad_variant
         else None
@@ -201,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
         args.env,
         tasks,
         methods,
-        list(range(args.seeds)),
+        list(range(args.first_seed, args.first_seed + args.seeds)),
         preset=args.preset,
         variant=args.variant,
         flags=flags,

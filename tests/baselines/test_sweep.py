@@ -57,6 +57,7 @@ def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
 
 
 def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
+    """From --first-seed 1, as a sweep split over machines (or continuing lost seeds) runs."""
     cmd = [
         sys.executable,
         "-m",
@@ -67,6 +68,8 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         "--methods",
         "lsd",
         "--seeds",
+        "1",
+        "--first-seed",
         "1",
         "--preset",
         "smoke",
@@ -80,7 +83,8 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     ]
     first = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    summary = tmp_path / "point-north-lsd-s0" / "summary.json"
+    assert not (tmp_path / "point-north-lsd-s0").exists()  # --first-seed 1: seed 1 alone
+    summary = tmp_path / "point-north-lsd-s1" / "summary.json"
     stamp = summary.stat().st_mtime_ns
     assert json.loads(summary.read_text())["epochs_done"] == 2
     assert "LSD" in (tmp_path / "report" / "report.md").read_text()
