@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -72,6 +72,10 @@ bench-guidance: $(STAMP)
 
 bench-update: $(STAMP)
 	$(PY) benchmarks/bench_update.py
+
+# Where a 2×256 update's CPU time goes (torch.profiler): matmul and Adam shares.
+profile-update: $(STAMP)
+	$(PY) benchmarks/profile_update.py
 
 # A point run alone and beside one busy process (trainer/threads.py's defaults hold their share).
 bench-contention: $(STAMP)
