@@ -34,6 +34,7 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
 from __future__ import annotations
 
 import argparse
+import gc
 import tempfile
 import time
 from collections.abc import Callable
@@ -109,6 +110,10 @@ def update_setup(env_name: str, hidden: int, dev: torch.device, **options: bool)
     def metra() -> None:
         agent.update(batches[next(it) % 8], None)
 
+    # The imports' ≈ 240 k objects out of the collector's reach: one full collection walking them
+    # (≈ 0.2 s) inside a timed block made it read up to 2× slower. The trainer has no full
+    # collection after its imports (none in a 40-epoch Ant run), so the timed steps should not either.
+    gc.freeze()
     return agent, full, plain_sac, metra
 
 

@@ -103,11 +103,10 @@ class Diayn(Metra):
         disc_loss = -log_q.mean()
         self.phi_opt.zero_grad(set_to_none=True)
         disc_loss.backward()
-        self.phi_opt.step()
-        self.phi_version += 1
+        pending = self.step_phi(self.phi_opt)
 
         reward = diayn_reward(log_q.detach(), self.prior.dim, discrete, self.cfg.diayn)
-        info = self.sac_update(b, reward)
+        info = self.sac_update(b, reward, pending)
         info.update(
             phi_loss=disc_loss.detach(), lam=self.log_lambda.exp().detach(), reward=reward.mean(), w_mean=torch.ones(())
         )

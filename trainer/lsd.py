@@ -55,11 +55,10 @@ class Lsd(Metra):
         phi_loss = -objective.mean()
         self.phi_opt.zero_grad(set_to_none=True)
         phi_loss.backward()
-        self.phi_opt.step()
-        self.phi_version += 1
+        pending = self.step_phi(self.phi_opt)
 
         reward = objective.detach()  # Eq. 11
-        info = self.sac_update(b, reward)
+        info = self.sac_update(b, reward, pending)
         info.update(
             phi_loss=phi_loss.detach(),
             lam=self.log_lambda.exp().detach(),

@@ -21,7 +21,7 @@ import torch
 from trainer.config import Config
 from trainer.encoders import PixelEncoder, feature_dim, is_pixels
 from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, init_like_reference
-from trainer.optim import adam, restore_kernel
+from trainer.optim import adam, restore_kernel, step_together
 from trainer.skills import SkillPrior
 
 # weight_fn(φ(s), φ(s′)) → w, shape (B,); both arguments detached.
@@ -71,6 +71,9 @@ class Metra:
         self.alpha_opt = adam([self.log_alpha], cfg.lr, cfg.fused_adam)
         self.lambda_opt = adam([self.log_lambda], cfg.lr, cfg.fused_adam)
         self.phi_version = 0  # bumped by every φ step; keys the labelled-embedding cache
+        # SAC never reads φ unless a pixel encoder is shared: then φ's step may wait for π's and
+        # run in the same Adam call (bit-identical; one call's overhead instead of two).
+        self.phi_apart = not (is_pixels(obs_shape) and cfg.encoder == "shared")
 
     @staticmethod
     def _encoders(obs_shape: int | tuple[int, ...], kind: str) -> dict[str, torch.nn.Module | None]:
@@ -121,12 +124,10 @@ class Metra:
         self.phi_opt.zero_grad(set_to_none=True)
         self.lambda_opt.zero_grad(set_to_none=True)
         (phi_loss + lambda_loss).backward()
-        self.phi_opt.step()
-        self.lambda_opt.step()
-        self.phi_version += 1
+        pending = self.step_phi(self.phi_opt, self.lambda_opt)
 
         reward = guided.detach()  # Eq. 11
-        info = self.sac_update(b, reward)
+        info = self.sac_update(b, reward, pending)
         info.update(
             phi_loss=phi_loss.detach(),
             lambda_loss=lambda_loss.detach(),
@@ -137,9 +138,22 @@ class Metra:
         )
         return info
 
-    def sac_update(self, b: TorchBatch, reward: torch.Tensor) -> dict[str, torch.Tensor]:
+    def step_phi(self, *opts: torch.optim.Adam) -> tuple[torch.optim.Adam, ...]:
+        """φ's (and λ's) Adam step after their backward: now, or (`phi_apart`) handed back for
+        `sac_update` to run with π's. Either way φ has stepped when `update` returns."""
+        self.phi_version += 1
+        if self.phi_apart:
+            return opts
+        step_together(*opts)
+        return ()
+
+    def sac_update(
+        self, b: TorchBatch, reward: torch.Tensor, pending: tuple[torch.optim.Adam, ...] = ()
+    ) -> dict[str, torch.Tensor]:
         """Soft actor-critic on a given reward: twin Q, learned α, Polyak-averaged target.
-        Episodes never terminate (time limit only), so no done mask, as the reference."""
+        Episodes never terminate (time limit only), so no done mask, as the reference.
+        `pending`: optimisers with gradients ready whose parameters SAC does not read (φ, λ),
+        stepped in π's Adam call."""
         alpha = self.log_alpha.exp().detach()
         with torch.no_grad():
             next_action, next_logp = self.policy.sample(b.next_obs, b.skill)
@@ -163,9 +177,7 @@ class Metra:
             actor_loss = actor_loss - (self.log_alpha * (logp.detach() + self.target_entropy)).mean()
             self.alpha_opt.zero_grad(set_to_none=True)
         actor_loss.backward()
-        self.policy_opt.step()
-        if self.learn_alpha:
-            self.alpha_opt.step()
+        step_together(self.policy_opt, *([self.alpha_opt] if self.learn_alpha else []), *pending)
 
         with torch.no_grad():  # Polyak averaging, one multi-tensor op
             torch._foreach_lerp_(list(self.qf_target.parameters()), list(self.qf.parameters()), self.cfg.tau)

@@ -13,6 +13,7 @@ import torch
 from trainer.config import make_config
 from trainer.guidance import CDIST_MM_ROWS, EMPTY_CLASS_DISTANCE, LabelledSets, class_distances, guidance_weight
 from trainer.metra import Metra, TorchBatch
+from trainer.optim import adam, step_together
 from trainer.skills import SkillPrior
 
 OBS, ACT, BATCH = 6, 3, 64
@@ -202,3 +203,52 @@ def test_cli_compile_is_a_bare_flag():
     assert p.parse_args(["--compile"]).compile is True
     assert p.parse_args(["--compile", "false"]).compile is False
     assert p.parse_args([]).compile is None
+
+
+def adam_pair(fused: bool, lr_b: float = 1e-3) -> tuple[list[torch.optim.Adam], list[torch.optim.Adam]]:
+    """Two identical sets of (network optimiser, scalar optimiser), e.g. π's and α's."""
+    torch.manual_seed(4)
+    net, scalar = torch.nn.Linear(5, 3), torch.zeros((), requires_grad=True)
+    twins = []
+    for _ in range(2):
+        n, s = copy.deepcopy(net), scalar.detach().clone().requires_grad_(True)
+        twins.append([adam(n.parameters(), 1e-3, fused), adam([s], lr_b, fused)])
+    return twins[0], twins[1]
+
+
+def set_grads(opts: list[torch.optim.Adam], step: int) -> None:
+    g = torch.Generator().manual_seed(10 + step)
+    for opt in opts:
+        for group in opt.param_groups:
+            for p in group["params"]:
+                p.grad = torch.randn(p.shape, generator=g) * 10.0 ** -(step % 4)
+
+
+def params(opts: list[torch.optim.Adam]) -> list[torch.Tensor]:
+    return [p for opt in opts for group in opt.param_groups for p in group["params"]]
+
+
+@pytest.mark.parametrize("fused", [False, True])
+@pytest.mark.parametrize("lr_b", [1e-3, 3e-4])  # equal hyper-parameters: one call; different: one by one
+def test_step_together_equals_separate_steps_bit_for_bit(fused, lr_b):
+    together, separate = adam_pair(fused, lr_b)
+    for step in range(5):
+        set_grads(together, step), set_grads(separate, step)
+        step_together(*together)
+        for opt in separate:
+            opt.step()
+    for a, b in zip(params(together), params(separate), strict=True):
+        assert torch.equal(a, b)
+    for t, s in zip(together, separate, strict=True):  # the saved state too: checkpoints unchanged
+        for pa, pb in zip(params([t]), params([s]), strict=True):
+            for key in ("step", "exp_avg", "exp_avg_sq"):
+                assert torch.equal(t.state[pa][key], s.state[pb][key]), key
+    moved = params(together)[0]
+    assert not torch.equal(moved, params(adam_pair(fused)[0])[0])  # the steps did move the weights
+
+
+def test_phi_steps_before_sac_reads_it_when_a_pixel_encoder_is_shared():
+    cfg = make_config("smoke", "point", hidden=32, encoder="shared")
+    agent = Metra((3, 64, 64), ACT, SkillPrior(2, False), cfg, torch.device("cpu"))
+    assert not agent.phi_apart  # φ's step changes the encoder Q and π read: it cannot wait
+    assert make_agent().phi_apart
