@@ -110,9 +110,9 @@ def update_setup(env_name: str, hidden: int, dev: torch.device, **options: bool)
     def metra() -> None:
         agent.update(batches[next(it) % 8], None)
 
-    # The imports' ≈ 240 k objects out of the collector's reach: one full collection walking them
-    # (≈ 0.2 s) inside a timed block made it read up to 2× slower. The trainer has no full
-    # collection after its imports (none in a 40-epoch Ant run), so the timed steps should not either.
+    # The imports' objects out of the collector's reach: a full collection walking them inside a
+    # timed block made that block read slow. A training run's full collections happen during its
+    # imports, so the timed steps should not pay for one either.
     gc.freeze()
     return agent, full, plain_sac, metra
 

@@ -53,10 +53,9 @@ def step_together(*opts: torch.optim.Adam) -> None:
 
     Adam is elementwise and each tensor keeps its own moments and step count, so the arithmetic per
     element is exactly that of calling each `opt.step()` (the tests check bit-equality); what it
-    saves is the per-call Python (hooks, grouping): the five steps of a 2×256 update took 0.66–0.71 ms
-    one by one and 0.49–0.54 ms in one call on the 2-core CPU (`make profile-update`: keys
-    `adam_one_by_one_ms`, `adam_together_ms`; docs/results.md). Each optimiser keeps
-    its own state, so checkpoints are unchanged.
+    saves is the per-call Python (hooks, grouping): about a fifth of the five Adam steps of a 2×256
+    update on the 2-core CPU (`make profile-update`: keys `adam_one_by_one_ms`, `adam_together_ms`;
+    figures in docs/results.md). Each optimiser keeps its own state, so checkpoints are unchanged.
     Optimisers whose groups differ in any hyper-parameter are stepped one by one."""
     groups = [(opt, group) for opt in opts for group in opt.param_groups]
     first = groups[0][1]
