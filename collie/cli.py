@@ -18,6 +18,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "sweep": ("trainer.sweep", "run methods × tasks × seeds of `collie train` (resumable; local pool or Ray)"),
     "report": ("trainer.report", "turn run folders into the paper's tables (markdown, CSV) and skill figures"),
     "rescore": ("trainer.rescore", "judge finished METRA / LSD / DIAYN runs by another task's rule, without training"),
+    "archive": ("trainer.archive", "keep finished runs' results, without checkpoint or replay, for `collie report`"),
 }
 
 

@@ -1,0 +1,67 @@
+"""`collie archive`: a finished run's results kept without its checkpoint and replay, and reported
+exactly as the run itself."""
+
+import json
+
+import pytest
+
+from collie.cli import main
+from trainer.archive import ArchiveError, archive
+from trainer.config import make_config
+from trainer.loop import Trainer
+from trainer.report import write_report
+from trainer.sweep import run_downstream_task
+
+
+@pytest.mark.slow
+def test_an_archived_run_reports_as_the_run_itself_without_its_checkpoint_or_replay(tmp_path, capsys):
+    runs, kept = tmp_path / "runs", tmp_path / "results"
+    source = runs / "point-north-collie-s0"
+    cfg = make_config("smoke", "point", method="collie", task="north", epochs=2, out=str(source))
+    Trainer(cfg, progress=False).run()
+    run_downstream_task(source)
+    assert main(["archive", str(source), "--out", str(kept)]) == 0
+    out = kept / source.name
+    assert f"→ {out}" in capsys.readouterr().out
+    names = {p.name for p in out.iterdir()}
+    assert {"summary.json", "eval_latest.npz", "config.json", "task.json", "downstream.json", "metrics.jsonl"} <= names
+    assert "checkpoint.pt" not in names and "replay" not in names
+    assert sum(p.stat().st_size for p in out.iterdir()) < 200_000  # small enough to commit
+
+    from_runs = write_report([runs], tmp_path / "report-runs")
+    from_kept = write_report([kept], tmp_path / "report-kept")
+    for name in ("markdown", "metrics_csv", "runs_csv"):  # every figure, diagnostic and downstream result
+        text = from_kept[name].read_text().replace(str(kept), str(runs)).replace("report-kept", "report-runs")
+        assert text == from_runs[name].read_text(), name
+    assert "zero_shot" in from_kept["metrics_csv"].read_text()
+
+    assert main(["archive", str(source), "--out", str(kept)]) == 0  # archiving again refreshes it
+    other = runs / "elsewhere" / source.name
+    other.mkdir(parents=True)
+    for name in ("summary.json", "eval_latest.npz"):
+        (other / name).write_bytes((source / name).read_bytes())
+    summary = json.loads((other / "summary.json").read_text())
+    summary["config"]["seed"] = 7
+    (other / "summary.json").write_text(json.dumps(summary))
+    assert main(["archive", str(other), "--out", str(kept)]) == 2
+    assert "holds another run of that name" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("files", "status", "message"),
+    [
+        ({"summary.json"}, "finished", "has no eval_latest.npz"),
+        ({"eval_latest.npz"}, "finished", "has no summary.json"),
+        ({"summary.json", "eval_latest.npz"}, "running", "not finished"),
+    ],
+)
+def test_what_is_not_a_finished_run_is_refused_with_the_reason(tmp_path, files, status, message):
+    source = tmp_path / "ant-north-metra-s0"
+    source.mkdir()
+    if "summary.json" in files:
+        (source / "summary.json").write_text(json.dumps({"status": status, "config": {"env": "ant"}}))
+    if "eval_latest.npz" in files:
+        (source / "eval_latest.npz").write_bytes(b"")
+    with pytest.raises(ArchiveError, match=message):
+        archive(source, tmp_path / "results")
+    assert not (tmp_path / "results").exists()
