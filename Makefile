@@ -133,7 +133,7 @@ bench-baselines: $(STAMP)
 # Ant: 33 trained runs + 6 rescored, zero-shot motion on each; HalfCheetah: 15 trained + 3 rescored and
 # the hierarchical Goal task; pixel Quadruped North, 1 seed, at a budget estimated to finish in <= 3 h
 # (PIXEL_ROBOT_FLAGS). Most of a day of wall time on 2 cores; resumable: rerun it to continue.
-# docs/results.md says what it measured.
+# docs/results.md says what it measured; results/robots keeps each finished run's results (collie archive).
 ROBOT_RUNS ?= runs/robots
 PIXEL_ROBOT_FLAGS ?= --epochs 400 --grad-steps 8 --batch-size 32 --warmup 80 --feedback-every 40 --total-queries 40 \
   --replay-capacity 50000 --eval-every 50 --checkpoint-every 50
@@ -154,6 +154,7 @@ bench-robots: $(STAMP)
 	$(VENV)/bin/collie sweep --env quadruped --tasks north --methods metra,collie \
 	  --seeds 1 --preset cpu --jobs 2 --no-report --out $(ROBOT_RUNS)/quadruped -- $(PIXEL_ROBOT_FLAGS)
 	$(VENV)/bin/collie report $(ROBOT_RUNS) --out $(ROBOT_RUNS)/report
+	$(VENV)/bin/collie archive $(ROBOT_RUNS) --out results/robots
 
 clean:
 	rm -rf runs .pytest_cache .ruff_cache

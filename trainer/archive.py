@@ -1,10 +1,12 @@
-"""`collie archive RUN… --out DIR`: keep a finished run's results, small enough to commit.
+"""`collie archive RUN|ROOT… --out DIR`: keep finished runs' results, small enough to commit.
 
 A robot run folder holds ≈ 90 MB (replay, checkpoint) and is gone when its machine is; its results
 are a few files of kilobytes. This copies those — summary.json, config.json, task.json,
 sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_latest.npz) — into
 DIR/<the run folder's name>, a folder `collie report` reads like the run itself (tables, skill
-figures, diagnostics). No checkpoint or replay is copied, so an archived run cannot be resumed or
+figures, diagnostics). A ROOT (a folder holding run folders, as `collie sweep --out` writes) has
+each finished run below it archived at the same relative path under DIR; the unfinished ones are
+named and left out. No checkpoint or replay is copied, so an archived run cannot be resumed or
 given a downstream task; run those before archiving.
 """
 
@@ -26,17 +28,17 @@ class ArchiveError(ValueError):
     """The folder is not a finished run, or the archive already holds another run of its name."""
 
 
-def archive(source: Path, out_root: Path) -> Path:
-    """Copy `source`'s results into `out_root`/<source's name>; returns that folder. Archiving the
-    same run again refreshes it (a downstream task run since, say); another run of the same name
-    (a different configuration) is refused."""
+def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
+    """Copy `source`'s results into `out_root`/<relative, default source's name>; returns that
+    folder. Archiving the same run again refreshes it (a downstream task run since, say); another
+    run of the same name (a different configuration) is refused."""
     for name in REQUIRED:
         if not (source / name).exists():
             raise ArchiveError(f"{source} has no {name}: not a run folder, or its final skills were not saved")
     summary = json.loads((source / "summary.json").read_text())
     if summary.get("status") != "finished":
         raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
-    out = out_root / source.resolve().name
+    out = out_root / (relative or source.resolve().name)
     if out.resolve() == source.resolve():
         raise ArchiveError(f"{source} is already in {out_root}")
     held = out / "summary.json"
@@ -49,18 +51,42 @@ def archive(source: Path, out_root: Path) -> Path:
     return out
 
 
+def runs_below(root: Path) -> tuple[list[Path], list[Path]]:
+    """The finished run folders below `root` and the unfinished ones, each in a stable order."""
+    finished, unfinished = [], []
+    for summary in sorted(root.rglob("summary.json")):
+        done = json.loads(summary.read_text()).get("status") == "finished"
+        (finished if done else unfinished).append(summary.parent)
+    return finished, unfinished
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("runs", nargs="+", help="finished run folders")
-    p.add_argument("--out", default="results", help="the archive: each run goes into OUT/<its folder's name>")
+    p.add_argument("runs", nargs="+", help="finished run folders, or folders holding them (searched recursively)")
+    p.add_argument("--out", default="results", help="the archive: a run goes into OUT/<its folder's name>")
 
 
 def run(args: argparse.Namespace) -> int:
-    for source in args.runs:
-        try:
-            out = archive(Path(source), Path(args.out))
-        except ArchiveError as exc:
-            print(f"collie archive: error: {exc}", file=sys.stderr)
+    out_root = Path(args.out)
+    for given in map(Path, args.runs):
+        if not given.is_dir():
+            print(f"collie archive: error: {given} is not a folder", file=sys.stderr)
             return 2
-        size = sum(f.stat().st_size for f in out.iterdir())
-        print(f"{source} → {out} ({size / 1e3:.0f} kB)")
+        if (given / "summary.json").exists():
+            jobs = [(given, None)]
+        else:
+            finished, unfinished = runs_below(given)
+            if not finished and not unfinished:
+                print(f"collie archive: error: {given} holds no run folder (none has summary.json)", file=sys.stderr)
+                return 2
+            for left in unfinished:
+                print(f"left out (not finished): {left}")
+            jobs = [(f, f.relative_to(given)) for f in finished if out_root.resolve() not in f.resolve().parents]
+        for source, relative in jobs:
+            try:
+                out = archive(source, out_root, relative)
+            except ArchiveError as exc:
+                print(f"collie archive: error: {exc}", file=sys.stderr)
+                return 2
+            size = sum(f.stat().st_size for f in out.iterdir())
+            print(f"{source} → {out} ({size / 1e3:.0f} kB)")
     return 0

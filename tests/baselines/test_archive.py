@@ -65,3 +65,28 @@ def test_what_is_not_a_finished_run_is_refused_with_the_reason(tmp_path, files, 
     with pytest.raises(ArchiveError, match=message):
         archive(source, tmp_path / "results")
     assert not (tmp_path / "results").exists()
+
+
+def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unfinished_runs(tmp_path, capsys):
+    sweep = tmp_path / "runs" / "robots"
+    for env, name, status in [
+        ("ant", "ant-north-metra-s0", "finished"),
+        ("ant", "ant-north-collie-s0", "running"),
+        ("half_cheetah", "half_cheetah-right-metra-s0", "finished"),
+    ]:
+        d = sweep / env / name
+        d.mkdir(parents=True)
+        (d / "summary.json").write_text(json.dumps({"status": status, "config": {"env": env}}))
+        (d / "eval_latest.npz").write_bytes(b"saved")
+    kept = tmp_path / "results" / "robots"
+    assert main(["archive", str(sweep), "--out", str(kept)]) == 0
+    assert f"left out (not finished): {sweep / 'ant' / 'ant-north-collie-s0'}" in capsys.readouterr().out
+    archived = sorted(p.parent.relative_to(kept).as_posix() for p in kept.rglob("summary.json"))
+    assert archived == ["ant/ant-north-metra-s0", "half_cheetah/half_cheetah-right-metra-s0"]
+    assert (kept / "ant" / "ant-north-metra-s0" / "eval_latest.npz").read_bytes() == b"saved"
+    assert main(["archive", str(tmp_path / "results"), "--out", str(kept)]) == 0  # nothing archived into itself
+    assert main(["archive", str(tmp_path / "nowhere"), "--out", str(kept)]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["archive", str(tmp_path / "empty"), "--out", str(kept)]) == 2
+    assert "holds no run folder" in capsys.readouterr().err
