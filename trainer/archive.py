@@ -53,7 +53,8 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
 
 def runs_below(root: Path) -> tuple[list[Path], list[Path]]:
     """The finished run folders below `root` and the unfinished ones, each in a stable order."""
-    finished, unfinished = [], []
+    finished: list[Path] = []
+    unfinished: list[Path] = []
     for summary in sorted(root.rglob("summary.json")):
         done = json.loads(summary.read_text()).get("status") == "finished"
         (finished if done else unfinished).append(summary.parent)
@@ -71,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         if not given.is_dir():
             print(f"collie archive: error: {given} is not a folder", file=sys.stderr)
             return 2
+        jobs: list[tuple[Path, Path | None]]
         if (given / "summary.json").exists():
             jobs = [(given, None)]
         else:
