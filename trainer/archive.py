@@ -18,6 +18,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
 
 REQUIRED = ("summary.json", "eval_latest.npz")
@@ -36,7 +37,7 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
         if not (source / name).exists():
             raise ArchiveError(f"{source} has no {name}: not a run folder, or its final skills were not saved")
     summary = json.loads((source / "summary.json").read_text())
-    if summary.get("status") != "finished":
+    if not is_finished(source):
         raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
     out = out_root / (relative or source.resolve().name)
     if out.resolve() == source.resolve():
@@ -53,12 +54,8 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
 
 def runs_below(root: Path) -> tuple[list[Path], list[Path]]:
     """The finished run folders below `root` and the unfinished ones, each in a stable order."""
-    finished: list[Path] = []
-    unfinished: list[Path] = []
-    for summary in sorted(root.rglob("summary.json")):
-        done = json.loads(summary.read_text()).get("status") == "finished"
-        (finished if done else unfinished).append(summary.parent)
-    return finished, unfinished
+    folders = sorted(summary.parent for summary in root.rglob("summary.json"))
+    return [f for f in folders if is_finished(f)], [f for f in folders if not is_finished(f)]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
