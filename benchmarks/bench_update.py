@@ -9,7 +9,9 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
 2. Update FLOP rate: the FLOPs of one full update (counted by torch's FlopCounterMode, forward and
    backward; key `update_gflop_<h>`) times its steps/s, ÷ this machine's rate for a (256 × h)·(h × h)
    matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
-   `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_fused_<h>` the same with `--fused-adam`.
+   `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_fused_<h>` the same with `--fused-adam`;
+   `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
+   nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
    i.e. compilation), `compile_speedup_<h>` (compiled ÷ eager steps/s, measured interleaved) and
    `compile_break_even_steps_<h>` (steps before the compile time is paid back; inf if never).
@@ -39,11 +41,14 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 import torch
 from record import record
+from torch._ops import OpOverload
+from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import FlopCounterMode
 
 from trainer.acting import TorchActor, actor
@@ -123,6 +128,44 @@ def flops(step: Step) -> int:
     return counter.get_total_flops()
 
 
+class MatmulRecorder(TorchDispatchMode):
+    """Keeps every matmul a step makes, with copies of its arguments (same shapes and strides)."""
+
+    OPS = (
+        torch.ops.aten.mm.default,
+        torch.ops.aten.addmm.default,
+        torch.ops.aten.bmm.default,
+        torch.ops.aten.baddbmm.default,
+    )
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[tuple[OpOverload, list[Any], dict[str, Any]]] = []
+
+    def __torch_dispatch__(
+        self, func: OpOverload, types: Any, args: tuple[Any, ...] = (), kwargs: dict[str, Any] | None = None
+    ) -> Any:
+        if func in self.OPS:  # clone keeps a dense tensor's strides; as_strided restores an expanded one's
+            copies = [
+                a.detach().clone().as_strided(a.shape, a.stride()) if isinstance(a, torch.Tensor) else a for a in args
+            ]
+            self.calls.append((func, copies, kwargs or {}))
+        return func(*args, **(kwargs or {}))
+
+
+def matmuls_alone(step: Step) -> Step:
+    """The matmuls of one call of `step`, replayed with nothing between them."""
+    with MatmulRecorder() as recorder:
+        step()
+    calls = recorder.calls
+
+    def replay() -> None:
+        for func, args, kwargs in calls:
+            func(*args, **kwargs)
+
+    return replay
+
+
 def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
     dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     _, full, plain_sac, metra = update_setup(env_name, 1024, dev)
@@ -157,6 +200,7 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
                 "fused": update_setup(env_name, h, cpu, fused_adam=True)[1],
             }
             flop = flops(variants["eager"])
+            variants["matmuls"] = matmuls_alone(variants["eager"])
             first: dict[str, float] = {}
             if compiled:
                 variants["compiled"] = update_setup(env_name, h, cpu, compile=True)[1]
@@ -175,6 +219,8 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
             out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
             out[f"flop_fraction_{h}"] = out[f"update_gflops_{h}"] / out[f"matmul_gflops_{h}"]
             out[f"flop_fraction_fused_{h}"] = med["fused"] * flop / 1e9 / out[f"matmul_gflops_{h}"]
+            mm_flop = flops(variants["matmuls"])
+            out[f"matmuls_alone_fraction_{h}"] = med["matmuls"] * mm_flop / 1e9 / out[f"matmul_gflops_{h}"]
             if compiled:
                 saved = 1 / med["eager"] - 1 / med["compiled"]  # seconds per step
                 out[f"compile_s_{h}"] = first["compiled"] - 3 / med["compiled"]
@@ -343,7 +389,8 @@ def main() -> None:
             print(
                 f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
                 f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
-                f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %"
+                f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %; its matmuls alone "
+                f"{100 * f[f'matmuls_alone_fraction_{h}']:.0f} %"
             )
             if f"compile_s_{h}" in f:
                 print(
