@@ -130,9 +130,9 @@ bench-baselines: $(STAMP)
 # hour per run, two at a time on 2 cores), then one report with the paper's Tables 1-3 beside ours.
 # METRA never reads its task while it trains, so it is trained on one task per env and judged by the
 # others' rules with `collie rescore` (same skills, no extra training; docs/baselines.md).
-# Ant: 33 trained runs + 6 rescored, zero-shot motion on each; HalfCheetah: 15 trained + 3 rescored and
+# Ant (2000 epochs, 53-59 min per run): 33 trained runs + 9 rescored, zero-shot motion on each; HalfCheetah: 15 trained + 3 rescored and
 # the hierarchical Goal task; pixel Quadruped North, 1 seed, at a budget estimated to finish in <= 3 h
-# (PIXEL_ROBOT_FLAGS). Most of a day of wall time on 2 cores; resumable: rerun it to continue.
+# (PIXEL_ROBOT_FLAGS). About a day of wall time on 2 cores (Ant ≈ 15 h); resumable: rerun it to continue.
 # docs/results.md says what it measured; results/robots keeps each finished run's results (collie archive).
 ROBOT_RUNS ?= runs/robots
 PIXEL_ROBOT_FLAGS ?= --epochs 400 --grad-steps 8 --batch-size 32 --warmup 80 --feedback-every 40 --total-queries 40 \

@@ -5,7 +5,7 @@ and where those seconds go, part by part.
 
 Target (issue 11): `first_segment_s` ≤ 45 s with the busy process (it was 886 s with torch's default
 threads; 33 s on a quiet machine). Issue 12: `--env ant` times `collie up --env ant --task north`
-(target ≤ 10 min; its `cpu` preset asks first at epoch 360).
+(target ≤ 10 min; with people labelling it asks first at epoch 240, `people_schedule` in trainer/config.py).
 
 The split comes from the stack's own timeline (OUT/logs/startup.jsonl, collie/startup.py): each
 process marks the work it just finished, so a part's seconds are the time since that process's

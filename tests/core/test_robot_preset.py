@@ -1,18 +1,20 @@
 """The `cpu` budgets for Ant and HalfCheetah: written-down shape, the paper's feedback proportions,
 and a small Ant run of that shape that trains, asks for labels, logs both bin rules and resumes."""
 
+import argparse
 import json
 from pathlib import Path
 
 import pytest
 import torch
 
-from trainer.config import ROBOT_CPU, feedback_schedule, make_config
+from collie.up import people_flags
+from trainer.config import ROBOT_CPU, feedback_schedule, make_config, people_schedule
 from trainer.loop import Trainer
 from trainer.obs_stats import REFERENCE_STATS
 
 
-@pytest.mark.parametrize(("env", "epochs"), [("ant", 1200), ("half_cheetah", 1600)])
+@pytest.mark.parametrize(("env", "epochs"), [("ant", 2000), ("half_cheetah", 1600)])
 def test_cpu_robot_budget_and_feedback_proportions(env: str, epochs: int) -> None:
     c = make_config("cpu", env)
     assert (c.epochs, c.grad_steps, c.hidden, c.layers, c.lr, c.batch_size) == (epochs, 50, 256, 2, 1e-3, 256)
@@ -32,6 +34,34 @@ def test_feedback_schedule_scales_and_refuses_what_does_not_fit() -> None:
     assert feedback_schedule(10) == {"warmup": 2, "feedback_every": 1}
     with pytest.raises(ValueError, match="sessions"):
         feedback_schedule(7)
+    assert feedback_schedule(2000, first=240) == {"warmup": 240, "feedback_every": 222}  # last at 1794
+    with pytest.raises(ValueError, match="sessions"):
+        feedback_schedule(100, first=95)
+
+
+def test_people_label_ant_from_epoch_240_and_the_last_session_stays_at_ninety_percent() -> None:
+    schedule = people_schedule("cpu", "ant")
+    c = make_config("cpu", "ant", **schedule)
+    assert make_config("cpu", "ant").warmup == 400 and c.warmup == 240  # ≈ 14 min of waiting → ≈ 9
+    last_session = c.warmup + (c.n_sessions - 1) * c.feedback_every
+    assert c.n_sessions == 8 and 0.85 * c.epochs < last_session <= 0.9 * c.epochs
+    for preset, env in (("cpu", "point"), ("cpu", "half_cheetah"), ("paper", "ant")):
+        assert people_schedule(preset, env) == {}  # the preset's own schedule
+
+
+@pytest.mark.parametrize(
+    ("teacher", "env", "train_args", "flags"),
+    [
+        ("none", "ant", "", ["--warmup", "240", "--feedback-every", "222"]),
+        ("oracle", "ant", "", []),  # the scripted teacher keeps the preset's schedule, as the sweeps do
+        ("none", "ant", "--epochs 50", []),  # a schedule of the person's own
+        ("none", "ant", "--warmup=10", []),
+        ("none", "point", "", []),
+    ],
+)
+def test_collie_up_brings_the_first_session_forward_only_for_people(teacher, env, train_args, flags) -> None:
+    args = argparse.Namespace(teacher=teacher, env=env, preset="cpu", train_args=train_args)
+    assert people_flags(args) == flags
 
 
 def small_ant(out: Path, epochs: int) -> Trainer:
