@@ -95,20 +95,6 @@ def task_flags(args: argparse.Namespace) -> list[str]:
     return flags or ["--task", "north"]
 
 
-SCHEDULE_FLAGS = ("--epochs", "--warmup", "--feedback-every")
-
-
-def people_flags(args: argparse.Namespace) -> list[str]:
-    """When people label and --train-args leaves the schedule alone: the first session brought
-    forward where the preset's warm-up would keep them waiting past ten minutes (`people_schedule`)."""
-    if args.teacher != "none" or any(a.split("=")[0] in SCHEDULE_FLAGS for a in args.train_args.split()):
-        return []
-    from trainer.config import people_schedule
-
-    schedule = people_schedule(args.preset, args.env)
-    return [f for k, v in schedule.items() for f in (f"--{k.replace('_', '-')}", str(v))]
-
-
 def run_name(args: argparse.Namespace) -> str:
     if args.instruction is not None:
         return "instruction"
@@ -181,7 +167,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
     if not resume:
         memo.unlink(missing_ok=True)
-    people = people_flags(args)
+    people = ["--people-schedule"] if args.teacher == "none" else []  # the first session earlier
     train = [
         "train",
         "--env",
@@ -247,8 +233,6 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     if labeler_url:  # links with tokens go to the terminal of the person who started the stack, not to logs
         print(f"  label     {labeler_url}")
     print(f"  dashboard {dashboard}")
-    if people:
-        print(f"  schedule  first labels at epoch {people[1]}, then every {people[3]} (the preset waits longer)")
     print(f"  tokens    in {tokens_file} (readable by you only)")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)

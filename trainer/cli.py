@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from collie.startup import mark
 from collie.tokens import add_token_arguments, resolve_token
-from trainer.config import PRESETS, Config, make_config
+from trainer.config import PRESETS, Config, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
@@ -48,6 +48,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="seconds to wait for a session's labels before continuing with what arrived "
         "(an operator may change it from the dashboard)",
     )
+    p.add_argument(
+        "--people-schedule",
+        action="store_true",
+        help="people label this run: its first session comes earlier where the preset's warm-up would keep "
+        "them waiting (trainer/config.py people_schedule), unless --epochs/--warmup/--feedback-every are given",
+    )
     group = p.add_argument_group("hyperparameters (override the preset)")
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
@@ -69,6 +75,9 @@ def _parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
 
 
+SCHEDULE_KEYS = ("epochs", "warmup", "feedback_every")  # a schedule of the person's own
+
+
 def config_from_args(args: argparse.Namespace) -> Config:
     overrides = {
         f.name: getattr(args, f.name, None)
@@ -83,6 +92,8 @@ def config_from_args(args: argparse.Namespace) -> Config:
         overrides["task"] = ""  # the file names its task
     name = overrides["task"] or (Path(args.task_file).stem if args.task_file else "north")
     overrides["out"] = args.out or f"runs/{args.env}-{name}-{args.method}-s{args.seed}"
+    if getattr(args, "people_schedule", False) and all(overrides[k] is None for k in SCHEDULE_KEYS):
+        overrides.update(people_schedule(args.preset, args.env))
     return make_config(args.preset, args.env, **overrides)
 
 

@@ -3,12 +3,13 @@ and a small Ant run of that shape that trains, asks for labels, logs both bin ru
 
 import argparse
 import json
+import shlex
 from pathlib import Path
 
 import pytest
 import torch
 
-from collie.up import people_flags
+from trainer.cli import add_arguments, config_from_args
 from trainer.config import ROBOT_CPU, feedback_schedule, make_config, people_schedule
 from trainer.loop import Trainer
 from trainer.obs_stats import REFERENCE_STATS
@@ -50,18 +51,20 @@ def test_people_label_ant_from_epoch_240_and_the_last_session_stays_at_ninety_pe
 
 
 @pytest.mark.parametrize(
-    ("teacher", "env", "train_args", "flags"),
+    ("argv", "schedule"),
     [
-        ("none", "ant", "", ["--warmup", "240", "--feedback-every", "222"]),
-        ("oracle", "ant", "", []),  # the scripted teacher keeps the preset's schedule, as the sweeps do
-        ("none", "ant", "--epochs 50", []),  # a schedule of the person's own
-        ("none", "ant", "--warmup=10", []),
-        ("none", "point", "", []),
+        ("--env ant --people-schedule", (2000, 240, 222)),  # what `collie up` passes when people label
+        ("--env ant", (2000, 400, 200)),  # the scripted teacher and the sweeps: the preset's
+        ("--env ant --people-schedule --epochs 50 --warmup 10 --feedback-every 5", (50, 10, 5)),  # their own
+        ("--env ant --people-schedule --warmup 300", (2000, 300, 200)),
+        ("--env point --people-schedule", (400, 40, 25)),  # make demo: the preset asks early already
     ],
 )
-def test_collie_up_brings_the_first_session_forward_only_for_people(teacher, env, train_args, flags) -> None:
-    args = argparse.Namespace(teacher=teacher, env=env, preset="cpu", train_args=train_args)
-    assert people_flags(args) == flags
+def test_collie_train_brings_the_first_session_forward_only_for_people(argv: str, schedule: tuple) -> None:
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    c = config_from_args(p.parse_args(shlex.split(argv)))
+    assert (c.epochs, c.warmup, c.feedback_every) == schedule
 
 
 def small_ant(out: Path, epochs: int) -> Trainer:
