@@ -2,10 +2,11 @@
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
 Resumable: a run folder whose summary.json says "finished" is not rerun; a run with a checkpoint
-continues from it (`collie train --resume`); with `--downstream`, a run whose downstream.json already
-holds its task is not re-evaluated. Folders: OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with
-sweep_run.json naming its method and variant for `collie report`. After the runs, the report of
-OUT is written to OUT/report/.
+continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT, SIGTERM) is
+reported as failed and never evaluated; with `--downstream`, a run whose downstream.json already
+holds its task from its final policy is not re-evaluated. Folders:
+OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
+for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
     collie sweep --env point --tasks north,range --methods metra,collie --seeds 3 --out runs/sweep
     collie sweep --methods collie --variant additive --out runs/ablations -- --reward-form additive
@@ -97,8 +98,13 @@ def train_command(spec: RunSpec) -> list[str]:
 
 
 def downstream_done(out: str | Path) -> bool:
-    path = Path(out) / "downstream.json"
-    return path.exists() and bool(json.loads(path.read_text()))
+    """downstream.json holds results, each from the run's final policy (its `epoch` is the run's
+    `epochs_done`): a result from an earlier policy is stale and is computed again."""
+    path, summary = Path(out) / "downstream.json", Path(out) / "summary.json"
+    if not (path.exists() and summary.exists()):
+        return False
+    results, done = json.loads(path.read_text()), json.loads(summary.read_text()).get("epochs_done")
+    return bool(results) and all(r.get("epoch", done) == done for r in results.values() if isinstance(r, dict))
 
 
 def _call(cmd: list[str], log: Path) -> None:
@@ -122,6 +128,10 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         out.mkdir(parents=True, exist_ok=True)
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
         _call(train_command(spec), out.with_suffix(".log"))
+        if not is_finished(out):  # stopped by SIGINT / SIGTERM: a final checkpoint, not a final policy
+            summary = out / "summary.json"
+            status = json.loads(summary.read_text()).get("status") if summary.exists() else None
+            raise RuntimeError(f"{out} stopped before its last epoch (status {status!r}); rerun the sweep to resume it")
     if spec.downstream and not downstream_done(out):
         run_downstream_task(out, spec.downstream_flags)
     return json.loads((out / "summary.json").read_text())

@@ -56,6 +56,27 @@ def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
         run_one(specs[0])
 
 
+def test_a_run_stopped_by_a_signal_is_not_evaluated_and_a_stale_evaluation_is_redone(tmp_path, monkeypatch):
+    spec = RunSpec("point", "north", "collie", 0, str(tmp_path / "run"), downstream=True)
+    calls = []
+
+    def stopped(cmd, **kw):  # `collie train` exits 0 after SIGINT, with a final checkpoint
+        calls.append(cmd)
+        (tmp_path / "run" / "summary.json").write_text(json.dumps({"status": "interrupted", "epochs_done": 658}))
+        return subprocess.CompletedProcess(cmd, 0)
+
+    monkeypatch.setattr(sweep.subprocess, "run", stopped)
+    with pytest.raises(RuntimeError, match=r"stopped before its last epoch .*'interrupted'.* rerun the sweep"):
+        run_one(spec)
+    assert len(calls) == 1 and "train" in calls[0]  # no downstream task on the unfinished policy
+
+    finished(tmp_path / "done", epochs_done=2000)
+    (tmp_path / "done" / "downstream.json").write_text(json.dumps({"zero_shot": {"mean": 1.0, "epoch": 658}}))
+    assert not sweep.downstream_done(tmp_path / "done")  # from an earlier policy: computed again
+    (tmp_path / "done" / "downstream.json").write_text(json.dumps({"zero_shot": {"mean": 1.0, "epoch": 2000}}))
+    assert sweep.downstream_done(tmp_path / "done")
+
+
 def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     """From --first-seed 1, as a sweep split over machines (or continuing lost seeds) runs."""
     cmd = [
