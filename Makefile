@@ -131,11 +131,11 @@ bench-baselines: $(STAMP)
 # METRA never reads its task while it trains, so it is trained on one task per env and judged by the
 # others' rules with `collie rescore` (same skills, no extra training; docs/baselines.md).
 # Ant (2000 epochs, 53-59 min per run): 33 trained runs + 9 rescored, zero-shot motion on each; HalfCheetah: 15 trained + 3 rescored and
-# the hierarchical Goal task; pixel Quadruped North, 1 seed, at a budget estimated to finish in <= 3 h
-# (PIXEL_ROBOT_FLAGS). About a day of wall time on 2 cores (Ant ≈ 15 h); resumable: rerun it to continue.
+# the hierarchical Goal task; pixel Quadruped North, 1 seed, at a budget measured to finish in <= 3 h
+# (PIXEL_ROBOT_FLAGS: 109 and 172 min here; its skills still do not move, docs/results.md). About a day of wall time on 2 cores (Ant ≈ 15 h); resumable: rerun it to continue.
 # docs/results.md says what it measured; results/robots keeps each finished run's results (collie archive).
 ROBOT_RUNS ?= runs/robots
-PIXEL_ROBOT_FLAGS ?= --epochs 400 --grad-steps 8 --batch-size 32 --warmup 80 --feedback-every 40 --total-queries 40 \
+PIXEL_ROBOT_FLAGS ?= --epochs 400 --grad-steps 16 --batch-size 32 --warmup 80 --feedback-every 40 --total-queries 40 \
   --replay-capacity 50000 --eval-every 50 --checkpoint-every 50
 bench-robots: $(STAMP)
 	$(VENV)/bin/collie sweep --env ant --tasks north,range,hole,hole_north --methods oracle,collie \
