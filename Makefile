@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders probe-quadruped-gait bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -108,6 +108,10 @@ bench-pixels: $(STAMP)
 
 bench-encoders: $(STAMP)
 	$(PY) benchmarks/bench_encoders.py
+
+# How far open-loop gaits carry the pixel Quadruped (seconds; docs/results.md's gait figures).
+probe-quadruped-gait: $(STAMP)
+	$(PY) benchmarks/probe_quadruped_gait.py --seeds 4
 
 # kill -9 ×100 over service, trainer, teacher and labeling UI during a 1000-label oracle run under collie up.
 bench-chaos: $(STAMP)
