@@ -42,6 +42,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=4, help="initial states of seeds 0 … N−1")
     args = p.parse_args()
+    if args.seeds < 1:
+        p.error(f"--seeds must be ≥ 1, got {args.seeds}")
     env = make_env("quadruped", seed=0)
     assert isinstance(env, QuadrupedEnv)
     phases = np.arange(env.action_dim)

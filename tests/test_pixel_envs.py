@@ -4,6 +4,9 @@ encoders and a smoke training run."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -16,6 +19,9 @@ from trainer.envs import VectorEnv, load_model, make_env, model_path, model_xml
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
 from trainer.skills import SkillPrior
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from probe_quadruped_gait import distance_after  # the bench folder is not a package
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -64,23 +70,14 @@ def test_same_seed_same_frames(env) -> None:
     assert not np.array_equal(env.reset(seed=6)[0], first)
 
 
-def _distance_after(env, seed: int, action_at) -> float:
-    """How far the root travels in one 200-step episode under an open-loop action sequence."""
-    env.reset(seed=seed)
-    start = env.data.qpos[:2].copy()
-    for t in range(env.episode_steps):
-        env.step(action_at(t))
-    return float(np.linalg.norm(env.data.qpos[:2] - start))
-
-
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_periodic_gait_walks_the_quadruped_away(seed: int) -> None:
     """The actuators can carry the robot far in one episode, so skills that stay put (docs/results.md,
     the pixel Quadruped) are the learner's, not the env's: standing still drifts only as it settles."""
     env = make_env("quadruped", seed=0)
     phases = np.arange(env.action_dim)
-    gait = _distance_after(env, seed, lambda t: np.sin(0.5 * t + phases))
-    still = _distance_after(env, seed, lambda t: np.zeros(env.action_dim))
+    gait = distance_after(env, seed, lambda t: np.sin(0.5 * t + phases))
+    still = distance_after(env, seed, lambda t: np.zeros(env.action_dim))
     env.close()
     assert gait > 4.0 and still < 1.0, (gait, still)
 
