@@ -24,7 +24,10 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    `rollout_fraction_torch_<env>`: the default rollout acting through the general torch path
    (`TorchActor`) instead of `Actor`, what the fast acting path gains; `rollout_fraction_batch2_<env>`:
    serial, but each step's mujoco.batch call on 2 MuJoCo threads (`batch_threads=2`, bit-identical
-   rollouts). `--only rollout` runs just this part.
+   rollouts). Where the default rollout's time goes, each part timed alone over one episode, µs
+   per step of all 8 envs: `rollout_step_us_<env>` (the whole rollout), `policy_us_<env>` (the
+   `actor` path acting for the 8 rows), `physics_us_<env>` (`VectorEnv.step`), `raw_us_<env>` (the
+   raw loop's time for 8 env steps). `--only rollout` runs just this part.
 4. Device data path: 32 batches gathered, normalised and made tensors by the device path
    (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
    Key `device_sampling_ratio` (≤ 1: costs nothing on the CPU).
@@ -244,6 +247,28 @@ def raw_mj_step_rate(env_name: str, steps: int, seed: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
+def rollout_parts(env: VectorEnv, agent: Metra, skills: np.ndarray, norm: Normaliser, seed: int) -> tuple[float, float]:
+    """Seconds per step of the default rollout's two parts, each alone over one episode: the
+    policy acting for every row (as `rollout` calls it, one torch thread) and the physics."""
+    b = env.reset(list(range(seed, seed + env.num_envs)))
+    policy, obs = actor(agent, skills, norm, deterministic=False), b.obs.copy()
+    actions, every, steps = np.zeros((env.num_envs, env.action_dim), np.float32), slice(None), env.episode_steps
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        start = time.perf_counter()
+        for _ in range(steps):
+            policy(obs, every, actions)
+        acting = time.perf_counter() - start
+        start = time.perf_counter()
+        for _ in range(steps):
+            env.step(actions, out=b)
+        physics = time.perf_counter() - start
+    finally:
+        torch.set_num_threads(threads)
+    return acting / steps, physics / steps
+
+
 def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     cfg = make_config("cpu", env_name)
     prior = SkillPrior(cfg.skill_dim, cfg.discrete_skills)
@@ -260,6 +285,7 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
     rng = np.random.default_rng(0)
     n = 8 * default.episode_steps
     rates: dict[str, list[float]] = {kind: [] for kind in (*envs, "raw")}
+    parts: dict[str, list[float]] = {"policy": [], "physics": []}
     for r in range(rounds):  # interleaved
         skills = prior.sample(8, rng)
         for kind, env in envs.items():
@@ -268,6 +294,8 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
             rollout(env, agent, skills, list(range(r * 8, r * 8 + 8)), norm, deterministic=False, acting=acting)
             rates[kind].append(n / (time.perf_counter() - start))
         rates["raw"].append(raw_mj_step_rate(env_name, n, r))
+        for part, seconds in zip(parts, rollout_parts(default, agent, skills, norm, r * 8), strict=True):
+            parts[part].append(seconds)
     med = {k: float(np.median(v)) for k, v in rates.items()}
     for env in envs.values():
         env.close()
@@ -281,6 +309,10 @@ def bench_rollout(env_name: str, rounds: int) -> dict[str, float]:
         f"rollout_fraction_batch2_{env_name}": med["batch2"] / med["raw"],
         f"physics_threads_{env_name}": default.physics_threads,
         f"batch_threads_{env_name}": default.batch_threads,
+        f"rollout_step_us_{env_name}": 8e6 / med["default"],
+        f"policy_us_{env_name}": 1e6 * float(np.median(parts["policy"])),
+        f"physics_us_{env_name}": 1e6 * float(np.median(parts["physics"])),
+        f"raw_us_{env_name}": 8e6 / med["raw"],
     }
 
 
@@ -410,6 +442,11 @@ def main() -> None:
                 f"{100 * r[f'rollout_fraction_pipelined_{env_name}']:.0f} %, one batch call on 2 threads "
                 f"{100 * r[f'rollout_fraction_batch2_{env_name}']:.0f} %, acting through TorchActor "
                 f"{100 * r[f'rollout_fraction_torch_{env_name}']:.0f} %; goal ≥ 90 %)"
+            )
+            print(
+                f"  µs per step of the 8 envs: rollout {r[f'rollout_step_us_{env_name}']:.0f} = policy "
+                f"{r[f'policy_us_{env_name}']:.0f} + physics {r[f'physics_us_{env_name}']:.0f} + the loop's rest; "
+                f"the raw loop {r[f'raw_us_{env_name}']:.0f}"
             )
     if "sampling" in parts:
         s = bench_sampling(a.rounds)
