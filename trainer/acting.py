@@ -11,10 +11,16 @@ randn_like, so for the same seed the actions equal the policy's own to float tol
 (tests/core/test_acting.py); not bit for bit (numpy's exp/tanh are not torch's), so a run's
 rollouts are deterministic per seed and across a resume, but differ at float level from
 `TorchActor`'s. Anything else (a CNN encoder, another device) acts through `Metra.act` (`TorchActor`).
+
+`--acting torch` (`acting_path`) makes every rollout act through `TorchActor`, as all runs did before
+2026-12-01 (18403cf): those runs' seeds are then reproduced exactly. Which path acts changes only
+rounding, and through it each seed's trajectories: on the point mass's Range Oracle six seeds of each
+gave the same figures within one std (docs/results.md, the no-regression rerun).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -129,3 +135,11 @@ def actor(agent: Metra, skills: np.ndarray, normalise: Normalising, deterministi
     """`Actor` wherever it fits the agent's policy, else the general torch path."""
     cls = Actor if fits(agent) else TorchActor
     return cls(agent, skills, normalise, deterministic)
+
+
+def acting_path(name: str) -> Callable[[Metra, np.ndarray, Normalising, bool], Acting]:
+    """The rollouts' acting path by its config name (`Config.acting`): "fast" or "torch"."""
+    paths: dict[str, Callable[[Metra, np.ndarray, Normalising, bool], Acting]] = {"fast": actor, "torch": TorchActor}
+    if name not in paths:
+        raise ValueError(f"unknown acting path {name!r}; valid: {', '.join(paths)}")
+    return paths[name]

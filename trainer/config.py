@@ -26,6 +26,7 @@ QUERY_STRATEGIES = ("entropy", "uniform", "uncertainty", "latent")
 PRESETS = ("paper", "cpu", "smoke")
 INITS = ("reference", "torch")
 DIAYN_VARIANTS = ("reference", "sphere")
+ACTING_PATHS = ("fast", "torch")  # trainer/acting.py
 REFERENCE_LOG_STD_MIN = math.log(1e-6)  # garage's Gaussian modules: min_std 1e-6 (the policy's floor)
 
 
@@ -44,6 +45,7 @@ class Config:
     physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
     compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
     fused_adam: bool = False  # Adam's fused kernel (trainer/optim.py): faster, rounds differently from foreach
+    acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)
     hidden: int = 1024
     layers: int = 2
@@ -144,6 +146,7 @@ class Config:
         need(self.physics_threads >= 0, f"physics_threads must be ≥ 0, got {self.physics_threads}")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
         need(self.init in INITS, f"unknown init {self.init!r}; valid: {', '.join(INITS)}")
+        need(self.acting in ACTING_PATHS, f"unknown acting path {self.acting!r}; valid: {', '.join(ACTING_PATHS)}")
         need(self.log_std_min < 2.0, f"log_std_min must be below the cap 2, got {self.log_std_min}")
         need(self.bin_rule in BIN_RULES, f"unknown bin rule {self.bin_rule!r}; valid: {', '.join(BIN_RULES)}")
         need(self.diayn in DIAYN_VARIANTS, f"unknown diayn variant {self.diayn!r}; valid: {', '.join(DIAYN_VARIANTS)}")

@@ -31,6 +31,7 @@ import torch
 
 from collie import startup
 from collie.labels import Label
+from trainer.acting import acting_path
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.device_replay import DeviceBatch, DeviceReplay
@@ -300,7 +301,7 @@ class Trainer:
         c = self.cfg
         skills = self.prior.evaluation_skills(c.eval_trajectories, seed=c.seed)
         seeds = [c.seed * 1000 + i for i in range(c.eval_trajectories)]
-        traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, deterministic=True)
+        traj = rollout(self.eval_env, self.agent, skills, seeds, self.normalise, True, acting_path(c.acting))
         xy = list(traj.xy.astype(np.float64))
         metrics = coverage_metrics(  # with no rule: only the rule-free ones (visited bins, states)
             xy,
@@ -482,7 +483,7 @@ class Trainer:
         n = self.cfg.episodes_per_epoch
         skills = self.prior.sample(n, self.rng)
         seeds = [int(x) for x in self.rng.integers(0, 2**31 - 1, size=n)]
-        traj = rollout(self.env, self.agent, skills, seeds, self.normalise, deterministic=False)
+        traj = rollout(self.env, self.agent, skills, seeds, self.normalise, False, acting_path(self.cfg.acting))
         if not np.isfinite(traj.action).all():  # MuJoCo would silently reset on a NaN control
             self.diverged("non-finite action")
         if not np.isfinite(traj.obs).all():

@@ -24,6 +24,7 @@ def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
     if saved.exists():
         with np.load(saved) as f:
             return f["xy"], f["skill"]
+    from trainer.acting import acting_path
     from trainer.envs import VectorEnv
     from trainer.pretrained import load_skills
     from trainer.rollout import rollout
@@ -39,6 +40,7 @@ def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
         [c.seed * 1000 + i for i in range(c.eval_trajectories)],
         skills.normalise,
         deterministic=True,
+        acting=acting_path(c.acting),
     )
     env.close()
     return traj.xy, traj.skill

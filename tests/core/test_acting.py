@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.acting import Actor, TorchActor, actor, fits
+from trainer.acting import Actor, TorchActor, acting_path, actor, fits
 from trainer.config import make_config
 from trainer.envs import VectorEnv, make_env
 from trainer.metra import Metra
@@ -159,3 +159,33 @@ def test_rollout_is_bit_identical_to_acting_and_stepping_written_out(
     assert np.ptp(traj.action) > 0.5  # real actions, not a constant
     env.close()
     plain.close()
+
+
+def test_acting_torch_rolls_out_through_the_policy_forward() -> None:
+    """`--acting torch`: every step's actions are `Metra.act`'s on the normalised observations,
+    bit for bit, as rollouts acted before `Actor` (runs before 2026-12-01 reproduce per seed)."""
+    torch.manual_seed(0)
+    agent, _, skills, norm = setup("point")
+    steps, seeds = 15, list(range(20, 28))
+    env = VectorEnv("point", 8, episode_steps=steps)
+    torch.manual_seed(5)
+    traj = rollout(env, agent, skills, seeds, norm, False, acting_path("torch"))
+    plain = VectorEnv("point", 8, episode_steps=steps)
+    torch.manual_seed(5)
+    b, actions = plain.reset(seeds), []
+    for _ in range(steps):
+        a = np.concatenate([reference(agent, b.obs[r], skills[r], norm, False) for r in env.groups])
+        actions.append(a)
+        b = plain.step(a)
+    np.testing.assert_array_equal(traj.action, np.stack(actions, 1))
+    assert np.ptp(traj.action) > 0.5
+    env.close()
+    plain.close()
+
+
+def test_acting_paths_by_name() -> None:
+    assert acting_path("fast") is actor and acting_path("torch") is TorchActor
+    with pytest.raises(ValueError, match="unknown acting path 'numpy'; valid: fast, torch"):
+        acting_path("numpy")
+    with pytest.raises(ValueError, match="unknown acting path 'numpy'"):
+        make_config("smoke", "point", acting="numpy")

@@ -72,6 +72,19 @@ def test_resume_reproduces_the_next_epochs_exactly(tmp_path):
     assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in records(b)]
 
 
+def test_acting_torch_reaches_the_rollouts_and_is_deterministic(tmp_path):
+    """`--acting torch` changes only rounding, but it must reach the trainer's rollouts: its runs
+    repeat themselves exactly and differ (in the last floats) from the default path's."""
+    runs = {}
+    for name, acting in (("fast", "fast"), ("torch", "torch"), ("torch2", "torch")):
+        runs[name] = smoke(tmp_path / name, epochs=4, acting=acting)  # each seeds torch as it starts
+        runs[name].run()
+    params = {name: torch.cat([p.flatten() for p in t.agent.policy.parameters()]) for name, t in runs.items()}
+    assert torch.equal(params["torch"], params["torch2"])
+    assert not torch.equal(params["torch"], params["fast"])
+    assert torch.allclose(params["torch"], params["fast"], atol=0.5)  # the same learning, other floats
+
+
 def test_nan_stops_the_run_naming_the_epoch_and_keeps_the_checkpoint(tmp_path):
     t = smoke(tmp_path, epochs=4)
     t.run()

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from collie.tasks import BAD, Task, get_task
+from trainer.acting import acting_path
 from trainer.envs import VectorEnv
 from trainer.pretrained import TrainedSkills
 from trainer.rollout import rollout
@@ -40,7 +41,7 @@ def zero_shot(
     rng = np.random.default_rng(seed)
     z = skills.prior.sample(trajectories, rng)
     seeds = [int(s) for s in rng.integers(0, 2**31 - 1, size=trajectories)]
-    traj = rollout(env, skills.agent, z, seeds, skills.normalise, deterministic=deterministic)
+    traj = rollout(env, skills.agent, z, seeds, skills.normalise, deterministic, acting_path(cfg.acting))
     env.close()
     xy = traj.xy.astype(np.float64)
     n, t1 = xy.shape[:2]
