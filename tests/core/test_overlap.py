@@ -8,6 +8,7 @@ import torch
 from trainer.config import make_config
 from trainer.envs import VectorEnv, make_env
 from trainer.metra import Metra
+from trainer.obs_noise import NoisyObservations
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
 
@@ -105,3 +106,18 @@ def test_batched_physics_equals_stepping_each_env(name: str, batch_threads: int)
     with pytest.raises(RuntimeError, match="episode over"):
         vec.step(actions[0])
     vec.close()
+
+
+def test_rollouts_keep_what_a_wrapper_observes() -> None:
+    """A wrapper that replaces the step's observations (NoisyObservations) has them stored, while
+    the rollout's own arrays take every other field straight from the physics."""
+    env = VectorEnv("half_cheetah", 4, episode_steps=STEPS)
+    noisy = NoisyObservations(env, 0.1)
+    policy = RowPolicy(env.obs_dim, 2, env.action_dim)
+    skills = np.random.default_rng(0).normal(size=(4, 2)).astype(np.float32)
+    norm = Normaliser(env.obs_mean, env.obs_std)
+    traj = rollout(noisy, policy, skills, [1, 2, 3, 4], norm, deterministic=True)  # type: ignore[arg-type]
+    exact = np.concatenate([traj.qpos, traj.qvel], -1)  # HalfCheetah observes [qpos, qvel]
+    ratio = traj.obs / np.where(exact == 0, 1, exact)
+    assert 0.05 < ratio[:, 1:].std() < 0.2  # every stored step is (1 + 0.1·x)·s, not s itself
+    env.close()
