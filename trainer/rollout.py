@@ -97,12 +97,8 @@ def rollout(
         else:  # batched physics (its own threads), pixel envs, wrappers such as NoisyObservations
             every = slice(None)
             for t in range(t_max):  # `out` writes into the trajectory; store() copies what a wrapper replaced
-                views = (obs[:, t + 1], xy[:, t + 1], pitch[:, t + 1], qpos[:, t + 1], qvel[:, t + 1])
-                b = env.step(act(every, t), out=StepBatch(*views))
-                if any(
-                    got is not view for got, view in zip((b.obs, b.xy, b.pitch, b.qpos, b.qvel), views, strict=True)
-                ):
-                    store(t + 1, b)
+                out = StepBatch(obs[:, t + 1], xy[:, t + 1], pitch[:, t + 1], qpos[:, t + 1], qvel[:, t + 1])
+                store(t + 1, env.step(act(every, t), out=out))
     finally:
         torch.set_num_threads(threads)
     return Trajectories(obs, action, skills.astype(np.float32), xy, pitch, qpos, qvel)
