@@ -62,9 +62,10 @@ test-compile: $(STAMP)
 	$(VENV)/bin/pytest -q -m compile tests/core/test_update_paths.py
 
 # The settings docs/results.md's point-mass numbers were measured with, before the reference's
-# initialisation, policy log-std floor and DIAYN variant became the defaults (docs/algorithm.md).
+# initialisation, policy log-std floor and DIAYN variant became the defaults (docs/algorithm.md),
+# and before rollouts acted through trainer/acting.py's Actor (`--acting torch`: the same seeds).
 # `make bench-guidance FIRST_VERSION_FLAGS=` measures today's defaults instead.
-FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere
+FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch
 
 # Every bench-* also writes its figures to runs/bench/<name>.json (benchmarks/record.py).
 bench-guidance: $(STAMP)

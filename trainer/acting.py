@@ -15,7 +15,7 @@ rollouts are deterministic per seed and across a resume, but differ at float lev
 `--acting torch` (`acting_path`) makes every rollout act through `TorchActor`, as all runs did before
 2026-12-01 (18403cf): those runs' seeds are then reproduced exactly. Which path acts changes only
 rounding, and through it each seed's trajectories: on the point mass's Range Oracle six seeds of each
-gave the same figures within one std (docs/results.md, the no-regression rerun).
+gave the same figures within one std (docs/results.md, "Which acting path").
 """
 
 from __future__ import annotations
