@@ -137,9 +137,12 @@ def actor(agent: Metra, skills: np.ndarray, normalise: Normalising, deterministi
     return cls(agent, skills, normalise, deterministic)
 
 
-def acting_path(name: str) -> Callable[[Metra, np.ndarray, Normalising, bool], Acting]:
-    """The rollouts' acting path by its config name (`Config.acting`): "fast" or "torch"."""
-    paths: dict[str, Callable[[Metra, np.ndarray, Normalising, bool], Acting]] = {"fast": actor, "torch": TorchActor}
-    if name not in paths:
-        raise ValueError(f"unknown acting path {name!r}; valid: {', '.join(paths)}")
-    return paths[name]
+ActingFactory = Callable[[Metra, np.ndarray, Normalising, bool], Acting]
+PATHS: dict[str, ActingFactory] = {"fast": actor, "torch": TorchActor}  # Config.acting's names (ACTING_PATHS)
+
+
+def acting_path(name: str) -> ActingFactory:
+    """The rollouts' acting path by its config name (`Config.acting`)."""
+    if name not in PATHS:
+        raise ValueError(f"unknown acting path {name!r}; valid: {', '.join(PATHS)}")
+    return PATHS[name]

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.acting import Actor, TorchActor, acting_path, actor, fits
-from trainer.config import make_config
+from trainer.acting import PATHS, Actor, TorchActor, acting_path, actor, fits
+from trainer.config import ACTING_PATHS, make_config
 from trainer.envs import VectorEnv, make_env
 from trainer.metra import Metra
 from trainer.networks import LOG_STD_MAX
@@ -185,6 +185,7 @@ def test_acting_torch_rolls_out_through_the_policy_forward() -> None:
 
 def test_acting_paths_by_name() -> None:
     assert acting_path("fast") is actor and acting_path("torch") is TorchActor
+    assert tuple(PATHS) == ACTING_PATHS  # what the config accepts is what the rollouts can do
     with pytest.raises(ValueError, match="unknown acting path 'numpy'; valid: fast, torch"):
         acting_path("numpy")
     with pytest.raises(ValueError, match="unknown acting path 'numpy'"):
