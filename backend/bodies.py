@@ -16,6 +16,7 @@ import pickle
 import signal
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
+from backend.services.errors import Unavailable
 from collie.schemas import EnvDims, QueryFrames, SessionPost
 
 FRAME_FIELDS = frozenset(QueryFrames.model_fields)
@@ -99,7 +101,8 @@ def _die_with_parent() -> None:
 
 class SessionParser:
     """One worker process (spawned: the service's threads make fork unsafe), started with the
-    first big session (a service that never gets one never starts it) and kept."""
+    first big session (a service that never gets one never starts it) and kept. A worker that
+    died (killed, or out of memory on a body) is replaced by the next session that needs it."""
 
     def __init__(self, spool_dir: Path | None = None) -> None:
         self.spool_dir = spool_dir
@@ -109,19 +112,38 @@ class SessionParser:
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
-    async def parse(self, request: Request) -> SessionPost:
+    def _worker(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(
                 max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
             )
+        return self._pool
+
+    async def _prepare(self, body_path: str) -> tuple[str, Any]:
+        """prepare_session in the worker; a body is tried on a fresh worker once more if the worker
+        died under it, and refused (503) if it dies again."""
+        loop = asyncio.get_running_loop()
+        for _ in range(2):
+            pool = self._worker()
+            try:
+                return await loop.run_in_executor(pool, prepare_session, body_path)
+            except BrokenProcessPool:
+                if self._pool is pool:  # not already replaced by a concurrent request
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = None
+        raise Unavailable(
+            "the worker validating large sessions died twice on this body (out of memory?); "
+            "post the session again, or in smaller sessions"
+        )
+
+    async def parse(self, request: Request) -> SessionPost:
         fd, body_path = tempfile.mkstemp(prefix="collie-body-", suffix=".json", dir=self.spool_dir)
         out: str | None = None
         try:
             with os.fdopen(fd, "wb") as file:
                 async for chunk in request.stream():
                     file.write(chunk)
-            loop = asyncio.get_running_loop()
-            kind, result = await loop.run_in_executor(self._pool, prepare_session, body_path)
+            kind, result = await self._prepare(body_path)
             if kind == "invalid":
                 raise RequestValidationError(result)
             out = result

@@ -38,6 +38,8 @@ def plain_error(error: dict[str, Any]) -> dict[str, Any]:
         "loc": [x if isinstance(x, int) else clean_text(x) for x in error.get("loc", ())],
         "msg": clean_text(error.get("msg")),
     }
+    if "input" not in error:  # already dropped (e.g. by the session worker's pass)
+        return plain
     try:
         text = json.dumps(error.get("input"), allow_nan=False, ensure_ascii=False)
         text.encode("utf-8")

@@ -88,6 +88,7 @@ GoldRate = Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)]
 MAX_CONFIG_BYTES = 64 * 1024
 MAX_EXTRA_BYTES = 16 * 1024
 MAX_PACKED_CHARS = 16 * 1024 * 1024  # one segment's packed image observations, base64
+MAX_UNPACKED_BYTES = 256 * 1024 * 1024  # the same, inflated (n × prod(shape))
 MAX_HOLD = 2  # queries one tab may hold at once in a run: the one on screen and the next
 MAX_TABS = 4  # a labeler's tabs that hold queries at once in a run (they hold MAX_HOLD each)
 MAX_ROLLOUTS = 64
@@ -255,6 +256,8 @@ class PackedFrames(Wire):
     @model_validator(mode="after")
     def _size(self) -> PackedFrames:
         want = self.n * math.prod(self.shape)
+        if want > MAX_UNPACKED_BYTES:
+            raise ValueError(f"{self.n} frames of {self.shape} are {want} bytes, more than {MAX_UNPACKED_BYTES}")
         try:
             inflate = zlib.decompressobj()
             got = len(inflate.decompress(base64.b64decode(self.zlib_b64, validate=True), want + 1))

@@ -25,6 +25,10 @@ class Invalid(ServiceError):
     status = 422
 
 
+class Unavailable(ServiceError):
+    status = 503
+
+
 class TabNotHolding(Conflict):
     """A label from a tab that does not hold the query's lease; the answer is a NotHeld body."""
 

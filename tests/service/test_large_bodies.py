@@ -110,4 +110,17 @@ def test_a_big_session_is_parsed_in_the_worker_like_a_small_one(live: Background
     response = httpx.post(f"{live.url}/api/runs/{created.id}/sessions", content=text, headers=headers, timeout=60)
     assert response.status_code == 422 and "finite" in response.text
     assert "599" in response.text  # the location of the bad value is named
+    assert '"input"' not in response.text  # not echoed (a NaN), nor claimed to be null
     assert trainer.run(created.id).queue.pending == 600  # nothing of the bad session stored
+
+
+def test_a_dead_session_worker_is_replaced(live: BackgroundServer, trainer: CollieClient) -> None:
+    """The worker killed (as the kernel's OOM killer would): the next big session still stores."""
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 600))
+    pool = live.app.state.session_parser._pool
+    for process in list(pool._processes.values()):
+        process.kill()
+        process.join(10)
+    posted = trainer.post_session(created.id, make_session(1, 600))
+    assert len(posted.created) == 600

@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import zlib
 
+import httpx
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -80,6 +81,20 @@ def test_a_pack_that_does_not_fit_the_run_is_refused(trainer: CollieClient) -> N
 def test_malformed_packs_name_the_problem(data: str, message: str) -> None:
     with pytest.raises(ValidationError, match=message):
         PackedFrames(dtype="uint8", n=2, shape=[2, 3], zlib_b64=data)
+
+
+def test_a_pack_claiming_absurd_sizes_is_refused_not_a_crash(live: object, trainer: CollieClient) -> None:
+    """n × prod(shape) beyond what any segment holds (here beyond a C size) is a 422 naming it."""
+    tiny = base64.b64encode(zlib.compress(bytes(1))).decode()
+    with pytest.raises(ValidationError, match="more than"):
+        PackedFrames(dtype="uint8", n=2**31 - 1, shape=[4096] * 4, zlib_b64=tiny)
+    segment, dims = quadruped_segment("0-0")
+    run = trainer.create_run(RunCreate(env="quadruped", task="north", method="collie", dims=dims, n_total=5))
+    body = SessionPost(session=0, epoch=1, queries=[to_wire(segment)]).model_dump(mode="json")
+    body["queries"][0]["obs_packed"].update(n=2**31 - 1, shape=[4096] * 4, zlib_b64=tiny)
+    url = f"{live.url}/api/runs/{run.id}/sessions"  # type: ignore[attr-defined]
+    response = httpx.post(url, json=body, headers={"Authorization": f"Bearer {TOKENS['trainer']}"}, timeout=30)
+    assert response.status_code == 422 and "bytes, more than" in response.text
 
 
 def test_pack_unpack_is_exact() -> None:
