@@ -124,6 +124,8 @@ class LabelEvent(Base):
     client_request_id: Mapped[str] = mapped_column(String(128))
     revises_event_id: Mapped[int | None] = mapped_column(ForeignKey("label_events.id"), nullable=True)
     created_at: Mapped[float] = mapped_column(Float)
+    # the redundancy r the query was under when this was recorded (null: recorded before 0009)
+    redundancy: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
     __table_args__ = (
         UniqueConstraint("labeler_id", "client_request_id", name="uq_label_events_request"),

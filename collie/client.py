@@ -269,9 +269,9 @@ class CollieClient:
         for every label); applies to the session it is waiting on now."""
         return self._post(RunRead, f"/runs/{run_id}/feedback-policy", FeedbackPolicy(timeout_s=timeout_s))
 
-    def set_quality(self, run_id: int, redundancy: int = 1, gold_rate: float = 0.0) -> RunRead:
+    def set_quality(self, run_id: int, redundancy: int | None = None, gold_rate: float | None = None) -> RunRead:
         """Labeler quality control (operator): labels from distinct labelers per query, and the
-        share of each labeler's segments that are gold."""
+        share of each labeler's segments that are gold (None: the run's value stays)."""
         body = QualitySettings(redundancy=redundancy, gold_rate=gold_rate)
         return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/quality", body).content)
 

@@ -213,10 +213,11 @@ class RunRead(Wire):
 
 class QualitySettings(Wire):
     """An operator's labeler quality control for a run. Redundancy applies to labels submitted from
-    then on (a query already counted stays counted); gold_rate to the segments served from then on."""
+    then on (a query already counted stays counted); gold_rate to the segments served from then on.
+    A field left out (or null) keeps the run's value; a new run has r = 1 and no gold."""
 
-    redundancy: Redundancy = 1
-    gold_rate: GoldRate = 0.0
+    redundancy: Redundancy | None = None
+    gold_rate: GoldRate | None = None
 
 
 MAX_INSTRUCTIONS = 4000  # characters of an operator's free-text instructions for a run's labelers
@@ -477,7 +478,7 @@ class MyLabel(Wire):
     event_id: int
     labelled_at: datetime
     revisions: int = Field(description="the caller's label events on the query beyond the first")
-    in_effect: bool = Field(description="false once undone, or relabelled by someone else")
+    in_effect: bool = Field(description="your label stands as your vote: false once undone (by you or an operator)")
     xy: list[list[float]] = Field(description="the segment's x-y, for a small inset")
 
 

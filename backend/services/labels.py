@@ -154,6 +154,7 @@ def _record(
         "client_request_id": request_id,
         "revises_event_id": revises,
         "created_at": now,
+        "redundancy": _redundancy(q),
     }
     event_id = conn.execute(_INSERT_EVENT, event).scalar_one()
     return LabelEventRead(
@@ -169,6 +170,11 @@ def _record(
         revises_event_id=revises,
         created_at=now,
     )
+
+
+def _redundancy(q: Any) -> int:
+    """The r a query is under now: the run's, 1 for a gold copy."""
+    return 1 if q.gold_of is not None else int(q.redundancy)
 
 
 def _announce(
@@ -265,11 +271,12 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
     else:  # a revision replaces the caller's vote in place
         conn.execute(_REVISE_VOTE, {"pk": q.id, "me": caller.id, "value": value, "event_id": event.id})
     votes = conn.execute(_VOTES, {"pk": q.id}).scalars().all()
-    label = consensus.effective(votes, 1 if q.gold_of is not None else q.redundancy)
+    label = consensus.effective(votes, _redundancy(q), counted=q.status == "labelled")
     if label is not None:
         change = {"status": "labelled", "label": label, "label_event_id": event.id, "lease_expires_at": None}
         status = "labelled"
-        _announce(conn, run_id, q, caller, "label", event.id, label, now)
+        if label != q.label:  # the stream carries changes of the effective label only
+            _announce(conn, run_id, q, caller, "label", event.id, label, now)
     elif holder or late:  # more labels needed: back to the pool, for labelers who have not voted
         change = {"status": "pending", "lease_owner_id": None, "lease_expires_at": None}
         status = "pending"
@@ -349,7 +356,7 @@ def effective_labels(conn: Connection, run_id: int) -> list[EffectiveLabel]:
     by_query: dict[str, list[Any]] = {}
     rows = conn.execute(
         _event_select()
-        .add_columns(Principal.role)
+        .add_columns(Principal.role, LabelEvent.redundancy)
         .where(LabelEvent.run_id == run_id, Query.gold_of.is_(None))
         .order_by(LabelEvent.id)
     )
@@ -357,8 +364,8 @@ def effective_labels(conn: Connection, run_id: int) -> list[EffectiveLabel]:
         by_query.setdefault(row.query_id, []).append(row)
     result = []
     for history in by_query.values():
-        votes = consensus.replay((r.kind, r.labeler_id, r.value, r.role) for r in history)
-        value = consensus.effective(votes.values(), run.redundancy)
+        events = (consensus.VoteEvent(r.kind, r.labeler_id, r.value, r.role, r.redundancy) for r in history)
+        votes, value = consensus.replay(events, run.redundancy)
         if value is None:
             continue
         last = next(r for r in reversed(history) if r.kind == "label" and r.labeler_id in votes)
@@ -381,12 +388,13 @@ MINE_LIMIT = 200  # the newest queries listed in a labeler's "my labels"
 
 def my_labels(conn: Connection, run_id: int, caller: Caller, limit: int = MINE_LIMIT) -> list[MyLabel]:
     """The queries `caller` labelled in the run, newest label first: their latest label of each,
-    how often they revised it, whether it is still the effective label, and the segment's x-y."""
+    how often they revised it, whether it still stands as their vote, and the segment's x-y."""
     runs.row(conn, run_id)
     rows = conn.execute(
         select(LabelEvent.id, LabelEvent.kind, LabelEvent.value, LabelEvent.created_at, LabelEvent.query_pk,
-               Query.query_id, Query.session, Query.label_event_id)
+               Query.query_id, Query.session, LabelVote.event_id.label("vote_event_id"))
         .join(Query, Query.id == LabelEvent.query_pk)
+        .outerjoin(LabelVote, and_(LabelVote.query_pk == Query.id, LabelVote.labeler_id == caller.id))
         .where(LabelEvent.run_id == run_id, LabelEvent.labeler_id == caller.id, LabelEvent.kind == "label")
         .order_by(LabelEvent.id)
     ).all()  # fmt: skip
@@ -410,7 +418,7 @@ def my_labels(conn: Connection, run_id: int, caller: Caller, limit: int = MINE_L
             event_id=r.id,
             labelled_at=r.created_at,
             revisions=count[r.query_pk] - 1,
-            in_effect=r.label_event_id == r.id,
+            in_effect=r.vote_event_id == r.id,  # their vote stands (not undone)
             xy=json.loads(frames[r.query_pk]).get("xy", []) if r.query_pk in frames else [],
         )
         for r in newest

@@ -214,9 +214,6 @@ def set_quality(conn: Connection, run_id: int, settings: QualitySettings) -> Run
     current = row(conn, run_id)
     if current.status in FINISHED:
         raise Conflict(f"run {run_id} is {current.status}")
-    conn.execute(
-        update(Run)
-        .where(Run.id == run_id)
-        .values(redundancy=settings.redundancy, gold_rate=settings.gold_rate, updated_at=time.time())
-    )
+    given = settings.model_dump(exclude_none=True)  # a field left out keeps the run's value
+    conn.execute(update(Run).where(Run.id == run_id).values(**given, updated_at=time.time()))
     return get(conn, run_id)

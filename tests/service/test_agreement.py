@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from backend.services.agreement import alpha, coder_alpha, coincidences
-from backend.services.consensus import consensus, effective, replay
+from backend.services.consensus import VoteEvent, consensus, effective, replay
 
 _ = None
 # Krippendorff (2011), "Computing Krippendorff's Alpha-Reliability", section C: 4 observers,
@@ -66,11 +66,23 @@ def test_consensus_majority_and_safer_ties() -> None:
 
 def test_replay_of_votes() -> None:
     events = [
-        ("label", 1, 2, "labeler"),
-        ("label", 2, 0, "labeler"),
-        ("label", 1, 1, "labeler"),  # a revision replaces the vote
-        ("undo", 2, None, "labeler"),  # withdraws 2's own vote
+        VoteEvent("label", 1, 2, "labeler"),
+        VoteEvent("label", 2, 0, "labeler"),
+        VoteEvent("label", 1, 1, "labeler"),  # a revision replaces the vote
+        VoteEvent("undo", 2, None, "labeler"),  # withdraws 2's own vote
     ]
-    assert replay(events) == {1: 1}
-    assert replay([*events, ("undo", 9, None, "operator")]) == {}  # an operator without a vote: every vote
-    assert replay([*events, ("undo", 9, None, "labeler")]) == {1: 1}
+    assert replay(events) == ({1: 1}, None)  # an undo withdraws the effective label
+    assert replay([*events, VoteEvent("undo", 9, None, "operator")]) == ({}, None)  # every vote
+    assert replay([*events, VoteEvent("undo", 9, None, "labeler")]) == ({1: 1}, None)
+    assert replay([*events, VoteEvent("label", 1, 2, "labeler")]) == ({1: 2}, 2)  # counts again
+
+
+def test_replay_keeps_the_redundancy_each_label_was_given_under() -> None:
+    """A query that counted under r = 1 stays counted after r rises; one short of r = 2 counts
+    when r falls only at its next label; events without their r use the run's."""
+    counted = [VoteEvent("label", 1, 2, "labeler", 1), VoteEvent("label", 1, 0, "labeler", 2)]
+    assert replay(counted[:1]) == ({1: 2}, 2) and replay(counted) == ({1: 0}, 0)  # revised, still counts
+    waiting = [VoteEvent("label", 1, 2, "labeler", 2)]
+    assert replay(waiting, redundancy=1) == ({1: 2}, None)
+    assert replay([*waiting, VoteEvent("label", 2, 0, "labeler", 1)]) == ({1: 2, 2: 0}, 0)
+    assert replay([VoteEvent("label", 1, 2, "labeler")], redundancy=2) == ({1: 2}, None)

@@ -281,3 +281,59 @@ def test_a_skipped_gold_segment_is_not_served_again(trainer: CollieClient, new_l
     assert me.skip(run.id, gold.query.query_id).query_status == "retired"
     assert me.claim(run.id).query.query_id == "1-0"  # 0-0 was served to me once: no gold left to serve
     assert trainer.run(run.id).queue.model_dump() == {"pending": 0, "leased": 1, "labelled": 1, "retired": 0}
+
+
+def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    """r raised after a query counted: it stays counted, and a revision still moves its label; r
+    lowered while a query waits: it counts at its next label. The recomputed view follows both."""
+    run = trainer.create_run(make_run_spec())
+    trainer.post_session(run.id, make_session(0, 2))
+    a, b = new_labeler("rc-a"), new_labeler("rc-b")
+    a.claim(run.id)
+    a.submit(run.id, "0-0", 2)  # counts under r = 1
+    operator.set_quality(run.id, redundancy=2)
+    a.claim(run.id)
+    assert a.submit(run.id, "0-1", 2).query_status == "pending"  # one of two
+    assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 2}
+    assert a.submit(run.id, "0-0", 0).label == 0  # a revision of a counted query moves its label
+    assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 0}
+    assert [i.label for i in trainer.labelled(run.id)] == [0] and trainer.run(run.id).n_labels == 1
+    operator.set_quality(run.id, redundancy=1)
+    assert {e.query_id for e in trainer.effective_labels(run.id)} == {"0-0"}  # 0-1 waits for a label
+    b.claim(run.id)
+    assert b.submit(run.id, "0-1", 0).label == 0  # 2 vs 0: a tie, bad
+    assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 0, "0-1": 0}
+    assert {i.query.query_id: i.label for i in trainer.labelled(run.id)} == {"0-0": 0, "0-1": 0}
+    exported = trainer.export(run.id, effective=True)
+    assert '"0-0"' in exported and '"0-1"' in exported
+
+
+def test_a_partial_quality_body_keeps_the_other_field(trainer: CollieClient, operator: CollieClient) -> None:
+    run = trainer.create_run(make_run_spec())
+    operator.set_quality(run.id, redundancy=3, gold_rate=0.2)
+    assert (operator.set_quality(run.id, gold_rate=0.3).redundancy, operator.run(run.id).gold_rate) == (3, 0.3)
+    operator._send("PUT", f"/runs/{run.id}/quality", json={})
+    assert (operator.run(run.id).redundancy, operator.run(run.id).gold_rate) == (3, 0.3)
+
+
+def test_only_changes_of_the_effective_label_go_on_the_stream(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    """r = 2: votes {2, 0} → {0, 0} → {1, 0} keep the effective label 0: one stream event."""
+    run = trainer.create_run(make_run_spec())
+    operator.set_quality(run.id, redundancy=2)
+    trainer.post_session(run.id, make_session(0, 1))
+    a, b = new_labeler("ch-a"), new_labeler("ch-b")
+    a.claim(run.id)
+    a.submit(run.id, "0-0", 2)
+    b.claim(run.id)
+    b.submit(run.id, "0-0", 0)
+    a.submit(run.id, "0-0", 0)
+    a.submit(run.id, "0-0", 1)
+    assert label_events_on_stream(trainer, run.id) == [("label", "0-0", 0)]
+    a.submit(run.id, "0-0", 2)
+    b.submit(run.id, "0-0", 2)  # {2, 2}: good
+    assert label_events_on_stream(trainer, run.id) == [("label", "0-0", 0), ("label", "0-0", 2)]
+    assert all(m.in_effect for m in a.my_labels(run.id) + b.my_labels(run.id))  # both votes stand
