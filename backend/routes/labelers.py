@@ -36,4 +36,5 @@ async def revoke_labeler(labeler_id: PrincipalId, _: OperatorCaller, db: DB, req
     with db.write() as conn:
         read = auth.revoke(conn, labeler_id)
     request.app.state.tokens.clear()
+    request.app.state.feed.end_streams_of(labeler_id)
     return read

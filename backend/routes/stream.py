@@ -12,15 +12,18 @@ Two ways to read it, both resumable from the last id seen (nothing missed, nothi
 from __future__ import annotations
 
 import asyncio
+from collections import Counter
 from collections.abc import AsyncIterator
-from typing import Annotated
+from typing import Annotated, Any
 
+import anyio
 from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials
+from starlette.types import Receive, Scope, Send
 
 from backend.routes.deps import ANY, DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer, check_scope
-from backend.services import events
+from backend.services import auth, events
 from backend.services.auth import Caller
 from backend.services.fanout import StreamFeed
 from collie.schemas import MAX_INT, EventPage
@@ -89,12 +92,15 @@ async def stream(
     if feed.open_by_caller[caller.id] >= settings.max_streams_per_token:
         raise HTTPException(429, f"at most {settings.max_streams_per_token} open streams per token; close one first")
 
+    def still_allowed() -> bool:
+        with db.read() as conn:
+            return auth.active(conn, caller.id)
+
     async def frames() -> AsyncIterator[str]:
-        feed.open_by_caller[caller.id] += 1
-        subscription = await feed.subscribe(run_id, start)
+        subscription = await feed.subscribe(run_id, start, caller.id)
         try:
             yield "retry: 1000\n\n"
-            while True:
+            while not subscription.ended:
                 if subscription.lagged:
                     sent = await feed.backlog(subscription)
                 else:
@@ -111,12 +117,29 @@ async def stream(
                 try:
                     await asyncio.wait_for(subscription.signal.wait(), HEARTBEAT_S)
                 except TimeoutError:
+                    if not await anyio.to_thread.run_sync(still_allowed):  # revoked by another process
+                        return
                     yield ": keep-alive\n\n"
         finally:
             feed.unsubscribe(subscription)
-            feed.open_by_caller[caller.id] -= 1
-            if feed.open_by_caller[caller.id] <= 0:
-                del feed.open_by_caller[caller.id]
 
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
-    return StreamingResponse(frames(), media_type="text/event-stream", headers=headers)
+    return SlotStream(feed.open_by_caller, caller.id, frames(), media_type="text/event-stream", headers=headers)
+
+
+class SlotStream(StreamingResponse):
+    """Holds one of its caller's stream slots from the handler's check until the response ends,
+    however it ends: a slot taken only once the body starts would let concurrent opens all pass."""
+
+    def __init__(self, slots: Counter[int], caller_id: int, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.slots, self.caller_id = slots, caller_id
+        slots[caller_id] += 1
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            self.slots[self.caller_id] -= 1
+            if self.slots[self.caller_id] <= 0:
+                del self.slots[self.caller_id]

@@ -128,10 +128,26 @@ def list_principals(conn: Connection) -> list[LabelerRead]:
     return [_read(r) for r in conn.execute(select(Principal).order_by(Principal.id))]
 
 
+def _active_operators(conn: Connection) -> int:
+    rows = conn.execute(select(Principal.id).where(Principal.role == "operator", Principal.revoked_at.is_(None)))
+    return len(rows.all())
+
+
+def active(conn: Connection, principal_id: int) -> bool:
+    """The principal exists and is not revoked (an open stream asks, now and then)."""
+    found = select(Principal.id).where(Principal.id == principal_id, Principal.revoked_at.is_(None))
+    return conn.execute(found).first() is not None
+
+
 def revoke(conn: Connection, principal_id: int) -> LabelerRead:
     row = conn.execute(select(Principal).where(Principal.id == principal_id)).first()
     if row is None:
         raise NotFound(f"no principal {principal_id}")
     if row.revoked_at is None:
+        if row.role == "operator" and _active_operators(conn) <= 1:
+            raise Conflict(
+                f"'{row.name}' is the last operator: nobody could manage principals after it; "
+                "create another operator first"
+            )
         conn.execute(update(Principal).where(Principal.id == principal_id).values(revoked_at=time.time()))
     return _read(conn.execute(select(Principal).where(Principal.id == principal_id)).one())

@@ -30,8 +30,10 @@ def sse_frame(event: StreamEvent) -> str:
 
 
 class Subscription:
-    def __init__(self, run_id: int, after: int) -> None:
+    def __init__(self, run_id: int, after: int, caller_id: int) -> None:
         self.run_id = run_id
+        self.caller_id = caller_id
+        self.ended = False  # its caller was revoked: the stream closes
         self.last = after
         self.frames: deque[Frame] = deque()
         self.lagged = True  # the backlog comes from the log first
@@ -59,6 +61,7 @@ class StreamFeed:
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self.open_by_caller: Counter[int] = Counter()
+        self._revoked: set[int] = set()  # principals revoked in this process (a stream may be opening)
         hub.listen(self._published)
 
     def start(self) -> None:
@@ -75,13 +78,24 @@ class StreamFeed:
             self._woken |= runs
             self._wake.set()
 
-    async def subscribe(self, run_id: int, after: int) -> Subscription:
+    async def subscribe(self, run_id: int, after: int, caller_id: int) -> Subscription:
         if run_id not in self._cursor:
             last = await anyio.to_thread.run_sync(self._last_id, run_id)
             self._cursor.setdefault(run_id, last)
-        subscription = Subscription(run_id, after)
+        subscription = Subscription(run_id, after, caller_id)
+        subscription.ended = caller_id in self._revoked  # revoked between its check and now
         self._subscribers[run_id].add(subscription)
         return subscription
+
+    def end_streams_of(self, caller_id: int) -> None:
+        """A revoked principal's open streams close now (those in other processes at their next
+        heartbeat, when they find the principal revoked)."""
+        self._revoked.add(caller_id)
+        for subscribers in self._subscribers.values():
+            for subscription in subscribers:
+                if subscription.caller_id == caller_id:
+                    subscription.ended = True
+                    subscription.signal.set()
 
     def unsubscribe(self, subscription: Subscription) -> None:
         subscribers = self._subscribers.get(subscription.run_id)

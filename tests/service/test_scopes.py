@@ -100,3 +100,18 @@ def test_a_revoked_principal_stays_revoked(tmp_path: Path) -> None:
         assert response.status_code == 401
         assert next(p for p in operator.labelers() if p.name == "labeler").revoked
         assert operator.me().name == "operator"  # the others are untouched
+
+
+def test_the_last_operator_cannot_be_revoked(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path / "last.db")
+    with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["operator"]) as operator:
+        me = next(p for p in operator.labelers() if p.name == "operator")
+        with pytest.raises(ApiError) as refused:
+            operator.revoke(me.id)
+        assert refused.value.status == 409 and "last operator" in str(refused.value.detail)
+        second = operator.create_labeler("ops-2", role="operator")
+        assert operator.revoke(me.id).revoked  # another operator exists now
+        with CollieClient(server.url, second.token) as other:
+            with pytest.raises(ApiError) as again:
+                other.revoke(second.id)
+            assert again.value.status == 409

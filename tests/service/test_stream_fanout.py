@@ -3,6 +3,7 @@ reaches every one of them, and a token may hold only so many streams open (429 b
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 from collections.abc import Iterator
@@ -119,3 +120,34 @@ def test_open_streams_per_token_are_capped(tmp_path: Path) -> None:
                 return r.status_code == 200
 
         assert wait_for(reopened)
+
+
+def test_streams_opened_at_once_are_capped_too(tmp_path: Path) -> None:
+    """Twenty opens sent at the same moment with one token: only the allowance (3) gets a stream."""
+    settings = settings_for(tmp_path / "race.db", max_streams_per_token=3)
+    with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["trainer"]) as trainer:
+        run = trainer.create_run(make_run_spec())
+        url = f"{server.url}/api/runs/{run.id}/stream"
+
+        async def open_all() -> list[int]:
+            headers = {"Authorization": f"Bearer {TOKENS['operator']}"}
+            async with httpx.AsyncClient(timeout=20, limits=httpx.Limits(max_connections=40)) as client:
+                sent = [client.send(client.build_request("GET", url, headers=headers), stream=True) for _ in range(20)]
+                responses = await asyncio.gather(*sent)
+                for response in responses:
+                    await response.aclose()
+                return [r.status_code for r in responses]
+
+        assert sorted(asyncio.run(open_all())) == [200] * 3 + [429] * 17
+
+
+def test_revoking_a_token_ends_its_open_streams(
+    live: BackgroundServer, operator: CollieClient, trainer: CollieClient
+) -> None:
+    created = operator.create_labeler("stream-revoked")
+    run = trainer.create_run(make_run_spec())
+    reader = next(streams(live, run.id, created.token, 1))
+    assert reader.status == 200
+    operator.revoke(created.id)
+    reader.join(10)
+    assert not reader.is_alive()  # the service closed the stream at once
