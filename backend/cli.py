@@ -1,8 +1,10 @@
 """`collie serve`: run the labeling service with uvicorn on one address.
 
-Tokens for the three built-in principals (operator, trainer, labeler) come from COLLIE_*_TOKEN or
-are generated; they are printed, and written to --tokens-json when given. Port 0 picks a free port;
-the bound URL is printed either way (and written to the tokens file as "api")."""
+Tokens for the three built-in principals (operator, trainer, labeler) come from COLLIE_*_TOKEN,
+else from the --tokens-json file an earlier start wrote; a principal the database already has keeps
+its token; only a missing one gets a new token, printed, and written to --tokens-json when given.
+So a restart never locks out clients that hold the tokens. Port 0 picks a free port; the bound URL
+is printed either way (and written to the tokens file as "api")."""
 
 from __future__ import annotations
 
@@ -16,7 +18,8 @@ from pathlib import Path
 
 from pydantic import SecretStr
 
-from backend.services.auth import ROLES, new_token
+from backend.services.auth import ROLES, builtin_principals, new_token
+from backend.services.errors import Conflict
 from backend.settings import Settings
 
 
@@ -28,24 +31,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
     )
     parser.add_argument("--tokens-json", type=Path, help="write {api, tokens: {operator, trainer, labeler}} here")
-    parser.add_argument("--no-generate-tokens", action="store_true", help="only use tokens from the environment")
+    parser.add_argument(
+        "--no-generate-tokens",
+        action="store_true",
+        help="only use tokens from the environment (no tokens file read, none generated)",
+    )
     parser.add_argument("--log-level", default="warning")
 
 
-def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str]]:
-    """Settings from the environment, with --db and generated bootstrap tokens filled in."""
+def written_tokens(path: Path | None) -> dict[str, str]:
+    """The tokens an earlier start wrote to --tokens-json (none if there is no such file)."""
+    if path is None or not path.exists():
+        return {}
+    try:
+        tokens = json.loads(path.read_text())["tokens"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(
+            f"collie serve: error: --tokens-json {path} is not a tokens file ({exc}); move it away"
+        ) from None
+    return {role: str(tokens[role]) for role in ROLES if isinstance(tokens, dict) and tokens.get(role)}
+
+
+def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str]]:
+    """Settings from the environment, with --db and the bootstrap tokens filled in; the tokens
+    known (from the environment, the tokens file or new), and the roles whose token is new."""
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
+    settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
+    written = {} if args.no_generate_tokens else written_tokens(args.tokens_json)
+    kept = set() if args.no_generate_tokens else builtin_principals(settings.database_url)
     tokens: dict[str, str] = {}
+    new: set[str] = set()
     for role in ROLES:
-        given = os.environ.get(f"COLLIE_{role.upper()}_TOKEN")
-        if given is None and not args.no_generate_tokens:
+        given = os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role)
+        if given is None and role not in kept and not args.no_generate_tokens:
             given = new_token()
-            overrides[f"{role}_token"] = SecretStr(given)
+            new.add(role)
         if given is not None:
             tokens[role] = given
-    return Settings(**overrides), tokens  # type: ignore[arg-type]  # pydantic-settings validates the overrides
+            overrides[f"{role}_token"] = SecretStr(given)
+    return Settings(**overrides), tokens, new  # type: ignore[arg-type]  # as above
 
 
 def inherited(fd: int) -> tuple[socket.socket, str]:
@@ -66,9 +92,11 @@ def run(args: argparse.Namespace) -> int:
 
     mark("imports")  # FastAPI, SQLAlchemy, the routes
 
-    settings, tokens = settings_from(args)
-    generated = {r for r in tokens if f"COLLIE_{r.upper()}_TOKEN" not in os.environ}
-    app = create_app(settings)
+    try:
+        settings, tokens, generated = settings_from(args)
+        app = create_app(settings)
+    except Conflict as exc:  # e.g. one token given for two roles
+        raise SystemExit(f"collie serve: error: {exc}") from None
     mark("app built")  # the database opened and migrated
     sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
@@ -79,10 +107,18 @@ def run(args: argparse.Namespace) -> int:
         partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
         partial.replace(args.tokens_json)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
-    for role, token in tokens.items():  # secrets given through the environment or a file stay out of logs
-        shown = token if role in generated and args.tokens_json is None else None
-        where = "(from environment)" if role not in generated else f"(in {args.tokens_json})"
-        print(f"  {role} token: {shown or where}", flush=True)
+    for role in ROLES:  # secrets given through the environment or a file stay out of logs
+        if role in generated:
+            shown = tokens[role] if args.tokens_json is None else f"(in {args.tokens_json})"
+        elif f"COLLIE_{role.upper()}_TOKEN" in os.environ:
+            shown = "(from environment)"
+        elif role in tokens:
+            shown = f"(kept, in {args.tokens_json})"
+        elif args.no_generate_tokens:
+            continue
+        else:
+            shown = f"(kept from the last start; to replace it, set COLLIE_{role.upper()}_TOKEN)"
+        print(f"  {role} token: {shown}", flush=True)
     # uvicorn shuts down cleanly, then re-raises Ctrl-C: for us that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):
         uvicorn_server(app, args.log_level).run(sockets=[sock])

@@ -14,9 +14,9 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, Row, insert, select, update
+from sqlalchemy import Connection, Row, insert, inspect, select, update
 
-from backend.db import Database
+from backend.db import Database, make_engine
 from backend.models import Principal
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import LabelerRead, Role
@@ -80,6 +80,19 @@ def lookup(conn: Connection, digest: str) -> Caller | None:
     if row is None:
         return None
     return Caller(row.id, row.name, row.role, None if row.runs is None else frozenset(row.runs))
+
+
+def builtin_principals(database_url: str) -> set[str]:
+    """The built-in principals a database already has (none for a new database)."""
+    engine = make_engine(database_url)
+    try:
+        with engine.connect() as conn:
+            if not inspect(conn).has_table(Principal.__tablename__):
+                return set()
+            rows = conn.execute(select(Principal.name).where(Principal.name.in_(ROLES)))
+            return {str(name) for name in rows.scalars()}
+    finally:
+        engine.dispose()
 
 
 def bootstrap(conn: Connection, role: Role, token: str) -> bool:

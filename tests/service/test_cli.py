@@ -109,3 +109,54 @@ def test_the_bound_socket_accepts_connections_before_the_server_runs() -> None:
             assert url.startswith("http://127.0.0.1:")
     finally:
         sock.close()
+
+
+def start_serve(db: Path, tokens_file: Path | None, env: dict[str, str]) -> tuple[subprocess.Popen[str], list[str]]:
+    command = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(db)]
+    if tokens_file is not None:
+        command += ["--tokens-json", str(tokens_file)]
+    server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = [server.stdout.readline() for _ in range(4)]  # type: ignore[union-attr]
+    return server, lines
+
+
+def stop(server: subprocess.Popen[str]) -> None:
+    server.send_signal(signal.SIGINT)
+    assert server.wait(20) == 0
+
+
+def test_a_restarted_service_keeps_its_tokens(tmp_path: Path) -> None:
+    """Clients holding the tokens keep working across a plain restart, with a tokens file or
+    without (then the tokens printed at the first start stay the valid ones)."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db, tokens_file = tmp_path / "keep.db", tmp_path / "tokens.json"
+    server, _ = start_serve(db, tokens_file, env)
+    first = json.loads(tokens_file.read_text())["tokens"]
+    stop(server)
+    server, lines = start_serve(db, tokens_file, env)
+    try:
+        info = json.loads(tokens_file.read_text())
+        assert info["tokens"] == first and f"trainer token: (kept, in {tokens_file})" in "".join(lines)
+        with CollieClient(info["api"], first["trainer"]) as trainer:
+            assert trainer.me().name == "trainer"
+    finally:
+        stop(server)
+    server, lines = start_serve(db, None, env)  # no tokens file: the database's tokens stay
+    try:
+        assert "operator token: (kept from the last start" in "".join(lines)
+        api = lines[0].split("listening on ")[1].split()[0]
+        with CollieClient(api, first["operator"]) as operator:
+            assert operator.me().name == "operator"
+    finally:
+        stop(server)
+
+
+def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
+    env = {
+        **os.environ,
+        "COLLIE_OPERATOR_TOKEN": "same-token-0123456789",
+        "COLLIE_LABELER_TOKEN": "same-token-0123456789",
+    }
+    out = collie("serve", "--port", "0", "--db", str(tmp_path / "same.db"), env=env)
+    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert "already the token of 'operator'" in out.stderr
