@@ -679,6 +679,8 @@ class Rollout(Wire):
     def _shape(self) -> Rollout:
         if self.xy and _width(self.xy, "xy") != 2:
             raise ValueError("xy rows must have 2 columns")
+        if self.pitch is not None and len(self.pitch) != len(self.xy):
+            raise ValueError(f"pitch has {len(self.pitch)} values, xy {len(self.xy)} points: one per point")
         if self.qpos is not None:
             if len(self.qpos) != len(self.xy):
                 raise ValueError(f"qpos has {len(self.qpos)} rows, xy {len(self.xy)}: one state per point")

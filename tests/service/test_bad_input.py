@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import logging
+import socket
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -238,3 +241,21 @@ def test_database_stays_consistent(tmp_path: Path) -> None:
         trainer.close()
         labeler.close()
     assert DIMS.horizon == 5
+
+
+def test_a_body_cut_short_is_no_error_in_the_log(
+    live: BackgroundServer, labeler: CollieClient, run: RunRead, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A client that announces 100 bytes, sends 11 and hangs up: the service logs no traceback."""
+    host, port = live.url.removeprefix("http://").split(":")
+    head = (
+        f"POST /api/runs/{run.id}/labels HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKENS['labeler']}\r\n"
+        "Content-Type: application/json\r\nContent-Length: 100\r\n\r\n"
+    )
+    with caplog.at_level(logging.ERROR), socket.create_connection((host, int(port)), timeout=10) as sock:
+        sock.sendall(head.encode() + b'{"query_id"')
+        sock.shutdown(socket.SHUT_WR)
+        sock.recv(1000)
+    assert labeler.run(run.id).id == run.id  # still serving
+    time.sleep(0.2)
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text

@@ -91,6 +91,8 @@ def test_trainer_rollouts_carry_states_at_the_same_points_for_the_watch_mode() -
     assert rollouts_of(too_wide).rollouts[0].qpos is None  # left out, the paths still go
     with pytest.raises(ValueError, match="one state per point"):
         RolloutsIn(epoch=1, rollouts=[{"skill": [1.0], "xy": [[0.0, 0.0]], "qpos": [[0.0], [1.0]]}])
+    with pytest.raises(ValueError, match="one per point"):
+        RolloutsIn(epoch=1, rollouts=[{"skill": [1.0], "xy": [[0.0, 0.0]], "pitch": [0.1, 0.2]}])
 
 
 def test_metric_history_is_thinned_and_keeps_the_newest(live: BackgroundServer, trainer: CollieClient) -> None:
