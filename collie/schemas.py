@@ -410,7 +410,9 @@ class ClaimRead(Wire):
 
 class Released(Wire):
     query_id: QueryId
-    status: QueryStatus = Field(description="the query's status after the call (pending once released)")
+    status: QueryStatus = Field(
+        description="the query's status after the call (pending once released; retired for a gold copy)"
+    )
 
 
 # ---------------------------------------------------------------- labels

@@ -144,12 +144,17 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
     """Hand a held query back to the pool (not a skip: nothing is recorded). Releasing what is no
     longer held by the caller (expired, released already) is a no-op; the query's status comes back."""
     row = conn.execute(
-        select(Query.id, Query.status, Query.lease_owner_id).where(Query.run_id == run_id, Query.query_id == query_id)
+        select(Query.id, Query.status, Query.lease_owner_id, Query.gold_of).where(
+            Query.run_id == run_id, Query.query_id == query_id
+        )
     ).first()
     if row is None:
         raise NotFound(f"no query {query_id!r} in run {run_id}")
     if row.status == "leased" and row.lease_owner_id != caller.id:
         raise Conflict(f"query {query_id!r} is held by another labeler")
+    if row.status == "leased" and row.gold_of is not None:  # a gold copy is its labeler's: done, as a skip
+        conn.execute(update(Query).where(Query.id == row.id).values(status="retired", lease_expires_at=None))
+        return "retired"
     if row.status == "leased":
         conn.execute(_RELEASE, {"pk": row.id, "me": caller.id, "now": time.time()})
         return "pending"

@@ -283,6 +283,23 @@ def test_a_skipped_gold_segment_is_not_served_again(trainer: CollieClient, new_l
     assert trainer.run(run.id).queue.model_dump() == {"pending": 0, "leased": 1, "labelled": 1, "retired": 0}
 
 
+def test_a_released_gold_segment_is_done_as_a_skipped_one(trainer: CollieClient, new_labeler: Labelers) -> None:
+    """Label, undo, release: the gold copy is retired (not left pending with no owner), and its
+    original is not served to the same labeler again."""
+    run = trainer.create_run(make_run_spec(task="north").model_copy(update={"gold_rate": 0.5}))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    first = new_labeler("gold-rel-a")
+    first.claim(run.id)
+    first.submit(run.id, "0-0", 1)
+    trainer.post_session(run.id, north_session(1, [1.0]))
+    me = new_labeler("gold-rel-b")
+    gold = me.claim(run.id).query.query_id
+    me.submit(run.id, gold, 2)
+    me.undo(run.id, gold)
+    assert me.release(run.id, gold).status == "retired"
+    assert me.claim(run.id).query.query_id == "1-0"  # no gold copy of 0-0 again
+
+
 def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
