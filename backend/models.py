@@ -97,6 +97,8 @@ class FeedbackSession(Base):
     session: Mapped[int] = mapped_column(Integer)
     epoch: Mapped[int] = mapped_column(Integer)
     created_at: Mapped[float] = mapped_column(Float)
+    # the posted query ids in order, some of which may be earlier sessions' (null: before 0010)
+    query_ids: Mapped[list[str] | None] = mapped_column(JSON, nullable=True)
 
     __table_args__ = (UniqueConstraint("run_id", "session", name="uq_feedback_sessions_run_session"),)
 

@@ -59,13 +59,17 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
     if problems:
         raise Invalid("segments do not match the run's env dims: " + "; ".join(problems[:5]))
     posted_before = conn.execute(
-        select(FeedbackSession.epoch).where(FeedbackSession.run_id == run_id, FeedbackSession.session == body.session)
+        select(FeedbackSession.epoch, FeedbackSession.query_ids).where(
+            FeedbackSession.run_id == run_id, FeedbackSession.session == body.session
+        )
     ).first()
     if posted_before is not None:
-        stored = conn.execute(
-            select(Query.query_id).where(Query.run_id == run_id, Query.session == body.session).order_by(Query.id)
-        ).scalars()
-        stored_ids = list(stored)
+        stored_ids = posted_before.query_ids
+        if stored_ids is None:  # posted before 0010: the queries this session created
+            stored = conn.execute(
+                select(Query.query_id).where(Query.run_id == run_id, Query.session == body.session).order_by(Query.id)
+            ).scalars()
+            stored_ids = list(stored)
         return SessionPosted(
             session=body.session,
             epoch=posted_before.epoch,
@@ -75,10 +79,12 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
             query_ids=stored_ids,
         )
     now = time.time()
-    conn.execute(  # the unique (run, session) makes a concurrent second post of this position a 409
-        insert(FeedbackSession).values(run_id=run_id, session=body.session, epoch=body.epoch, created_at=now)
-    )
     ids = [q.query_id for q in body.queries]
+    conn.execute(  # the unique (run, session) makes a concurrent second post of this position a 409
+        insert(FeedbackSession).values(
+            run_id=run_id, session=body.session, epoch=body.epoch, created_at=now, query_ids=ids
+        )
+    )
     existing = set(
         conn.execute(select(Query.query_id).where(Query.run_id == run_id, Query.query_id.in_(ids))).scalars()
     )

@@ -53,6 +53,8 @@ def test_a_new_session_keeps_stored_segments_under_ids_it_repeats(trainer: Colli
     posted = trainer.post_session(run.id, body)
     assert not posted.reused and posted.existing == ["0-0"] and posted.created == ["1-1"]
     assert trainer.query(run.id, "0-0").start != 999_999
+    again = trainer.post_session(run.id, body)  # the position re-posted: the same ids, in order
+    assert again.reused and again.query_ids == posted.query_ids == ["0-0", "1-1"]
 
 
 def test_query_round_trips_exactly(trainer: CollieClient, run: RunRead) -> None:
