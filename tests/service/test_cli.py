@@ -13,11 +13,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 
 from backend.db import Database
-from backend.migrate import upgrade
+from backend.migrate import alembic_config, upgrade
 from backend.models import Base
 from collie.client import CollieClient
 
@@ -82,6 +83,30 @@ def test_serve_then_export(tmp_path: Path) -> None:
     assert missing.returncode == 2 and "no database" in missing.stderr and not (tmp_path / "nope.db").exists()
     unknown = collie("export", "--db", str(db), "--run", "99")
     assert unknown.returncode == 1 and "no run 99" in unknown.stderr
+
+
+def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -> None:
+    """A database from before the newest migration is brought up to date (as `collie serve` would)
+    and exported; a file that is no database, or none at all, is a one-line error."""
+    old = Database(f"sqlite:///{tmp_path / 'old.db'}")
+    config = alembic_config(old.url)
+    with old.engine.begin() as conn:
+        config.attributes["connection"] = conn
+        command.upgrade(config, "0008")
+    old.dispose()
+    out = collie("export", "--db", str(tmp_path / "old.db"), "--run", "1", "--effective")
+    assert (
+        out.returncode == 1 and "no run 1" in out.stderr and "upgraded" in out.stderr and "Traceback" not in out.stderr
+    )
+    junk = tmp_path / "checkpoint.pt"
+    junk.write_bytes(b"\x80\x02not sqlite at all" * 100)
+    out = collie("export", "--db", str(junk), "--run", "1")
+    assert out.returncode == 2 and "not a collie database" in out.stderr and "Traceback" not in out.stderr
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "COLLIE_DATABASE_URL"}
+    out = collie("export", "--run", "1", cwd=empty, env=env)
+    assert out.returncode == 2 and "no database at" in out.stderr and list(empty.iterdir()) == []
 
 
 def test_migrations_build_exactly_the_models(tmp_path: Path) -> None:
