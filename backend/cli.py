@@ -21,11 +21,12 @@ from pydantic import SecretStr
 from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict
 from backend.settings import Settings
+from collie.argtypes import port
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8000, help="port; 0 picks a free one (default 8000)")
+    parser.add_argument("--port", type=port, default=8000, help="port; 0 picks a free one (default 8000)")
     parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
     parser.add_argument(
         "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
@@ -36,7 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="only use tokens from the environment (no tokens file read, none generated)",
     )
-    parser.add_argument("--log-level", default="warning")
+    parser.add_argument(
+        "--log-level", default="warning", choices=("critical", "error", "warning", "info", "debug", "trace")
+    )
 
 
 def written_tokens(path: Path | None) -> dict[str, str]:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
+from collie.argtypes import port
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import TOKEN_ENV, write_secret
@@ -50,21 +51,47 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-band", type=float, default=0.0, help="oracle R_error noise band")
     p.add_argument("--db", type=Path, default=None, help="SQLite file (default OUT/collie.db)")
     p.add_argument("--out", type=Path, default=None, help="folder for everything (default runs/up-ENV-TASK)")
-    p.add_argument("--port", type=int, default=8000, help="service port (0 = any free port)")
+    p.add_argument("--port", type=port, default=8000, help="service port (0 = any free port; default 8000)")
     p.add_argument("--info-json", type=Path, default=None, help="write URLs, run id and tokens here")
     p.add_argument("--exit-when-done", action="store_true", help="exit 0 when the run finishes")
     p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
-    p.add_argument("--ui-port", type=int, default=8080, help="labeling UI port (0 = any free port)")
+    p.add_argument("--ui-port", type=port, default=8080, help="labeling UI port (0 = any free port; default 8080)")
     p.add_argument("--train-args", default="", help='extra `collie train` flags, e.g. "--epochs 50"')
     p.add_argument(
         "--max-restarts", type=int, default=5, help="restarts of a part that keeps dying before the stack gives up"
     )
 
 
-def wait_for(path: Path, proc: subprocess.Popen, what: str, key: str | None = None, timeout_s: float = 120.0) -> dict:
-    """The JSON at path once it exists (and holds `key`), or an error if proc exits first."""
+class Stopped(Exception):
+    """Ctrl-C (or SIGTERM) while the stack was starting."""
+
+
+def last_error(log: Path) -> str:
+    """The last line a child wrote to its log that says what went wrong (empty if none)."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    said = [line.strip() for line in lines if line.strip()]
+    errors = [line for line in said if "error" in line.lower() or "Error" in line]
+    return (errors or said or [""])[-1][:300]
+
+
+def wait_for(
+    path: Path,
+    proc: subprocess.Popen,
+    what: str,
+    key: str | None = None,
+    timeout_s: float = 120.0,
+    stopping: dict | None = None,
+    log: Path | None = None,
+) -> dict:
+    """The JSON at path once it exists (and holds `key`), or an error if proc exits first (with the
+    last error line of its `log`); Stopped on Ctrl-C."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        if stopping is not None and stopping["flag"]:
+            raise Stopped
         if path.exists():
             try:
                 found = json.loads(path.read_text())
@@ -73,7 +100,10 @@ def wait_for(path: Path, proc: subprocess.Popen, what: str, key: str | None = No
             except json.JSONDecodeError:
                 pass  # being written
         if proc.poll() is not None:
-            raise RuntimeError(f"{what} exited with code {proc.returncode} before it was ready")
+            said = last_error(log) if log is not None else ""
+            raise RuntimeError(
+                f"{what} exited with code {proc.returncode} before it was ready{': ' + said if said else ''}"
+            )
         time.sleep(0.1)
     raise TimeoutError(f"{what} was not ready after {timeout_s:.0f} s")
 
@@ -101,13 +131,35 @@ def run_name(args: argparse.Namespace) -> str:
     return args.task or (args.task_file.stem if args.task_file is not None else "north")
 
 
+# `collie train` flags that `collie up` sets itself: given in --train-args they would contradict it
+UP_OWNS = ("--out", "--api", "--run-id", "--resume", "--env", "--task", "--task-file", "--instruction",
+           "--method", "--preset", "--seed", "--token", "--token-file")  # fmt: skip
+
+
+def checked(args: argparse.Namespace) -> Path:
+    """OUT, once the arguments are known to make sense together (ValueError naming what does not)."""
+    args.task_flags = task_flags(args)
+    owned = [f for f in args.train_args.split() if f.split("=")[0] in UP_OWNS]
+    if owned:
+        raise ValueError(f"--train-args may not set {', '.join(owned)}: give it to collie up itself (or not at all)")
+    out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder")
+    if args.info_json is not None and args.info_json.is_dir():
+        raise ValueError(f"--info-json {args.info_json} is a folder; give a file path")
+    if args.max_restarts < 0:
+        raise ValueError("--max-restarts must be ≥ 0")
+    if args.teacher_rate is not None and args.teacher_rate <= 0:
+        raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     try:
-        args.task_flags = task_flags(args)
+        out = checked(args)
     except ValueError as exc:
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
-    out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")
     out.mkdir(parents=True, exist_ok=True)
     db = args.db or out / "collie.db"
     stack = Supervisor(out, max_restarts=args.max_restarts)
@@ -120,6 +172,9 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     try:
         return supervise(args, out, db, stack, stopping)
+    except Stopped:
+        print("collie up: stopped while starting", file=sys.stderr)
+        return 130
     except (RuntimeError, TimeoutError) as exc:  # ChildFailed included
         stack.log(f"error: {exc}")
         print(f"collie up: error: {exc} (logs in {out / 'logs'})", file=sys.stderr)
@@ -200,10 +255,14 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)  # it waits for the service itself
     from collie.client import CollieClient
 
+    logs = out / "logs"
     with CollieClient(api, tokens["operator"]) as client:
-        wait_healthy(client, service)
+        wait_healthy(client, service, logs / "service.log", stopping)
     mark("waited: service healthy")
-    run_id = wait_for(memo, trainer, "the trainer")["run_id"] if not resume else json.loads(memo.read_text())["run_id"]
+    if resume:
+        run_id = json.loads(memo.read_text())["run_id"]
+    else:
+        run_id = wait_for(memo, trainer, "the trainer", stopping=stopping, log=logs / "trainer.log")["run_id"]
     mark("waited: run created")
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
@@ -219,7 +278,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
             return ["label-ui", "--api", api, "--run", str(run_id), *where]
 
         ui = stack.start("labeling_ui", ui_args, child_env())
-        ui_meta = wait_for(ui_info, ui, "the labeling UI")
+        ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log")
         mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
         labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])
@@ -228,7 +287,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
         dashboard += "&ui=" + quote(labeler_url.split("?")[0], safe="")
     urls = {"api": api, "labeling_ui": labeler_url, "dashboard": dashboard}
     write_info(args.info_json, urls, run_id, tokens)
-    print(f"collie up: run {run_id} · {args.env} {run_name(args)} {args.method} ({args.preset})")
+    print(f"collie up: run {run_id} · {what_runs(args, trainer_out / 'config.json' if resume else None)}")
     print(f"  service   {api}   (API docs {api}/docs)")
     if labeler_url:  # links with tokens go to the terminal of the person who started the stack, not to logs
         print(f"  label     {labeler_url}")
@@ -238,6 +297,24 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
     stack.log(f"stack up: run {run_id}, service {api}")
     return watch(api, tokens["operator"], run_id, stack, args.exit_when_done, stopping)
+
+
+def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
+    """env, task, method and preset of the run: a resumed run's own (with a warning for the flags
+    given that differ: the trainer keeps the run's), else those asked for."""
+    asked = {"env": args.env, "task": run_name(args), "method": args.method, "preset": args.preset}
+    try:
+        config = json.loads(stored.read_text()) if stored is not None else {}
+    except (OSError, ValueError):
+        config = {}
+    if args.instruction is not None or args.task is None:  # only a task given by name is compared
+        config.pop("task", None)
+    runs = {k: str(config.get(k, v)) for k, v in asked.items()}
+    differ = [f"--{k} {asked[k]}" for k in asked if runs[k] != asked[k]]
+    if differ:
+        print(f"collie up: warning: resuming a {runs['env']} {runs['task']} {runs['method']} run; "
+              f"{', '.join(differ)} ignored (another --out starts a new run)", file=sys.stderr)  # fmt: skip
+    return f"{runs['env']} {runs['task']} {runs['method']} ({runs['preset']})"
 
 
 def listening_socket(port: int) -> socket.socket:
@@ -253,15 +330,22 @@ def listening_socket(port: int) -> socket.socket:
     return sock
 
 
-def wait_healthy(client: CollieClient, service: subprocess.Popen, timeout_s: float = 60.0) -> None:
+def wait_healthy(
+    client: CollieClient, service: subprocess.Popen, log: Path, stopping: dict, timeout_s: float = 60.0
+) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        if stopping["flag"]:
+            raise Stopped
         try:
             client.health()
             return
         except Exception:  # not up yet
             if service.poll() is not None:
-                raise RuntimeError(f"the service exited with code {service.returncode}") from None
+                said = last_error(log)
+                raise RuntimeError(
+                    f"the service exited with code {service.returncode}{': ' + said if said else ''}"
+                ) from None
             time.sleep(0.2)
     raise TimeoutError("the service did not become healthy")
 

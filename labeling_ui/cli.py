@@ -8,6 +8,7 @@ import signal
 import threading
 from pathlib import Path
 
+from collie.argtypes import http_url, port
 from collie.mjmodels import MODEL_NAMES
 from collie.startup import mark
 from collie.tokens import resolve_token
@@ -16,8 +17,8 @@ from labeling_ui.session import UiConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--api", required=True, help="the labeling service, e.g. http://127.0.0.1:8000")
-    parser.add_argument("--port", type=int, default=8090, help="port to serve on (0: any free port)")
+    parser.add_argument("--api", required=True, type=http_url, help="the labeling service, e.g. http://127.0.0.1:8000")
+    parser.add_argument("--port", type=port, default=8090, help="port to serve on (0: any free port)")
     parser.add_argument("--host", default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
     parser.add_argument("--run", type=int, default=None, help="label only this run (default: newest with work)")
     parser.add_argument("--token", default=None, help="print a labeler URL that signs in with this token")

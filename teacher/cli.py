@@ -7,13 +7,14 @@ import logging
 import sys
 import time
 
+from collie.argtypes import http_url
 from collie.client import ApiError, CollieClient, Unreachable
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--api", required=True, help="service URL, e.g. http://127.0.0.1:8000")
+    parser.add_argument("--api", required=True, type=http_url, help="service URL, e.g. http://127.0.0.1:8000")
     add_token_arguments(parser, "labeler")
     parser.add_argument("--run", type=int, required=True, help="run id")
     parser.add_argument("--noise-band", type=float, default=0.0, help="R_error: random labels this close to a boundary")

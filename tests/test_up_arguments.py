@@ -1,0 +1,79 @@
+"""`collie up` refuses what cannot work before it starts anything, names a failing part's own
+error, and leaves a start that never gets ready when asked to stop."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from collie.up import Stopped, last_error, wait_for
+
+
+def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--port", "-1"], "argument --port: -1 is not a port"),
+        (["--ui-port", "99999"], "argument --ui-port: 99999 is not a port"),
+        (["--out", "afile"], "--out afile is a file"),
+        (["--info-json", "."], "--info-json . is a folder"),
+        (["--train-args=--out elsewhere --epochs 2"], "--train-args may not set --out"),
+        (["--teacher-rate", "-1", "--teacher", "oracle"], "--teacher-rate must be > 0"),
+    ],
+)
+def test_bad_arguments_are_refused_before_anything_starts(tmp_path: Path, args: list[str], said: str) -> None:
+    (tmp_path / "afile").write_text("not a folder")
+    proc = up(tmp_path, *args)
+    assert proc.returncode == 2 and said in proc.stderr and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing was started or written
+
+
+def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
+    proc = up(tmp_path, "--env", "nope", "--port", "0", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert "the trainer exited with code 2 before it was ready: collie train: error: unknown env 'nope'" in proc.stderr
+
+
+def test_waiting_for_a_part_ends_when_asked_to_stop(tmp_path: Path) -> None:
+    never = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    stopping = {"flag": False}
+    threading.Timer(0.5, lambda: stopping.update(flag=True)).start()
+    try:
+        with pytest.raises(Stopped):
+            wait_for(tmp_path / "never.json", never, "the labeling UI", timeout_s=30, stopping=stopping)
+    finally:
+        never.kill()
+        never.wait()
+
+
+def test_the_last_error_line_of_a_log(tmp_path: Path) -> None:
+    log = tmp_path / "part.log"
+    log.write_text("starting\nTraceback (most recent call last):\n  ...\nOverflowError: bind(): port\n\ndone\n")
+    assert last_error(log) == "OverflowError: bind(): port"
+    log.write_text("only this\n")
+    assert last_error(log) == "only this" and last_error(tmp_path / "missing.log") == ""
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["serve", "--port", "-1"], "argument --port: -1 is not a port"),
+        (["serve", "--log-level", "bogus"], "argument --log-level: invalid choice"),
+        (["label-ui", "--api", "http://127.0.0.1:1", "--port", "70000"], "argument --port: 70000 is not a port"),
+        (["label-ui", "--api", "notaurl"], "argument --api: 'notaurl' is not an http:// or https:// URL"),
+        (["teacher", "--api", "127.0.0.1:8000", "--run", "1"], "is not an http:// or https:// URL"),
+    ],
+)
+def test_the_other_commands_refuse_bad_ports_and_urls_at_once(tmp_path: Path, args: list[str], said: str) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "collie.cli", *args], capture_output=True, text=True, timeout=60, cwd=tmp_path
+    )
+    assert proc.returncode == 2 and said in proc.stderr and "Traceback" not in proc.stderr
