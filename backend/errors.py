@@ -10,7 +10,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, OperationalError
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
@@ -71,6 +71,15 @@ def install(app: FastAPI) -> None:
     async def _client_gone(_: Request, __: ClientDisconnect) -> Response:
         # the client hung up before its body was whole: nobody to answer, nothing to log as an error
         return Response(status_code=400)
+
+    @app.exception_handler(OperationalError)
+    async def _database_busy(_: Request, exc: OperationalError) -> JSONResponse:
+        if "locked" not in str(exc.orig):  # anything else is a real fault: the 500 handler and its log
+            raise exc
+        # SQLite's busy timeout ran out: another process holds the write lock (docs/service.md:
+        # one service process per SQLite file); nothing was written, the client may retry
+        detail = "the database is busy (another process holds its write lock); nothing was written, retry"
+        return SafeJSONResponse({"detail": detail}, status_code=503, headers={"Retry-After": "5"})
 
     @app.exception_handler(IntegrityError)
     async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:

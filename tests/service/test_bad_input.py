@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import socket
+import sqlite3
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -15,7 +16,7 @@ import pytest
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
-from collie.schemas import EnvDims, RunRead
+from collie.schemas import EnvDims, MetricsIn, RunRead
 
 from .conftest import DIMS, TOKENS, make_run_spec, make_session, settings_for
 
@@ -259,3 +260,25 @@ def test_a_body_cut_short_is_no_error_in_the_log(
     assert labeler.run(run.id).id == run.id  # still serving
     time.sleep(0.2)
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
+
+
+def test_a_database_locked_by_another_process_is_a_503_to_retry(tmp_path: Path) -> None:
+    """Another process holds SQLite's write lock past the busy timeout: a JSON 503 with Retry-After,
+    nothing written, and the service answers again once the lock is gone."""
+    settings = settings_for(tmp_path / "locked.db")
+    with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["trainer"]) as trainer:
+        run = trainer.create_run(make_run_spec())
+        holder = sqlite3.connect(tmp_path / "locked.db", isolation_level=None, timeout=10)
+        holder.execute("BEGIN IMMEDIATE")
+        try:
+            response = post(
+                server.url, "trainer", f"/api/runs/{run.id}/metrics", json={"epoch": 1, "values": {"a": 1.0}}
+            )
+        finally:
+            holder.execute("ROLLBACK")
+            holder.close()
+        assert response.status_code == 503 and response.headers["retry-after"] == "5"
+        assert "busy" in response.json()["detail"]
+        assert trainer.metrics(run.id) == []
+        trainer.post_metrics(run.id, MetricsIn(epoch=1, values={"a": 1.0}))
+        assert len(trainer.metrics(run.id)) == 1
