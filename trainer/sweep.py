@@ -64,9 +64,34 @@ def grid(
     ]
 
 
+class RunFolderError(ValueError):
+    """A run folder's file cannot be read as what it should hold; the message names the file."""
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """`path`'s JSON object; RunFolderError naming the file and why if it is missing, not JSON or
+    not an object (a file cut short by a full disk, or written by hand)."""
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise RunFolderError(f"{path}: missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RunFolderError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise RunFolderError(f"{path}: not a JSON object")
+    return data
+
+
 def is_finished(out: str | Path) -> bool:
+    """summary.json says "finished". An unreadable one is not: the sweep trains (resumes) that run
+    again, which rewrites it; `collie report` and `collie archive` name it and leave it out."""
     summary = Path(out) / "summary.json"
-    return summary.exists() and json.loads(summary.read_text()).get("status") == "finished"
+    if not summary.exists():
+        return False
+    try:
+        return read_json_object(summary).get("status") == "finished"
+    except RunFolderError:
+        return False
 
 
 def train_command(spec: RunSpec) -> list[str]:
