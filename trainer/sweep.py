@@ -213,25 +213,58 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
 
 
+def names(flag: str, given: str) -> tuple[list[str], str | None]:
+    """`given`'s comma-separated names (spaces around them dropped), or the problem naming `flag`'s
+    empty entry ("north,,range" would otherwise become a run of task '')."""
+    listed = [n.strip() for n in given.split(",")]
+    empty = [i for i, n in enumerate(listed, 1) if not n]
+    if empty:
+        return listed, f"{flag} {given!r}: entry {empty[0]} of {len(listed)} is empty"
+    return listed, None
+
+
+def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> str | None:
+    """The first thing wrong with the sweep's arguments, found before any run is launched (a bad
+    name would otherwise fail every run, each in its own process); None if there is none."""
+    from collie.tasks import get_task, task_names
+    from trainer.envs.registry import ENV_NAMES
+
+    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in task_names()]
+    if bad_methods:
+        return f"unknown method(s) {', '.join(bad_methods)}; valid: {', '.join(METHODS)}"
+    if args.env not in ENV_NAMES:
+        return f"unknown --env {args.env!r}; valid: {', '.join(ENV_NAMES)}"
+    if bad_tasks:
+        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(task_names())}"
+    if args.preset not in PRESETS:
+        return f"unknown --preset {args.preset!r}; valid: {', '.join(PRESETS)}"
+    for task in tasks:  # a known task on an env it has no geometry for (north on car, hazard on point)
+        try:
+            get_task(task, args.env, layout_seed=args.first_seed)
+        except ValueError as exc:
+            return f"task {task} on --env {args.env}: {exc}"
+    if args.seeds < 1:
+        return "--seeds must be ≥ 1"
+    if args.first_seed < 0:
+        return "--first-seed must be ≥ 0"
+    if args.variant and not args.variant.replace("_", "").isalnum():
+        return "--variant: letters, digits and _ only"
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        return f"--out {args.out} is a file, not a folder"
+    try:
+        shlex.split(args.downstream_flags)
+    except ValueError as exc:  # an unclosed quote
+        return f"--downstream-flags {args.downstream_flags!r}: {exc}"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    methods, tasks = args.methods.split(","), args.tasks.split(",")
-    bad = [m for m in methods if m not in METHODS]
-    bad_variant = bool(args.variant) and not args.variant.replace("_", "").isalnum()
-    problem = (
-        f"unknown method(s) {', '.join(bad)}; valid: {', '.join(METHODS)}"
-        if bad
-        else "--seeds must be ≥ 1"
-        if args.seeds < 1
-        else "--first-seed must be ≥ 0"
-        if args.first_seed < 0
-        else "--variant: letters, digits and _ only"
-        if bad_variant
-        else None
-    )
-    if problem:
-        print(f"collie sweep: error: {problem}", file=sys.stderr)
+    (methods, empty_method), (tasks, empty_task) = names("--methods", args.methods), names("--tasks", args.tasks)
+    wrong = empty_method or empty_task or problem(args, methods, tasks)
+    if wrong:
+        print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
     flags = tuple(f for f in args.train_flags if f != "--")
     specs = grid(

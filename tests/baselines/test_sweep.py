@@ -112,3 +112,33 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0 and "1 already finished" in again.stdout
     assert summary.stat().st_mtime_ns == stamp
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        (["--tasks", "nort", "--preset", "smok"], "unknown task(s) nort; valid: north, right, range,"),
+        (["--preset", "smok"], "unknown --preset 'smok'; valid: paper, cpu, smoke"),
+        (["--env", "pont"], "unknown --env 'pont'; valid: point, ant,"),
+        (["--tasks", "hazard"], "task hazard on --env point: task 'hazard' is defined for env car"),
+        (["--tasks", "north,,range"], "--tasks 'north,,range': entry 2 of 3 is empty"),
+        (["--methods", "metra,"], "--methods 'metra,': entry 2 of 2 is empty"),
+        (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
+        (["--out", "{file}"], "--out {file} is a file, not a folder"),
+    ],
+)
+def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
+    from collie.cli import main
+
+    launched = []  # a run that would start is recorded (and fails) instead of training
+    monkeypatch.setattr(
+        sweep.subprocess, "run", lambda cmd, **kw: launched.append(cmd) or subprocess.CompletedProcess(cmd, 1)
+    )
+    file = tmp_path / "a-file"
+    file.write_text("")
+    out = ["--out", str(tmp_path / "runs")] if "--out" not in given else []
+    argv = ["sweep", "--seeds", "1", *out, *[g.format(file=file) for g in given]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie sweep: error: {message.format(file=file)}") and len(err.splitlines()) == 1, err
+    assert launched == [] and not (tmp_path / "runs").exists()  # nothing launched, no empty report
