@@ -1,10 +1,11 @@
 """`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
-Resumable: a run folder whose summary.json says "finished" is not rerun; a run with a checkpoint
-continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT, SIGTERM) is
-reported as failed and never evaluated; with `--downstream`, a run whose downstream.json already
-holds its task from its final policy is not re-evaluated. Folders:
+Resumable: a run folder whose summary.json says "finished" is not rerun (one made with another
+preset or other train flags, as its sweep_run.json records, is named in a warning); a run with a
+checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
+SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
+already holds its task from its final policy is not re-evaluated. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
@@ -92,6 +93,24 @@ def is_finished(out: str | Path) -> bool:
         return read_json_object(summary).get("status") == "finished"
     except RunFolderError:
         return False
+
+
+def made_otherwise(spec: RunSpec) -> str | None:
+    """How a run folder's recorded preset and train flags (sweep_run.json, written when it was
+    launched) differ from `spec`'s, as "--preset P -- FLAGS, not …"; None if they are the same or
+    there is no record. A finished run is not rerun, so new flags would silently not apply to it."""
+    try:
+        made = read_json_object(Path(spec.out) / "sweep_run.json")
+    except RunFolderError:
+        return None
+    old_preset, old_flags = made.get("preset"), tuple(made.get("flags") or ())
+    if (old_preset, old_flags) == (spec.preset, spec.flags):
+        return None
+
+    def shown(preset: Any, flags: tuple[Any, ...]) -> str:
+        return f"--preset {preset} -- {shlex.join(map(str, flags))}" if flags else f"--preset {preset}, no train flags"
+
+    return f"{shown(old_preset, old_flags)}, not {shown(spec.preset, spec.flags)}"
 
 
 def train_command(spec: RunSpec) -> list[str]:
@@ -280,6 +299,10 @@ def run(args: argparse.Namespace) -> int:
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
     todo = sum(not is_finished(s.out) for s in specs)
+    for spec in specs:
+        differs = made_otherwise(spec) if is_finished(spec.out) else None
+        if differs:
+            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
     print(
         f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"

@@ -112,6 +112,13 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0 and "1 already finished" in again.stdout
     assert summary.stat().st_mtime_ns == stamp
+    assert "warning" not in again.stderr  # the same flags: nothing to say
+    other = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
+    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # still not rerun, but said so:
+    assert (
+        f"warning: {tmp_path / 'point-north-lsd-s1'} finished with --preset smoke -- --epochs 2, "
+        "not --preset smoke -- --epochs 4; not rerun (remove it to rerun)"
+    ) in other.stderr
 
 
 @pytest.mark.parametrize(
