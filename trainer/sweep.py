@@ -20,6 +20,7 @@ import importlib
 import json
 import os
 import shlex
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -30,6 +31,8 @@ from typing import Any
 
 from trainer.config import PRESETS
 from trainer.methods import METHODS
+
+HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 
 
 @dataclass(frozen=True)
@@ -202,6 +205,13 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
         ray = importlib.import_module("ray")
     except ModuleNotFoundError as exc:
         raise RuntimeError("--ray needs the `ray` package on this machine and the cluster (pip install ray)") from exc
+    head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
+    host, _, port = head.rpartition(":")
+    if host and port.isdigit():  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
+        except OSError as exc:
+            raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
     ray.init(address=address)
     remote = ray.remote(num_cpus=1)(run_one)
     pending = {remote.remote(s): s for s in specs}

@@ -149,3 +149,18 @@ def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsy
     err = capsys.readouterr().err
     assert err.startswith(f"collie sweep: error: {message.format(file=file)}") and len(err.splitlines()) == 1, err
     assert launched == [] and not (tmp_path / "runs").exists()  # nothing launched, no empty report
+
+
+def test_a_ray_address_where_no_head_answers_is_a_one_line_error_within_seconds(tmp_path):
+    import socket
+    import time
+
+    with socket.socket() as probe:  # a port nothing listens on: bound, then closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    cmd = [sys.executable, "-m", "collie.cli", "sweep", "--ray", f"127.0.0.1:{port}", "--tasks", "north"]
+    cmd += ["--methods", "metra", "--seeds", "1", "--preset", "smoke", "--out", str(tmp_path), "--no-report"]
+    start = time.monotonic()
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)  # ray.init alone retries forever
+    assert done.returncode == 2 and time.monotonic() - start < 30
+    assert f"collie sweep: error: --ray 127.0.0.1:{port}: no Ray head answers at that address" in done.stderr
