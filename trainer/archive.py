@@ -73,7 +73,9 @@ def runs_below(root: Path) -> tuple[list[Path], list[Path], list[str]]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", help="finished run folders, or folders holding them (searched recursively)")
-    p.add_argument("--out", default="results", help="the archive: a run goes into OUT/<its folder's name>")
+    p.add_argument(
+        "--out", default="results", help="the archive: a run goes into OUT/<its folder's name> (default: ./results)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

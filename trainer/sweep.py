@@ -225,21 +225,48 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
 
 
 # ---- `collie sweep` ------------------------------------------------------------------------------
+# `collie` adds this to "unrecognized arguments" (collie/cli.py): a train flag given before --.
+UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point")
-    p.add_argument("--tasks", default="north,range,hole_north", help="comma-separated task names")
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)}")
-    p.add_argument("--seeds", type=int, default=3, help="how many seeds: FIRST … FIRST+N−1")
-    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST", help="the lowest seed (default 0)")
-    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--out", default="runs/sweep", help="root folder of the run folders")
-    p.add_argument("--variant", default="", help="name of this ablation (folder suffix and report label)")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at a time on this machine")
+    from collie.tasks import task_names
+    from trainer.envs.registry import ENV_NAMES
+
+    # Each default is shown: together they are the full grid a bare `collie sweep` runs (the epilog).
+    p.add_argument("--env", default="point", help=f"one of: {', '.join(ENV_NAMES)} (default: %(default)s)")
+    p.add_argument(
+        "--tasks",
+        default="north,range,hole_north",
+        help=f"comma-separated, of: {', '.join(task_names())} (default: %(default)s)",
+    )
+    p.add_argument(
+        "--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)} (default: %(default)s)"
+    )
+    p.add_argument("--seeds", type=int, default=3, help="how many seeds: FIRST … FIRST+N−1 (default: %(default)s)")
+    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST", help="the lowest seed (default: %(default)s)")
+    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)} (default: %(default)s)")
+    p.add_argument("--out", default="runs/sweep", help="root folder of the run folders (default: %(default)s)")
+    p.add_argument(
+        "--variant", default="", help="name of this ablation (folder suffix and report label): letters, digits and _"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="runs at a time on this machine (default: its CPU count, %(default)s)",
+    )
     p.add_argument("--ray", default=None, metavar="ADDRESS", help="run on the Ray cluster at ADDRESS instead")
     p.add_argument("--downstream", action="store_true", help="evaluate each finished run's downstream task")
     p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
     p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
+    tasks, seeds = len(p.get_default("tasks").split(",")), p.get_default("seeds")
+    p.epilog = (
+        f"A bare `collie sweep` runs the full grid the defaults name: {len(METHODS)} methods × {tasks} tasks × "
+        f"{seeds} seeds on {p.get_default('env')} at the {p.get_default('preset')} preset, "
+        f"{len(METHODS) * tasks * seeds} runs (hours on 2 cores). Flags for `collie train` go after --."
+    )
 
 
 def names(flag: str, given: str) -> tuple[list[str], str | None]:
@@ -276,8 +303,8 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> s
         return "--seeds must be ≥ 1"
     if args.first_seed < 0:
         return "--first-seed must be ≥ 0"
-    if args.variant and not args.variant.replace("_", "").isalnum():
-        return "--variant: letters, digits and _ only"
+    if not all(c.isalnum() or c == "_" for c in args.variant):  # a folder-name part: no "/", "+" or "-"
+        return f"--variant {args.variant!r}: letters, digits and _ only"
     if Path(args.out).exists() and not Path(args.out).is_dir():
         return f"--out {args.out} is a file, not a folder"
     try:

@@ -164,3 +164,31 @@ def test_a_ray_address_where_no_head_answers_is_a_one_line_error_within_seconds(
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)  # ray.init alone retries forever
     assert done.returncode == 2 and time.monotonic() - start < 30
     assert f"collie sweep: error: --ray 127.0.0.1:{port}: no Ray head answers at that address" in done.stderr
+
+
+def test_variant_names_are_letters_digits_and_underscores_and_an_underscore_alone_is_one(tmp_path, capsys):
+    from collie.cli import main
+
+    finished(tmp_path / "point-north-metra+_-s0")  # so the accepted sweep has nothing to train
+    argv = ["sweep", "--tasks", "north", "--methods", "metra", "--seeds", "1", "--out", str(tmp_path), "--no-report"]
+    assert main([*argv, "--variant", "_"]) == 0
+    assert main([*argv, "--variant", "a-b"]) == 2
+    assert "collie sweep: error: --variant 'a-b': letters, digits and _ only" in capsys.readouterr().err
+
+
+def test_help_shows_the_full_grid_and_a_train_flag_before_the_separator_gets_a_hint(capsys):
+    from collie.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["sweep", "--help"])
+    assert exit_.value.code == 0
+    shown = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert "(default: point)" in shown and "(default: north,range,hole_north)" in shown and "(default: cpu)" in shown
+    assert "A bare `collie sweep` runs the full grid" in shown and "63 runs" in shown
+    with pytest.raises(SystemExit) as exit_:
+        main(["sweep", "--epochs", "2"])
+    assert exit_.value.code == 2
+    assert "unrecognized arguments: --epochs; flags for every `collie train` go after --" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["archive", "--help"])
+    assert "(default: ./results)" in " ".join(capsys.readouterr().out.split())
