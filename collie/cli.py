@@ -39,7 +39,10 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error(f"'{name}' is not available: {exc}")
             module.add_arguments(p)
             p.set_defaults(_module=module)
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # as parse_args says it, with the command's hint where it has one (sweep: train flags after --)
+        hint = getattr(getattr(args, "_module", None), "UNRECOGNIZED_HINT", "")  # none before the command's name
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
     return int(args._module.run(args) or 0)
 
 

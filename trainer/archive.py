@@ -5,20 +5,19 @@ are a few files of kilobytes. This copies those — summary.json, config.json, t
 sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_latest.npz) — into
 DIR/<the run folder's name>, a folder `collie report` reads like the run itself (tables, skill
 figures, diagnostics). A ROOT (a folder holding run folders, as `collie sweep --out` writes) has
-each finished run below it archived at the same relative path under DIR; the unfinished ones are
-named and left out. No checkpoint or replay is copied, so an archived run cannot be resumed or
-given a downstream task; run those before archiving.
+each finished run below it archived at the same relative path under DIR; the unfinished ones, and
+those whose summary.json cannot be read, are named and left out. No checkpoint or replay is
+copied, so an archived run cannot be resumed or given a downstream task; run those before archiving.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 from pathlib import Path
 
-from trainer.sweep import is_finished
+from trainer.sweep import RunFolderError, is_finished, read_json_object
 from trainer.task_choice import TASK_JSON
 
 REQUIRED = ("summary.json", "eval_latest.npz")
@@ -26,7 +25,8 @@ OPTIONAL = ("config.json", TASK_JSON, "sweep_run.json", "downstream.json", "metr
 
 
 class ArchiveError(ValueError):
-    """The folder is not a finished run, or the archive already holds another run of its name."""
+    """The folder is not a finished run (or its summary.json cannot be read), or the archive already
+    holds another run of its name."""
 
 
 def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
@@ -36,15 +36,18 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
     for name in REQUIRED:
         if not (source / name).exists():
             raise ArchiveError(f"{source} has no {name}: not a run folder, or its final skills were not saved")
-    summary = json.loads((source / "summary.json").read_text())
-    if not is_finished(source):
-        raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
-    out = out_root / (relative or source.resolve().name)
-    if out.resolve() == source.resolve():
-        raise ArchiveError(f"{source} is already in {out_root}")
-    held = out / "summary.json"
-    if held.exists() and json.loads(held.read_text()).get("config") != summary.get("config"):
-        raise ArchiveError(f"{out} holds another run of that name (its configuration differs); remove it first")
+    try:
+        summary = read_json_object(source / "summary.json")
+        if not is_finished(source):
+            raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
+        out = out_root / (relative or source.resolve().name)
+        if out.resolve() == source.resolve():
+            raise ArchiveError(f"{source} is already in {out_root}")
+        held = out / "summary.json"
+        if held.exists() and read_json_object(held).get("config") != summary.get("config"):
+            raise ArchiveError(f"{out} holds another run of that name (its configuration differs); remove it first")
+    except RunFolderError as exc:  # the message names the file
+        raise ArchiveError(str(exc)) from None
     out.mkdir(parents=True, exist_ok=True)
     for name in REQUIRED + OPTIONAL:
         if (source / name).exists():
@@ -52,15 +55,27 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
     return out
 
 
-def runs_below(root: Path) -> tuple[list[Path], list[Path]]:
-    """The finished run folders below `root` and the unfinished ones, each in a stable order."""
-    folders = sorted(summary.parent for summary in root.rglob("summary.json"))
-    return [f for f in folders if is_finished(f)], [f for f in folders if not is_finished(f)]
+def runs_below(root: Path) -> tuple[list[Path], list[Path], list[str]]:
+    """The finished run folders below `root`, the unfinished ones, each in a stable order, and why
+    each folder whose summary.json cannot be read was left out (naming the file)."""
+    finished: list[Path] = []
+    unfinished: list[Path] = []
+    unreadable: list[str] = []
+    for folder in sorted(summary.parent for summary in root.rglob("summary.json")):
+        try:
+            read_json_object(folder / "summary.json")
+        except RunFolderError as exc:
+            unreadable.append(str(exc))
+            continue
+        (finished if is_finished(folder) else unfinished).append(folder)
+    return finished, unfinished, unreadable
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", help="finished run folders, or folders holding them (searched recursively)")
-    p.add_argument("--out", default="results", help="the archive: a run goes into OUT/<its folder's name>")
+    p.add_argument(
+        "--out", default="results", help="the archive: a run goes into OUT/<its folder's name> (default: ./results)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,12 +88,14 @@ def run(args: argparse.Namespace) -> int:
         if (given / "summary.json").exists():
             jobs = [(given, None)]
         else:
-            finished, unfinished = runs_below(given)
-            if not finished and not unfinished:
+            finished, unfinished, unreadable = runs_below(given)
+            if not finished and not unfinished and not unreadable:
                 print(f"collie archive: error: {given} holds no run folder (none has summary.json)", file=sys.stderr)
                 return 2
             for left in unfinished:
                 print(f"left out (not finished): {left}")
+            for why in unreadable:
+                print(f"left out (unreadable): {why}")
             jobs = [(f, f.relative_to(given)) for f in finished if out_root.resolve() not in f.resolve().parents]
         for source, relative in jobs:
             try:

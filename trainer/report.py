@@ -14,8 +14,9 @@ The diagnostic "safe ratio outside the start's 2×2 bins" (2-D bodies, from eval
 visits, three of which the corner rule judges at a corner outside a wedge whose apex is the start;
 "share of the skills ending within one unit of their start" counts the skills that stand.
 
-A run folder is any folder with summary.json; runs not "finished" are listed and left out. ± is the
-sample standard deviation over seeds (as the paper's tables); a single seed shows its value alone.
+A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
+are folders whose files cannot be read, each with why. ± is the sample standard deviation over
+seeds (as the paper's tables); a single seed shows its value alone.
 
 Coverage cells use the reference's corner bin rule (the `corner_*` figures every run logs), as the
 paper's tables do, and where the paper published a cell (`trainer/paper_results.py`: Ant,
@@ -27,9 +28,9 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ import numpy as np
 from collie.tasks import Task, get_task
 from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
+from trainer.sweep import RunFolderError, read_json_object
 from trainer.task_choice import saved_rule
 
 METRICS: tuple[tuple[str, str, int], ...] = (
@@ -97,21 +99,32 @@ class RunResult:
 
 
 def load_run(folder: Path) -> RunResult:
-    summary = json.loads((folder / "summary.json").read_text())
-    cfg = summary.get("config") or json.loads((folder / "config.json").read_text())
-    sweep = folder / "sweep_run.json"
-    variant = json.loads(sweep.read_text()).get("variant", "") if sweep.exists() else ""
-    down = folder / "downstream.json"
+    """The run in `folder`; RunFolderError naming the file and why if one of its files is broken."""
+    summary = read_json_object(folder / "summary.json")
+    config_path = folder / "summary.json" if summary.get("config") else folder / "config.json"
+    if not summary.get("config") and not config_path.exists():
+        raise RunFolderError(f"{folder / 'summary.json'}: no config in it, and no config.json beside it")
+    cfg = summary.get("config") or read_json_object(config_path)
+    if not isinstance(cfg, dict):
+        raise RunFolderError(f"{config_path}: its config is not a JSON object")
+    missing = [k for k in ("env", "task", "method", "seed") if not isinstance(cfg.get(k), (str, int))]
+    if missing:
+        raise RunFolderError(f"{config_path}: its config has no {', '.join(missing)}")
+    try:
+        seed = int(cfg["seed"])
+    except ValueError:
+        raise RunFolderError(f"{config_path}: its config's seed {cfg['seed']!r} is not a whole number") from None
+    sweep, down = folder / "sweep_run.json", folder / "downstream.json"
     return RunResult(
         folder,
-        cfg["env"],
-        cfg["task"],
-        cfg["method"],
-        int(cfg["seed"]),
+        str(cfg["env"]),
+        str(cfg["task"]),
+        str(cfg["method"]),
+        seed,
         summary.get("status", "?"),
         summary,
-        variant,
-        json.loads(down.read_text()) if down.exists() else {},
+        read_json_object(sweep).get("variant", "") if sweep.exists() else "",
+        read_json_object(down) if down.exists() else {},
     )
 
 
@@ -138,10 +151,17 @@ def add_diagnostics(run: RunResult) -> None:
         run.metrics["off_start_safe_ratio"] = off_start_safe_ratio(xy, task)
 
 
-def find_runs(roots: list[Path]) -> list[RunResult]:
-    """Every run folder (one with summary.json) under `roots`, in a stable order."""
+def find_runs(roots: list[Path]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
+    """Every run folder (one with summary.json) under `roots`, in a stable order, and the folders
+    that could not be read, each with why (one broken folder must not hide the others)."""
     folders = sorted({p.parent for root in roots for p in Path(root).rglob("summary.json")})
-    return [load_run(f) for f in folders]
+    runs, broken = [], []
+    for f in folders:
+        try:
+            runs.append(load_run(f))
+        except RunFolderError as exc:
+            broken.append((f, str(exc)))
+    return runs, broken
 
 
 def format_cell(values: list[float], digits: int) -> str:
@@ -278,7 +298,13 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
         writer.writerows(rows)
 
 
-def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path], out: Path) -> str:
+def markdown(
+    runs: list[RunResult],
+    skipped: list[RunResult],
+    figures: list[Path],
+    out: Path,
+    broken: Sequence[tuple[Path, str]] = (),
+) -> str:
     seeds = sorted({len(g) for g in _group(runs).values()})
     parts = [
         f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
@@ -288,6 +314,8 @@ def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path
     ]
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
+    if broken:
+        parts.append("Left out (unreadable): " + ", ".join(f"`{path}` ({why})" for path, why in broken))
     for metric, title, digits in METRICS:
         if any(metric in r.metrics for r in runs):
             parts.append(f"## {title}\n\n{metric_table(runs, metric, digits)}")
@@ -303,7 +331,9 @@ def markdown(runs: list[RunResult], skipped: list[RunResult], figures: list[Path
 
 def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str, Path]:
     """Find the runs under `roots`, write report.md, metrics.csv, runs.csv and figures into `out`."""
-    every = [r for r in find_runs(roots) if out not in r.path.parents]
+    found, unreadable = find_runs(roots)
+    every = [r for r in found if out not in r.path.parents]
+    broken = [(path, why) for path, why in unreadable if out not in path.parents]
     runs = [r for r in every if r.status == "finished"]
     skipped = [r for r in every if r.status != "finished"]
     for r in runs:
@@ -331,7 +361,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
             for r in runs
         ],
     )
-    (out / "report.md").write_text(markdown(runs, skipped, paths, out))
+    (out / "report.md").write_text(markdown(runs, skipped, paths, out, broken))
     return {"markdown": out / "report.md", "metrics_csv": out / "metrics.csv", "runs_csv": out / "runs.csv"}
 
 
@@ -347,6 +377,13 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         print(f"collie report: error: not a folder: {', '.join(missing)}", file=sys.stderr)
         return 2
+    for root in roots:  # a run folder given itself: a broken one is an error, not a line in the report
+        if (root / "summary.json").exists():
+            try:
+                load_run(root)
+            except RunFolderError as exc:
+                print(f"collie report: error: {exc}", file=sys.stderr)
+                return 2
     out = Path(args.out) if args.out else roots[0] / "report"
     paths = write_report(roots, out, figures=not args.no_figures)
     print((out / "report.md").read_text())

@@ -28,7 +28,8 @@ from trainer.config import Config
 from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
-from trainer.sweep import downstream_done, run_downstream_task
+from trainer.report import load_run
+from trainer.sweep import RunFolderError, downstream_done, read_json_object, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
 CHECKPOINT = "checkpoint.pt"
@@ -62,8 +63,11 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     summary_path = source / "summary.json"
     if not summary_path.exists():
         raise RescoreError(f"{source} is not a run folder: it has no summary.json")
-    summary: dict[str, Any] = json.loads(summary_path.read_text())
-    cfg = dict(summary["config"])
+    try:  # names the broken file: a summary or config that is not JSON, or a config without a seed
+        summary: dict[str, Any] = load_run(source).metrics
+        cfg = dict(summary.get("config") or read_json_object(source / "config.json"))
+    except RunFolderError as exc:
+        raise RescoreError(str(exc)) from None
     if summary.get("status") != "finished":
         raise RescoreError(f"{source} is not finished (status {summary.get('status')!r})")
     if not task_free(cfg["method"]):
@@ -79,7 +83,7 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     rule = get_task(task, cfg["env"], layout_seed=int(cfg["seed"]))  # fails with the valid task names
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
     if (out / "summary.json").exists():
-        held = json.loads((out / "summary.json").read_text())
+        held = read_json_object(out / "summary.json")  # RunFolderError, a ValueError, names a broken one
         if keep_existing and same_run(held.get("rescored_from"), source):
             return out
         raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
@@ -96,7 +100,7 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
         shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
     (out / "config.json").write_text(json.dumps(cfg, indent=2))
     if (source / "downstream.json").exists():
-        done = json.loads((source / "downstream.json").read_text())
+        done = read_json_object(source / "downstream.json")
         kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
         if kept_results:
             (out / "downstream.json").write_text(json.dumps(kept_results, indent=2))

@@ -1,10 +1,11 @@
 """`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
-Resumable: a run folder whose summary.json says "finished" is not rerun; a run with a checkpoint
-continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT, SIGTERM) is
-reported as failed and never evaluated; with `--downstream`, a run whose downstream.json already
-holds its task from its final policy is not re-evaluated. Folders:
+Resumable: a run folder whose summary.json says "finished" is not rerun (one made with another
+preset or other train flags, as its sweep_run.json records, is named in a warning); a run with a
+checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
+SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
+already holds its task from its final policy is not re-evaluated. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
@@ -19,6 +20,7 @@ import importlib
 import json
 import os
 import shlex
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -29,6 +31,8 @@ from typing import Any
 
 from trainer.config import PRESETS
 from trainer.methods import METHODS
+
+HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 
 
 @dataclass(frozen=True)
@@ -64,9 +68,52 @@ def grid(
     ]
 
 
+class RunFolderError(ValueError):
+    """A run folder's file cannot be read as what it should hold; the message names the file."""
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """`path`'s JSON object; RunFolderError naming the file and why if it is missing, not JSON or
+    not an object (a file cut short by a full disk, or written by hand)."""
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise RunFolderError(f"{path}: missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RunFolderError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise RunFolderError(f"{path}: not a JSON object")
+    return data
+
+
 def is_finished(out: str | Path) -> bool:
+    """summary.json says "finished". An unreadable one is not: the sweep trains (resumes) that run
+    again, which rewrites it; `collie report` and `collie archive` name it and leave it out."""
     summary = Path(out) / "summary.json"
-    return summary.exists() and json.loads(summary.read_text()).get("status") == "finished"
+    if not summary.exists():
+        return False
+    try:
+        return read_json_object(summary).get("status") == "finished"
+    except RunFolderError:
+        return False
+
+
+def made_otherwise(spec: RunSpec) -> str | None:
+    """How a run folder's recorded preset and train flags (sweep_run.json, written when it was
+    launched) differ from `spec`'s, as "--preset P -- FLAGS, not …"; None if they are the same or
+    there is no record. A finished run is not rerun, so new flags would silently not apply to it."""
+    try:
+        made = read_json_object(Path(spec.out) / "sweep_run.json")
+    except RunFolderError:
+        return None
+    old_preset, old_flags = made.get("preset"), tuple(made.get("flags") or ())
+    if (old_preset, old_flags) == (spec.preset, spec.flags):
+        return None
+
+    def shown(preset: Any, flags: tuple[Any, ...]) -> str:
+        return f"--preset {preset} -- {shlex.join(map(str, flags))}" if flags else f"--preset {preset}, no train flags"
+
+    return f"{shown(old_preset, old_flags)}, not {shown(spec.preset, spec.flags)}"
 
 
 def train_command(spec: RunSpec) -> list[str]:
@@ -158,6 +205,13 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
         ray = importlib.import_module("ray")
     except ModuleNotFoundError as exc:
         raise RuntimeError("--ray needs the `ray` package on this machine and the cluster (pip install ray)") from exc
+    head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
+    host, _, port = head.rpartition(":")
+    if host and port.isdigit():  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
+        except OSError as exc:
+            raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
     ray.init(address=address)
     remote = ray.remote(num_cpus=1)(run_one)
     pending = {remote.remote(s): s for s in specs}
@@ -171,42 +225,102 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
 
 
 # ---- `collie sweep` ------------------------------------------------------------------------------
+# `collie` adds this to "unrecognized arguments" (collie/cli.py): a train flag given before --.
+UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point")
-    p.add_argument("--tasks", default="north,range,hole_north", help="comma-separated task names")
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)}")
-    p.add_argument("--seeds", type=int, default=3, help="how many seeds: FIRST … FIRST+N−1")
-    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST", help="the lowest seed (default 0)")
-    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--out", default="runs/sweep", help="root folder of the run folders")
-    p.add_argument("--variant", default="", help="name of this ablation (folder suffix and report label)")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at a time on this machine")
+    from collie.tasks import task_names
+    from trainer.envs.registry import ENV_NAMES
+
+    # Each default is shown: together they are the full grid a bare `collie sweep` runs (the epilog).
+    p.add_argument("--env", default="point", help=f"one of: {', '.join(ENV_NAMES)} (default: %(default)s)")
+    p.add_argument(
+        "--tasks",
+        default="north,range,hole_north",
+        help=f"comma-separated, of: {', '.join(task_names())} (default: %(default)s)",
+    )
+    p.add_argument(
+        "--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)} (default: %(default)s)"
+    )
+    p.add_argument("--seeds", type=int, default=3, help="how many seeds: FIRST … FIRST+N−1 (default: %(default)s)")
+    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST", help="the lowest seed (default: %(default)s)")
+    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)} (default: %(default)s)")
+    p.add_argument("--out", default="runs/sweep", help="root folder of the run folders (default: %(default)s)")
+    p.add_argument(
+        "--variant", default="", help="name of this ablation (folder suffix and report label): letters, digits and _"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="runs at a time on this machine (default: its CPU count, %(default)s)",
+    )
     p.add_argument("--ray", default=None, metavar="ADDRESS", help="run on the Ray cluster at ADDRESS instead")
     p.add_argument("--downstream", action="store_true", help="evaluate each finished run's downstream task")
     p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
     p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
+    tasks, seeds = len(p.get_default("tasks").split(",")), p.get_default("seeds")
+    p.epilog = (
+        f"A bare `collie sweep` runs the full grid the defaults name: {len(METHODS)} methods × {tasks} tasks × "
+        f"{seeds} seeds on {p.get_default('env')} at the {p.get_default('preset')} preset, "
+        f"{len(METHODS) * tasks * seeds} runs (hours on 2 cores). Flags for `collie train` go after --."
+    )
+
+
+def names(flag: str, given: str) -> tuple[list[str], str | None]:
+    """`given`'s comma-separated names (spaces around them dropped), or the problem naming `flag`'s
+    empty entry ("north,,range" would otherwise become a run of task '')."""
+    listed = [n.strip() for n in given.split(",")]
+    empty = [i for i, n in enumerate(listed, 1) if not n]
+    if empty:
+        return listed, f"{flag} {given!r}: entry {empty[0]} of {len(listed)} is empty"
+    return listed, None
+
+
+def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> str | None:
+    """The first thing wrong with the sweep's arguments, found before any run is launched (a bad
+    name would otherwise fail every run, each in its own process); None if there is none."""
+    from collie.tasks import get_task, task_names
+    from trainer.envs.registry import ENV_NAMES
+
+    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in task_names()]
+    if bad_methods:
+        return f"unknown method(s) {', '.join(bad_methods)}; valid: {', '.join(METHODS)}"
+    if args.env not in ENV_NAMES:
+        return f"unknown --env {args.env!r}; valid: {', '.join(ENV_NAMES)}"
+    if bad_tasks:
+        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(task_names())}"
+    if args.preset not in PRESETS:
+        return f"unknown --preset {args.preset!r}; valid: {', '.join(PRESETS)}"
+    for task in tasks:  # a known task on an env it has no geometry for (north on car, hazard on point)
+        try:
+            get_task(task, args.env, layout_seed=args.first_seed)
+        except ValueError as exc:
+            return f"task {task} on --env {args.env}: {exc}"
+    if args.seeds < 1:
+        return "--seeds must be ≥ 1"
+    if args.first_seed < 0:
+        return "--first-seed must be ≥ 0"
+    if not all(c.isalnum() or c == "_" for c in args.variant):  # a folder-name part: no "/", "+" or "-"
+        return f"--variant {args.variant!r}: letters, digits and _ only"
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        return f"--out {args.out} is a file, not a folder"
+    try:
+        shlex.split(args.downstream_flags)
+    except ValueError as exc:  # an unclosed quote
+        return f"--downstream-flags {args.downstream_flags!r}: {exc}"
+    return None
 
 
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    methods, tasks = args.methods.split(","), args.tasks.split(",")
-    bad = [m for m in methods if m not in METHODS]
-    bad_variant = bool(args.variant) and not args.variant.replace("_", "").isalnum()
-    problem = (
-        f"unknown method(s) {', '.join(bad)}; valid: {', '.join(METHODS)}"
-        if bad
-        else "--seeds must be ≥ 1"
-        if args.seeds < 1
-        else "--first-seed must be ≥ 0"
-        if args.first_seed < 0
-        else "--variant: letters, digits and _ only"
-        if bad_variant
-        else None
-    )
-    if problem:
-        print(f"collie sweep: error: {problem}", file=sys.stderr)
+    (methods, empty_method), (tasks, empty_task) = names("--methods", args.methods), names("--tasks", args.tasks)
+    wrong = empty_method or empty_task or problem(args, methods, tasks)
+    if wrong:
+        print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
     flags = tuple(f for f in args.train_flags if f != "--")
     specs = grid(
@@ -222,6 +336,10 @@ def run(args: argparse.Namespace) -> int:
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
     todo = sum(not is_finished(s.out) for s in specs)
+    for spec in specs:
+        differs = made_otherwise(spec) if is_finished(spec.out) else None
+        if differs:
+            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
     print(
         f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"

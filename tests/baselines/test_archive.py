@@ -90,3 +90,20 @@ def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unf
     (tmp_path / "empty").mkdir()
     assert main(["archive", str(tmp_path / "empty"), "--out", str(kept)]) == 2
     assert "holds no run folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("text", "why"), [("{not json", "not JSON"), ("[1]", "not a JSON object")])
+def test_an_unreadable_summary_is_named_and_left_out_and_given_alone_is_a_one_line_error(tmp_path, capsys, text, why):
+    sweep = tmp_path / "runs"
+    for name, summary in [("ant-north-metra-s0", json.dumps({"status": "finished"})), ("ant-north-metra-s1", text)]:
+        (sweep / name).mkdir(parents=True)
+        (sweep / name / "summary.json").write_text(summary)
+        (sweep / name / "eval_latest.npz").write_bytes(b"saved")
+    kept = tmp_path / "results"
+    assert main(["archive", str(sweep), "--out", str(kept)]) == 0
+    broken = sweep / "ant-north-metra-s1" / "summary.json"
+    assert f"left out (unreadable): {broken}: {why}" in capsys.readouterr().out
+    assert [p.parent.name for p in kept.rglob("summary.json")] == ["ant-north-metra-s0"]
+    assert main(["archive", str(broken.parent), "--out", str(kept)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie archive: error: {broken}: {why}") and len(err.strip().splitlines()) == 1

@@ -4,6 +4,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from trainer.report import format_cell, write_report
 
@@ -160,3 +161,30 @@ def test_the_goal_table_prints_the_papers_table_4_beside_not_flip(tmp_path):
         "| half_cheetah right | half_cheetah right (random skills) |"
     )
     assert lines[2] == "| METRA | 7.00 ± 1.41 | 21.58 ± 25.53 | -900.50 ± 0.71 | 7.00 ± 1.41 | -900.50 ± 0.71 |"
+
+
+BROKEN = [
+    ("{not json", "summary.json: not JSON"),
+    ("{}", "summary.json: no config in it, and no config.json beside it"),
+    ("[1]", "summary.json: not a JSON object"),
+    ('{"status": "finished", "config": {"env": "point", "task": "north", "method": "metra", "seed": "x"}}', "seed 'x'"),
+]
+
+
+@pytest.mark.parametrize(("text", "why"), BROKEN)
+def test_a_broken_run_folder_is_named_and_left_out_and_given_alone_is_a_one_line_error(tmp_path, capsys, text, why):
+    from collie.cli import main
+
+    runs = tmp_path / "runs"
+    fake_run(runs, "point", "north", "oracle", 0, 9.0)
+    broken = runs / "point-north-metra-s0"
+    broken.mkdir()
+    (broken / "summary.json").write_text(text)
+    assert main(["report", str(runs), "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert "| Oracle | 9.00 |" in out  # the others are reported
+    assert f"Left out (unreadable): `{broken}` ({broken / 'summary.json'}" in out and why in out
+    assert main(["report", str(broken), "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie report: error: {broken / 'summary.json'}") and why in err
+    assert len(err.strip().splitlines()) == 1

@@ -98,3 +98,19 @@ def test_a_downstream_task_without_a_checkpoint_is_refused_with_the_reason(tmp_p
     assert main(["rescore", str(source), "--task", "range", "--downstream"]) == 2
     assert "has no checkpoint.pt; no downstream task" in capsys.readouterr().err
     assert (tmp_path / "ant-range-metra-s0" / "summary.json").exists()  # the rescore itself is kept
+
+
+@pytest.mark.parametrize(
+    ("summary", "why"),
+    [
+        ("{not json", "summary.json: not JSON"),
+        ("{}", "summary.json: no config in it"),
+        ('{"status": "finished", "config": {"env": "ant", "task": "north", "method": "metra", "seed": "x"}}', "'x'"),
+    ],
+)
+def test_a_broken_summary_is_a_one_line_error_naming_it(tmp_path, capsys, summary, why):
+    source, _ = finished_run(tmp_path)
+    (source / "summary.json").write_text(summary)
+    assert main(["rescore", str(source), "--task", "range"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie rescore: error: {source / 'summary.json'}") and why in err

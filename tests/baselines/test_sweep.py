@@ -112,3 +112,83 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0 and "1 already finished" in again.stdout
     assert summary.stat().st_mtime_ns == stamp
+    assert "warning" not in again.stderr  # the same flags: nothing to say
+    other = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
+    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # still not rerun, but said so:
+    assert (
+        f"warning: {tmp_path / 'point-north-lsd-s1'} finished with --preset smoke -- --epochs 2, "
+        "not --preset smoke -- --epochs 4; not rerun (remove it to rerun)"
+    ) in other.stderr
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        (["--tasks", "nort", "--preset", "smok"], "unknown task(s) nort; valid: north, right, range,"),
+        (["--preset", "smok"], "unknown --preset 'smok'; valid: paper, cpu, smoke"),
+        (["--env", "pont"], "unknown --env 'pont'; valid: point, ant,"),
+        (["--tasks", "hazard"], "task hazard on --env point: task 'hazard' is defined for env car"),
+        (["--tasks", "north,,range"], "--tasks 'north,,range': entry 2 of 3 is empty"),
+        (["--methods", "metra,"], "--methods 'metra,': entry 2 of 2 is empty"),
+        (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
+        (["--out", "{file}"], "--out {file} is a file, not a folder"),
+    ],
+)
+def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
+    from collie.cli import main
+
+    launched = []  # a run that would start is recorded (and fails) instead of training
+    monkeypatch.setattr(
+        sweep.subprocess, "run", lambda cmd, **kw: launched.append(cmd) or subprocess.CompletedProcess(cmd, 1)
+    )
+    file = tmp_path / "a-file"
+    file.write_text("")
+    out = ["--out", str(tmp_path / "runs")] if "--out" not in given else []
+    argv = ["sweep", "--seeds", "1", *out, *[g.format(file=file) for g in given]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie sweep: error: {message.format(file=file)}") and len(err.splitlines()) == 1, err
+    assert launched == [] and not (tmp_path / "runs").exists()  # nothing launched, no empty report
+
+
+def test_a_ray_address_where_no_head_answers_is_a_one_line_error_within_seconds(tmp_path):
+    import socket
+    import time
+
+    with socket.socket() as probe:  # a port nothing listens on: bound, then closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    cmd = [sys.executable, "-m", "collie.cli", "sweep", "--ray", f"127.0.0.1:{port}", "--tasks", "north"]
+    cmd += ["--methods", "metra", "--seeds", "1", "--preset", "smoke", "--out", str(tmp_path), "--no-report"]
+    start = time.monotonic()
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)  # ray.init alone retries forever
+    assert done.returncode == 2 and time.monotonic() - start < 30
+    assert f"collie sweep: error: --ray 127.0.0.1:{port}: no Ray head answers at that address" in done.stderr
+
+
+def test_variant_names_are_letters_digits_and_underscores_and_an_underscore_alone_is_one(tmp_path, capsys):
+    from collie.cli import main
+
+    finished(tmp_path / "point-north-metra+_-s0")  # so the accepted sweep has nothing to train
+    argv = ["sweep", "--tasks", "north", "--methods", "metra", "--seeds", "1", "--out", str(tmp_path), "--no-report"]
+    assert main([*argv, "--variant", "_"]) == 0
+    assert main([*argv, "--variant", "a-b"]) == 2
+    assert "collie sweep: error: --variant 'a-b': letters, digits and _ only" in capsys.readouterr().err
+
+
+def test_help_shows_the_full_grid_and_a_train_flag_before_the_separator_gets_a_hint(capsys):
+    from collie.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["sweep", "--help"])
+    assert exit_.value.code == 0
+    shown = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert "(default: point)" in shown and "(default: north,range,hole_north)" in shown and "(default: cpu)" in shown
+    assert "A bare `collie sweep` runs the full grid" in shown and "63 runs" in shown
+    with pytest.raises(SystemExit) as exit_:
+        main(["sweep", "--epochs", "2"])
+    assert exit_.value.code == 2
+    assert "unrecognized arguments: --epochs; flags for every `collie train` go after --" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["archive", "--help"])
+    assert "(default: ./results)" in " ".join(capsys.readouterr().out.split())
