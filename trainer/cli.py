@@ -164,6 +164,17 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
+RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh start would overwrite
+
+
+def check_out(out: Path, resume: bool) -> None:
+    """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume)."""
+    if not resume and any((out / name).exists() for name in RUN_FILES):
+        raise ValueError(
+            f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
@@ -171,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
+        check_out(Path(cfg.out), args.resume)
         if args.resume:
             saved = Path(cfg.out) / "config.json"
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
