@@ -4,12 +4,17 @@ and no run folder overwritten or created by a refused command."""
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 import shutil
 import subprocess
 import sys
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import torch
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -54,3 +59,106 @@ def test_an_existing_run_is_not_overwritten_without_resume(run_copy: Path) -> No
     before = {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()}
     refused(train("--epochs", "1", "--out", str(run_copy)), "already holds a run", "--resume", "--out")
     assert {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()} == before
+
+
+def test_resume_without_a_checkpoint_is_refused_and_creates_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "never"
+    refused(train("--out", str(out), "--resume"), "--resume", "no checkpoint", str(out / "checkpoint.pt"))
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("where", ["file", "under_file"])
+def test_out_that_is_or_lies_under_a_file_is_refused(tmp_path: Path, where: str) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("not a folder")
+    out = blocker if where == "file" else blocker / "run"
+    refused(train("--epochs", "1", "--out", str(out)), "--out", "is a file")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_out_in_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    refused(train("--epochs", "1", "--out", str(locked / "run")), "--out", "cannot write")
+
+
+def test_a_truncated_checkpoint_is_named(run_copy: Path) -> None:
+    ckpt = run_copy / "checkpoint.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[:100])
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(ckpt), "damaged")
+
+
+def test_a_missing_replay_chunk_is_named(run_copy: Path) -> None:
+    chunk = next((run_copy / "replay").glob("*.npz"))
+    chunk.unlink()
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "missing")
+
+
+def test_a_torn_last_metrics_line_is_dropped_on_resume(run_copy: Path) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    whole = metrics.read_text()
+    metrics.write_text(whole + '{"epoch": 3, "safe_cov')  # a crash while appending
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert [json.loads(ln)["epoch"] for ln in metrics.read_text().splitlines()] == [0, 2, 3]
+
+
+def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    metrics.write_text("{oops\n" + metrics.read_text())
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(metrics), "line 1")
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "words"),
+    [
+        ("--device", "bogus", ("--device", "'bogus'", "valid", "cpu")),
+        ("--checkpoint-every", "0", ("--checkpoint-every", "≥ 1")),
+        ("--skill-dim", "0", ("--skill-dim", "≥ 1")),
+        ("--api", "notaurl", ("--api", "http://")),
+    ],
+)
+def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value: str, words: tuple[str, ...]) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), *words)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
+def test_device_cuda_without_cuda_is_refused(tmp_path: Path) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), "--device", "cuda"), "--device cuda", "no CUDA")
+
+
+TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": "lb-" + "l" * 30}
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A real labeling service; yields its URL."""
+    tmp = tmp_path_factory.mktemp("service")
+    info = tmp / "service.json"
+    env = {**os.environ, **{f"COLLIE_{k.upper()}_TOKEN": v for k, v in TOKENS.items()}}
+    cmd = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(tmp / "c.db")]
+    with open(tmp / "service.log", "wb") as log:
+        proc = subprocess.Popen([*cmd, "--tokens-json", str(info)], stdout=log, stderr=subprocess.STDOUT, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not info.exists():
+            assert proc.poll() is None and time.monotonic() < deadline, (tmp / "service.log").read_text()
+            time.sleep(0.2)
+        yield json.loads(info.read_text())["api"]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (("--token", "wrong-" + "x" * 30), ("401",)),
+        (("--token", TOKENS["labeler"]), ("403",)),
+        (("--token", TOKENS["trainer"], "--run-id", "999"), ("404",)),
+    ],
+)
+def test_the_service_refusal_is_one_line(tmp_path: Path, service: str, extra: tuple[str, ...], words) -> None:
+    proc = train("--epochs", "1", "--out", str(tmp_path / "run"), "--api", service, *extra, timeout=120)
+    refused(proc, "labeling service", service, *words)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from collie.startup import mark
 from collie.tokens import add_token_arguments, resolve_token
+from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
@@ -168,11 +170,21 @@ RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh 
 
 
 def check_out(out: Path, resume: bool) -> None:
-    """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume)."""
+    """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume),
+    one --resume cannot continue, or one we cannot write; before anything creates it."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder")
+    if resume and not (out / "checkpoint.pt").is_file():
+        raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
     if not resume and any((out / name).exists() for name in RUN_FILES):
         raise ValueError(
             f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
         )
+    nearest = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())  # the folder or its creator
+    if not nearest.is_dir():
+        raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -181,6 +193,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
+        if args.api is not None and not args.api.startswith(("http://", "https://")):
+            raise ValueError(f"--api {args.api!r} is not a URL: it starts with http:// or https://")
         cfg = config_from_args(args)
         check_out(Path(cfg.out), args.resume)
         if args.resume:
@@ -203,7 +217,12 @@ def run(args: argparse.Namespace) -> int:
             cfg.task = rule.definition.name
         feedback = None
         if args.api:
-            feedback, rule = http_feedback(args, cfg, rule)
+            from collie.client import ApiError
+
+            try:
+                feedback, rule = http_feedback(args, cfg, rule)
+            except ApiError as exc:  # a wrong token or run id: the service's answer, as `collie teacher` prints it
+                raise ValueError(f"the labeling service at {args.api} answered {exc}") from None
             mark("run created")
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
@@ -211,7 +230,11 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
-    summary = trainer.run(resume=args.resume)
+    try:
+        summary = trainer.run(resume=args.resume)
+    except ResumeError as exc:  # a damaged or missing file of the run folder, named
+        print(f"collie train: error: {exc}", file=sys.stderr)
+        return 2
     keys = (
         "epoch",
         "safe_coverage",
