@@ -162,3 +162,9 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 def test_the_service_refusal_is_one_line(tmp_path: Path, service: str, extra: tuple[str, ...], words) -> None:
     proc = train("--epochs", "1", "--out", str(tmp_path / "run"), "--api", service, *extra, timeout=120)
     refused(proc, "labeling service", service, *words)
+
+
+def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> None:
+    refused(
+        train("--env", "car", "--out", str(tmp_path / "run")), "task 'north' is not defined for env 'car'", "hazard"
+    )
