@@ -168,3 +168,15 @@ def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> Non
     refused(
         train("--env", "car", "--out", str(tmp_path / "run")), "task 'north' is not defined for env 'car'", "hazard"
     )
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--seed", "-1"), ("--run-id", "abc"), ("--episode-steps", "0")])
+def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), flag, value)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("name", ["config.json", "task.json"])
+def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> None:
+    (run_copy / name).write_text('{"epochs": 3,')
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))

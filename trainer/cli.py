@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
-    p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
+    p.add_argument("--run-id", type=int, default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
         "--feedback-timeout",
         type=float,
@@ -134,7 +134,10 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
-        run_id = json.loads(memo.read_text())["run_id"]
+        try:
+            run_id = int(json.loads(memo.read_text())["run_id"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"--resume: {memo} is damaged ({type(exc).__name__}); give the run's --run-id") from None
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
@@ -200,7 +203,10 @@ def run(args: argparse.Namespace) -> int:
         if args.resume:
             saved = Path(cfg.out) / "config.json"
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
-                stored = json.loads(saved.read_text())
+                try:
+                    stored = json.loads(saved.read_text())
+                except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                    raise ValueError(f"--resume: {saved} is not valid JSON ({exc})") from None
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
                 cfg = Config.from_stored(stored)

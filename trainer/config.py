@@ -117,8 +117,6 @@ class Config:
             self.query_strategy in QUERY_STRATEGIES,
             f"unknown query strategy {self.query_strategy!r}; valid: {', '.join(QUERY_STRATEGIES)}",
         )
-        need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
-        need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
         for name in (
             "epochs",
             "episodes_per_epoch",
@@ -135,6 +133,10 @@ class Config:
             "skill_dim",
         ):
             need(getattr(self, name) >= 1, f"{flag(name)} must be ≥ 1, got {getattr(self, name)}")
+        need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
+        # after the sizes themselves, so that `--episode-steps 0` is named as such
+        need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
+        need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
         need(
             self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
             "replay_capacity must hold at least one epoch of transitions",
