@@ -180,3 +180,16 @@ def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> No
 def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> None:
     (run_copy / name).write_text('{"epochs": 3,')
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))
+
+
+def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
+    # TRAIN gives --env point and --preset smoke again (as `collie up` and `collie sweep` do): not warned
+    proc = train(
+        "--out", str(run_copy), "--resume", "--epochs", "3", "--env", "ant", "--method", "metra", "--hidden", "64"
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    warnings = [ln for ln in proc.stderr.splitlines() if ln.startswith("collie train: warning:")]
+    assert len(warnings) == 1, proc.stderr[-3000:]
+    assert "--env ant (the run's: point)" in warnings[0] and "--method metra (the run's: collie)" in warnings[0]
+    assert "--epochs" not in warnings[0] and "--hidden" not in warnings[0] and "--preset" not in warnings[0]
+    assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"

@@ -10,12 +10,12 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from collie.startup import mark
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
-from trainer.config import PRESETS, Config, make_config, people_schedule
+from trainer.config import PRESETS, Config, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
@@ -26,17 +26,26 @@ MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "see
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point", help="point, ant, half_cheetah, …")
+    p.set_defaults(given=frozenset())  # the run's flags given on this command line (_Given)
+    p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, …")
     p.add_argument(
-        "--task", default=None, help="north (default), right, range, hole, not_flip, range_north, hole_north"
+        "--task",
+        default=None,
+        action=_Given,
+        help="north (default), right, range, hole, not_flip, range_north, hole_north",
     )
     p.add_argument(
-        "--task-file", default=None, help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)"
+        "--task-file",
+        default=None,
+        action=_Given,
+        help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)",
     )
-    p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words (needs --api)")
-    p.add_argument("--method", default="collie", help=f"one of: {', '.join(METHODS)}")
-    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--instruction", default=None, action=_Given, help="no rule: people label by this intent in words (needs --api)"
+    )
+    p.add_argument("--method", default="collie", action=_Given, help=f"one of: {', '.join(METHODS)}")
+    p.add_argument("--preset", default="cpu", action=_Given, help=f"one of: {', '.join(PRESETS)}")
+    p.add_argument("--seed", type=int, default=0, action=_Given)
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -63,10 +72,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         flag = "--" + f.name.replace("_", "-")
         if f.type in ("bool", bool):
             # a bare flag means true (`--compile`); `--compile false` still works
-            group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True)
+            group.add_argument(
+                flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True, action=_Given
+            )
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            group.add_argument(flag, dest=f.name, default=None, type=kind)
+            group.add_argument(flag, dest=f.name, default=None, type=kind, action=_Given)
+
+
+class _Given(argparse.Action):
+    """`store` that also records the flag as given: a resumed run warns about those it ignores."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None
+    ) -> None:
+        setattr(namespace, self.dest, values)
+        namespace.given = frozenset({*namespace.given, self.dest})
+
+
+RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
+
+
+def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
+    """The given flags whose values differ from the resumed run's own config (which wins)."""
+    return [
+        f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
+        for k in sorted(args.given)
+        if k not in RESUME_MAY_CHANGE and hasattr(run, k) and getattr(asked, k) != getattr(run, k)
+    ]
 
 
 def _parse_bool(text: str) -> bool:
@@ -209,7 +242,13 @@ def run(args: argparse.Namespace) -> int:
                     raise ValueError(f"--resume: {saved} is not valid JSON ({exc})") from None
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-                cfg = Config.from_stored(stored)
+                asked, cfg = cfg, Config.from_stored(stored)
+                ignored = ignored_on_resume(args, asked, cfg)
+                if ignored:
+                    print(
+                        f"collie train: warning: --resume keeps the run's config; ignored: {', '.join(ignored)}",
+                        file=sys.stderr,
+                    )
         from trainer.threads import apply_openmp_env, resolve_threads
 
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
