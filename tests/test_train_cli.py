@@ -7,6 +7,7 @@ import hashlib
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -193,3 +194,22 @@ def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
     assert "--env ant (the run's: point)" in warnings[0] and "--method metra (the run's: collie)" in warnings[0]
     assert "--epochs" not in warnings[0] and "--hidden" not in warnings[0] and "--preset" not in warnings[0]
     assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"
+
+
+def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    # one evaluation (epoch 0) and then none: the interrupted run's last one lies behind it
+    cmd = [*TRAIN, "--out", str(out), "--epochs", "1000", "--eval-every", "1000"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not (out / "checkpoint.pt").exists():  # a few epochs past the evaluation
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-3000:]
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr[-3000:]  # docs/training.md: a checkpointed interruption exits 0
+    printed, summary = json.loads(stdout.splitlines()[0]), json.loads((out / "summary.json").read_text())
+    assert summary["status"] == printed["status"] == "interrupted"
+    assert printed["epochs_done"] == summary["epochs_done"] >= 2 and printed["epoch"] == summary["epoch"] == 0
+    evaluated = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
+    assert printed["wall_s"] == summary["wall_s"] > evaluated["wall_s"]

@@ -280,7 +280,8 @@ def run(args: argparse.Namespace) -> int:
     except ResumeError as exc:  # a damaged or missing file of the run folder, named
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
-    keys = (
+    keys = (  # as summary.json: the last evaluation's epoch and metrics, the run's epochs and wall time
+        "epochs_done",
         "epoch",
         "safe_coverage",
         "safe_ratio",

@@ -618,7 +618,15 @@ class Trainer:
     def finish(self, status: LoopStatus, record: dict[str, Any] | None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         last = record or (records[-1] if records else {})
-        summary = {**last, "status": status, "epochs_done": self.epoch, "config": self.cfg.to_dict()}
+        # the last evaluation's metrics (its `epoch`), and the run's own epochs and wall time: an
+        # interrupted run's last evaluation may lie many epochs back
+        summary = {
+            **last,
+            "status": status,
+            "epochs_done": self.epoch,
+            "wall_s": round(self.wall_s(), 2),
+            "config": self.cfg.to_dict(),
+        }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
