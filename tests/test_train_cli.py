@@ -213,3 +213,21 @@ def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) 
     assert printed["epochs_done"] == summary["epochs_done"] >= 2 and printed["epoch"] == summary["epoch"] == 0
     evaluated = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
     assert printed["wall_s"] == summary["wall_s"] > evaluated["wall_s"]
+
+
+def test_help_lists_every_registered_task() -> None:
+    from collie.tasks import task_names
+
+    proc = subprocess.run([*TRAIN, "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    flat = " ".join(proc.stdout.split())
+    assert "hazard" in task_names() and all(name in flat for name in task_names())
+
+
+def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    proc = train("--epochs", "1", "--method", "metra", "--out", str(out))  # no guidance: no w(s) map
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = proc.stdout.strip().splitlines()[-1]
+    assert line.startswith(f"run folder: {out}") and "summary.json" in line and "checkpoint.pt" in line
+    assert not (out / "guidance_latest.png").exists() and "guidance_latest.png" not in line

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from collie.startup import mark
+from collie.tasks import task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, flag, make_config, people_schedule
@@ -32,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--task",
         default=None,
         action=_Given,
-        help="north (default), right, range, hole, not_flip, range_north, hole_north",
+        help=f"one of: {', '.join(task_names())} (default north; docs/tasks.md)",
     )
     p.add_argument(
         "--task-file",
@@ -202,6 +203,17 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
+RUN_OUTPUTS = (  # what the end-of-run line lists, where written
+    "metrics.jsonl",
+    "summary.json",
+    "task.json",
+    "skills_latest.png",
+    "guidance_latest.png",
+    "curves.png",
+    "plots/",
+    "tb/",
+    "checkpoint.pt",
+)
 RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh start would overwrite
 
 
@@ -293,8 +305,6 @@ def run(args: argparse.Namespace) -> int:
         "status",
     )
     print(json.dumps({k: summary.get(k) for k in keys}))
-    print(
-        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, task.json, skills_latest.png, guidance_latest.png, "
-        f"curves.png, plots/, tb/, checkpoint.pt)"
-    )
+    written = [name for name in RUN_OUTPUTS if (Path(cfg.out) / name).exists()]  # e.g. no w(s) map without guidance
+    print(f"run folder: {cfg.out}  ({', '.join(written)})")
     return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1
