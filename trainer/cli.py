@@ -70,15 +70,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
             continue
-        flag = "--" + f.name.replace("_", "-")
+        option = flag(f.name)
         if f.type in ("bool", bool):
             # a bare flag means true (`--compile`); `--compile false` still works
             group.add_argument(
-                flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True, action=_Given
+                option,
+                dest=f.name,
+                default=None,
+                type=_parse_bool,
+                metavar="BOOL",
+                nargs="?",
+                const=True,
+                action=_Given,
             )
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            group.add_argument(flag, dest=f.name, default=None, type=kind, action=_Given)
+            group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given)
 
 
 class _Given(argparse.Action):

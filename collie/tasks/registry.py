@@ -72,7 +72,7 @@ def tasks_for(env: str) -> tuple[str, ...]:
     for name, factory in _FACTORIES.items():
         try:
             factory(env, 0) if name in _LAYOUT_TASKS else factory(env)
-        except EnvNotSupported:
+        except Exception:  # refused, or a user's factory that fails anyway: not one to offer
             continue
         found.append(name)
     return tuple(found)
