@@ -26,6 +26,7 @@ from collie.tasks import (
     task_names,
     to_definition,
 )
+from collie.tasks import registry as task_registry
 from collie.tasks.task_file import TaskFileError, load_task_file
 
 POLYGON_TOML = """\
@@ -253,3 +254,30 @@ def test_the_spec_file_in_the_docs_loads(tmp_path: Path) -> None:
     task = from_definition(load_task_file(write(tmp_path, "charger.toml", block)))
     xy = np.array([[0.0, 0.0], [5.0, 5.0], [6.0, 0.0], [20.0, 0.0]])
     assert task.name == "charger" and task.classify(xy).tolist() == [GOOD, NEUTRAL, BAD, BAD]
+
+
+def test_a_python_task_file_that_fails_names_the_file_and_line(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(task_registry, "_FACTORIES", dict(task_registry._FACTORIES))  # its failing factory goes
+    with pytest.raises(
+        TaskFileError, match=r"missing_mod.py: line 2: running it raised ModuleNotFoundError: .*nowhere"
+    ):
+        load_task_file(write(tmp_path, "missing_mod.py", "x = 1\nimport nowhere_to_be_found\n"))
+    with pytest.raises(TaskFileError, match=r"raises.py: line 1: running it raised ZeroDivisionError"):
+        load_task_file(write(tmp_path, "raises.py", "1 / 0\n"))
+    factory = """\
+    from collie.tasks import register_task
+    @register_task("factory_fails_test")
+    def f(env):
+        return {}["oops"]
+    """
+    with pytest.raises(TaskFileError, match=r"factory.py: line 4: KeyError: 'oops'"):
+        load_task_file(write(tmp_path, "factory.py", factory))
+
+
+def test_a_directory_or_non_utf8_spec_is_named(tmp_path: Path) -> None:
+    with pytest.raises(TaskFileError, match="is a directory"):
+        load_task_file(tmp_path)
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes('# a comment\nname = "caf\xe9"\n'.encode("latin-1"))
+    with pytest.raises(TaskFileError, match=r"latin.toml: line 2: not UTF-8 text"):
+        load_task_file(latin)

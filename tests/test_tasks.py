@@ -145,6 +145,14 @@ def test_unknown_task_lists_valid_names() -> None:
     assert all(name in str(err.value) for name in TASK_NAMES)
 
 
+@pytest.mark.parametrize(("task", "env", "theirs"), [("north", "car", "hazard"), ("hazard", "point", "north")])
+def test_a_task_on_an_env_it_is_not_defined_for_lists_that_envs_tasks(task: str, env: str, theirs: str) -> None:
+    with pytest.raises(ValueError) as err:
+        get_task(task, env, layout_seed=0)
+    assert f"task {task!r} is not defined for env {env!r}" in str(err.value)
+    assert f"{env}'s tasks: " in str(err.value) and theirs in str(err.value) and "unknown env" not in str(err.value)
+
+
 def test_bad_inputs_rejected() -> None:
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         get_task("north").classify(np.zeros((3, 3)))

@@ -6,14 +6,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from collie.startup import mark
+from collie.tasks import task_names
 from collie.tokens import add_token_arguments, resolve_token
-from trainer.config import PRESETS, Config, make_config, people_schedule
+from trainer.checkpoint import ResumeError
+from trainer.config import PRESETS, Config, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
@@ -24,23 +27,32 @@ MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "see
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point", help="point, ant, half_cheetah, …")
+    p.set_defaults(given=frozenset())  # the run's flags given on this command line (_Given)
+    p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, …")
     p.add_argument(
-        "--task", default=None, help="north (default), right, range, hole, not_flip, range_north, hole_north"
+        "--task",
+        default=None,
+        action=_Given,
+        help=f"one of: {', '.join(task_names())} (default north; docs/tasks.md)",
     )
     p.add_argument(
-        "--task-file", default=None, help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)"
+        "--task-file",
+        default=None,
+        action=_Given,
+        help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)",
     )
-    p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words (needs --api)")
-    p.add_argument("--method", default="collie", help=f"one of: {', '.join(METHODS)}")
-    p.add_argument("--preset", default="cpu", help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--instruction", default=None, action=_Given, help="no rule: people label by this intent in words (needs --api)"
+    )
+    p.add_argument("--method", default="collie", action=_Given, help=f"one of: {', '.join(METHODS)}")
+    p.add_argument("--preset", default="cpu", action=_Given, help=f"one of: {', '.join(PRESETS)}")
+    p.add_argument("--seed", type=int, default=0, action=_Given)
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
-    p.add_argument("--run-id", default=None, help="existing run id on the service (default: create one)")
+    p.add_argument("--run-id", type=int, default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
         "--feedback-timeout",
         type=float,
@@ -58,13 +70,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
             continue
-        flag = "--" + f.name.replace("_", "-")
+        option = flag(f.name)
         if f.type in ("bool", bool):
             # a bare flag means true (`--compile`); `--compile false` still works
-            group.add_argument(flag, dest=f.name, default=None, type=_parse_bool, metavar="BOOL", nargs="?", const=True)
+            group.add_argument(
+                option,
+                dest=f.name,
+                default=None,
+                type=_parse_bool,
+                metavar="BOOL",
+                nargs="?",
+                const=True,
+                action=_Given,
+            )
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            group.add_argument(flag, dest=f.name, default=None, type=kind)
+            group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given)
+
+
+class _Given(argparse.Action):
+    """`store` that also records the flag as given: a resumed run warns about those it ignores."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None
+    ) -> None:
+        setattr(namespace, self.dest, values)
+        namespace.given = frozenset({*namespace.given, self.dest})
+
+
+RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
+
+
+def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
+    """The given flags whose values differ from the resumed run's own config (which wins)."""
+    return [
+        f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
+        for k in sorted(args.given)
+        if k not in RESUME_MAY_CHANGE and hasattr(run, k) and getattr(asked, k) != getattr(run, k)
+    ]
 
 
 def _parse_bool(text: str) -> bool:
@@ -132,7 +175,10 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
-        run_id = json.loads(memo.read_text())["run_id"]
+        try:
+            run_id = int(json.loads(memo.read_text())["run_id"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"--resume: {memo} is damaged ({type(exc).__name__}); give the run's --run-id") from None
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
@@ -164,20 +210,64 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
+RUN_OUTPUTS = (  # what the end-of-run line lists, where written
+    "metrics.jsonl",
+    "summary.json",
+    "task.json",
+    "skills_latest.png",
+    "guidance_latest.png",
+    "curves.png",
+    "plots/",
+    "tb/",
+    "checkpoint.pt",
+)
+RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh start would overwrite
+
+
+def check_out(out: Path, resume: bool) -> None:
+    """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume),
+    one --resume cannot continue, or one we cannot write; before anything creates it."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder")
+    if resume and not (out / "checkpoint.pt").is_file():
+        raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
+    if not resume and any((out / name).exists() for name in RUN_FILES):
+        raise ValueError(
+            f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
+        )
+    nearest = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())  # the folder or its creator
+    if not nearest.is_dir():
+        raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
+        if args.api is not None and not args.api.startswith(("http://", "https://")):
+            raise ValueError(f"--api {args.api!r} is not a URL: it starts with http:// or https://")
         cfg = config_from_args(args)
+        check_out(Path(cfg.out), args.resume)
         if args.resume:
             saved = Path(cfg.out) / "config.json"
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
-                stored = json.loads(saved.read_text())
+                try:
+                    stored = json.loads(saved.read_text())
+                except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                    raise ValueError(f"--resume: {saved} is not valid JSON ({exc})") from None
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-                cfg = Config.from_stored(stored)
+                asked, cfg = cfg, Config.from_stored(stored)
+                ignored = ignored_on_resume(args, asked, cfg)
+                if ignored:
+                    print(
+                        f"collie train: warning: --resume keeps the run's config; ignored: {', '.join(ignored)}",
+                        file=sys.stderr,
+                    )
         from trainer.threads import apply_openmp_env, resolve_threads
 
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
@@ -191,7 +281,12 @@ def run(args: argparse.Namespace) -> int:
             cfg.task = rule.definition.name
         feedback = None
         if args.api:
-            feedback, rule = http_feedback(args, cfg, rule)
+            from collie.client import ApiError
+
+            try:
+                feedback, rule = http_feedback(args, cfg, rule)
+            except ApiError as exc:  # a wrong token or run id: the service's answer, as `collie teacher` prints it
+                raise ValueError(f"the labeling service at {args.api} answered {exc}") from None
             mark("run created")
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
@@ -199,8 +294,13 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as exc:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
-    summary = trainer.run(resume=args.resume)
-    keys = (
+    try:
+        summary = trainer.run(resume=args.resume)
+    except ResumeError as exc:  # a damaged or missing file of the run folder, named
+        print(f"collie train: error: {exc}", file=sys.stderr)
+        return 2
+    keys = (  # as summary.json: the last evaluation's epoch and metrics, the run's epochs and wall time
+        "epochs_done",
         "epoch",
         "safe_coverage",
         "safe_ratio",
@@ -212,8 +312,6 @@ def run(args: argparse.Namespace) -> int:
         "status",
     )
     print(json.dumps({k: summary.get(k) for k in keys}))
-    print(
-        f"run folder: {cfg.out}  (metrics.jsonl, summary.json, task.json, skills_latest.png, guidance_latest.png, "
-        f"curves.png, plots/, tb/, checkpoint.pt)"
-    )
+    written = [name for name in RUN_OUTPUTS if (Path(cfg.out) / name).exists()]  # e.g. no w(s) map without guidance
+    print(f"run folder: {cfg.out}  ({', '.join(written)})")
     return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -27,6 +28,7 @@ PRESETS = ("paper", "cpu", "smoke")
 INITS = ("reference", "torch")
 DIAYN_VARIANTS = ("reference", "sphere")
 ACTING_PATHS = ("fast", "torch")  # trainer/acting.py
+DEVICE_NAMES = r"auto|cpu|mps|cuda(:\d+)?"  # whether one is present is checked where it is used (trainer/loop.py)
 REFERENCE_LOG_STD_MIN = math.log(1e-6)  # garage's Gaussian modules: min_std 1e-6 (the policy's floor)
 
 
@@ -115,8 +117,6 @@ class Config:
             self.query_strategy in QUERY_STRATEGIES,
             f"unknown query strategy {self.query_strategy!r}; valid: {', '.join(QUERY_STRATEGIES)}",
         )
-        need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
-        need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
         for name in (
             "epochs",
             "episodes_per_epoch",
@@ -129,11 +129,21 @@ class Config:
             "segment_length",
             "eval_every",
             "knn_k",
+            "checkpoint_every",
+            "skill_dim",
         ):
-            need(getattr(self, name) > 0, f"{name} must be positive, got {getattr(self, name)}")
+            need(getattr(self, name) >= 1, f"{flag(name)} must be ≥ 1, got {getattr(self, name)}")
+        need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
+        # after the sizes themselves, so that `--episode-steps 0` is named as such
+        need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
+        need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
         need(
             self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
             "replay_capacity must hold at least one epoch of transitions",
+        )
+        need(
+            re.fullmatch(DEVICE_NAMES, self.device) is not None,
+            f"unknown --device {self.device!r}; valid: auto, cpu, cuda, cuda:N, mps",
         )
         need(self.w_at in ("next", "current"), "w_at must be 'next' or 'current'")
         need(self.distance in DISTANCES, f"unknown distance {self.distance!r}; valid: {', '.join(DISTANCES)}")
@@ -313,6 +323,11 @@ PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
     preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()
 }
 PRESET_ENV_VALUES["cpu"].update(ROBOT_CPU)
+
+
+def flag(name: str) -> str:
+    """The command-line flag of a config key (`collie train --help`), for messages."""
+    return "--" + name.replace("_", "-")
 
 
 def make_config(preset: str = "cpu", env: str = "point", **overrides: Any) -> Config:

@@ -32,7 +32,7 @@ import torch
 from collie import startup
 from collie.labels import Label
 from trainer.acting import acting_path
-from trainer.checkpoint import load_checkpoint, save_checkpoint
+from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
@@ -75,7 +75,14 @@ class TrainingDiverged(RuntimeError):
 def pick_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
+    device = torch.device(name)  # the name's form is checked by Config.validate
+    if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
+        raise ValueError(f"--device {name}: this machine has {torch.cuda.device_count()} CUDA devices")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"--device {name}: torch sees no CUDA device here; use --device cpu (or auto)")
+    if device.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"--device {name}: torch sees no MPS device here; use --device cpu (or auto)")
+    return device
 
 
 class Trainer:
@@ -475,7 +482,17 @@ class Trainer:
         self.load_state_dict(state)
         metrics = self.out / "metrics.jsonl"  # drop evaluations written after that checkpoint
         if metrics.exists():
-            keep = [ln for ln in metrics.read_text().splitlines() if ln and json.loads(ln)["epoch"] <= self.epoch]
+            lines = [ln for ln in metrics.read_text(errors="replace").splitlines() if ln]
+            keep = []
+            for i, ln in enumerate(lines):
+                try:
+                    record = json.loads(ln)
+                except json.JSONDecodeError as exc:
+                    if i == len(lines) - 1:  # a crash while appending tears only the last line
+                        break
+                    raise ResumeError(f"{metrics} line {i + 1} is not valid JSON ({exc.msg})") from None
+                if record["epoch"] <= self.epoch:
+                    keep.append(ln)
             metrics.write_text("".join(ln + "\n" for ln in keep))
 
     # ---- the loop ------------------------------------------------------------------------
@@ -601,7 +618,15 @@ class Trainer:
     def finish(self, status: LoopStatus, record: dict[str, Any] | None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         last = record or (records[-1] if records else {})
-        summary = {**last, "status": status, "epochs_done": self.epoch, "config": self.cfg.to_dict()}
+        # the last evaluation's metrics (its `epoch`), and the run's own epochs and wall time: an
+        # interrupted run's last evaluation may lie many epochs back
+        summary = {
+            **last,
+            "status": status,
+            "epochs_done": self.epoch,
+            "wall_s": round(self.wall_s(), 2),
+            "config": self.cfg.to_dict(),
+        }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from trainer.checkpoint import ResumeError
 from trainer.replay import FIELDS, TrajectoryReplay
 
 
@@ -65,11 +66,14 @@ class ReplayLog:
         for chunk in record["chunks"]:
             path = self.path(chunk)
             if not path.exists():
-                raise FileNotFoundError(f"replay chunk {path} named by the checkpoint is missing")
-            with np.load(path) as data:
-                slots = data["slots"]
-                for key in FIELDS:
-                    getattr(r, key)[slots] = data[key]
+                raise ResumeError(f"replay chunk {path} named by the checkpoint is missing")
+            try:
+                with np.load(path) as data:
+                    slots = data["slots"]
+                    for key in FIELDS:
+                        getattr(r, key)[slots] = data[key]
+            except (OSError, ValueError, KeyError, EOFError) as exc:  # truncated or overwritten
+                raise ResumeError(f"replay chunk {path} is damaged ({type(exc).__name__}: {exc})") from None
             self.owner[slots] = chunk
         r.next, r.count = int(record["next"]), int(record["count"])
         r.dirty[:] = False

@@ -58,8 +58,14 @@ def saved_rule(out: str | Path) -> RunRule | None:
     path = Path(out) / TASK_JSON
     if not path.exists():
         return None
-    saved = json.loads(path.read_text())
-    definition = saved.get("definition")
-    if definition is None and saved.get("instruction") is None:
-        return None  # a rule function (nothing written down): chosen again from the config
-    return from_stored(None if definition is None else TaskDefinition.model_validate(definition), saved["instruction"])
+    try:
+        saved = json.loads(path.read_text())
+        definition = saved.get("definition")
+        if definition is None and saved.get("instruction") is None:
+            return None  # a rule function (nothing written down): chosen again from the config
+        return from_stored(
+            None if definition is None else TaskDefinition.model_validate(definition), saved["instruction"]
+        )
+    except (ValueError, KeyError, AttributeError) as exc:  # JSON and pydantic errors are ValueErrors
+        first = str(exc).splitlines()[0]
+        raise ValueError(f"{path} (the run's rule) is damaged: {type(exc).__name__}: {first}") from None

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from collie.tasks.classes import BAD, GOOD, NEUTRAL
 from collie.tasks.regions import Disc, HalfPlane, OutsideDisc, PitchBeyond, WedgeNorth
-from collie.tasks.registry import register_task
+from collie.tasks.registry import EnvNotSupported, register_task
 from collie.tasks.task import Task
 
 
@@ -52,7 +52,7 @@ ENV_GEOMETRY: dict[str, Geometry] = {
 
 def geometry(env: str) -> Geometry:
     if env not in ENV_GEOMETRY:
-        raise ValueError(f"unknown env {env!r}; tasks know: {', '.join(ENV_GEOMETRY)}")
+        raise EnvNotSupported(list(ENV_GEOMETRY))
     return ENV_GEOMETRY[env]
 
 

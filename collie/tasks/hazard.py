@@ -11,7 +11,7 @@ import numpy as np
 
 from collie.tasks.classes import BAD, NEUTRAL
 from collie.tasks.regions import Disc
-from collie.tasks.registry import register_task
+from collie.tasks.registry import EnvNotSupported, register_task
 from collie.tasks.task import Task
 
 HAZARD_COUNT = 8
@@ -42,7 +42,7 @@ def hazard_layout(
 @register_task("hazard", layout=True)
 def hazard(env: str, layout_seed: int) -> Task:
     if env not in HAZARD_ENVS:
-        raise ValueError(f"task 'hazard' is defined for env {', '.join(HAZARD_ENVS)}, not {env!r}")
+        raise EnvNotSupported(HAZARD_ENVS)
     centres = hazard_layout(layout_seed)
     return Task(
         "hazard",

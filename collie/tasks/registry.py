@@ -31,6 +31,13 @@ def register_task(name: str, *, replace: bool = False, layout: bool = False) -> 
     return decorate
 
 
+class EnvNotSupported(ValueError):
+    """A task factory's answer for an env its rule is not defined on (the car has no North wedge)."""
+
+    def __init__(self, envs: tuple[str, ...] | list[str]) -> None:
+        super().__init__(", ".join(envs))  # the envs it is defined for
+
+
 def task_names() -> tuple[str, ...]:
     """All registered task names, in registration order (built-ins first)."""
     return tuple(_FACTORIES)
@@ -47,10 +54,25 @@ def get_task(name: str, env: str = "point", layout_seed: int | None = None) -> T
     factory = _FACTORIES.get(name)
     if factory is None:
         raise ValueError(f"unknown task {name!r}; valid tasks: {', '.join(task_names())}")
-    if name not in _LAYOUT_TASKS:
-        return factory(env)
-    if layout_seed is None:
+    if name in _LAYOUT_TASKS and layout_seed is None:
         raise ValueError(
             f"task {name!r} places its scenery at random per experiment: pass layout_seed (the run's seed)"
         )
-    return factory(env, int(layout_seed))
+    try:
+        return factory(env) if name not in _LAYOUT_TASKS else factory(env, int(layout_seed or 0))
+    except EnvNotSupported as exc:
+        ours = tasks_for(env)
+        theirs = f"; {env}'s tasks: {', '.join(ours)}" if ours else ""
+        raise ValueError(f"task {name!r} is not defined for env {env!r} (only for {exc}){theirs}") from None
+
+
+def tasks_for(env: str) -> tuple[str, ...]:
+    """The registered tasks defined for `env` (their factories do not refuse it)."""
+    found = []
+    for name, factory in _FACTORIES.items():
+        try:
+            factory(env, 0) if name in _LAYOUT_TASKS else factory(env)
+        except Exception:  # refused, or a user's factory that fails anyway: not one to offer
+            continue
+        found.append(name)
+    return tuple(found)

@@ -17,6 +17,7 @@ import json
 import re
 import runpy
 import tomllib
+import traceback
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,8 @@ def load_task_file(
     """The definition in the spec file `path`, or of task `task` (or the only one) that the
     Python file `path` registers, built for `env` and the run's `layout_seed`."""
     path = Path(path)
+    if path.is_dir():
+        raise TaskFileError(path, "", "is a directory, not a task file")
     if not path.is_file():
         raise TaskFileError(path, "", "no such file")
     if path.suffix == ".py":
@@ -54,7 +57,11 @@ def load_task_file(
 
 
 def _read_spec(path: Path) -> dict[str, Any]:
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        line = exc.object[: exc.start].count(b"\n") + 1
+        raise TaskFileError(path, f"line {line}", "not UTF-8 text (save it as UTF-8)") from None
     try:
         data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
     except tomllib.TOMLDecodeError as exc:  # its message says "(at line L, column C)"
@@ -97,6 +104,8 @@ def _from_python(path: Path, task: str | None, env: str, layout_seed: int) -> Ta
         raise TaskFileError(path, f"line {exc.lineno}", f"not valid Python: {exc.msg}") from None
     except ValueError as exc:  # e.g. registering a name that is taken
         raise TaskFileError(path, "", str(exc)) from None
+    except Exception as exc:  # the user's code failed (a missing module, a bug): say where, not a traceback
+        raise TaskFileError(path, _line_in(path, exc), f"running it raised {type(exc).__name__}: {exc}") from None
     added = [n for n in task_names() if n not in before]
     if not added:
         raise TaskFileError(path, "", "registers no task; decorate a factory with @collie.tasks.register_task('name')")
@@ -108,6 +117,15 @@ def _from_python(path: Path, task: str | None, env: str, layout_seed: int) -> Ta
         return to_definition(get_task(task, env, layout_seed=layout_seed), source=path.name)
     except NotDeclarative as exc:
         raise TaskFileError(path, task, str(exc)) from None
+    except Exception as exc:  # its factory is the user's code too
+        detail = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
+        raise TaskFileError(path, _line_in(path, exc) or task, detail) from None
+
+
+def _line_in(path: Path, exc: BaseException) -> str:
+    """'line N' of the innermost frame of the traceback that ran in `path` ('' if none did)."""
+    lines = [f.lineno for f in traceback.extract_tb(exc.__traceback__) if Path(f.filename) == path]
+    return f"line {lines[-1]}" if lines else ""
 
 
 def _stem_name(path: Path) -> str:

@@ -1,0 +1,233 @@
+"""`collie train` on ordinary mistakes: one line `collie train: error: …` naming the flag or file, exit 2,
+and no run folder overwritten or created by a refused command."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import torch
+
+pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
+
+TRAIN = [sys.executable, "-m", "collie.cli", "train", "--env", "point", "--preset", "smoke", "--no-progress"]
+
+
+def train(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def refused(proc: subprocess.CompletedProcess[str], *words: str) -> str:
+    """The one-line error, checked: exit 2, no traceback, every word in it."""
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line.startswith("collie train: error: "), proc.stderr
+    for word in words:
+        assert word in line, line
+    return line
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A real 2-epoch smoke run (checkpoint, replay chunk, metrics, summary)."""
+    out = tmp_path_factory.mktemp("finished") / "run"
+    proc = train("--epochs", "2", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out
+
+
+@pytest.fixture
+def run_copy(finished: Path, tmp_path: Path) -> Path:
+    """A copy of the finished run that a test may damage."""
+    return Path(shutil.copytree(finished, tmp_path / "run"))
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_an_existing_run_is_not_overwritten_without_resume(run_copy: Path) -> None:
+    before = {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()}
+    refused(train("--epochs", "1", "--out", str(run_copy)), "already holds a run", "--resume", "--out")
+    assert {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()} == before
+
+
+def test_resume_without_a_checkpoint_is_refused_and_creates_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "never"
+    refused(train("--out", str(out), "--resume"), "--resume", "no checkpoint", str(out / "checkpoint.pt"))
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("where", ["file", "under_file"])
+def test_out_that_is_or_lies_under_a_file_is_refused(tmp_path: Path, where: str) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("not a folder")
+    out = blocker if where == "file" else blocker / "run"
+    refused(train("--epochs", "1", "--out", str(out)), "--out", "is a file")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_out_in_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    refused(train("--epochs", "1", "--out", str(locked / "run")), "--out", "cannot write")
+
+
+def test_a_truncated_checkpoint_is_named(run_copy: Path) -> None:
+    ckpt = run_copy / "checkpoint.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[:100])
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(ckpt), "damaged")
+
+
+def test_a_missing_replay_chunk_is_named(run_copy: Path) -> None:
+    chunk = next((run_copy / "replay").glob("*.npz"))
+    chunk.unlink()
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "missing")
+
+
+def test_a_torn_last_metrics_line_is_dropped_on_resume(run_copy: Path) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    whole = metrics.read_text()
+    metrics.write_text(whole + '{"epoch": 3, "safe_cov')  # a crash while appending
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert [json.loads(ln)["epoch"] for ln in metrics.read_text().splitlines()] == [0, 2, 3]
+
+
+def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    metrics.write_text("{oops\n" + metrics.read_text())
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(metrics), "line 1")
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "words"),
+    [
+        ("--device", "bogus", ("--device", "'bogus'", "valid", "cpu")),
+        ("--checkpoint-every", "0", ("--checkpoint-every", "≥ 1")),
+        ("--skill-dim", "0", ("--skill-dim", "≥ 1")),
+        ("--api", "notaurl", ("--api", "http://")),
+    ],
+)
+def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value: str, words: tuple[str, ...]) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), *words)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
+def test_device_cuda_without_cuda_is_refused(tmp_path: Path) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), "--device", "cuda"), "--device cuda", "no CUDA")
+
+
+TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": "lb-" + "l" * 30}
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A real labeling service; yields its URL."""
+    tmp = tmp_path_factory.mktemp("service")
+    info = tmp / "service.json"
+    env = {**os.environ, **{f"COLLIE_{k.upper()}_TOKEN": v for k, v in TOKENS.items()}}
+    cmd = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(tmp / "c.db")]
+    with open(tmp / "service.log", "wb") as log:
+        proc = subprocess.Popen([*cmd, "--tokens-json", str(info)], stdout=log, stderr=subprocess.STDOUT, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not info.exists():
+            assert proc.poll() is None and time.monotonic() < deadline, (tmp / "service.log").read_text()
+            time.sleep(0.2)
+        yield json.loads(info.read_text())["api"]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (("--token", "wrong-" + "x" * 30), ("401",)),
+        (("--token", TOKENS["labeler"]), ("403",)),
+        (("--token", TOKENS["trainer"], "--run-id", "999"), ("404",)),
+    ],
+)
+def test_the_service_refusal_is_one_line(tmp_path: Path, service: str, extra: tuple[str, ...], words) -> None:
+    proc = train("--epochs", "1", "--out", str(tmp_path / "run"), "--api", service, *extra, timeout=120)
+    refused(proc, "labeling service", service, *words)
+
+
+def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> None:
+    refused(
+        train("--env", "car", "--out", str(tmp_path / "run")), "task 'north' is not defined for env 'car'", "hazard"
+    )
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--seed", "-1"), ("--run-id", "abc"), ("--episode-steps", "0")])
+def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> None:
+    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), flag, value)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("name", ["config.json", "task.json"])
+def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> None:
+    (run_copy / name).write_text('{"epochs": 3,')
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))
+
+
+def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
+    # TRAIN gives --env point and --preset smoke again (as `collie up` and `collie sweep` do): not warned
+    proc = train(
+        "--out", str(run_copy), "--resume", "--epochs", "3", "--env", "ant", "--method", "metra", "--hidden", "64"
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    warnings = [ln for ln in proc.stderr.splitlines() if ln.startswith("collie train: warning:")]
+    assert len(warnings) == 1, proc.stderr[-3000:]
+    assert "--env ant (the run's: point)" in warnings[0] and "--method metra (the run's: collie)" in warnings[0]
+    assert "--epochs" not in warnings[0] and "--hidden" not in warnings[0] and "--preset" not in warnings[0]
+    assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"
+
+
+def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    # one evaluation (epoch 0) and then none: the interrupted run's last one lies behind it
+    cmd = [*TRAIN, "--out", str(out), "--epochs", "1000", "--eval-every", "1000"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not (out / "checkpoint.pt").exists():  # a few epochs past the evaluation
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-3000:]
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr[-3000:]  # docs/training.md: a checkpointed interruption exits 0
+    printed, summary = json.loads(stdout.splitlines()[0]), json.loads((out / "summary.json").read_text())
+    assert summary["status"] == printed["status"] == "interrupted"
+    assert printed["epochs_done"] == summary["epochs_done"] >= 2 and printed["epoch"] == summary["epoch"] == 0
+    evaluated = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
+    assert printed["wall_s"] == summary["wall_s"] > evaluated["wall_s"]
+
+
+def test_help_lists_every_registered_task() -> None:
+    from collie.tasks import task_names
+
+    proc = subprocess.run([*TRAIN, "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    flat = " ".join(proc.stdout.split())
+    assert "hazard" in task_names() and all(name in flat for name in task_names())
+
+
+def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    proc = train("--epochs", "1", "--method", "metra", "--out", str(out))  # no guidance: no w(s) map
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = proc.stdout.strip().splitlines()[-1]
+    assert line.startswith(f"run folder: {out}") and "summary.json" in line and "checkpoint.pt" in line
+    assert not (out / "guidance_latest.png").exists() and "guidance_latest.png" not in line
