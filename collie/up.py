@@ -1,6 +1,7 @@
 """`collie up`: the whole loop on one machine — service, trainer, labeling UI (unless --no-label-ui)
-and (optionally) the oracle teacher, on the embedded SQLite default. Each part is its own process talking HTTP, as in production, and is
-supervised (collie/supervisor.py): one that dies is restarted — the trainer from its checkpoint.
+and (optionally) the oracle teacher, on the embedded SQLite default. Each part is its own process
+talking HTTP, as in production, and is supervised (collie/supervisor.py): one that dies is
+restarted — the trainer from its checkpoint.
 Tokens reach the children through their environment, never their command line, and are written
 only to files their owner alone may read. Ctrl-C stops them all cleanly, and running the same
 command again resumes the run."""
