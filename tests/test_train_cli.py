@@ -117,6 +117,9 @@ def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None
         ("--checkpoint-every", "0", ("--checkpoint-every", "≥ 1")),
         ("--skill-dim", "0", ("--skill-dim", "≥ 1")),
         ("--api", "notaurl", ("--api", "http://")),
+        ("--gamma", "2", ("--gamma", "(0, 1]")),
+        ("--total-queries", "-1", ("--total-queries", "≥ 0")),
+        ("--lr", "0", ("--lr", "> 0")),
     ],
 )
 def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value: str, words: tuple[str, ...]) -> None:

@@ -134,6 +134,12 @@ class Config:
         ):
             need(getattr(self, name) >= 1, f"{flag(name)} must be ≥ 1, got {getattr(self, name)}")
         need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
+        for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "eval_trajectories", "noise_band"):
+            need(getattr(self, name) >= 0, f"{flag(name)} must be ≥ 0, got {getattr(self, name)}")
+        for name in ("gamma", "tau"):  # a discount and a Polyak rate: fractions
+            need(0 < getattr(self, name) <= 1, f"{flag(name)} must be in (0, 1], got {getattr(self, name)}")
+        for name in ("lr", "alpha_init", "lambda_init", "epsilon", "k_beta"):
+            need(getattr(self, name) > 0, f"{flag(name)} must be > 0, got {getattr(self, name)}")
         # after the sizes themselves, so that `--episode-steps 0` is named as such
         need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
         need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
