@@ -7,6 +7,7 @@ Panels only draw and forward clicks; what a click does is the session's business
 
 from __future__ import annotations
 
+import html
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
@@ -42,6 +43,12 @@ LEGEND = (
     "red bad area, green good area. The blue **N** arrow points north (up in the inset)."
 )
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
+
+
+def plain(text: str) -> str:
+    """People's free text (an operator's instructions, a task file's words) for a markdown element:
+    HTML shown as the characters typed, never run (viser's markdown renders HTML)."""
+    return html.escape(text)
 
 
 class Actions(Protocol):
@@ -246,7 +253,7 @@ class Panels:
         class the task cannot give is disabled, with a note why."""
         meaning = task.meaning
         lines = "\n".join(f"- **{LABEL_NAMES[k]}**: {meaning[k]}" for k in sorted(meaning) if k in LABEL_NAMES)
-        self.task.content = f"### {task.name}\n{task.description}\n\n{lines}"
+        self.task.content = f"### {plain(task.name)}\n{plain(task.description)}\n\n{lines}"
         good = self.label_buttons[2]
         good.disabled = good.disabled or not task.can_be_good
         good.label = "3 · Good" if task.can_be_good else "3 · Good (not in this task)"
@@ -255,16 +262,16 @@ class Panels:
     def show_instruction(self, instruction: str, instructions: str) -> None:
         """A run without a rule: the person's instruction stands where the task's words would."""
         lines = "\n".join(f"- **{LABEL_NAMES[k]}**: {v}" for k, v in sorted(INSTRUCTION_MEANING.items()))
-        self.task.content = f"### Instruction\n{instruction}\n\n{lines}"
+        self.task.content = f"### Instruction\n{plain(instruction)}\n\n{lines}"
         self.label_buttons[2].label = "3 · Good"
         self.show_instructions(instructions)
 
     def show_unknown_task(self, name: str, env: str, instructions: str) -> None:
-        self.task.content = f"### {name}\nUnknown task '{name}' for {env}: judge by its name."
+        self.task.content = f"### {plain(name)}\nUnknown task '{plain(name)}' for {env}: judge by its name."
         self.show_instructions(instructions)
 
     def show_instructions(self, text: str) -> None:
-        self.instructions.content = f"**From your operator:** {text}" if text else ""
+        self.instructions.content = f"**From your operator:** {plain(text)}" if text else ""
         self.instructions.visible = bool(text)
 
     def show_speed(self, speed: float) -> None:

@@ -196,12 +196,15 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
 
 def test_instructions_rule_and_a_class_the_task_cannot_give(stack: Stack, browser: Browser, artifacts: Path) -> None:
     run = stack.post_run("point", 2)  # north: nothing is ever good
-    stack.operator.set_instructions(run.id, "Judge only the last second of each segment.")
+    html = '<img src=x onerror="window.pwned=1">'  # an operator's text is shown, never run
+    stack.operator.set_instructions(run.id, f"Judge only the last second of each segment. {html}")
     app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
     context = profile(browser)
     page = tab(context, app.labeler_url(stack.new_labeler("ivy")))
     first = wait_segment(page)
     wait_text(page, "Judge only the last second of each segment.")
+    wait_text(page, html)
+    assert page.evaluate("window.pwned") is None and page.locator("img[src='x']").count() == 0
     wait_text(page, "bad if any state is bad")
     good = page.get_by_role("button", name="3 · Good (not in this task)")
     good.wait_for()
