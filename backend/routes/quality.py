@@ -3,10 +3,12 @@ per query) and the gold rate (share of each labeler's segments that are gold).""
 
 from __future__ import annotations
 
+import time
+
 from fastapi import APIRouter, Request
 
 from backend.routes.deps import DB, OperatorCaller, RunId, json_body, parse_body
-from backend.services import runs
+from backend.services import labels, runs
 from collie.schemas import QualitySettings, RunRead
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
@@ -16,4 +18,7 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
 async def set_quality(run_id: RunId, request: Request, _: OperatorCaller, db: DB) -> RunRead:
     body = await parse_body(request, QualitySettings)  # read after the caller is checked
     with db.write() as conn:
-        return runs.set_quality(conn, run_id, body)
+        read = runs.set_quality(conn, run_id, body)
+        if body.redundancy is not None and labels.count_reached(conn, run_id, time.time()):
+            read = runs.get(conn, run_id)  # counts changed: queries that waited for more labels count now
+        return read

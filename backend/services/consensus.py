@@ -5,7 +5,9 @@ Each labeler has at most one current label (vote) per query: their latest `label
 without a vote of their own withdraws every vote of the query. A query counts once, at a label
 event, r distinct labelers have a vote, r being the run's redundancy when that event was recorded;
 a query that counts stays counted (a later change of r does not touch it) until an undo withdraws
-its effective label. Its effective label is the majority of the votes, a tie going to the safer
+its effective label. When r is lowered, the queries whose votes reach it count at once: the r is
+written on their latest label or undo event (a plain undo carries none), so the replay counts
+them there too. Its effective label is the majority of the votes, a tie going to the safer
 label: bad (0) over neutral (1) over good (2) — the lowest value among the tied. With r = 1 this
 is the latest label, as before redundancy existed.
 """
@@ -19,7 +21,8 @@ from typing import NamedTuple
 
 class VoteEvent(NamedTuple):
     """What the rule reads of a label event: kind, who, the value, their role, and the r in effect
-    (None for events stored before it was recorded: the run's r is used)."""
+    (a label's: None for one stored before it was recorded, then the run's r is used; an undo's:
+    None, or the lowered r that made its query count after it)."""
 
     kind: str
     labeler: int
@@ -59,4 +62,6 @@ def replay(events: Iterable[VoteEvent], redundancy: int = 1) -> tuple[dict[int, 
             elif role == "operator":
                 votes.clear()
             label = None  # an undo withdraws the effective label; the query counts again at r votes
+            if r is not None and votes:  # a lowered r made it count after this undo
+                label = effective(votes.values(), r)
     return votes, label

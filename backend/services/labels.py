@@ -24,7 +24,7 @@ import json
 import time
 from typing import Any
 
-from sqlalchemy import Connection, and_, bindparam, delete, insert, select, update
+from sqlalchemy import Connection, and_, bindparam, delete, exists, insert, select, update
 
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import consensus, events, leases, runs
@@ -154,7 +154,7 @@ def _record(
         "client_request_id": request_id,
         "revises_event_id": revises,
         "created_at": now,
-        "redundancy": _redundancy(q),
+        "redundancy": _redundancy(q) if kind == "label" else None,  # the r a label is given under
     }
     event_id = conn.execute(_INSERT_EVENT, event).scalar_one()
     return LabelEventRead(
@@ -335,6 +335,45 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     if q.label is not None:
         _announce(conn, run_id, q, caller, "withdrawn", event.id, None, now)
     return LabelAck(event=event, label=None, query_status=status, duplicate=False)
+
+
+def count_reached(conn: Connection, run_id: int, now: float) -> list[str]:
+    """After the run's redundancy was lowered: the uncounted queries whose votes reach it count now
+    (their labelers cannot vote on them again, so no later label would). The new r is written on
+    each one's latest label or undo event, so the recomputed labels count it there too. Returns
+    their ids."""
+    r = runs.row(conn, run_id).redundancy
+    waiting = conn.execute(
+        select(Query.id, Query.query_id, Query.session, Query.label, Query.gold_of)
+        .where(Query.run_id == run_id, Query.status.in_(("pending", "leased")), Query.gold_of.is_(None))
+        .where(exists().where(LabelVote.query_pk == Query.id))
+    ).all()
+    counted = []
+    for q in waiting:
+        votes = conn.execute(_VOTES, {"pk": q.id}).all()
+        label = consensus.effective([v.value for v in votes], r)
+        if label is None:
+            continue
+        latest = (
+            select(LabelEvent.id)
+            .where(LabelEvent.query_pk == q.id, LabelEvent.kind.in_(("label", "undo")))
+            .order_by(LabelEvent.id.desc())
+            .limit(1)
+            .scalar_subquery()
+        )
+        conn.execute(update(LabelEvent).where(LabelEvent.id == latest).values(redundancy=r))
+        last_vote = max(v.event_id for v in votes)
+        voter = conn.execute(
+            select(Principal.name)
+            .join(LabelEvent, LabelEvent.labeler_id == Principal.id)
+            .where(LabelEvent.id == last_vote)
+        ).scalar_one()
+        change = {"status": "labelled", "label": label, "label_event_id": last_vote, "lease_expires_at": None}
+        conn.execute(_SET_QUERY, {"pk": q.id, **change})
+        data = LabelChanged(query_id=q.query_id, session=q.session, event_id=last_vote, labeler=voter, label=label)
+        events.append(conn, run_id, data, now, labels_delta=1)
+        counted.append(q.query_id)
+    return counted
 
 
 def list_events(conn: Connection, run_id: int, after: int, limit: int) -> list[LabelEventRead]:

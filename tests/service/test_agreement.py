@@ -86,3 +86,6 @@ def test_replay_keeps_the_redundancy_each_label_was_given_under() -> None:
     assert replay(waiting, redundancy=1) == ({1: 2}, None)
     assert replay([*waiting, VoteEvent("label", 2, 0, "labeler", 1)]) == ({1: 2, 2: 0}, 0)
     assert replay([VoteEvent("label", 1, 2, "labeler")], redundancy=2) == ({1: 2}, None)
+    undone = [VoteEvent("label", 1, 1, "labeler", 3), VoteEvent("label", 2, 0, "labeler", 3)]
+    assert replay([*undone, VoteEvent("undo", 2, None, "labeler")]) == ({1: 1}, None)  # a plain undo
+    assert replay([*undone, VoteEvent("undo", 2, None, "labeler", 1)]) == ({1: 1}, 1)  # then r lowered to 1

@@ -304,10 +304,11 @@ def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
     """r raised after a query counted: it stays counted, and a revision still moves its label; r
-    lowered while a query waits: it counts at its next label. The recomputed view follows both."""
+    lowered while a query waits with enough votes: it counts at once (its labeler cannot vote on it
+    again), and stays counted when r rises again. The recomputed view follows every step."""
     run = trainer.create_run(make_run_spec())
     trainer.post_session(run.id, make_session(0, 2))
-    a, b = new_labeler("rc-a"), new_labeler("rc-b")
+    a = new_labeler("rc-a")
     a.claim(run.id)
     a.submit(run.id, "0-0", 2)  # counts under r = 1
     operator.set_quality(run.id, redundancy=2)
@@ -317,14 +318,36 @@ def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
     assert a.submit(run.id, "0-0", 0).label == 0  # a revision of a counted query moves its label
     assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 0}
     assert [i.label for i in trainer.labelled(run.id)] == [0] and trainer.run(run.id).n_labels == 1
-    operator.set_quality(run.id, redundancy=1)
-    assert {e.query_id for e in trainer.effective_labels(run.id)} == {"0-0"}  # 0-1 waits for a label
-    b.claim(run.id)
-    assert b.submit(run.id, "0-1", 0).label == 0  # 2 vs 0: a tie, bad
-    assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 0, "0-1": 0}
-    assert {i.query.query_id: i.label for i in trainer.labelled(run.id)} == {"0-0": 0, "0-1": 0}
+    assert operator.set_quality(run.id, redundancy=1).n_labels == 2  # 0-1 counts now
+    assert label_events_on_stream(trainer, run.id)[-1] == ("label", "0-1", 2)
+    for r in (1, 3):  # and stays counted when r rises again
+        operator.set_quality(run.id, redundancy=r)
+        assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 0, "0-1": 2}
+        assert {i.query.query_id: i.label for i in trainer.labelled(run.id)} == {"0-0": 0, "0-1": 2}
     exported = trainer.export(run.id, effective=True)
     assert '"0-0"' in exported and '"0-1"' in exported
+
+
+def test_a_lowered_redundancy_counts_a_query_whose_second_vote_was_undone(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    """r = 3: a and b vote, b undoes; r lowered to 1 counts a's vote; raised to 2, it stays."""
+    run = trainer.create_run(make_run_spec())
+    operator.set_quality(run.id, redundancy=3)
+    trainer.post_session(run.id, make_session(0, 1))
+    a, b = new_labeler("ru-a"), new_labeler("ru-b")
+    a.claim(run.id)
+    a.submit(run.id, "0-0", 1)
+    b.claim(run.id)
+    b.submit(run.id, "0-0", 0)
+    b.undo(run.id, "0-0")
+    b.release(run.id, "0-0")
+    operator.set_quality(run.id, redundancy=1)
+    assert trainer.query(run.id, "0-0").status == "labelled"
+    for r in (1, 2):
+        operator.set_quality(run.id, redundancy=r)
+        assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 1}
+    assert b.claim(run.id) is None  # nothing waits any more
 
 
 def test_a_partial_quality_body_keeps_the_other_field(trainer: CollieClient, operator: CollieClient) -> None:
