@@ -125,10 +125,28 @@ def test_the_quality_settings_are_set_from_the_panel(page: Any, trainer: CollieC
     page.wait_for_function("document.querySelector('#quality').dataset.redundancy === '3'")
     changed = trainer.run(run.id)
     assert (changed.redundancy, changed.gold_rate) == (3, 0.1)
-    page.fill("#quality-redundancy", "0")
+    page.wait_for_function("document.querySelector('#quality-message').textContent === 'applied'")
+    for value, said in (("0", "redundancy: a whole number"), ("", "redundancy: a whole number")):
+        page.fill("#quality-redundancy", value)
+        page.click("#quality-apply")
+        page.wait_for_function(f"document.querySelector('#quality-message').textContent.startsWith({said!r})")
+    page.fill("#quality-redundancy", "3")
+    page.fill("#quality-gold", "60")  # a percentage: refused before it is sent as 0.6
     page.click("#quality-apply")
-    page.wait_for_function("document.querySelector('#quality-message').textContent.includes('greater than or equal')")
-    assert trainer.run(run.id).redundancy == 3
+    page.wait_for_function("document.querySelector('#quality-message').textContent.startsWith('gold: a whole')")
+    assert (trainer.run(run.id).redundancy, trainer.run(run.id).gold_rate) == (3, 0.1)
+
+
+def test_apply_sends_only_what_was_typed(page: Any, trainer: CollieClient, operator: CollieClient, run: RunRead) -> None:
+    """Another operator set r = 4 meanwhile: this panel follows it, and its gold change keeps it."""
+    page.reload()  # the test before left typed, unapplied values
+    page.wait_for_function("document.querySelector('#quality-redundancy').value === '3'")
+    operator.set_quality(run.id, redundancy=4)
+    page.wait_for_function("document.querySelector('#quality-redundancy').value === '4'", timeout=30_000)
+    page.fill("#quality-gold", "20")
+    page.click("#quality-apply")
+    page.wait_for_function("document.querySelector('#quality-message').textContent === 'applied'")
+    assert (trainer.run(run.id).redundancy, trainer.run(run.id).gold_rate) == (4, 0.2)
 
 
 def test_the_charts_have_legends_and_labelled_states_are_large(page: Any, artifacts: Any) -> None:

@@ -114,6 +114,10 @@ export class RunPage {
 
   renderLabeling(view) {
     renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
+    if (this.run) {  // another operator may have changed them: the form's untouched inputs follow
+      const { redundancy, gold_rate } = view.labeling;
+      this.quality.show({ ...this.run, redundancy, gold_rate });
+    }
     // the labeling UI's review mode (labeling_ui/review.py) replays one query, labelling nothing
     const replay = this.watchUrl ? (queryId) => this.uiLink({ review: this.runId, query: queryId }) : null;
     renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task, this.labelNames ?? [], replay);
