@@ -5,8 +5,15 @@ export const STATUS_TEXT = {
   waiting_for_labels: "waiting for labels",
   paused: "paused",
   finished: "finished",
+  stopped: "stopped",
   failed: "failed",
 };
+
+// A run's state in a word: one the operator stopped ends "finished" with control "stop", and says
+// stopped (as the labeling UI does), not finished.
+export function shownStatus(run) {
+  return run.status === "finished" && run.control === "stop" ? "stopped" : run.status;
+}
 
 export function ago(isoTime, now = Date.now()) {
   if (!isoTime) return "—";
