@@ -188,7 +188,10 @@ class Panels:
             self.context_panel.visible = replay
 
     def show_login(self, message: str) -> None:
-        self._screen(message, login=True)
+        """The sign-in field: this tab is nobody until a token is accepted (the title says so)."""
+        with self.client.atomic():
+            self._screen(message, login=True)
+            self.title.content = "**collie · labeling** — not signed in"
 
     def show_message(self, message: str, keep_replay: bool = False) -> None:
         """A state with no segment (connecting, unreachable, waiting): only undo stays offered;

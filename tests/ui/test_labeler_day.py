@@ -79,6 +79,8 @@ def test_a_change_of_identity_in_one_tab_is_loud(stack: Stack, browser: Browser)
     page.get_by_text("Account").first.click()
     page.get_by_role("button", name="Sign out").click()
     wait_text(page, "Signed out")
+    wait_text(page, "not signed in")
+    assert page.get_by_text("signed in as cara").count() == 0
     page.get_by_role("textbox").first.fill(stack.new_labeler("dave"))
     page.get_by_role("button", name="Sign in").click()
     wait_text(page, "signed in as dave")
