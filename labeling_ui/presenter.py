@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from collie.schemas import RunRead
+from collie.schemas import FINISHED, RunRead
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.inset import render_inset
@@ -142,17 +142,18 @@ class Presenter:
             status = waiting_text(run, forecast(run, link.metrics(run.id)), held_here)
             self.load_mine(link, run)
         skills = self.skills
-        self.show_waiting(status or "", keep_skills=skills is not None and run is not None and skills.run_id == run.id)
+        ended = run is not None and (run.status in FINISHED or run.control == "stop")
+        keep = skills is not None and run is not None and skills.run_id == run.id
+        self.show_waiting(status or "", keep_skills=keep, ended=ended)
 
-    def show_waiting(self, status: str, keep_skills: bool = False) -> None:
-        """The waiting screen; the skills of the run's latest evaluation keep playing if they are on."""
+    def show_waiting(self, status: str, keep_skills: bool = False, ended: bool = False) -> None:
+        """The waiting screen; the skills of the run's latest evaluation keep playing if they are on.
+        `ended`: the run takes no more labels, so no segment will come."""
         if not keep_skills:
             self.skills = None
             self.screen.blank()
-        self.panels.show_message(
-            f"☕ **Nothing to label right now.**  \n{status}  \nNew segments appear here by themselves.",
-            keep_replay=keep_skills,
-        )
+        after = "This run takes no more labels; yours are kept." if ended else "New segments appear here by themselves."
+        self.panels.show_message(f"☕ **Nothing to label right now.**  \n{status}  \n{after}", keep_replay=keep_skills)
 
     def play_skills(self, link: ServiceLink, run_id: int, watching: bool) -> None:
         """The run's latest skills play in 3D (watch mode's own screen, or the waiting screen's view)."""

@@ -80,7 +80,7 @@ def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
         else:
             lines.append("The trainer posts the next feedback session when its schedule says so.")
     tail = f"{run.n_labels} labelled"
-    if others:
+    if others and run.status not in FINISHED:  # an ended run's leases only wait to run out
         tail = f"{others} being labelled by others, " + tail
     lines.append(tail + ".")
     return "  \n".join(lines)

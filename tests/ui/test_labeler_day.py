@@ -193,6 +193,8 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab
     wait_text(page, "stopping")
     assert "finished" not in page.inner_text("body")
+    wait_text(page, "This run takes no more labels")
+    assert "New segments appear here" not in page.inner_text("body")
     context.close()  # type: ignore[attr-defined]
 
 

@@ -42,3 +42,5 @@ def test_stopped_is_not_finished_and_own_claims_are_not_others() -> None:
     mine = run().model_copy(update={"queue": QueueCounts(leased=2)})
     assert "others" not in waiting_text(mine, forecast(mine, []), held_here=2)
     assert "1 being labelled by others" in waiting_text(mine, forecast(mine, []), held_here=1)
+    ended = stopped.model_copy(update={"queue": QueueCounts(leased=2)})  # leases that only wait to run out
+    assert "others" not in waiting_text(ended, forecast(ended, []), held_here=0)

@@ -137,7 +137,9 @@ def test_the_quality_settings_are_set_from_the_panel(page: Any, trainer: CollieC
     assert (trainer.run(run.id).redundancy, trainer.run(run.id).gold_rate) == (3, 0.1)
 
 
-def test_apply_sends_only_what_was_typed(page: Any, trainer: CollieClient, operator: CollieClient, run: RunRead) -> None:
+def test_apply_sends_only_what_was_typed(
+    page: Any, trainer: CollieClient, operator: CollieClient, run: RunRead
+) -> None:
     """Another operator set r = 4 meanwhile: this panel follows it, and its gold change keeps it."""
     page.reload()  # the test before left typed, unapplied values
     page.wait_for_function("document.querySelector('#quality-redundancy').value === '3'")
