@@ -137,6 +137,12 @@ def test_a_wrong_token_cannot_pause(stack: dict[str, Any], browser: Any) -> None
     stranger.wait_for_selector("#token-form:not([hidden])")
     assert "unknown or revoked token" in stranger.text_content("#token-error")
     assert stranger.locator("#runs-body tr[data-run-id]").count() == 0
+    assert "paste an operator token" in stranger.text_content("#runs-body")
+    assert stranger.text_content("#connection") == "token refused"
+    stranger.goto(f"{api}/")  # a fresh tab with no token at all
+    stranger.evaluate("sessionStorage.clear()")
+    stranger.reload()
+    stranger.wait_for_function("document.querySelector('#labelers-body').textContent.includes('no token')")
     stranger.close()
     refused = httpx.post(f"{api}/api/runs/{run_id}/pause", headers={"Authorization": "Bearer not-a-token"})
     assert refused.status_code == 401

@@ -16,7 +16,7 @@ let started = 0; // bumped by a new token: the old poll loop ends
 function showConnection(state) {
   const pill = $("#connection");
   pill.className = `pill ${state === "live" ? "live" : "down"}`;
-  pill.textContent = { live: "live", down: "reconnecting…", closed: "disconnected" }[state] ?? state;
+  pill.textContent = { live: "live", down: "reconnecting…", closed: "disconnected", refused: "token refused" }[state] ?? state;
 }
 
 function selectedRun() {
@@ -24,9 +24,17 @@ function selectedRun() {
   return match ? Number(match[1]) : null;
 }
 
+// No token, or one the service refused: the page says what it needs instead of looking empty.
 function askForToken(message) {
   $("#token-form").hidden = false;
   $("#token-error").textContent = message;
+  const why = message ? "this token was refused" : "no token";
+  const needed = `<tr><td colspan="8" class="muted">${why}: paste an operator token above ` +
+    "(the dashboard link <code>collie up</code> prints carries one)</td></tr>";
+  runsBody.innerHTML = needed;
+  $("#labelers-body").innerHTML = needed;
+  runs = [];
+  showConnection(message ? "refused" : "no token");
 }
 
 async function openSelected() {
