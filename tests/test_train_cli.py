@@ -234,3 +234,12 @@ def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None
     line = proc.stdout.strip().splitlines()[-1]
     assert line.startswith(f"run folder: {out}") and "summary.json" in line and "checkpoint.pt" in line
     assert not (out / "guidance_latest.png").exists() and "guidance_latest.png" not in line
+
+
+def test_a_run_labelled_through_the_service_is_not_resumed_with_the_oracle(run_copy: Path) -> None:
+    """A `collie up` trainer folder (service_run.json) resumed without --api would mix the scripted
+    oracle's labels into a run people label: refused, saying what to give."""
+    (run_copy / "service_run.json").write_text(json.dumps({"run_id": 1}))
+    before = digest(run_copy / "checkpoint.pt")
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "--api", "service_run.json")
+    assert digest(run_copy / "checkpoint.pt") == before

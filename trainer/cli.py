@@ -252,6 +252,11 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--api {args.api!r} is not a URL: it starts with http:// or https://")
         cfg = config_from_args(args)
         check_out(Path(cfg.out), args.resume)
+        if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
+            raise ValueError(  # the oracle would label a run people label through the service
+                f"--resume: {cfg.out} takes its labels from a labeling service (service_run.json): give --api "
+                "and the trainer's token (or run `collie up` again with the same --out)"
+            )
         if args.resume:
             saved = Path(cfg.out) / "config.json"
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
