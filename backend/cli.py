@@ -109,21 +109,22 @@ def run(args: argparse.Namespace) -> int:
         partial.touch(mode=0o600)  # secrets: readable by this user only
         partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
         partial.replace(args.tokens_json)
-    print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
-    for role in ROLES:  # secrets given through the environment or a file stay out of logs
-        if role in generated:
-            shown = tokens[role] if args.tokens_json is None else f"(in {args.tokens_json})"
-        elif f"COLLIE_{role.upper()}_TOKEN" in os.environ:
-            shown = "(from environment)"
-        elif role in tokens:
-            shown = f"(kept, in {args.tokens_json})"
-        elif args.no_generate_tokens:
-            continue
-        else:
-            shown = f"(kept from the last start; to replace it, set COLLIE_{role.upper()}_TOKEN)"
-        print(f"  {role} token: {shown}", flush=True)
-    # uvicorn shuts down cleanly, then re-raises Ctrl-C: for us that is a normal exit.
+    # Ctrl-C is the way to stop: uvicorn shuts down cleanly, then re-raises it, and one that comes
+    # before uvicorn listens for it (while the banner prints) is a normal exit too.
     with contextlib.suppress(KeyboardInterrupt):
+        print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
+        for role in ROLES:  # secrets given through the environment or a file stay out of logs
+            if role in generated:
+                shown = tokens[role] if args.tokens_json is None else f"(in {args.tokens_json})"
+            elif f"COLLIE_{role.upper()}_TOKEN" in os.environ:
+                shown = "(from environment)"
+            elif role in tokens:
+                shown = f"(kept, in {args.tokens_json})"
+            elif args.no_generate_tokens:
+                continue
+            else:
+                shown = f"(kept from the last start; to replace it, set COLLIE_{role.upper()}_TOKEN)"
+            print(f"  {role} token: {shown}", flush=True)
         uvicorn_server(app, args.log_level).run(sockets=[sock])
     return 0
 
