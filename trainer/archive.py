@@ -17,7 +17,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from trainer.sweep import RunFolderError, is_finished, read_json_object
+from trainer.run_files import RunFolderError, read_json_object
+from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
 
 REQUIRED = ("summary.json", "eval_latest.npz")

@@ -12,12 +12,14 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from collie.argtypes import http_url
 from collie.startup import mark
 from collie.tasks import task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, flag, make_config, people_schedule
 from trainer.methods import METHODS
+from trainer.run_files import read_json_object
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
@@ -50,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--api", default=None, help="labeling service URL: labels come over HTTP instead of the oracle")
+    p.add_argument("--api", default=None, type=http_url, help="labeling service URL: labels come over HTTP instead of the oracle")
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
     p.add_argument("--run-id", type=int, default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
@@ -176,9 +178,9 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     run_id = args.run_id
     if run_id is None and memo.exists() and args.resume:
         try:
-            run_id = int(json.loads(memo.read_text())["run_id"])
-        except (ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"--resume: {memo} is damaged ({type(exc).__name__}); give the run's --run-id") from None
+            run_id = int(read_json_object(memo)["run_id"])
+        except (ValueError, KeyError, TypeError) as exc:  # RunFolderError is a ValueError
+            raise ValueError(f"--resume: {memo} is damaged ({exc}); give the run's --run-id") from None
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
@@ -248,8 +250,6 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
-        if args.api is not None and not args.api.startswith(("http://", "https://")):
-            raise ValueError(f"--api {args.api!r} is not a URL: it starts with http:// or https://")
         cfg = config_from_args(args)
         check_out(Path(cfg.out), args.resume)
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
@@ -260,10 +260,7 @@ def run(args: argparse.Namespace) -> int:
         if args.resume:
             saved = Path(cfg.out) / "config.json"
             if saved.exists():  # the run's own config wins; the command line may only extend epochs
-                try:
-                    stored = json.loads(saved.read_text())
-                except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                    raise ValueError(f"--resume: {saved} is not valid JSON ({exc})") from None
+                stored = read_json_object(saved)  # a damaged one: RunFolderError naming it
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
                 asked, cfg = cfg, Config.from_stored(stored)

@@ -40,7 +40,7 @@ import numpy as np
 from collie.tasks import Task, get_task
 from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
-from trainer.sweep import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, read_json_object
 from trainer.task_choice import saved_rule
 
 METRICS: tuple[tuple[str, str, int], ...] = (

@@ -29,7 +29,8 @@ from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
 from trainer.report import load_run
-from trainer.sweep import RunFolderError, downstream_done, read_json_object, run_downstream_task
+from trainer.run_files import RunFolderError, read_json_object
+from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
 CHECKPOINT = "checkpoint.pt"

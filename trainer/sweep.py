@@ -31,6 +31,7 @@ from typing import Any
 
 from trainer.config import PRESETS
 from trainer.methods import METHODS
+from trainer.run_files import RunFolderError, read_json_object
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 
@@ -66,24 +67,6 @@ def grid(
         for t in tasks
         for m in methods
     ]
-
-
-class RunFolderError(ValueError):
-    """A run folder's file cannot be read as what it should hold; the message names the file."""
-
-
-def read_json_object(path: Path) -> dict[str, Any]:
-    """`path`'s JSON object; RunFolderError naming the file and why if it is missing, not JSON or
-    not an object (a file cut short by a full disk, or written by hand)."""
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise RunFolderError(f"{path}: missing") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise RunFolderError(f"{path}: not JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise RunFolderError(f"{path}: not a JSON object")
-    return data
 
 
 def is_finished(out: str | Path) -> bool:
