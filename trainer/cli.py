@@ -52,7 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--api", default=None, type=http_url, help="labeling service URL: labels come over HTTP instead of the oracle")
+    p.add_argument(
+        "--api", default=None, type=http_url, help="labeling service URL: labels come over HTTP instead of the oracle"
+    )
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
     p.add_argument("--run-id", type=int, default=None, help="existing run id on the service (default: create one)")
     p.add_argument(
