@@ -18,7 +18,7 @@ from backend.db import Database
 from backend.migrate import alembic_config, upgrade
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
-from collie.schemas import LabelChangedEvent, WithdrawnEvent
+from collie.schemas import LabelChangedEvent, RunRead, WithdrawnEvent
 from trainer.feedback.http import HttpFeedback
 
 from .conftest import DIMS, TOKENS, make_run_spec, make_session
@@ -328,18 +328,24 @@ def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
     assert '"0-0"' in exported and '"0-1"' in exported
 
 
+def two_votes(
+    trainer: CollieClient, operator: CollieClient, a: CollieClient, b: CollieClient, r: int, values: tuple[int, int]
+) -> tuple[RunRead, CollieClient, CollieClient]:
+    """A run under redundancy r with one query, 0-0, which a and then b label with `values`."""
+    run = trainer.create_run(make_run_spec())
+    operator.set_quality(run.id, redundancy=r)
+    trainer.post_session(run.id, make_session(0, 1))
+    for labeler, value in zip((a, b), values, strict=True):
+        labeler.claim(run.id)
+        labeler.submit(run.id, "0-0", value)
+    return run, a, b
+
+
 def test_a_lowered_redundancy_counts_a_query_whose_second_vote_was_undone(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
     """r = 3: a and b vote, b undoes; r lowered to 1 counts a's vote; raised to 2, it stays."""
-    run = trainer.create_run(make_run_spec())
-    operator.set_quality(run.id, redundancy=3)
-    trainer.post_session(run.id, make_session(0, 1))
-    a, b = new_labeler("ru-a"), new_labeler("ru-b")
-    a.claim(run.id)
-    a.submit(run.id, "0-0", 1)
-    b.claim(run.id)
-    b.submit(run.id, "0-0", 0)
+    run, _, b = two_votes(trainer, operator, new_labeler("ru-a"), new_labeler("ru-b"), 3, (1, 0))
     b.undo(run.id, "0-0")
     b.release(run.id, "0-0")
     operator.set_quality(run.id, redundancy=1)
@@ -362,14 +368,7 @@ def test_only_changes_of_the_effective_label_go_on_the_stream(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
     """r = 2: votes {2, 0} → {0, 0} → {1, 0} keep the effective label 0: one stream event."""
-    run = trainer.create_run(make_run_spec())
-    operator.set_quality(run.id, redundancy=2)
-    trainer.post_session(run.id, make_session(0, 1))
-    a, b = new_labeler("ch-a"), new_labeler("ch-b")
-    a.claim(run.id)
-    a.submit(run.id, "0-0", 2)
-    b.claim(run.id)
-    b.submit(run.id, "0-0", 0)
+    run, a, b = two_votes(trainer, operator, new_labeler("ch-a"), new_labeler("ch-b"), 2, (2, 0))
     a.submit(run.id, "0-0", 0)
     a.submit(run.id, "0-0", 1)
     assert label_events_on_stream(trainer, run.id) == [("label", "0-0", 0)]
