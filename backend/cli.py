@@ -22,6 +22,7 @@ from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict
 from backend.settings import Settings
 from collie.argtypes import port
+from collie.tokens import read_tokens_file, write_secret
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,12 +48,10 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     if path is None or not path.exists():
         return {}
     try:
-        tokens = json.loads(path.read_text())["tokens"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise SystemExit(
-            f"collie serve: error: --tokens-json {path} is not a tokens file ({exc}); move it away"
-        ) from None
-    return {role: str(tokens[role]) for role in ROLES if isinstance(tokens, dict) and tokens.get(role)}
+        tokens = read_tokens_file(path)
+    except ValueError as exc:
+        raise SystemExit(f"collie serve: error: --tokens-json {exc}; move it away") from None
+    return {role: tokens[role] for role in ROLES if role in tokens}
 
 
 def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str]]:
@@ -103,12 +102,7 @@ def run(args: argparse.Namespace) -> int:
     mark("app built")  # the database opened and migrated
     sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
-        args.tokens_json.parent.mkdir(parents=True, exist_ok=True)
-        partial = args.tokens_json.with_suffix(".partial")
-        partial.unlink(missing_ok=True)
-        partial.touch(mode=0o600)  # secrets: readable by this user only
-        partial.write_text(json.dumps({"api": url, "tokens": tokens}, indent=1))
-        partial.replace(args.tokens_json)
+        write_secret(args.tokens_json, json.dumps({"api": url, "tokens": tokens}, indent=1))
     # Ctrl-C is the way to stop: uvicorn shuts down cleanly, then re-raises it, and one that comes
     # before uvicorn listens for it (while the banner prints) is a normal exit too.
     with contextlib.suppress(KeyboardInterrupt):

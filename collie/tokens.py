@@ -6,6 +6,7 @@ type it (write `--token=-abc` for a token that starts with a dash)."""
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 
@@ -48,3 +49,15 @@ def write_secret(path: Path, text: str) -> None:
     with os.fdopen(fd, "w") as f:
         f.write(text)
     partial.replace(path)
+
+
+def read_tokens_file(path: Path) -> dict[str, str]:
+    """The role → token map of a tokens file (`collie serve --tokens-json`, `collie up`'s
+    OUT/tokens.json); ValueError naming the file if it is not one."""
+    try:
+        tokens = json.loads(path.read_text())["tokens"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path} is not a tokens file ({type(exc).__name__}: {exc})") from None
+    if not isinstance(tokens, dict):
+        raise ValueError(f"{path} is not a tokens file (its tokens are not a map of role to token)")
+    return {str(role): str(token) for role, token in tokens.items() if token}

@@ -25,7 +25,7 @@ from urllib.parse import quote
 from collie.argtypes import port
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
-from collie.tokens import TOKEN_ENV, write_secret
+from collie.tokens import TOKEN_ENV, read_tokens_file, write_secret
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
     from collie.client import CollieClient
@@ -74,7 +74,7 @@ def last_error(log: Path) -> str:
     except OSError:
         return ""
     said = [line.strip() for line in lines if line.strip()]
-    errors = [line for line in said if "error" in line.lower() or "Error" in line]
+    errors = [line for line in said if "error" in line.lower()]
     return (errors or said or [""])[-1][:300]
 
 
@@ -188,7 +188,10 @@ def stack_tokens(tokens_file: Path) -> dict[str, str]:
     """A resumed stack keeps its tokens (links already handed out stay valid); a new one takes
     COLLIE_<ROLE>_TOKEN from the environment, else fresh random ones."""
     if tokens_file.exists():
-        return dict(json.loads(tokens_file.read_text())["tokens"])
+        try:
+            return read_tokens_file(tokens_file)
+        except ValueError as exc:  # reported as the stack's error, with the logs' folder
+            raise RuntimeError(f"{exc}; move it away to start with new tokens") from None
     return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or secrets.token_urlsafe(32) for r in ROLES}
 
 

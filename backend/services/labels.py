@@ -344,7 +344,7 @@ def count_reached(conn: Connection, run_id: int, now: float) -> list[str]:
     their ids."""
     r = runs.row(conn, run_id).redundancy
     waiting = conn.execute(
-        select(Query.id, Query.query_id, Query.session, Query.label, Query.gold_of)
+        select(Query.id, Query.query_id, Query.session)
         .where(Query.run_id == run_id, Query.status.in_(("pending", "leased")), Query.gold_of.is_(None))
         .where(exists().where(LabelVote.query_pk == Query.id))
     ).all()
