@@ -230,7 +230,8 @@ RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh 
 
 def check_out(out: Path, resume: bool) -> None:
     """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume),
-    one --resume cannot continue, or one we cannot write; before anything creates it."""
+    one --resume cannot continue, or one we cannot write; then makes it (creating it is the one
+    test of writing there that root, for whom access() says yes everywhere, cannot pass by fiat)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder")
     if resume and not (out / "checkpoint.pt").is_file():
@@ -244,6 +245,10 @@ def check_out(out: Path, resume: bool) -> None:
         raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
     if not os.access(nearest, os.W_OK | os.X_OK):
         raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # e.g. /sys, read-only for root too
+        raise ValueError(f"--out {out}: cannot create it ({exc.strerror})") from None
 
 
 def run(args: argparse.Namespace) -> int:
