@@ -63,9 +63,10 @@ test-compile: $(STAMP)
 
 # The settings docs/results.md's point-mass numbers were measured with, before the reference's
 # initialisation, policy log-std floor and DIAYN variant became the defaults (docs/algorithm.md),
-# and before rollouts acted through trainer/acting.py's Actor (`--acting torch`: the same seeds).
+# before rollouts acted through trainer/acting.py's Actor (`--acting torch`: the same seeds), and
+# before the step's fused Adam and fast tanh / one-output Q layer (`--fused-adam false --fast-ops false`).
 # `make bench-guidance FIRST_VERSION_FLAGS=` measures today's defaults instead.
-FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch
+FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch --fused-adam false --fast-ops false
 
 # Every bench-* also writes its figures to runs/bench/<name>.json (benchmarks/record.py).
 bench-guidance: $(STAMP)

@@ -9,7 +9,8 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
 2. Update FLOP rate: the FLOPs of one full update (counted by torch's FlopCounterMode, forward and
    backward; key `update_gflop_<h>`) times its steps/s, ÷ this machine's rate for a (256 × h)·(h × h)
    matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
-   `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_fused_<h>` the same with `--fused-adam`;
+   `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_foreach_<h>` the same with `--fused-adam false`,
+   `flop_fraction_before_<h>` with `--fused-adam false --fast-ops false` (the step before 12-05);
    `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
    nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
@@ -180,18 +181,23 @@ def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
         for k, fn in steps_fns.items():
             rates[k].append(timed(fn, steps))
     med = {k: float(np.median(v)) for k, v in rates.items()}
+    _, full_counted, sac_counted, _ = update_setup(env_name, 1024, dev, fast_ops=False)  # every matmul counted
+    counted_full, counted_sac = flops(full_counted), flops(sac_counted)
     return {
         "full_steps_per_s": med["full"],
         "sac_steps_per_s": med["sac"],
         "metra_steps_per_s": med["metra"],
         "cost_ratio": med["sac"] / med["full"],
-        "cost_ratio_flops": flops(full) / flops(plain_sac),
+        "cost_ratio_flops": counted_full / counted_sac,
     }
 
 
 def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[str, float]:
     """One thread, CPU: the update's FLOP rate against a plain matmul of the same width; the eager
-    default, `--fused-adam` and (if `compiled`) `--compile` timed interleaved."""
+    default, the default with foreach Adam, the step as it was before 12-05 (foreach Adam, torch's
+    tanh, bmm for the one-output Q layer) and (if `compiled`) `--compile`, timed interleaved. FLOPs
+    are counted on the before-12-05 step, whose every matmul torch's counter sees (the same
+    mathematics; the multiply-sum layer would go uncounted)."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cpu = torch.device("cpu")
@@ -200,9 +206,10 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
         for h in (256, 1024):
             variants = {
                 "eager": update_setup(env_name, h, cpu)[1],
-                "fused": update_setup(env_name, h, cpu, fused_adam=True)[1],
+                "foreach": update_setup(env_name, h, cpu, fused_adam=False)[1],
+                "before": update_setup(env_name, h, cpu, fused_adam=False, fast_ops=False)[1],
             }
-            flop = flops(variants["eager"])
+            flop = flops(variants["before"])
             variants["matmuls"] = matmuls_alone(variants["eager"])
             first: dict[str, float] = {}
             if compiled:
@@ -221,7 +228,8 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
             out[f"update_gflops_{h}"] = med["eager"] * flop / 1e9
             out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
             out[f"flop_fraction_{h}"] = out[f"update_gflops_{h}"] / out[f"matmul_gflops_{h}"]
-            out[f"flop_fraction_fused_{h}"] = med["fused"] * flop / 1e9 / out[f"matmul_gflops_{h}"]
+            for k in ("foreach", "before"):
+                out[f"flop_fraction_{k}_{h}"] = med[k] * flop / 1e9 / out[f"matmul_gflops_{h}"]
             mm_flop = flops(variants["matmuls"])
             out[f"matmuls_alone_fraction_{h}"] = med["matmuls"] * mm_flop / 1e9 / out[f"matmul_gflops_{h}"]
             if compiled:
@@ -421,7 +429,8 @@ def main() -> None:
             print(
                 f"  2×{h}: {f[f'update_gflop_{h}']:.3f} GFLOP per update, {f[f'update_gflops_{h}']:.1f} GFLOP/s vs "
                 f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
-                f"(goal ≥ 60 %); --fused-adam {100 * f[f'flop_fraction_fused_{h}']:.0f} %; its matmuls alone "
+                f"(goal ≥ 60 %); with foreach Adam {100 * f[f'flop_fraction_foreach_{h}']:.0f} %; the step before "
+                f"12-05 {100 * f[f'flop_fraction_before_{h}']:.0f} %; its matmuls alone "
                 f"{100 * f[f'matmuls_alone_fraction_{h}']:.0f} %"
             )
             if f"compile_s_{h}" in f:

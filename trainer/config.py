@@ -46,7 +46,8 @@ class Config:
     threads: int = 0  # torch intra-op threads; 0 = auto (trainer/threads.py: 1 on ≤ 4 cores or small nets)
     physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
     compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
-    fused_adam: bool = False  # Adam's fused kernel (trainer/optim.py): faster, rounds differently from foreach
+    fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
+    fast_ops: bool = True  # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05
     acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)
     hidden: int = 1024

@@ -52,10 +52,17 @@ class Metra:
         f = feature_dim(obs_shape)
         enc = self._encoders(obs_shape, cfg.encoder)
         self.phi = SkillLatent(f, k, h, n, enc["phi"]).to(device)
-        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"]).to(device)
-        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"]).to(device)
+        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"], cfg.fast_ops).to(device)
+        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"], cfg.fast_ops).to(device)
         self.policy = TanhGaussianPolicy(
-            f + k, action_dim, h, n, enc["policy"], detach_encoder=cfg.encoder == "shared", log_std_min=cfg.log_std_min
+            f + k,
+            action_dim,
+            h,
+            n,
+            enc["policy"],
+            detach_encoder=cfg.encoder == "shared",
+            log_std_min=cfg.log_std_min,
+            fast=cfg.fast_ops,
         ).to(device)
         if cfg.init == "reference":
             init_like_reference(self.phi, self.qf, self.policy)
