@@ -1,10 +1,11 @@
 """Adam as every learner builds it: which kernel runs the step.
 
-`foreach` (the default) updates all of an optimiser's tensors with multi-tensor ops: the same
-arithmetic, in the same order, as torch's per-tensor loop, so runs are bit-identical to it.
-`fused` (`--fused-adam true`) runs one kernel per parameter that reads and writes each element
-once; on the CPU it is several times faster for small nets, but it rounds differently (≈ 1 ulp
-per step), so a run is deterministic per seed yet not bit-identical to a `foreach` one.
+`fused` (the default since 2026-12-05) runs one kernel per parameter that reads and writes each
+element once; on the CPU it is several times faster than the multi-tensor ops for small nets.
+`foreach` (`--fused-adam false`) updates all of an optimiser's tensors with multi-tensor ops: the
+same arithmetic, in the same order, as torch's per-tensor loop, so runs are bit-identical to it and
+to every run before 2026-12-05. The two round differently (≈ 1 ulp per step): each is deterministic
+per seed, but a fused run is not bit-identical to a foreach one.
 """
 
 from __future__ import annotations

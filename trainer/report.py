@@ -40,7 +40,7 @@ import numpy as np
 from collie.tasks import Task, get_task
 from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
-from trainer.run_files import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, read_arrays, read_json_object
 from trainer.task_choice import saved_rule
 
 METRICS: tuple[tuple[str, str, int], ...] = (
@@ -143,8 +143,7 @@ def add_diagnostics(run: RunResult) -> None:
     saved = run.path / "eval_latest.npz"
     if not saved.exists():
         return
-    with np.load(saved) as f:
-        xy = list(f["xy"])
+    xy = list(read_arrays(saved, ("xy",))["xy"])  # a damaged file: RunFolderError naming it
     dims, task = env_class(run.env).position_dims, run_task(run)
     run.metrics["standing_share"] = standing_share([t[:, :dims] for t in xy])
     if task is not None and dims == 2:
@@ -336,8 +335,12 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     broken = [(path, why) for path, why in unreadable if out not in path.parents]
     runs = [r for r in every if r.status == "finished"]
     skipped = [r for r in every if r.status != "finished"]
-    for r in runs:
-        add_diagnostics(r)
+    for r in list(runs):
+        try:
+            add_diagnostics(r)
+        except RunFolderError as exc:  # its final evaluation is unreadable: left out, with why
+            runs.remove(r)
+            broken.append((r.path, str(exc)))
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
     if figures and runs:
@@ -380,7 +383,7 @@ def run(args: argparse.Namespace) -> int:
     for root in roots:  # a run folder given itself: a broken one is an error, not a line in the report
         if (root / "summary.json").exists():
             try:
-                load_run(root)
+                add_diagnostics(load_run(root))  # its final evaluation read too
             except RunFolderError as exc:
                 print(f"collie report: error: {exc}", file=sys.stderr)
                 return 2

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
 from trainer.report import VISITED_MARK, RunResult, metric_value, run_task
+from trainer.run_files import read_arrays
 
 MAX_COLUMNS = 4  # panels per row
 
@@ -21,9 +22,9 @@ MAX_COLUMNS = 4  # panels per row
 def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
     """(xy (n, T+1, 2), skills (n, k)) of the run's last evaluation."""
     saved = run.path / "eval_latest.npz"
-    if saved.exists():
-        with np.load(saved) as f:
-            return f["xy"], f["skill"]
+    if saved.exists():  # readable: write_report left out the runs whose file is not
+        arrays = read_arrays(saved, ("xy", "skill"))
+        return arrays["xy"], arrays["skill"]
     from trainer.acting import acting_path
     from trainer.envs import VectorEnv
     from trainer.pretrained import load_skills

@@ -29,7 +29,7 @@ from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
 from trainer.report import load_run
-from trainer.run_files import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, read_arrays, read_json_object
 from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
@@ -88,8 +88,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
         if keep_existing and same_run(held.get("rescored_from"), source):
             return out
         raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
-    with np.load(saved) as f:
-        xy, pitch = list(f["xy"].astype(np.float64)), list(f["pitch"].astype(np.float64))
+    arrays = read_arrays(saved, ("xy", "pitch"))  # RunFolderError, a ValueError, names a damaged one
+    xy, pitch = list(arrays["xy"].astype(np.float64)), list(arrays["pitch"].astype(np.float64))
     cfg.update(task=task)
     config, env = Config.from_stored(cfg), env_class(cfg["env"])
     figures = coverage_metrics(

@@ -1,11 +1,15 @@
-"""Reading a run folder's JSON files (summary.json, config.json, task.json, …) so that a missing or
-damaged one is an error naming the file, for every command that reads run folders."""
+"""Reading a run folder's files (summary.json, config.json, task.json, eval_latest.npz, …) so that a
+missing or damaged one is an error naming the file, for every command that reads run folders."""
 
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 
 class RunFolderError(ValueError):
@@ -24,3 +28,19 @@ def read_json_object(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise RunFolderError(f"{path}: not a JSON object")
     return data
+
+
+def read_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The arrays `keys` of the .npz file at `path`; RunFolderError naming the file and why if it is
+    missing, damaged (cut short, not an npz) or lacks one of them."""
+    try:
+        with np.load(path) as f:
+            found = {k: f[k] for k in keys if k in f.files}
+    except FileNotFoundError:
+        raise RunFolderError(f"{path}: missing") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise RunFolderError(f"{path}: not a readable .npz ({exc})") from None
+    missing = [k for k in keys if k not in found]
+    if missing:
+        raise RunFolderError(f"{path}: no {', '.join(missing)} in it")
+    return found

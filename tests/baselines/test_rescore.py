@@ -114,3 +114,13 @@ def test_a_broken_summary_is_a_one_line_error_naming_it(tmp_path, capsys, summar
     assert main(["rescore", str(source), "--task", "range"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"collie rescore: error: {source / 'summary.json'}") and why in err
+
+
+def test_a_damaged_final_evaluation_is_a_one_line_error_naming_it(tmp_path, capsys):
+    source, _ = finished_run(tmp_path)
+    saved = source / "eval_latest.npz"
+    saved.write_bytes(saved.read_bytes()[:100])
+    assert main(["rescore", str(source), "--task", "range"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie rescore: error: {saved}: not a readable .npz") and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "ant-range-metra-s0").exists()
