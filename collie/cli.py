@@ -22,6 +22,20 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def joined_values(argv: list[str], options: tuple[str, ...]) -> list[str]:
+    """`--train-args "--compile"` as `--train-args=--compile`: argparse takes a separate value that
+    starts with '-' for an option and refuses it, though such an option's value is a string of flags."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in options and i + 1 < len(argv):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     from collie.startup import mark
 
@@ -39,6 +53,7 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error(f"'{name}' is not available: {exc}")
             module.add_arguments(p)
             p.set_defaults(_module=module)
+            argv = joined_values(argv, getattr(module, "DASHED_VALUE_OPTIONS", ()))
     args, unknown = parser.parse_known_args(argv)
     if unknown:  # as parse_args says it, with the command's hint where it has one (sweep: train flags after --)
         hint = getattr(getattr(args, "_module", None), "UNRECOGNIZED_HINT", "")  # none before the command's name

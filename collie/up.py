@@ -132,6 +132,8 @@ def run_name(args: argparse.Namespace) -> str:
     return args.task or (args.task_file.stem if args.task_file is not None else "north")
 
 
+DASHED_VALUE_OPTIONS = ("--train-args",)  # its value is flags: `--train-args "--compile"` (collie/cli.py)
+
 # `collie train` flags that `collie up` sets itself: given in --train-args they would contradict it
 UP_OWNS = ("--out", "--api", "--run-id", "--resume", "--env", "--task", "--task-file", "--instruction",
            "--method", "--preset", "--seed", "--token", "--token-file")  # fmt: skip

@@ -26,6 +26,7 @@ def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.Completed
         (["--out", "afile"], "--out afile is a file"),
         (["--info-json", "."], "--info-json . is a folder"),
         (["--train-args=--out elsewhere --epochs 2"], "--train-args may not set --out"),
+        (["--train-args", "--api=http://x"], "--train-args may not set --api"),  # a value that is one flag
         (["--teacher-rate", "-1", "--teacher", "oracle"], "--teacher-rate must be > 0"),
     ],
 )
