@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -180,6 +181,26 @@ def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0
     assert f"labeler URL: {served['url']}?token=tok%20en" in out
+
+
+def test_a_port_in_use_is_said_with_the_port_served_instead(stack: Stack, tmp_path: Path) -> None:
+    info = tmp_path / "ui.json"
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        taken = busy.getsockname()[1]
+        cmd = [sys.executable, "-m", "labeling_ui.cli", "--api", stack.api, "--port", str(taken)]
+        proc = subprocess.Popen([*cmd, "--info-json", str(info)], stdout=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 30
+            while not info.exists() and time.monotonic() < deadline:
+                time.sleep(0.1)
+            served = json.loads(info.read_text())["port"]
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            out, _ = proc.communicate(timeout=20)
+    assert served != taken
+    assert f"port {taken} is in use; serving on port {served} instead" in out
 
 
 def test_fits_the_collie_command(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
