@@ -98,7 +98,8 @@ async def claim(
     tab: Annotated[TabId | None, Query(description="the browser tab the claim is for: only it may label it")] = None,
 ) -> Response:
     """Renew every lease the caller holds here and return their `hold`-th query (of those held for
-    `tab`), taking the oldest pending one when they hold fewer (204: none to take now)."""
+    `tab`), taking the oldest pending one when they hold fewer (204: none to take now; 409 for a
+    finished run, or a tab beyond the labeler's MAX_TABS tabs' worth of held queries)."""
     with db.write() as conn:
         claimed = leases.claim(conn, run_id, caller, lease_s or settings.lease_s, hold, tab)
     if claimed is None:

@@ -10,9 +10,9 @@ A claim may name the browser tab it is for: the lease records it, and a label th
 is taken only from the tab holding the lease (services/labels.py), so a stale tab never labels a
 segment another tab of the same labeler shows. Each tab holds up to MAX_HOLD queries (the one on
 screen and the next, preloaded) and sees only its own; a labeler's tabs hold at most
-MAX_HOLD × MAX_TABS. A claim without a tab is the labeler's as a whole (an API client): it sees
-every query they hold and may hold MAX_HOLD. Statements are built once: this is the hottest path
-of the service."""
+MAX_HOLD × MAX_TABS, and a tab beyond that which holds none is refused with why. A claim without a
+tab is the labeler's as a whole (an API client): it sees every query they hold and may hold
+MAX_HOLD. Statements are built once: this is the hottest path of the service."""
 
 from __future__ import annotations
 
@@ -137,6 +137,11 @@ def claim(
         raise NotFound(f"no run {run_id}")
     if state.status in FINISHED or state.control == "stop":
         raise Conflict(f"run {run_id} takes no more labels ({state.status}, control {state.control})")
+    if not room and not held:  # a tab too many: say so, where an empty answer would read as "no work"
+        raise Conflict(
+            f"your other tabs hold {len(renewed)} segments of run {run_id}, as many as {MAX_TABS} tabs may; "
+            "close one of them to label in this one"
+        )
     return None
 
 

@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 import pytest
 
-from collie.client import CollieClient, NotHolding
+from collie.client import CollieClient, Conflict, NotHolding
 from collie.schemas import MAX_HOLD, MAX_TABS, RunCreate, RunRead
 
 from .conftest import make_run_spec, make_session
@@ -133,8 +133,14 @@ def test_a_labeler_holds_at_most_max_tabs_tabs_worth(
     for tab in tabs[:MAX_TABS]:
         for hold in range(1, MAX_HOLD + 1):
             assert who.claim(run.id, tab=tab, hold=hold) is not None
-    assert who.claim(run.id, tab=tabs[-1]) is None  # one tab too many: nothing more to hold
+    with pytest.raises(Conflict, match=f"your other tabs hold {MAX_HOLD * MAX_TABS} segments"):
+        who.claim(run.id, tab=tabs[-1])  # one tab too many: told so, not "nothing to label"
     assert trainer.run(run.id).queue.leased == MAX_HOLD * MAX_TABS
+    first = tabs[0]
+    held = who.claim(run.id, tab=first)
+    assert held is not None
+    who.submit(run.id, held.query.query_id, 1, tab=first)  # a tab labels: room for the fifth again
+    assert who.claim(run.id, tab=tabs[-1]) is not None
 
 
 def test_a_label_can_claim_the_tabs_next_preload(
