@@ -71,9 +71,16 @@ def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: Backgr
         page.fill("#labeler-name", "alice-web")
         page.click("#labeler-create")
         page.wait_for_function("document.querySelector('#labeler-message').textContent.includes('taken')")
+        page.fill("#labeler-name", "bob-web")
+        assert page.text_content("#labeler-message") == ""  # typing again clears the old error
+        page.click("#labeler-create")
+        page.wait_for_selector('#labelers-body tr[data-labeler="bob-web"]')
         button = page.locator('#labelers-body tr[data-labeler="alice-web"] button')
+        other = page.locator('#labelers-body tr[data-labeler="bob-web"] button')
+        other.click()
         button.click()
         assert button.text_content() == "Confirm revoke"  # one click only arms it
+        assert other.text_content() == "Revoke"  # and disarms the other
         alice.me()
         button.click()
         page.wait_for_selector('#labelers-body tr.revoked[data-labeler="alice-web"]')

@@ -30,6 +30,7 @@ export class LabelerPanel {
     this.body = root.querySelector("#labelers-body");
     this.message = root.querySelector("#labeler-message");
     this.armed = null;
+    root.querySelector("#labeler-name").addEventListener("input", () => { this.message.textContent = ""; });
     root.querySelector("#labeler-form").addEventListener("submit", (event) => {
       event.preventDefault();
       this.create(root.querySelector("#labeler-name").value.trim());
@@ -79,8 +80,17 @@ export class LabelerPanel {
     }
   }
 
+  disarm() {
+    if (this.armed) {
+      this.armed.textContent = "Revoke";
+      this.armed.classList.remove("confirm");
+    }
+    this.armed = null;
+  }
+
   async revoke(id, button) {
-    if (this.armed !== button) { // the first click arms, the second revokes
+    if (this.armed !== button) { // the first click arms (and disarms another), the second revokes
+      this.disarm();
       this.armed = button;
       button.textContent = "Confirm revoke";
       button.classList.add("confirm");
@@ -89,6 +99,7 @@ export class LabelerPanel {
     this.armed = null;
     try {
       await api(`labelers/${id}`, { method: "DELETE" });
+      this.message.textContent = "";
       this.root.querySelector("#labeler-created").hidden = true; // a shown token may be the revoked one
     } catch (error) {
       this.message.textContent = error.message;
