@@ -69,7 +69,7 @@ def run_state(run: RunRead) -> str:
 
 
 def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
-    """The waiting screen's status. `held_here`: this tab's own claims (never "others")."""
+    """The waiting screen's status. `held_here`: this tab's own claims (never "elsewhere")."""
     q = run.queue
     others = max(q.leased - held_here, 0)
     lines = [f"Run {run.id} ({run.env}, {run.task}) is *{run_state(run)}* at epoch **{fc.epoch}**."]
@@ -81,6 +81,6 @@ def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
             lines.append("The trainer posts the next feedback session when its schedule says so.")
     tail = f"{run.n_labels} labelled"
     if others and run.status not in FINISHED:  # an ended run's leases only wait to run out
-        tail = f"{others} being labelled by others, " + tail
+        tail = f"{others} being labelled elsewhere (other labelers, or your other tabs), " + tail
     lines.append(tail + ".")
     return "  \n".join(lines)

@@ -188,7 +188,7 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     wait_text(page, "While you wait: the latest evaluation")
     time.sleep(1.0)
     assert canvas_pixels(page, artifacts / "waiting-skills.png").std() > 10.0  # not a blank screen
-    assert "being labelled by others" not in page.inner_text("body")
+    assert "being labelled elsewhere" not in page.inner_text("body")
     stack.operator.stop(run.id)
     stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab
     wait_text(page, "stopping")

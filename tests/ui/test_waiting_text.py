@@ -1,6 +1,6 @@
 """The waiting screen's words (labeling_ui/waiting.py): the next feedback epoch from the trainer's
 schedule, an ETA from its epoch rate, stopped is not finished, and this tab's own claims are never
-"being labelled by others"."""
+"being labelled elsewhere"."""
 
 from __future__ import annotations
 
@@ -40,7 +40,9 @@ def test_stopped_is_not_finished_and_own_claims_are_not_others() -> None:
     assert run_state(run().model_copy(update={"control": "stop"})) == "stopping"
     assert run_state(run().model_copy(update={"status": "finished"})) == "finished"
     mine = run().model_copy(update={"queue": QueueCounts(leased=2)})
-    assert "others" not in waiting_text(mine, forecast(mine, []), held_here=2)
-    assert "1 being labelled by others" in waiting_text(mine, forecast(mine, []), held_here=1)
+    assert "elsewhere" not in waiting_text(mine, forecast(mine, []), held_here=2)
+    assert "1 being labelled elsewhere (other labelers, or your other tabs)" in waiting_text(
+        mine, forecast(mine, []), held_here=1
+    )
     ended = stopped.model_copy(update={"queue": QueueCounts(leased=2)})  # leases that only wait to run out
-    assert "others" not in waiting_text(ended, forecast(ended, []), held_here=0)
+    assert "elsewhere" not in waiting_text(ended, forecast(ended, []), held_here=0)
