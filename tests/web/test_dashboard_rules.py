@@ -17,8 +17,8 @@ WAIT_MS = 30_000
 WEDGE = [[0.0, 0.0], [40.0, -40.0], [40.0, 40.0]]
 
 
-def open_run(browser: Any, live: BackgroundServer, run_id: int) -> Any:
-    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+def open_run(browser: Any, live: BackgroundServer, run_id: int, width: int = 1400) -> Any:
+    page = browser.new_page(viewport={"width": width, "height": 1000})
     page.set_default_timeout(WAIT_MS)
     page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run_id}")
     # a selector, not wait_for_function: Playwright evaluates a string predicate with eval when it
@@ -63,4 +63,29 @@ def test_an_instruction_run_shows_the_instruction_no_regions_and_only_rule_free_
     shapes = page.evaluate("document.querySelector('#map').layout.shapes ?? []")
     assert shapes == []  # nothing pretends to know what is safe
     assert "no task rule" in page.locator("#labeling-body").inner_text()
+    page.close()
+
+
+def test_curve_titles_and_legends_do_not_overlap_on_a_narrow_screen(
+    live: BackgroundServer, browser: Any, trainer: CollieClient, artifacts: Any
+) -> None:
+    run = trainer.create_run(make_run_spec())
+    names = ["safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage", "lambda", "alpha"]
+    names += ["phi_loss", "qf_loss", "policy_loss", "n_labels", "n_bins", "n_labels_bad", "n_labels_neutral"]
+    names += ["n_labels_good", "w_mean", "w_min", "w_max"]
+    for epoch in (1, 2):
+        trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values=dict.fromkeys(names, float(epoch))))
+    page = open_run(browser, live, run.id, width=820)
+    page.wait_for_function("document.querySelector('#curves').dataset.points === '2'")
+    boxes = page.eval_on_selector_all(
+        "#curves g.annotation",
+        "gs => gs.map(g => { const r = g.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; })",
+    )
+    width = page.evaluate("document.querySelector('#curves').getBoundingClientRect().right")
+    assert len(boxes) >= 10
+    for i, (l1, t1, r1, b1) in enumerate(boxes):
+        assert r1 <= width + 1, f"annotation {i} runs off the plot"
+        for l2, t2, r2, b2 in boxes[i + 1 :]:
+            assert r1 <= l2 or r2 <= l1 or b1 <= t2 or b2 <= t1, "two panels' titles overlap"
+    page.locator("#curves").screenshot(path=str(artifacts / "curves-820px.png"))
     page.close()

@@ -76,9 +76,9 @@ export class Curves {
     const rows = Math.max(1, Math.ceil(panels.length / COLUMNS));
     const traces = [];
     const layout = {
-      grid: { rows, columns: COLUMNS, pattern: "independent", ygap: 0.45, xgap: 0.12 },
-      margin: { l: 55, r: 10, t: 24, b: 30 }, showlegend: false, annotations: [], uirevision: "curves",
-      height: 40 + 150 * rows,
+      grid: { rows, columns: COLUMNS, pattern: "independent", ygap: 0.6, xgap: 0.12 },
+      margin: { l: 55, r: 10, t: 40, b: 30 }, showlegend: false, annotations: [], uirevision: "curves",
+      height: 50 + 175 * rows,
     };
     panels.forEach((panel, p) => {
       const axis = p === 0 ? "" : String(p + 1);
@@ -90,10 +90,11 @@ export class Curves {
       }));
       layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined };
       layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
-      // the panel's legend: each series' name in its line's colour
+      // the panel's legend, under its title (one line would run into the next panel on a narrow
+      // screen): each series' name in its line's colour
       const legend = panel.names.map((n, i) => `<span style="color:${PALETTE[i % PALETTE.length]}">━ ${n}</span>`).join("  ");
       layout.annotations.push({
-        text: `<b>${panel.title}</b>  ${legend}`, showarrow: false,
+        text: `<b>${panel.title}</b><br>${legend}`, showarrow: false, align: "left",
         xref: `x${axis} domain`, yref: `y${axis} domain`, x: 0, y: 1.02, xanchor: "left", yanchor: "bottom",
         font: { size: 12 },
       });
