@@ -190,14 +190,17 @@ def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> Non
 def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
     # TRAIN gives --env point and --preset smoke again (as `collie up` and `collie sweep` do): not warned
     proc = train(
-        "--out", str(run_copy), "--resume", "--epochs", "3", "--env", "ant", "--method", "metra", "--hidden", "64"
-    )
+        "--out", str(run_copy), "--resume", "--epochs", "3", "--env", "ant", "--method", "metra", "--hidden", "64",
+        "--threads", "2",
+    )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     warnings = [ln for ln in proc.stderr.splitlines() if ln.startswith("collie train: warning:")]
     assert len(warnings) == 1, proc.stderr[-3000:]
     assert "--env ant (the run's: point)" in warnings[0] and "--method metra (the run's: collie)" in warnings[0]
     assert "--epochs" not in warnings[0] and "--hidden" not in warnings[0] and "--preset" not in warnings[0]
     assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"
+    assert "--threads" not in warnings[0]  # a runtime setting: the resumed run uses what it is given
+    assert json.loads((run_copy / "config.json").read_text())["threads"] == 2
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:

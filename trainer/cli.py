@@ -103,6 +103,9 @@ class _Given(argparse.Action):
 
 
 RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
+# how many cores a resumed run uses, not what it computes: taken from the command line when given
+# (more intra-op threads may round some reductions differently, as a fresh run with them would)
+RESUME_RUNTIME = ("threads", "physics_threads")
 
 
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
@@ -110,7 +113,7 @@ def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> l
     return [
         f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
         for k in sorted(args.given)
-        if k not in RESUME_MAY_CHANGE and hasattr(run, k) and getattr(asked, k) != getattr(run, k)
+        if k not in (*RESUME_MAY_CHANGE, *RESUME_RUNTIME) and hasattr(run, k) and getattr(asked, k) != getattr(run, k)
     ]
 
 
@@ -270,6 +273,7 @@ def run(args: argparse.Namespace) -> int:
                 stored = read_json_object(saved)  # a damaged one: RunFolderError naming it
                 stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
                 stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
+                stored |= {k: getattr(cfg, k) for k in RESUME_RUNTIME if k in args.given}
                 asked, cfg = cfg, Config.from_stored(stored)
                 ignored = ignored_on_resume(args, asked, cfg)
                 if ignored:
