@@ -35,6 +35,10 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
 5. Checkpoints: a periodic checkpoint of an Ant `cpu` run (replay holding 200 trajectories, 25
    epochs of new ones since the last checkpoint). Keys `checkpoint_s` (goal < 1), `checkpoint_mb`
    (bytes written, goal < 50), `replay_mb` (the whole replay, what a checkpoint used to rewrite).
+6. Kernels (`--fast-ops`, trainer/networks.py), one thread, forward and backward on a batch of 256
+   at width h = 256 and 1024: `tanh_speedup_<h>` (torch.tanh's time ÷ `Tanh`'s, 2σ(2x) − 1) and
+   `one_output_speedup_<h>` (the twin Q's one-output layer by bmm ÷ by multiply-sum), with the
+   times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`).
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ from trainer.envs import VectorEnv, make_env
 from trainer.guidance import LabelledSets, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
+from trainer.networks import EnsembleLinear, Tanh
 from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
@@ -395,7 +400,39 @@ def bench_checkpoint() -> dict[str, float]:
         }
 
 
-PARTS = ("update", "flops", "rollout", "sampling", "checkpoint")
+def fwd_bwd_us(module: torch.nn.Module, x: torch.Tensor, repeats: int = 200) -> float:
+    """Median µs of one forward and backward pass of `module` on `x` (5 blocks of `repeats`)."""
+    grad = torch.randn_like(module(x))
+
+    def once() -> None:
+        x.grad = None
+        module(x).backward(grad)
+
+    return 1e6 / float(np.median([timed(once, repeats) for _ in range(5)]))
+
+
+def bench_kernels() -> dict[str, float]:
+    """`--fast-ops`'s two kernels against torch's, one thread, batch 256."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    out: dict[str, float] = {}
+    try:
+        for h in (256, 1024):
+            x = torch.randn(256, h, requires_grad=True)
+            out[f"tanh_us_{h}"] = fwd_bwd_us(torch.nn.Tanh(), x)
+            out[f"fast_tanh_us_{h}"] = fwd_bwd_us(Tanh(), x)
+            hidden = torch.randn(2, 256, h, requires_grad=True)
+            fast, exact = EnsembleLinear(2, h, 1), EnsembleLinear(2, h, 1, fast=False)
+            out[f"one_output_bmm_us_{h}"] = fwd_bwd_us(exact, hidden)
+            out[f"one_output_fast_us_{h}"] = fwd_bwd_us(fast, hidden)
+            out[f"tanh_speedup_{h}"] = out[f"tanh_us_{h}"] / out[f"fast_tanh_us_{h}"]
+            out[f"one_output_speedup_{h}"] = out[f"one_output_bmm_us_{h}"] / out[f"one_output_fast_us_{h}"]
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
+PARTS = ("update", "flops", "rollout", "sampling", "checkpoint", "kernels")
 
 
 def main() -> None:
@@ -468,6 +505,16 @@ def main() -> None:
             f"periodic checkpoint (ant, cpu preset): {c['checkpoint_s']:.2f} s, {c['checkpoint_mb']:.1f} MB written "
             f"(goal < 1 s, < 50 MB; the whole replay is {c['replay_mb']:.0f} MB)"
         )
+    if "kernels" in parts:
+        k = bench_kernels()
+        figures |= k
+        for h in (256, 1024):
+            print(
+                f"kernels, 256 × {h}, forward + backward: tanh {k[f'tanh_us_{h}']:.0f} µs vs 2σ(2x) − 1 "
+                f"{k[f'fast_tanh_us_{h}']:.0f} µs ({k[f'tanh_speedup_{h}']:.1f}×); one-output twin-Q layer by bmm "
+                f"{k[f'one_output_bmm_us_{h}']:.0f} µs vs multiply-sum {k[f'one_output_fast_us_{h}']:.0f} µs "
+                f"({k[f'one_output_speedup_{h}']:.1f}×)"
+            )
     name = "update" if a.only is None else "-".join(["update", *parts])  # a partial run keeps the full file
     record(name, {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **figures})
 

@@ -38,9 +38,10 @@ class _TanhViaSigmoid(torch.autograd.Function):
 
 
 class Tanh(nn.Tanh):
-    """nn.Tanh computed as 2σ(2x) − 1: on the CPU wheel torch's tanh kernel is ≈ 6× slower than its
-    sigmoid, and the policy trunk runs it on every hidden unit. Equal to torch.tanh within 2e-7
-    (float32 rounding near 0.5 inside σ)."""
+    """nn.Tanh computed as 2σ(2x) − 1: on the CPU wheel torch's tanh kernel is several times slower
+    than its sigmoid, and the policy trunk runs it on every hidden unit (`make bench-update`:
+    `tanh_speedup_<h>`, forward and backward). Equal to torch.tanh within 2e-7 (float32 rounding
+    near 0.5 inside σ)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return _TanhViaSigmoid.apply(x)
@@ -73,7 +74,7 @@ class SkillLatent(nn.Module):
 class EnsembleLinear(nn.Module):
     """`n` independent linear layers evaluated in one batched matmul (twin Q as one call). With
     `fast`, a one-output layer is a multiply-and-sum instead: bmm's kernel for a matrix-vector
-    product is ≈ 4–7× slower on the CPU (forward and backward, 2×256 and 2×1024)."""
+    product is several times slower on the CPU (`make bench-update`: `one_output_speedup_<h>`)."""
 
     def __init__(self, n: int, inp: int, out: int, fast: bool = True) -> None:
         super().__init__()
