@@ -33,7 +33,7 @@ class _TanhViaSigmoid(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor) -> torch.Tensor:
-        (y,) = ctx.saved_tensors  # type: ignore[attr-defined]
+        (y,) = ctx.saved_tensors  # type: ignore[attr-defined]  # set by save_for_backward; not in the stub
         return torch.ops.aten.tanh_backward(grad, y)
 
 
