@@ -89,7 +89,8 @@ def test_which_statistics_a_run_gets() -> None:
 def test_a_saved_run_from_before_these_options_keeps_what_it_ran_with() -> None:
     saved = make_config("cpu", "ant").to_dict()
     assert Config.from_stored(saved) == make_config("cpu", "ant")
-    for key in ("init", "log_std_min", "diayn", "obs_norm", "bin_rule"):
+    for key in ("init", "log_std_min", "diayn", "obs_norm", "bin_rule", "fused_adam", "fast_ops"):
         saved.pop(key)
     old = Config.from_stored({**saved, "a_key_from_the_future": 1})
     assert (old.obs_norm, old.init, old.log_std_min, old.diayn) == ("rollout", "torch", -5.0, "sphere")
+    assert not old.fused_adam and not old.fast_ops  # a resumed old run keeps its step's arithmetic

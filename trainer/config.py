@@ -191,7 +191,13 @@ class Config:
 
 # What runs saved before these options existed ran with (they wrote no such key).
 FIRST_VERSION: dict[str, Any] = dict(
-    init="torch", log_std_min=-5.0, diayn="sphere", obs_norm="rollout", bin_rule="visited"
+    init="torch",
+    log_std_min=-5.0,
+    diayn="sphere",
+    obs_norm="rollout",
+    bin_rule="visited",
+    fused_adam=False,
+    fast_ops=False,
 )
 
 PRESET_VALUES: dict[str, dict[str, Any]] = {
