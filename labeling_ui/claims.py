@@ -27,14 +27,17 @@ class Claims:
         self.screen = screen
         self.prefetch = prefetch  # claim and prepare the next segment while one is on screen
         self.next_claim: ClaimRead | None = None  # the preload a label's answer carried (used once)
+        self.refused: str | None = None  # why the last claim was refused (a run that ended, a tab too many)
 
     def claim(self, link: ServiceLink, run: RunRead) -> tuple[RunRead, QueryRead] | None:
         """A segment this tab may show: a fresh claim, or one this labeler holds that no other of
         its tabs shows (the service keeps claims per labeler)."""
+        self.refused = None
         for hold in (1, MAX_HOLD):
             try:
                 claimed = link.claim(run.id, hold=hold)
-            except Rejected:  # the run stopped or finished meanwhile
+            except Rejected as exc:  # the run stopped or finished meanwhile, or this is a tab too many
+                self.refused = str(exc)
                 return None
             if claimed is None:
                 return None

@@ -65,7 +65,7 @@ class Presenter:
                 return False
             claim = self.claims.claim(link, run)
         if claim is None:
-            self.wait_for(link, run, None)
+            self.wait_for(link, run, None, refused=self.claims.refused)
             return False
         self.present(link, self.claims.prepare(*claim))
         return True
@@ -127,8 +127,9 @@ class Presenter:
 
     # ---------------------------------------------------------------- nothing to label
 
-    def wait_for(self, link: ServiceLink, run: RunRead | None, status: str | None) -> None:
-        """Nothing claimable in `run` (None: no run is open; `status` says so)."""
+    def wait_for(self, link: ServiceLink, run: RunRead | None, status: str | None, refused: str | None = None) -> None:
+        """Nothing claimable in `run` (None: no run is open; `status` says so); `refused`: the
+        service's reason, when it refused the claim (e.g. this labeler's other tabs hold enough)."""
         run = link.run(run.id) if run is not None else None  # fresh counts, after our own claims
         with self.tab as state:
             state.nothing_claimable(run, time.monotonic(), self.wait_s)
@@ -141,6 +142,8 @@ class Presenter:
         if run is not None:
             status = waiting_text(run, forecast(run, link.metrics(run.id)), held_here)
             self.load_mine(link, run)
+        if refused:
+            status = f"⚠️ The service said: {refused}  \n{status or ''}"
         skills = self.skills
         ended = run is not None and (run.status in FINISHED or run.control == "stop")
         keep = skills is not None and run is not None and skills.run_id == run.id

@@ -104,8 +104,9 @@ class _Given(argparse.Action):
 
 RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
 # how many cores a resumed run uses, not what it computes: taken from the command line when given
-# (more intra-op threads may round some reductions differently, as a fresh run with them would)
-RESUME_RUNTIME = ("threads", "physics_threads")
+# (more intra-op threads may round some reductions differently, as a fresh run with them would).
+# Not --physics-threads: the number of rollout groups changes the policy's noise draws.
+RESUME_RUNTIME = ("threads",)
 
 
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:

@@ -102,8 +102,8 @@ class Metra:
     def compile(self) -> None:
         """`--compile`: torch.compile each network's forward in place (its backward follows through
         AOTAutograd; state-dict keys are unchanged). The optimiser steps stay eager (`--fused-adam`
-        is their fast kernel), as do the losses between the networks. Off by default: on a busy
-        2-core CPU it compiled for minutes and stepped no faster (docs/training.md, `make bench-update`)."""
+        is their fast kernel), as do the losses between the networks. Off by default: on the 2-core
+        CPU it stepped no faster, busy or quiet (docs/training.md, `make bench-update`)."""
         for net in (self.phi, self.qf, self.qf_target, self.policy):
             net.compile()
 

@@ -34,7 +34,10 @@ def read_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     """The arrays `keys` of the .npz file at `path`; RunFolderError naming the file and why if it is
     missing, damaged (cut short, not an npz) or lacks one of them."""
     try:
-        with np.load(path) as f:
+        loaded = np.load(path)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy under the name: one array
+            raise ValueError("a single array, not an archive of named arrays")
+        with loaded as f:
             found = {k: f[k] for k in keys if k in f.files}
     except FileNotFoundError:
         raise RunFolderError(f"{path}: missing") from None

@@ -140,7 +140,7 @@ def claim(
     if not room and not held:  # a tab too many: say so, where an empty answer would read as "no work"
         raise Conflict(
             f"your other tabs hold {len(renewed)} segments of run {run_id}, as many as {MAX_TABS} tabs may; "
-            "close one of them to label in this one"
+            "close one of them (or label there) to label in this one"
         )
     return None
 

@@ -190,13 +190,18 @@ def test_a_broken_run_folder_is_named_and_left_out_and_given_alone_is_a_one_line
     assert len(err.strip().splitlines()) == 1
 
 
-def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, capsys):
+@pytest.mark.parametrize("damage", ["cut short", "a bare .npy"])
+def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, capsys, damage):
     from collie.cli import main
 
     runs = tmp_path / "runs"
     fake_run(runs, "point", "north", "oracle", 0, 9.0)
     cut = fake_run(runs, "point", "north", "metra", 0, -5.0) / "eval_latest.npz"
-    cut.write_bytes(cut.read_bytes()[:100])  # a write cut short
+    if damage == "cut short":
+        cut.write_bytes(cut.read_bytes()[:100])  # a write cut short
+    else:
+        with cut.open("wb") as f:
+            np.save(f, np.zeros(3))
     assert main(["report", str(runs)]) == 0
     out = capsys.readouterr().out
     assert "| Oracle | 9.00 |" in out and "METRA" not in out.split("Left out")[0]

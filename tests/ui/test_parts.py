@@ -16,12 +16,16 @@ import httpx
 import numpy as np
 import pytest
 
+from collie.schemas import MAX_HOLD, MAX_TABS
 from collie.tasks import get_task
+from labeling_ui.claims import Claims
+from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.inset import SIZE, render_inset, view_box
 from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
 from labeling_ui.service import AuthRefused, ServiceDown, ServiceLink
+from labeling_ui.tab import TabState
 
 from .stack import Stack
 
@@ -162,6 +166,17 @@ def test_service_link_sorts_errors(stack: Stack) -> None:
     progress = link.progress(run.id, 0)
     assert (progress.session_done, progress.session_size, progress.total_done) == (1, 2, 1)
     assert len(stack.trainer.label_events(run.id)) == 1
+
+
+def test_a_tab_too_many_keeps_the_services_reason(stack: Stack) -> None:
+    token = stack.new_labeler("five-tabs")
+    run = stack.post_run("point", MAX_HOLD * MAX_TABS + 2)
+    for t in range(MAX_TABS):  # four tabs, each holding its segment and the next
+        for hold in range(1, MAX_HOLD + 1):
+            assert ServiceLink(stack.api, token, tab=f"tab-full-{t:04d}").claim(run.id, hold=hold) is not None
+    claims = Claims(GuardedTab(TabState()), None, prefetch=True)  # type: ignore[arg-type]  # claim() needs no screen
+    assert claims.claim(ServiceLink(stack.api, token, tab="tab-fifth-0000"), run) is None
+    assert claims.refused is not None and f"your other tabs hold {MAX_HOLD * MAX_TABS} segments" in claims.refused
 
 
 def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path: Path) -> None:
