@@ -22,8 +22,8 @@ pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (test
 TRAIN = [sys.executable, "-m", "collie.cli", "train", "--env", "point", "--preset", "smoke", "--no-progress"]
 
 
-def train(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=timeout)
+def train(*args: str, timeout: float = 300, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*TRAIN, *args], capture_output=True, text=True, timeout=timeout, env=env)
 
 
 def refused(proc: subprocess.CompletedProcess[str], *words: str) -> str:
@@ -128,9 +128,13 @@ def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
 def test_device_cuda_without_cuda_is_refused(tmp_path: Path) -> None:
-    refused(train("--epochs", "1", "--out", str(tmp_path / "run"), "--device", "cuda"), "--device cuda", "no CUDA")
+    hidden = {**os.environ, "CUDA_VISIBLE_DEVICES": ""}  # no CUDA device, on any machine
+    out = str(tmp_path / "run")
+    refused(train("--epochs", "1", "--out", out, "--device", "cuda", env=hidden), "--device cuda", "no CUDA")
+    beyond = f"cuda:{torch.cuda.device_count()}"  # one past this machine's last device
+    refused(train("--epochs", "1", "--out", out, "--device", beyond), f"--device {beyond}", "CUDA devices")
+    assert not (tmp_path / "run").exists()
 
 
 TOKENS = {"operator": "op-" + "o" * 30, "trainer": "tr-" + "t" * 30, "labeler": "lb-" + "l" * 30}

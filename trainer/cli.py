@@ -232,10 +232,11 @@ RUN_OUTPUTS = (  # what the end-of-run line lists, where written
 RUN_FILES = ("checkpoint.pt", "summary.json")  # what a run leaves that a fresh start would overwrite
 
 
-def check_out(out: Path, resume: bool) -> None:
+def check_out(out: Path, resume: bool) -> list[Path]:
     """Refuse a run folder that a fresh start would overwrite (a long run lost by a forgotten --resume),
     one --resume cannot continue, or one we cannot write; then makes it (creating it is the one
-    test of writing there that root, for whom access() says yes everywhere, cannot pass by fiat)."""
+    test of writing there that root, for whom access() says yes everywhere, cannot pass by fiat).
+    Returns the folders it created, deepest first (removed again if the start fails)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder")
     if resume and not (out / "checkpoint.pt").is_file():
@@ -249,20 +250,32 @@ def check_out(out: Path, resume: bool) -> None:
         raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
     if not os.access(nearest, os.W_OK | os.X_OK):
         raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+    made = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # e.g. /sys, read-only for root too
         raise ValueError(f"--out {out}: cannot create it ({exc.strerror})") from None
+    return made
+
+
+def remove_if_empty(folders: list[Path]) -> None:
+    """Undo check_out's folders after a refused start (deepest first; any that holds a file stays)."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
+    made: list[Path] = []
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
-        check_out(Path(cfg.out), args.resume)
+        made = check_out(Path(cfg.out), args.resume)
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
             raise ValueError(  # the oracle would label a run people label through the service
                 f"--resume: {cfg.out} takes its labels from a labeling service (service_run.json): give --api "
@@ -306,6 +319,7 @@ def run(args: argparse.Namespace) -> int:
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
         mark("trainer built")  # envs, observation statistics, networks, replay
     except (ValueError, FileNotFoundError) as exc:
+        remove_if_empty(made)  # a refused start leaves no empty run folder behind
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
     try:
