@@ -6,7 +6,6 @@ service follows the definition the service holds.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from collie.task_schemas import TaskDefinition
 from collie.tasks import NotDeclarative, Task, from_definition, get_task, to_definition
 from collie.tasks.task_file import load_task_file
 from trainer.config import Config
+from trainer.run_files import read_json_object
 
 INSTRUCTION_TASK = "instruction"  # the run's task name when it has no rule
 TASK_JSON = "task.json"
@@ -58,14 +58,14 @@ def saved_rule(out: str | Path) -> RunRule | None:
     path = Path(out) / TASK_JSON
     if not path.exists():
         return None
+    saved = read_json_object(path)  # a damaged one: RunFolderError naming it
     try:
-        saved = json.loads(path.read_text())
         definition = saved.get("definition")
         if definition is None and saved.get("instruction") is None:
             return None  # a rule function (nothing written down): chosen again from the config
         return from_stored(
             None if definition is None else TaskDefinition.model_validate(definition), saved["instruction"]
         )
-    except (ValueError, KeyError, AttributeError) as exc:  # JSON and pydantic errors are ValueErrors
+    except (ValueError, KeyError) as exc:  # pydantic's errors are ValueErrors
         first = str(exc).splitlines()[0]
         raise ValueError(f"{path} (the run's rule) is damaged: {type(exc).__name__}: {first}") from None
