@@ -469,8 +469,10 @@ class Trainer:
         if self._signalled is not None:  # a second signal: stop now, without a checkpoint
             raise KeyboardInterrupt
         self._signalled = signum
+        reason = f"stopped by signal {signal.Signals(signum).name}"
+        self.feedback.interrupt(reason)  # the waits check it too: a raise from here can be dropped
         if self._waiting:
-            raise StopRequested(f"stopped by signal {signal.Signals(signum).name}")
+            raise StopRequested(reason)
 
     def _install_signal_handlers(self) -> dict[int, Any]:
         if threading.current_thread() is not threading.main_thread():
@@ -520,6 +522,8 @@ class Trainer:
             self._waiting = True
             try:
                 while wish == "pause":
+                    if self.feedback.interrupted is not None:
+                        raise StopRequested(self.feedback.interrupted)
                     time.sleep(0.5)
                     wish = self.feedback.control()
             finally:

@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
@@ -46,6 +47,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
         "--tokens-json",
         str(tokens_file),
     ]
+    env = {**env, "PYTHONFAULTHANDLER": "1"}  # for stop(): a hung server's stacks on SIGABRT
     server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, text=True)
     try:
         banner = server.stdout.readline()  # type: ignore[union-attr]
@@ -140,6 +142,7 @@ def start_serve(db: Path, tokens_file: Path | None, env: dict[str, str]) -> tupl
     command = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(db)]
     if tokens_file is not None:
         command += ["--tokens-json", str(tokens_file)]
+    env = {**env, "PYTHONFAULTHANDLER": "1"}  # for stop(): a hung server's stacks on SIGABRT
     server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines = [server.stdout.readline() for _ in range(4)]  # type: ignore[union-attr]
     return server, lines
@@ -147,7 +150,13 @@ def start_serve(db: Path, tokens_file: Path | None, env: dict[str, str]) -> tupl
 
 def stop(server: subprocess.Popen[str]) -> None:
     server.send_signal(signal.SIGINT)
-    assert server.wait(20) == 0
+    try:
+        code = server.wait(20)
+    except subprocess.TimeoutExpired:  # show where it hangs: faulthandler prints every thread's stack
+        server.send_signal(signal.SIGABRT)
+        _, err = server.communicate(timeout=20)
+        pytest.fail(f"collie serve did not stop within 20 s of Ctrl-C; its threads:\n{err[-8000:]}")
+    assert code == 0
 
 
 def test_a_restarted_service_keeps_its_tokens(tmp_path: Path) -> None:

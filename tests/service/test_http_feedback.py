@@ -125,6 +125,16 @@ def test_stop_while_waiting_raises(live: BackgroundServer, feedback: HttpFeedbac
         assert feedback.control() == "stop"
 
 
+def test_an_interrupt_ends_a_wait_within_one_chunk(feedback: HttpFeedback) -> None:
+    """The trainer's signal handler calls interrupt() before it raises: should Python drop that
+    raise (in a weakref callback or __del__), the wait still ends, at its next look."""
+    threading.Timer(0.3, feedback.interrupt, args=("stopped by signal SIGTERM",)).start()
+    started = time.monotonic()
+    with pytest.raises(StopRequested, match="SIGTERM"):
+        feedback.collect(0, 0, segments(0, 2))
+    assert time.monotonic() - started < 10  # one 2 s wait chunk, not the labels that never come
+
+
 def test_pause_holds_collect_until_resume(live: BackgroundServer, feedback: HttpFeedback) -> None:
     with CollieClient(live.url, TOKENS["operator"]) as operator:
         operator.pause(feedback.run_id)

@@ -55,6 +55,14 @@ class FeedbackSource(abc.ABC):
         """Publish a session's segments and block until its labels are in (or the source's
         timeout policy ends the wait). Returns the effective labels that arrived."""
 
+    interrupted: str | None = None  # set by interrupt()
+
+    def interrupt(self, reason: str) -> None:
+        """Ask a blocking `collect` to raise StopRequested(reason) at its next look (within one wait
+        chunk): the trainer's signal handler calls it, as a backstop to the exception it raises,
+        which Python drops if it lands in a weakref callback or __del__."""
+        self.interrupted = reason
+
     def revisions(self) -> list[LabelEvent]:
         """Labels changed since the last call (undo, relabel, late arrivals). Non-blocking."""
         return []

@@ -129,6 +129,8 @@ class HttpFeedback(FeedbackSource):
             self._pump(wait)
             if self._control == "stop":
                 raise StopRequested(f"run {self.run_id} was stopped by an operator")
+            if self.interrupted is not None:
+                raise StopRequested(self.interrupted)
             if self._control == "pause":
                 self._show("paused", epoch)
                 wait = self.wait_chunk_s  # labels keep arriving while paused; we return after a resume
