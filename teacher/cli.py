@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 import time
 
@@ -66,6 +67,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"collie teacher: error: {exc}", file=sys.stderr)
             return 2
         loop = TeacherLoop(client, args.run, oracle, rate=args.rate)
+
+        def on_interrupt(_signum: int, _frame: object) -> None:
+            loop.stop.set()  # the loop checks it too: Python drops a raise that lands in a weakref callback
+            raise KeyboardInterrupt
+
+        signal.signal(signal.SIGINT, on_interrupt)
         try:
             n = loop.run(until_done=args.until_done)
         except KeyboardInterrupt:
