@@ -1,7 +1,10 @@
 """Every benchmark's final figures as JSON, so runs can be compared: runs/bench/<name>.json.
 
 The file holds the figures a benchmark's docstring names, plus where and when they were measured
-(commit, host's core count, load average, torch version when loaded). Each run overwrites it.
+(commit, the host's CPU model and core count, load average, torch version and the CPU kernels it
+chose when loaded). Each run overwrites it. The CPU matters: the same 2-core machine has been lent
+on hosts whose one-thread matmul rate differed by 2×, and torch's AVX-512 kernels (tanh, bmm) rank
+differently against `--fast-ops` than its AVX2 ones (docs/results.md).
 """
 
 from __future__ import annotations
@@ -26,6 +29,14 @@ def _commit() -> str | None:
     return out.stdout.strip() or None
 
 
+def _cpu_model() -> str | None:
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        return platform.processor() or None
+    return next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")), None)
+
+
 def record(name: str, figures: dict[str, Any]) -> Path:
     """Write `figures` (JSON-serialisable) to runs/bench/<name>.json and say where."""
     torch = sys.modules.get("torch")
@@ -33,10 +44,12 @@ def record(name: str, figures: dict[str, Any]) -> Path:
         "bench": name,
         "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "commit": _commit(),
+        "cpu": _cpu_model(),
         "cores": os.cpu_count(),
         "load_average_1m": round(os.getloadavg()[0], 2),
         "python": platform.python_version(),
         "torch": getattr(torch, "__version__", None),
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability() if torch is not None else None,
     }
     BENCH_DIR.mkdir(parents=True, exist_ok=True)
     path = BENCH_DIR / f"{name}.json"

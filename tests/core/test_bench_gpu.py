@@ -28,5 +28,7 @@ def test_without_cuda_it_says_so_and_exits_0(tmp_path):
 def test_its_code_path_runs_on_the_cpu(tmp_path):
     proc = bench(tmp_path, "--device", "cpu", "--preset", "smoke", "--epochs", "1", "--envs", "ant")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    figures = json.loads((tmp_path / "gpu.json").read_text())["figures"]["ant"]
+    written = json.loads((tmp_path / "gpu.json").read_text())
+    figures, meta = written["figures"]["ant"], written["meta"]
+    assert meta["cores"] == os.cpu_count() and meta["torch_cpu_capability"] in ("DEFAULT", "AVX2", "AVX512")
     assert figures["updates_per_s"] > 0 and figures["env_steps_per_s"] > 0 and figures["projected_hours"] > 0
