@@ -11,6 +11,8 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
    `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_foreach_<h>` the same with `--fused-adam false`,
    `flop_fraction_before_<h>` with `--fused-adam false --fast-ops false` (the step before 12-05);
+   `flop_fraction_fast_ops_on_<h>` / `_off_<h>`: the default with `--fast-ops` forced on / off
+   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py);
    `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
    nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
@@ -66,7 +68,7 @@ from trainer.envs import VectorEnv, make_env
 from trainer.guidance import LabelledSets, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
-from trainer.networks import EnsembleLinear, Tanh
+from trainer.networks import EnsembleLinear, Tanh, fast_ops_pay
 from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
@@ -206,13 +208,15 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cpu = torch.device("cpu")
-    out: dict[str, float] = {}
+    out: dict[str, float] = {"fast_ops_default": float(fast_ops_pay(cpu))}
     try:
         for h in (256, 1024):
             variants = {
                 "eager": update_setup(env_name, h, cpu)[1],
                 "foreach": update_setup(env_name, h, cpu, fused_adam=False)[1],
                 "before": update_setup(env_name, h, cpu, fused_adam=False, fast_ops=False)[1],
+                "fast_ops_on": update_setup(env_name, h, cpu, fast_ops=True)[1],
+                "fast_ops_off": update_setup(env_name, h, cpu, fast_ops=False)[1],
             }
             flop = flops(variants["before"])
             variants["matmuls"] = matmuls_alone(variants["eager"])
@@ -233,7 +237,7 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
             out[f"update_gflops_{h}"] = med["eager"] * flop / 1e9
             out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
             out[f"flop_fraction_{h}"] = out[f"update_gflops_{h}"] / out[f"matmul_gflops_{h}"]
-            for k in ("foreach", "before"):
+            for k in ("foreach", "before", "fast_ops_on", "fast_ops_off"):
                 out[f"flop_fraction_{k}_{h}"] = med[k] * flop / 1e9 / out[f"matmul_gflops_{h}"]
             mm_flop = flops(variants["matmuls"])
             out[f"matmuls_alone_fraction_{h}"] = med["matmuls"] * mm_flop / 1e9 / out[f"matmul_gflops_{h}"]
@@ -468,7 +472,9 @@ def main() -> None:
                 f"matmul {f[f'matmul_gflops_{h}']:.1f} GFLOP/s (one thread) → {100 * f[f'flop_fraction_{h}']:.0f} % "
                 f"(goal ≥ 60 %); with foreach Adam {100 * f[f'flop_fraction_foreach_{h}']:.0f} %; the step before "
                 f"12-05 {100 * f[f'flop_fraction_before_{h}']:.0f} %; its matmuls alone "
-                f"{100 * f[f'matmuls_alone_fraction_{h}']:.0f} %"
+                f"{100 * f[f'matmuls_alone_fraction_{h}']:.0f} %; fast ops on / off "
+                f"{100 * f[f'flop_fraction_fast_ops_on_{h}']:.0f} / {100 * f[f'flop_fraction_fast_ops_off_{h}']:.0f} % "
+                f"(the default here: {'on' if f['fast_ops_default'] else 'off'})"
             )
             if f"compile_s_{h}" in f:
                 print(

@@ -75,7 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
             continue
         option = flag(f.name)
-        if f.type in ("bool", bool):
+        if f.type in ("bool", bool, "bool | None"):  # None: the option's own default (e.g. fast_ops)
             # a bare flag means true (`--compile`); `--compile false` still works
             group.add_argument(
                 option,

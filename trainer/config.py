@@ -47,7 +47,9 @@ class Config:
     physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
     compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
     fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
-    fast_ops: bool = True  # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05
+    # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05;
+    # None: on where they measured faster (networks.fast_ops_pay), fixed when the trainer starts
+    fast_ops: bool | None = None
     acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)
     hidden: int = 1024

@@ -42,6 +42,7 @@ from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
+from trainer.networks import fast_ops_pay
 from trainer.obs_noise import NoisyObservations
 from trainer.obs_stats import observation_stats
 from trainer.plots import plot_curves, plot_guidance_map, plot_skill_trajectories
@@ -106,6 +107,8 @@ class Trainer:
         if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
             raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
+        if cfg.fast_ops is None:  # fixed now, so config.json and a resume carry this machine's choice
+            cfg.fast_ops = fast_ops_pay(self.device)
         torch.set_num_threads(resolve_threads(cfg.threads, cfg.hidden))  # fair share on a busy machine
         self.rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)

@@ -20,7 +20,7 @@ import torch
 
 from trainer.config import Config
 from trainer.encoders import PixelEncoder, feature_dim, is_pixels
-from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, init_like_reference
+from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, fast_ops_pay, init_like_reference
 from trainer.optim import adam, restore_kernel, step_together
 from trainer.skills import SkillPrior
 
@@ -51,9 +51,10 @@ class Metra:
         k, h, n = prior.dim, cfg.hidden, cfg.layers
         f = feature_dim(obs_shape)
         enc = self._encoders(obs_shape, cfg.encoder)
+        fast = fast_ops_pay(device) if cfg.fast_ops is None else cfg.fast_ops
         self.phi = SkillLatent(f, k, h, n, enc["phi"]).to(device)
-        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"], cfg.fast_ops).to(device)
-        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"], cfg.fast_ops).to(device)
+        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"], fast).to(device)
+        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"], fast).to(device)
         self.policy = TanhGaussianPolicy(
             f + k,
             action_dim,
@@ -62,7 +63,7 @@ class Metra:
             enc["policy"],
             detach_encoder=cfg.encoder == "shared",
             log_std_min=cfg.log_std_min,
-            fast=cfg.fast_ops,
+            fast=fast,
         ).to(device)
         if cfg.init == "reference":
             init_like_reference(self.phi, self.qf, self.policy)

@@ -12,8 +12,9 @@ import torch
 
 from trainer.config import make_config
 from trainer.guidance import CDIST_MM_ROWS, EMPTY_CLASS_DISTANCE, LabelledSets, class_distances, guidance_weight
+from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
-from trainer.networks import EnsembleLinear, Tanh
+from trainer.networks import EnsembleLinear, Tanh, fast_ops_pay
 from trainer.optim import adam, step_together
 from trainer.skills import SkillPrior
 
@@ -145,9 +146,10 @@ def test_exact_step_equals_the_old_path_bit_for_bit(sizes):
         assert torch.equal(ours[k], theirs[k]), k
 
 
-@pytest.mark.parametrize("options", [{}, {"fused_adam": False}, {"fast_ops": False}])
+@pytest.mark.parametrize("options", [{}, {"fused_adam": False}, {"fast_ops": False}, {"fast_ops": True}])
 def test_default_step_matches_the_old_path_to_float_tolerance(options):
-    """The default (fused Adam, fast ops) and each lever alone. One step from the same batch lands
+    """The default (fused Adam; fast ops where they pay) and each lever alone, fast ops forced on
+    too (on every host: the default turns them off where torch runs AVX-512 kernels). One step from the same batch lands
     within float rounding; over several steps Adam's normalisation can turn a rounding difference
     in a near-zero gradient into a visible one, so there only the losses are compared."""
     sets = labelled_states((40, 19, 30))
@@ -163,6 +165,19 @@ def test_default_step_matches_the_old_path_to_float_tolerance(options):
     for g, o in zip(got, want, strict=True):
         for k in o:
             torch.testing.assert_close(g[k], o[k], rtol=1e-3, atol=1e-5)
+
+
+def test_the_trainer_fixes_the_fast_ops_default_for_its_machine(tmp_path):
+    """`fast_ops` None (the default) becomes this machine's choice when the trainer starts, so
+    config.json and a resume carry a bool; the networks are built with it; a given value stays."""
+    for given in (None, True, False):
+        cfg = make_config("smoke", "point", out=str(tmp_path / str(given)), fast_ops=given)
+        trainer = Trainer(cfg, progress=False)
+        want = fast_ops_pay(torch.device("cpu")) if given is None else given
+        assert trainer.cfg.fast_ops is want
+        trunk_tanh = [m for m in trainer.agent.policy.trunk if isinstance(m, torch.nn.Tanh)]
+        assert all(isinstance(m, Tanh) is want for m in trunk_tanh) and trunk_tanh
+        trainer.env.close()
 
 
 def test_a_loaded_optimiser_steps_with_the_runs_kernel():
