@@ -156,6 +156,8 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
     # The run holds the instruction and no rule; the trainer applied the person's labels.
     assert run.status in FINISHED and run.instruction == instruction and run.task_definition is None
     assert run.task == "instruction"
+    saved = json.loads((out / "config.json").read_text())  # a default fixed for this machine, in both copies
+    assert isinstance(saved["fast_ops"], bool) and run.config["fast_ops"] is saved["fast_ops"]
     ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
     applied = {q: s["label"] for q, s in ckpt["labelled"].items()}
     assert applied == given and len(given) == ckpt["config"]["total_queries"]

@@ -298,9 +298,12 @@ def run(args: argparse.Namespace) -> int:
         from trainer.threads import apply_openmp_env, resolve_threads
 
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
-        from trainer.loop import Trainer
+        from trainer.loop import Trainer, pick_device
+        from trainer.networks import fast_ops_pay
 
         mark("imports")  # torch, mujoco, the trainer's modules
+        if cfg.fast_ops is None:  # this machine's choice, in the service's copy of the config too
+            cfg.fast_ops = fast_ops_pay(pick_device(cfg.device))
 
         # a resumed run keeps the rule it started with, whatever its file says now
         rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)
