@@ -58,7 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:  # as parse_args says it, with the command's hint where it has one (sweep: train flags after --)
         hint = getattr(getattr(args, "_module", None), "UNRECOGNIZED_HINT", "")  # none before the command's name
         parser.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
-    return int(args._module.run(args) or 0)
+    try:
+        return int(args._module.run(args) or 0)
+    except KeyboardInterrupt:  # Ctrl-C where the command keeps no handler of its own: a line, not a traceback
+        print(f"collie {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -40,6 +42,21 @@ def test_cli_labels_every_query_by_the_rule(live: BackgroundServer, trainer: Col
     got = {e.query_id: e.label for e in trainer.effective_labels(run.id)}
     assert got == expected(trainer, run.id)
     assert {e.labeler for e in trainer.label_events(run.id)} == {"labeler"}
+
+
+def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:
+    """Ctrl-C where a command has no handler of its own (here `--wait` for the service) ends it with
+    a line and status 130, not a traceback."""
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        listener.settimeout(60)
+        api = f"http://127.0.0.1:{listener.getsockname()[1]}"
+        command = [sys.executable, "-m", "collie.cli", "teacher", "--api", api, "--run", "1", "--wait", "60"]
+        proc = subprocess.Popen([*command, "--token", TOKENS["labeler"]], stderr=subprocess.PIPE, text=True)
+        conn, _ = listener.accept()  # its first request: past the imports, waiting for an answer
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=20)
+        conn.close()
+    assert proc.returncode == 130 and "collie teacher: interrupted" in err and "Traceback" not in err, err
 
 
 def test_until_done_waits_for_new_sessions_and_stops_when_finished(
