@@ -1,13 +1,16 @@
 """make bench-gpu: the `paper` preset on a CUDA GPU, Ant and pixel Quadruped, a few epochs each.
 
-Per env: updates/s (gradient steps of METRA's update; COLLIE's adds the w(s) term, whose cost
-`make bench-update` gives as `cost_ratio`), env steps/s of the training rollouts, the seconds of one
-48-episode evaluation, peak GPU memory, and the projected wall time of a full paper run
-(Ant 10 000 epochs, Quadruped 5 000): epochs × (rollout + update time per epoch) plus
-(epochs / eval_every) evaluations. Without CUDA it prints `no CUDA device` and exits 0
-(`--device cpu --preset smoke` runs the same code on the CPU, as the test suite does).
+Per env: updates/s of COLLIE's update at its costliest, the end of a run (`with_full_labels`: the
+whole label budget, N_total segments of H states, and guidance at full strength, so every step
+re-encodes all labelled states, pixels through the CNN), env steps/s of the training rollouts, the
+seconds of one 48-episode evaluation, peak GPU memory, and the projected wall time of a full paper
+run (Ant 10 000 epochs, Quadruped 5 000): epochs × (rollout + update time per epoch) plus
+(epochs / eval_every) evaluations; an upper bound, since the label set grows over the run and w ≡ 1
+before the first session. `--method metra` times METRA's update instead. Without CUDA it prints
+`no CUDA device` and exits 0 (`--device cpu --preset smoke` runs the same code on the CPU, as the
+test suite does).
 JSON (runs/bench/gpu.json): per env updates_per_s, env_steps_per_s, eval_s, peak_gpu_mb,
-epoch_s, projected_hours, epochs_full, grad_steps; plus device.
+epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device and method.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import numpy as np
 import torch
 from record import record
 
@@ -32,11 +36,22 @@ def sync(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
-def bench_env(env: str, preset: str, device: str, epochs: int) -> dict[str, float]:
+def with_full_labels(t: Trainer) -> None:
+    """COLLIE's costliest step: N_total segments of H states from the collected trajectories,
+    labelled bad, neutral, good in turn (the step's cost depends on how many states are labelled,
+    not on which label they carry), and β = 0 (guidance at full strength)."""
+    c = t.cfg
+    slots, starts = t.replay.sample_windows(c.total_queries, c.segment_length, np.random.default_rng(0))
+    for q, (i, s) in enumerate(zip(slots, starts, strict=True)):
+        t.labelled.set(f"bench-{q}", t.replay.obs[i, s : s + c.segment_length], q % 3)
+    t.first_feedback_epoch = t.epoch - c.n_sessions * c.feedback_every  # β_e = max(0, 1 − k_β) = 0
+
+
+def bench_env(env: str, preset: str, device: str, epochs: int, method: str) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         full = make_config(preset, env)
         per_epoch = full.episodes_per_epoch * full.episode_steps
-        cfg = make_config(preset, env, method="metra", out=tmp, device=device, start_transitions=per_epoch)
+        cfg = make_config(preset, env, method=method, out=tmp, device=device, start_transitions=per_epoch)
         t = Trainer(cfg, progress=False)
         t._t0 = time.perf_counter()
         dev = t.device
@@ -44,6 +59,9 @@ def bench_env(env: str, preset: str, device: str, epochs: int) -> dict[str, floa
             torch.cuda.reset_peak_memory_stats(dev)
         t.epoch += 1
         t.collect_epoch()
+        if method == "collie":
+            with_full_labels(t)
+            assert t.beta() == 0.0
         t.train_epoch()  # warm-up: allocator, cuDNN autotuning
         sync(dev)
         collect_s = train_s = 0.0
@@ -68,6 +86,7 @@ def bench_env(env: str, preset: str, device: str, epochs: int) -> dict[str, floa
             "epochs_full": full.epochs,
             "grad_steps": cfg.grad_steps,
             "projected_hours": (full.epochs * epoch_s + full.epochs / full.eval_every * eval_s) / 3600,
+            "labelled_states": t.labelled.n_states(),
         }
 
 
@@ -77,18 +96,20 @@ def main() -> int:
     p.add_argument("--epochs", type=int, default=5, help="timed epochs per env (after one warm-up epoch)")
     p.add_argument("--preset", default="paper")
     p.add_argument("--device", default="cuda")
+    p.add_argument("--method", default="collie", choices=("collie", "metra"), help="whose update is timed")
     a = p.parse_args()
     if a.device == "cuda" and not torch.cuda.is_available():
         print("no CUDA device")
         return 0
     name = torch.cuda.get_device_name() if a.device == "cuda" else "cpu"
-    print(f"bench-gpu on {name}, preset {a.preset}, {a.epochs} timed epochs per env")
-    figures: dict[str, object] = {"device": name, "preset": a.preset}
+    print(f"bench-gpu on {name}, preset {a.preset}, {a.method}'s update, {a.epochs} timed epochs per env")
+    figures: dict[str, object] = {"device": name, "preset": a.preset, "method": a.method}
     for env in a.envs.split(","):
-        r = bench_env(env, a.preset, a.device, a.epochs)
+        r = bench_env(env, a.preset, a.device, a.epochs, a.method)
         figures[env] = r
         print(
-            f"  {env:10s} {r['updates_per_s']:8.1f} updates/s  {r['env_steps_per_s']:8.0f} env steps/s  "
+            f"  {env:10s} {r['updates_per_s']:8.1f} updates/s ({r['labelled_states']} labelled states)  "
+            f"{r['env_steps_per_s']:8.0f} env steps/s  "
             f"eval {r['eval_s']:6.1f} s  peak {r['peak_gpu_mb']:8.0f} MB  → a full run of {r['epochs_full']} "
             f"epochs ≈ {r['projected_hours']:.1f} h"
         )

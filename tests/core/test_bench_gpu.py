@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from trainer.config import make_config
+
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_gpu.py"
 
 
@@ -32,3 +34,8 @@ def test_its_code_path_runs_on_the_cpu(tmp_path):
     figures, meta = written["figures"]["ant"], written["meta"]
     assert meta["cores"] == os.cpu_count() and meta["torch_cpu_capability"] in ("DEFAULT", "AVX2", "AVX512")
     assert figures["updates_per_s"] > 0 and figures["env_steps_per_s"] > 0 and figures["projected_hours"] > 0
+    cfg = make_config("smoke", "ant")  # COLLIE's update with the whole label budget, by default
+    assert (
+        written["figures"]["method"] == "collie"
+        and figures["labelled_states"] == cfg.total_queries * cfg.segment_length
+    )
