@@ -123,9 +123,13 @@ def run(args: argparse.Namespace) -> int:
         else:
             shown = f"(kept from the last start; to replace it, set COLLIE_{role.upper()}_TOKEN)"
         print(f"  {role} token: {shown}", flush=True)
-    if not server.should_exit:  # stopped while the banner printed: nothing to serve
-        server.run(sockets=[sock])
-    return 0
+    try:
+        if not server.should_exit:  # stopped while the banner printed: nothing to serve
+            server.run(sockets=[sock])
+    finally:  # served and shut down: a later Ctrl-C (a hang on the way out) interrupts as usual
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    return 0  # stopped by Ctrl-C or SIGTERM, after a clean shutdown
 
 
 if __name__ == "__main__":

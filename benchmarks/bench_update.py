@@ -12,7 +12,8 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_foreach_<h>` the same with `--fused-adam false`,
    `flop_fraction_before_<h>` with `--fused-adam false --fast-ops false` (the step before 12-05);
    `flop_fraction_fast_ops_on_<h>` / `_off_<h>`: the default with `--fast-ops` forced on / off
-   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py);
+   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py; the
+   one equal to the default repeats `flop_fraction_<h>`, which shows the run's noise);
    `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
    nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,

@@ -64,13 +64,14 @@ class TeacherLoop:
         self.idle_wait_s = idle_wait_s
         self.labelled = 0
         self._last_submit = 0.0
+        self.interrupted = False  # set by a signal handler (teacher/cli.py): the loop ends at its next look
 
     def run(self, until_done: bool = False) -> int:
         """Label what is claimable; with until_done, keep waiting for new sessions until the run
         is finished, failed or stopped."""
         after = self._retry(lambda: self.client.run(self.run_id)).last_event_id
         held: QueryRead | None = None
-        while not self.stop.is_set():
+        while not (self.stop.is_set() or self.interrupted):
             if held is None:
                 try:
                     claim = self._retry(lambda: self.client.claim(self.run_id))

@@ -69,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
         loop = TeacherLoop(client, args.run, oracle, rate=args.rate)
 
         def on_interrupt(_signum: int, _frame: object) -> None:
-            loop.stop.set()  # the loop checks it too: Python drops a raise that lands in a weakref callback
+            # A plain flag the loop checks too (Python drops a raise that lands in a weakref callback);
+            # not loop.stop.set(), whose lock the interrupted thread may hold inside stop.wait().
+            loop.interrupted = True
             raise KeyboardInterrupt
 
         signal.signal(signal.SIGINT, on_interrupt)

@@ -51,7 +51,8 @@ class Tanh(nn.Tanh):
 def fast_ops_pay(device: torch.device) -> bool:
     """`--fast-ops`'s default: on only where `make bench-update` measured its kernels faster than
     torch's, a CPU on which torch runs its AVX2 kernels (tanh 1.8–2.8×, the one-output layer
-    3.8–7.7×, forward and backward). With torch's AVX-512 kernels both were slower (0.4–0.6×,
+    3.8–7.7×, forward and backward; that host's kernels were not recorded, its matmul rate, half an
+    AVX-512 host's, says AVX2). With torch's AVX-512 kernels both were slower (0.4–0.6×,
     0.7–1.0×; the 2×256 step about 5 % slower), and on a GPU they are unmeasured (tanh is one
     kernel there, 2σ(2x) − 1 three): off. docs/results.md, "Another host"."""
     return device.type == "cpu" and torch.backends.cpu.get_cpu_capability() == "AVX2"

@@ -48,7 +48,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
         str(tokens_file),
     ]
     env = {**env, "PYTHONFAULTHANDLER": "1"}  # for stop(): a hung server's stacks on SIGABRT
-    server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, text=True)
+    server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         banner = server.stdout.readline()  # type: ignore[union-attr]
         assert banner.startswith("collie service listening on http://127.0.0.1:")
@@ -79,8 +79,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
         trainer.close()
         labeler.close()
     finally:
-        server.send_signal(signal.SIGINT)
-        assert server.wait(20) == 0
+        stop(server)
     missing = collie("export", "--db", str(tmp_path / "nope.db"), "--run", "1")
     assert missing.returncode == 2 and "no database" in missing.stderr and not (tmp_path / "nope.db").exists()
     unknown = collie("export", "--db", str(db), "--run", "99")

@@ -135,6 +135,14 @@ def test_an_interrupt_ends_a_wait_within_one_chunk(feedback: HttpFeedback) -> No
     assert time.monotonic() - started < 10  # one 2 s wait chunk, not the labels that never come
 
 
+def test_a_session_asked_after_an_interrupt_is_not_posted(feedback: HttpFeedback) -> None:
+    """A signal during a feedback epoch's rollout: the trainer stops before people see a session."""
+    feedback.interrupt("stopped by signal SIGINT")
+    with pytest.raises(StopRequested, match="SIGINT"):
+        feedback.collect(0, 0, segments(0, 2))
+    assert list(feedback.client.queries(feedback.run_id)) == []
+
+
 def test_pause_holds_collect_until_resume(live: BackgroundServer, feedback: HttpFeedback) -> None:
     with CollieClient(live.url, TOKENS["operator"]) as operator:
         operator.pause(feedback.run_id)

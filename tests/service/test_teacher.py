@@ -52,10 +52,14 @@ def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:
         api = f"http://127.0.0.1:{listener.getsockname()[1]}"
         command = [sys.executable, "-m", "collie.cli", "teacher", "--api", api, "--run", "1", "--wait", "60"]
         proc = subprocess.Popen([*command, "--token", TOKENS["labeler"]], stderr=subprocess.PIPE, text=True)
-        conn, _ = listener.accept()  # its first request: past the imports, waiting for an answer
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=20)
-        conn.close()
+        try:
+            conn, _ = listener.accept()
+            with conn, conn.makefile("rb") as request:
+                assert request.read(4) == b"GET "  # its first request is sent: it waits for the answer
+                proc.send_signal(signal.SIGINT)
+                _, err = proc.communicate(timeout=20)
+        finally:
+            proc.kill()
     assert proc.returncode == 130 and "collie teacher: interrupted" in err and "Traceback" not in err, err
 
 

@@ -239,8 +239,16 @@ class HttpFeedback(FeedbackSource):
             self.reporter.status(StatusReport(status, epoch))
 
     def _retry(self, call: Callable[[], T]) -> T:
-        """Call until the service answers: waits out restarts with backoff; 4xx errors raise."""
-        return retrying(call, Backoff(max_s=self.max_backoff_s))
+        """Call until the service answers: waits out restarts with backoff; 4xx errors raise. Once
+        interrupted (`interrupt`), the next attempt raises StopRequested instead: no session is
+        posted after a signal, and a wait on an unreachable service ends too."""
+
+        def attempt() -> T:
+            if self.interrupted is not None:
+                raise StopRequested(self.interrupted)
+            return call()
+
+        return retrying(attempt, Backoff(max_s=self.max_backoff_s))
 
 
 # ---------------------------------------------------------------- conversions
