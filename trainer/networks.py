@@ -40,9 +40,8 @@ class _TanhViaSigmoid(torch.autograd.Function):
 class Tanh(nn.Tanh):
     """nn.Tanh computed as 2σ(2x) − 1: with the CPU wheel's AVX2 kernels torch's tanh is several
     times slower than its sigmoid (not with its AVX-512 ones: `fast_ops_pay`), and the policy trunk
-    runs it on every hidden unit (`make bench-update`:
-    `tanh_speedup_<h>`, forward and backward). Equal to torch.tanh within 2e-7 (float32 rounding
-    near 0.5 inside σ)."""
+    runs it on every hidden unit (`make bench-update`: `tanh_speedup_<h>`, forward and backward).
+    Equal to torch.tanh within 2e-7 (float32 rounding near 0.5 inside σ)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return _TanhViaSigmoid.apply(x)

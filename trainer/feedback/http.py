@@ -7,7 +7,8 @@ The trainer's side of the contract (docs/service.md):
   arrived; later labels come through `revisions`). An operator may change `timeout_s` at any time
   (a "policy" event): the session being waited on is then re-timed from its start, so a shorter
   timeout that has already passed releases it at once, and None waits for every label again.
-  A stop raises StopRequested; while paused it keeps waiting and does not return.
+  A stop raises StopRequested, as does a signal to the trainer (`interrupt`) at the wait's next
+  call to the service; while paused it keeps waiting and does not return.
 - Every label the trainer is given is remembered with its value, so a label reaches the trainer
   once, and a change of it (undo, relabel, a late label) once more as a revision.
 - `history` returns the labelled segments of the run for a restarted trainer, which replays from
@@ -129,8 +130,6 @@ class HttpFeedback(FeedbackSource):
             self._pump(wait)
             if self._control == "stop":
                 raise StopRequested(f"run {self.run_id} was stopped by an operator")
-            if self.interrupted is not None:
-                raise StopRequested(self.interrupted)
             if self._control == "pause":
                 self._show("paused", epoch)
                 wait = self.wait_chunk_s  # labels keep arriving while paused; we return after a resume
