@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     # Ctrl-C (or SIGTERM) is the way to stop, at any moment from here on: the handler only sets
     # uvicorn's exit flag, which it reads once it serves (and its own handlers do the same). Not a
     # KeyboardInterrupt: one raised inside a weakref callback or __del__ is printed and dropped, and
-    # the service then ran on (seen once in 36 restarts beside two busy loops).
+    # the service then ran on (seen in a loop of restarts beside busy processes).
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, server.handle_exit)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
