@@ -28,8 +28,8 @@ if TYPE_CHECKING:
     from labeling_ui.watch import SkillShow
 
 KEYMAP = (
-    "**Keys** · **1** bad · **2** neutral · **3** good · **S** skip (not a label) · **U** undo the last "
-    "label · **Space** replay · **P** play / pause · **← →** one frame · **V** reset the view"
+    "**Keys** · **1** bad · **2** neutral · **3** good · **X** skip (not a label) · **U** undo the last "
+    "label · **Space** replay · **P** play / pause · **J L** one frame back / forward · **V** reset the view"
 )
 LABEL_NAMES = {int(label): label.word for label in Label}
 MIXED_RULE = (
@@ -116,7 +116,7 @@ class Panels:
             bad = gui.add_button("1 · Bad", color="red", hint="key 1")
             neutral = gui.add_button("2 · Neutral", color="gray", hint="key 2")
             good = gui.add_button("3 · Good", color="green", hint="key 3")
-            skip = gui.add_button("S · Skip", color="dark", hint="key S: not a label; someone else gets it")
+            skip = gui.add_button("X · Skip", color="dark", hint="key X: not a label; someone else gets it")
             undo = gui.add_button("U · Undo last label", color="dark", hint="key U")
             gui.add_markdown(KEYMAP)
             self.progress = gui.add_markdown("")
@@ -132,7 +132,7 @@ class Panels:
         with gui.add_folder("Replay", visible=False) as self.replay:
             self.play = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE, hint="key P")
             again = gui.add_button("Replay from start", icon=viser.Icon.REPEAT, hint="key Space")
-            steps = gui.add_button_group("Step", options=["◀ frame", "frame ▶"], hint="keys ← →")
+            steps = gui.add_button_group("Step", options=["◀ frame", "frame ▶"], hint="keys J L")
             self.frame = gui.add_slider("Frame", min=0, max=1, step=1, initial_value=0)
             self.speed = gui.add_button_group("Speed", options=[f"{s:g}×" for s in SPEEDS])
             self.speed_now = gui.add_markdown("Speed **1×**")
@@ -233,7 +233,7 @@ class Panels:
         auto.on_update(lambda _: show.set_auto(bool(auto.value)))
 
     def show_segment(self, info: SegmentInfo, error: str | None = None) -> None:
-        status = f"⚠️ **This segment cannot be replayed** — {error}  \nPress **S** to skip it." if error else ""
+        status = f"⚠️ **This segment cannot be replayed** — {error}  \nPress **X** to skip it." if error else ""
         with self.client.atomic():
             self._screen(status, labeling=True, replay=error is None)
             again = " — **relabel**: a new label revises yours" if info.revising else ""

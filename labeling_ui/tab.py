@@ -301,7 +301,7 @@ class TabState:
         if value == "skip":
             return Submit(shown, value, max(0.0, now - shown.appeared), request_id)
         if shown.error is not None:
-            return Refusal("Cannot label", "this segment cannot be replayed; press S to skip it")
+            return Refusal("Cannot label", "this segment cannot be replayed; press X to skip it")
         if value not in shown.classes:
             return Refusal("Not a label here", "this task never calls a state good: bad or neutral")
         if not shown.seen(self.rules.min_played):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import viser
 from playwright.sync_api import Browser
 
 from .page import canvas_pixels, open_labeler, segment_id, wait_segment, wait_text
@@ -136,6 +137,45 @@ def test_next_segment_is_preloaded_and_a_closed_tab_releases_both(stack: Stack, 
     assert [e.kind for e in stack.trainer.label_events(run.id)] == ["label"]  # a release is no skip
 
 
+def view(client: viser.ClientHandle) -> np.ndarray | None:
+    """The camera as the browser last reported it (orientation and position), None before its first report."""
+    try:
+        return np.concatenate([client.camera.wxyz, client.camera.position])
+    except AssertionError:  # viser asserts a camera was reported before it answers
+        return None
+
+
+def hold(page: object, key: str, seconds: float = 0.4) -> None:
+    time.sleep(DWELL_S + 0.05)
+    page.keyboard.down(key)  # type: ignore[attr-defined]
+    time.sleep(seconds)  # viser's camera keys move the view for as long as they are held
+    page.keyboard.up(key)  # type: ignore[attr-defined]
+
+
+def test_frame_and_skip_keys_leave_the_north_up_view_alone(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("keys-view")))
+    first = wait_segment(page)
+    (session,) = app.sessions.values()
+    wait_until(lambda: view(session.client) is not None)
+    start = view(session.client)
+    hold(page, "j")  # a frame key pauses: from here only the frame keys change the frame
+    wait_until(lambda: not session.player.playing)
+    frame = session.player.position  # at most the second-to-last frame, so one more fits
+    hold(page, "l")
+    wait_until(lambda: session.player.position == frame + 1)
+    hold(page, "j")
+    wait_until(lambda: session.player.position == frame)
+    hold(page, "x")
+    assert wait_segment(page, first) != first
+    time.sleep(1.0)  # a camera the keys had moved would have been reported by now
+    assert np.allclose(view(session.client), start, atol=1e-6)
+    hold(page, "ArrowLeft")  # control: viser's own camera key does turn the view, and this test sees it
+    wait_until(lambda: not np.allclose(view(session.client), start, atol=1e-3))
+    page.context.close()
+
+
 def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, artifacts: Path) -> None:
     run = stack.post_run("point", 0)
     page = open_labeler(browser, stack.ui(run.id).labeler_url(stack.new_labeler("waiter")))
@@ -155,7 +195,7 @@ def test_unbuildable_model_can_be_skipped(stack: Stack, browser: Browser, artifa
     wait_text(page, "cannot be replayed")
     page.screenshot(path=str(artifacts / "unbuildable-model.png"))
     press(page, "1")  # a label is refused on a segment that cannot be shown
-    press(page, "s")
+    press(page, "x")
     assert wait_segment(page, first) != first
     events = stack.trainer.label_events(broken.id)
     assert [(e.query_id, e.kind) for e in events] == [(first, "skip")]

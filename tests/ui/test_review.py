@@ -55,7 +55,7 @@ def test_a_disagreement_replays_in_3d_and_labels_nothing(stack: Stack, browser: 
     assert len(seen) >= 3, f"the replay did not advance: frames {sorted(seen)}"
     assert canvas_pixels(page, artifacts / "review-0-0.png").std() > 10.0
     assert not page.get_by_role("button", name="1 · Bad").is_visible()
-    for key in ("1", "3", "s", "u"):
+    for key in ("1", "3", "x", "u"):
         page.keyboard.press(key)
     wait_text(page, "Review only")
     time.sleep(1.0)  # what a key sent would have reached the service by now
