@@ -12,8 +12,8 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_foreach_<h>` the same with `--fused-adam false`,
    `flop_fraction_before_<h>` with `--fused-adam false --fast-ops false` (the step before 12-05);
    `flop_fraction_fast_ops_on_<h>` / `_off_<h>`: the default with `--fast-ops` forced on / off
-   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py; the
-   one equal to the default repeats `flop_fraction_<h>`, which shows the run's noise);
+   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py; only
+   the one that differs from the default is timed, the other is `flop_fraction_<h>`);
    `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
    nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
    Compiled (`--compile`, skipped with --no-compile): `compile_s_<h>` (the first steps' extra time,
@@ -209,15 +209,16 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cpu = torch.device("cpu")
-    out: dict[str, float] = {"fast_ops_default": float(fast_ops_pay(cpu))}
+    default_on = fast_ops_pay(cpu)
+    out: dict[str, float] = {"fast_ops_default": float(default_on)}
+    same, other = ("fast_ops_on", "fast_ops_off") if default_on else ("fast_ops_off", "fast_ops_on")
     try:
         for h in (256, 1024):
             variants = {
                 "eager": update_setup(env_name, h, cpu)[1],
                 "foreach": update_setup(env_name, h, cpu, fused_adam=False)[1],
                 "before": update_setup(env_name, h, cpu, fused_adam=False, fast_ops=False)[1],
-                "fast_ops_on": update_setup(env_name, h, cpu, fast_ops=True)[1],
-                "fast_ops_off": update_setup(env_name, h, cpu, fast_ops=False)[1],
+                other: update_setup(env_name, h, cpu, fast_ops=not default_on)[1],  # the default is `same`
             }
             flop = flops(variants["before"])
             variants["matmuls"] = matmuls_alone(variants["eager"])
@@ -234,6 +235,7 @@ def bench_flops(env_name: str, steps: int, rounds: int, compiled: bool) -> dict[
                 for k, fn in variants.items():
                     rates[k].append(timed(fn, steps))
             med = {k: float(np.median(v)) for k, v in rates.items()}
+            med[same] = med["eager"]
             out[f"update_gflop_{h}"] = flop / 1e9
             out[f"update_gflops_{h}"] = med["eager"] * flop / 1e9
             out[f"matmul_gflops_{h}"] = float(np.median(mm_rate)) / 1e9
