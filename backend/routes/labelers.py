@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 
 from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId, json_body, parse_body
-from backend.services import auth
+from backend.services import auth, leases
 from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, Me
 
 router = APIRouter(tags=["labelers"])
@@ -33,8 +33,10 @@ def list_labelers(_: OperatorCaller, db: DB) -> list[LabelerRead]:
 
 @router.delete("/labelers/{labeler_id}")
 async def revoke_labeler(labeler_id: PrincipalId, _: OperatorCaller, db: DB, request: Request) -> LabelerRead:
+    """Revoke a principal's token: its open streams end and its claims go back to the pool now."""
     with db.write() as conn:
         read = auth.revoke(conn, labeler_id)
+        leases.release_all_held_by(conn, labeler_id)
     request.app.state.tokens.clear()
     request.app.state.feed.end_streams_of(labeler_id)
     return read

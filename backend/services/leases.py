@@ -166,6 +166,16 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
     return row.status
 
 
+def release_all_held_by(conn: Connection, principal_id: int) -> int:
+    """A revoked principal's claims, in every run, go back to the pool now rather than when their
+    leases expire; gold copies served to them are retired (as `release` does). Returns how many
+    queries went back to the pool."""
+    mine = (Query.status == "leased") & (Query.lease_owner_id == principal_id)
+    conn.execute(update(Query).where(mine, Query.gold_of.is_not(None)).values(status="retired", lease_expires_at=None))
+    pool = {"status": "pending", "lease_owner_id": None, "lease_tab": None, "lease_expires_at": time.time()}
+    return conn.execute(update(Query).where(mine, Query.gold_of.is_(None)).values(**pool)).rowcount
+
+
 def make_room(conn: Connection, run_id: int, caller: Caller, now: float, tab: str | None = None) -> list[str]:
     """Before a query comes back to the caller's `tab` outside a claim (an undo of their label):
     release the last ones that tab holds (with no tab: they hold) in claim order (the preloaded) so

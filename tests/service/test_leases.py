@@ -59,3 +59,26 @@ def test_undo_keeps_the_labeler_within_max_hold(
         assert query_id in held and len(held) <= MAX_HOLD, held
     run = trainer.run(created.id)
     assert run.queue.leased <= MAX_HOLD and run.n_labels == 0
+
+
+def test_revoking_a_labeler_hands_their_claims_back_at_once(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Callable[[str], CollieClient]
+) -> None:
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 4))
+    gone = new_labeler("revoked-holder")
+    me = gone.me()
+    claims = [gone.claim(created.id, hold=hold) for hold in range(1, MAX_HOLD + 1)]
+    held = [c.query.query_id for c in claims if c is not None]
+    assert len(held) == MAX_HOLD and held_by(trainer, created.id, me.name) == held
+    operator.revoke(me.id)
+    assert held_by(trainer, created.id, me.name) == []  # not after the lease: now
+    assert {trainer.query(created.id, q).status for q in held} == {"pending"}
+    assert trainer.run(created.id).queue.leased == 0
+    taker = new_labeler("next-in-line")
+    first = taker.claim(created.id)
+    assert first is not None and first.query.query_id == held[0]  # the oldest, as before the claim
+    taker.submit(created.id, held[0], 1)
+    with pytest.raises(ApiError) as err:
+        gone.submit(created.id, held[1], 1)
+    assert err.value.status == 401

@@ -188,6 +188,28 @@ def test_gold_segments_are_served_scored_and_kept_from_the_trainer(
     assert view["labeling"]["gold_rate"] == 0.5
 
 
+def test_a_revoked_labelers_gold_copy_is_retired(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    run = trainer.create_run(make_run_spec(task="north"))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    a = new_labeler("gold-labelled")
+    a.submit(run.id, a.claim(run.id).query.query_id, 1)
+    operator.set_quality(run.id, gold_rate=0.5)
+    trainer.post_session(run.id, north_session(1, [1.0, 1.0]))
+    b = new_labeler("gold-revoked")
+    gold = b.claim(run.id)  # b's first segment is gold: a copy of 0-0
+    assert gold is not None and gold.query.query_id not in {"0-0", "1-0", "1-1"}
+    operator.revoke(b.me().id)
+    with live.app.state.db.read() as conn:
+        status = conn.execute(
+            text("SELECT status FROM queries WHERE run_id = :run AND query_id = :q"),
+            {"run": run.id, "q": gold.query.query_id},
+        ).scalar_one()
+    assert status == "retired"  # never back in the pool: a gold copy is its labeler's
+    assert trainer.run(run.id).queue.model_dump() == {"pending": 2, "leased": 0, "labelled": 1, "retired": 0}
+
+
 def test_agreement_and_disagreements_on_the_dashboard(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:

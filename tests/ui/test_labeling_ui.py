@@ -176,6 +176,20 @@ def test_frame_and_skip_keys_leave_the_north_up_view_alone(stack: Stack, browser
     page.context.close()
 
 
+def test_a_revoked_labeler_is_told_without_pressing_a_key(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, lease_s=3.0)  # the tab renews its claims every lease_s / 3 while one is on screen
+    created = stack.operator.create_labeler("revoked-mid-segment")
+    page = open_labeler(browser, app.labeler_url(created.token))
+    wait_segment(page)
+    assert stack.trainer.run(run.id).queue.leased == 2  # on screen and preloaded
+    stack.operator.revoke(created.id)
+    assert stack.trainer.run(run.id).queue.leased == 0  # back in the pool at once
+    wait_text(page, "The service refused this token", timeout_s=15.0)
+    assert segment_id(page) is None  # the segment left the screen
+    page.context.close()
+
+
 def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, artifacts: Path) -> None:
     run = stack.post_run("point", 0)
     page = open_labeler(browser, stack.ui(run.id).labeler_url(stack.new_labeler("waiter")))
