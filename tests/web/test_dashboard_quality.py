@@ -39,6 +39,7 @@ def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -
                 client.submit(created.id, "0-0", 1)
     for epoch in (2, 4):
         values = {"safe_ratio": 0.5, "phi_loss": 1.0 / epoch, "qf_loss": 2.0 / epoch, "n_labels": 3.0}
+        values |= {"n_labels_bad": 1.0, "n_labels_neutral": 1.0, "n_labels_good": 1.0}
         trainer.post_metrics(created.id, MetricsIn(epoch=epoch, values=values))
     trainer.post_rollouts(created.id, RolloutsIn(epoch=4, rollouts=[Rollout(skill=[1.0, 0.0], xy=[[0, 0], [1, 1]])]))
     return created
@@ -165,6 +166,13 @@ def test_the_charts_have_legends_and_labelled_states_are_large(page: Any, artifa
     assert "phi_loss" in losses and "qf_loss" in losses
     helped = page.eval_on_selector_all("#curves-help li b", "bs => bs.map(b => b.textContent)")
     assert "losses" in helped and "safe ratio" in helped
+    lines = page.evaluate("Object.fromEntries(document.querySelector('#curves').data.map(t => [t.name, t.line.color]))")
+    markers_by_class = page.evaluate(
+        "Object.fromEntries(document.querySelector('#map').data.filter(t => t.name.startsWith('labelled'))"
+        ".map(t => [t.name.split(' ')[1], t.marker.color]))"
+    )
+    # the labels-per-class curves wear the map's class colours: one colour means one class on the page
+    assert {c: lines[f"n_labels_{c}"] for c in ("bad", "neutral", "good")} == markers_by_class
     page.wait_for_function("document.querySelector('#map').dataset.labelled === '3'")
     legend = page.eval_on_selector_all("#map .legendtext", "ts => ts.map(t => t.textContent)")
     assert any(t.startswith("evaluation trajectories") for t in legend)

@@ -3,6 +3,7 @@
 // and the series thinned again by halves when it grows past twice that.
 
 import { plot } from "./plotly.js";
+import { CLASS_COLOURS } from "./regions.js";
 
 const PANELS = [
   { title: "safe coverage", keys: ["safe_coverage"], help: "x-y area the skills reach without entering a bad region (the paper's Table 1)" },
@@ -15,11 +16,15 @@ const PANELS = [
   { title: "labels", keys: ["n_labels"], help: "labels the trainer has used so far" },
   // rule-free: what a run without a task rule (an instruction) still measures
   { title: "state coverage (visited bins)", keys: ["n_bins"], help: "bins the evaluation states visit (needs no rule)" },
-  { title: "labels per class", keys: ["n_labels_bad", "n_labels_neutral", "n_labels_good"], help: "labels the trainer holds, by class" },
+  {
+    title: "labels per class", keys: ["n_labels_bad", "n_labels_neutral", "n_labels_good"], help: "labels the trainer holds, by class",
+    colours: { n_labels_bad: CLASS_COLOURS[0], n_labels_neutral: CLASS_COLOURS[1], n_labels_good: CLASS_COLOURS[2] }, // as on the map
+  },
   { title: "guidance w(s) over evaluations", keys: ["w_mean", "w_min", "w_max"], help: "the guidance weight (Eq. 8) along the evaluation rollouts" },
 ];
 const COLUMNS = 2;
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
+const colour = (panel, name, i) => panel.colours?.[name] ?? PALETTE[i % PALETTE.length];
 
 export class Curves {
   constructor(element, note, maxPoints, help = null) {
@@ -85,14 +90,14 @@ export class Curves {
       panel.names.forEach((name, i) => traces.push({
         type: "scatter", mode: h.epochs.length > 60 ? "lines" : "lines+markers", x: h.epochs, y: series[name],
         name, xaxis: `x${axis}`, yaxis: `y${axis}`, connectgaps: true, marker: { size: 4 },
-        line: { color: PALETTE[i % PALETTE.length], width: 1.5 },
+        line: { color: colour(panel, name, i), width: 1.5 },
         hovertemplate: `${name}<br>epoch %{x}: %{y:.4g}<extra></extra>`,
       }));
       layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined };
       layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
       // the panel's legend, under its title (one line would run into the next panel on a narrow
       // screen): each series' name in its line's colour
-      const legend = panel.names.map((n, i) => `<span style="color:${PALETTE[i % PALETTE.length]}">━ ${n}</span>`).join("  ");
+      const legend = panel.names.map((n, i) => `<span style="color:${colour(panel, n, i)}">━ ${n}</span>`).join("  ");
       layout.annotations.push({
         text: `<b>${panel.title}</b><br>${legend}`, showarrow: false, align: "left",
         xref: `x${axis} domain`, yref: `y${axis} domain`, x: 0, y: 1.02, xanchor: "left", yanchor: "bottom",
