@@ -68,7 +68,8 @@ test-compile: $(STAMP)
 # `make bench-guidance FIRST_VERSION_FLAGS=` measures today's defaults instead.
 FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch --fused-adam false --fast-ops false
 
-# Every bench-* also writes its figures to runs/bench/<name>.json (benchmarks/record.py).
+# Every bench-* but bench-baselines and bench-robots (collie report tables) also writes its figures to
+# runs/bench/<name>.json (benchmarks/record.py).
 bench-guidance: $(STAMP)
 	$(PY) benchmarks/bench_guidance.py -- $(FIRST_VERSION_FLAGS)
 

@@ -12,7 +12,7 @@ run before the kills are done. Kills are spread by progress, not by time: kill i
 run's progress (the mean of its label and epoch fractions, the highest seen so far) passes
 0.8·(i+1)/(kills+1), and until the last part killed is back, so every kill lands on a live stack
 and the run always moves on between kills.
-Writes OUT/chaos.json (default runs/bench/chaos.json)."""
+Writes chaos.json beside OUT, the stack's folder (default OUT runs/bench/chaos: runs/bench/chaos.json)."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ Measures, in one run:
 Needs Debian's chromium (`apt-get install -y chromium`) and `pip install playwright`.
 JSON (runs/bench/labeling.json): one key per printed row, its name in snake case with the unit
 (e.g. `in_page_median_ms`, `three_labelers_in_page_median_ms`, `ant_scene_build_ms`,
-`server_updates_at_1x_fps`, `browser_ant_paused_fps`); `--only-crowd` writes only the
+`server_1x_fps`, `browser_ant_paused_fps`); `--only-crowd` writes only the
 three-labeler rows, to runs/bench/labeling_crowd.json. The `three_labelers_segments_still_*`
 rows are a diagnostic: the same crowd with each segment held on its first frame.
 """

@@ -19,9 +19,11 @@ postgresql 15, started by the bench; --no-postgres skips it).
 Targets: ≥ 1000 labels/s with p99 ≤ 20 ms; stream p99 ≤ 50 ms; 1000 queries claimable ≤ 1 s; body at
 the limit: RSS growth ≤ 2× its size, health p99 ≤ 100 ms; 1000 idle streams ≤ 5 % of a core.
 Bounded: fixed durations and counts; everything runs on 127.0.0.1.
-JSON (runs/bench/service.json): baseline_rps, baseline_p50_ms, baseline_p99_ms, label_rps, label_p50_ms,
-label_p99_ms, claim_p99_ms, stream_p50_ms, stream_p99_ms, post_1000_s, stream_missing,
-baseline_cpu_ms, label_cpu_ms, targets_met.
+JSON (runs/bench/service.json): one object per configuration, under its name, with baseline_rps,
+baseline_p50_ms, baseline_p99_ms, label_rps, label_p50_ms, label_p99_ms, claim_p99_ms,
+stream_p50_ms, stream_p99_ms, post_1000_s, stream_missing, baseline_cpu_ms, label_cpu_ms,
+big_body_mib, big_body_rss_growth_ratio, big_body_health_p99_ms, idle_streams,
+idle_streams_core_share.
 """
 
 from __future__ import annotations
@@ -483,6 +485,7 @@ def figures_of(f: dict) -> dict[str, Any]:
     base, labels, stream = f["base"], f["labels"], f["stream"]
     return {
         "baseline_rps": base["rps"],
+        "baseline_p50_ms": base["p50"],
         "baseline_p99_ms": base["p99"],
         "label_rps": labels["rps"],
         "label_p50_ms": labels["p50"],
@@ -492,6 +495,7 @@ def figures_of(f: dict) -> dict[str, Any]:
         "stream_p99_ms": percentile(stream, 99),
         "post_1000_s": f["post_s"],
         "stream_missing": f["missing"],
+        "baseline_cpu_ms": base["cpu_ms"],
         "label_cpu_ms": labels["cpu_ms"],
         "big_body_mib": f["big"]["mib"],
         "big_body_rss_growth_ratio": f["big"]["growth_ratio"],
