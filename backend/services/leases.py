@@ -24,7 +24,7 @@ from typing import Any
 from sqlalchemy import Connection, Update, bindparam, exists, select, update
 from sqlalchemy.orm import aliased
 
-from backend.models import LabelEvent, LabelVote, Query, QueryData, Run
+from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import gold
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
@@ -43,6 +43,9 @@ _RETURNED = (
 )
 _DATA = select(QueryData.frames, QueryData.extra).where(QueryData.query_pk == bindparam("pk"))
 _RUN_OPEN = exists().where(Run.id == bindparam("run"), Run.status.not_in(tuple(FINISHED)), Run.control != "stop")
+# A revoked caller takes and renews nothing, even where a token cache (another service process,
+# for COLLIE_TOKEN_CACHE_S) or a request already past its token check still lets them in.
+_CALLER_ACTIVE = exists().where(Principal.id == bindparam("me"), Principal.revoked_at.is_(None))
 _SWEEP = (
     update(Query)
     .where(Query.run_id == bindparam("run"), Query.status == "leased", Query.lease_expires_at <= bindparam("now"))
@@ -53,7 +56,11 @@ _SWEEP = (
 _RENEW = (
     update(Query)
     .where(
-        Query.run_id == bindparam("run"), Query.status == "leased", Query.lease_owner_id == bindparam("me"), _RUN_OPEN
+        Query.run_id == bindparam("run"),
+        Query.status == "leased",
+        Query.lease_owner_id == bindparam("me"),
+        _RUN_OPEN,
+        _CALLER_ACTIVE,
     )
     .values(lease_expires_at=bindparam("expires"))
     .returning(*_RETURNED)
@@ -90,7 +97,7 @@ def _take(avoid_skipped: bool) -> Update:
     oldest_id = oldest.order_by(pool.session, pool.id).limit(1).scalar_subquery()
     return (
         update(Query)
-        .where(Query.id == oldest_id, Query.status == "pending", _RUN_OPEN)
+        .where(Query.id == oldest_id, Query.status == "pending", _RUN_OPEN, _CALLER_ACTIVE)
         .values(
             status="leased",
             lease_owner_id=bindparam("me"),
@@ -168,7 +175,7 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
 
 def release_all_held_by(conn: Connection, principal_id: int) -> int:
     """A revoked principal's claims, in every run, go back to the pool now rather than when their
-    leases expire; gold copies served to them are retired (as `release` does). Returns how many
+    leases expire; gold copies leased to them are retired (as `release` does). Returns how many
     queries went back to the pool."""
     mine = (Query.status == "leased") & (Query.lease_owner_id == principal_id)
     conn.execute(update(Query).where(mine, Query.gold_of.is_not(None)).values(status="retired", lease_expires_at=None))

@@ -3,10 +3,16 @@ hands a query back keeps its labeler within MAX_HOLD."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import pytest
+from sqlalchemy import update
 
+from backend.models import Principal
+from backend.server import BackgroundServer
+from backend.services import leases
+from backend.services.auth import Caller
 from collie.client import ApiError, CollieClient
 from collie.schemas import MAX_HOLD, RunRead
 
@@ -82,3 +88,25 @@ def test_revoking_a_labeler_hands_their_claims_back_at_once(
     with pytest.raises(ApiError) as err:
         gone.submit(created.id, held[1], 1)
     assert err.value.status == 401
+
+
+def test_a_revoked_caller_past_the_token_check_takes_and_renews_nothing(
+    live: BackgroundServer, trainer: CollieClient, new_labeler: Callable[[str], CollieClient]
+) -> None:
+    """Another service process (or a request already past its token check) may still let a revoked
+    token in for a moment: the lease statements themselves refuse it."""
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 3))
+    late = new_labeler("late-revoked")
+    me = late.me()
+    held = late.claim(created.id)
+    assert held is not None
+    db = live.app.state.db
+    with db.write() as conn:  # revoked elsewhere: revoked_at is set, this process's release not run
+        conn.execute(update(Principal).where(Principal.id == me.id).values(revoked_at=time.time()))
+    expires = trainer.query(created.id, held.query.query_id).lease_expires_at
+    caller = Caller(me.id, me.name, "labeler")
+    with db.write() as conn:
+        assert leases.claim(conn, created.id, caller, lease_s=600.0, hold=2) is None  # nothing new
+    assert trainer.query(created.id, held.query.query_id).lease_expires_at == expires  # not renewed
+    assert trainer.run(created.id).queue.leased == 1

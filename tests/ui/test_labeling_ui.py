@@ -145,6 +145,20 @@ def view(client: viser.ClientHandle) -> np.ndarray | None:
         return None
 
 
+def settled_view(client: viser.ClientHandle) -> np.ndarray:
+    """The camera once two reports half a second apart agree (a new scene aims it as it loads)."""
+    wait_until(lambda: view(client) is not None)
+    last = view(client)
+    for _ in range(60):
+        time.sleep(0.5)
+        now = view(client)
+        assert now is not None and last is not None
+        if np.allclose(now, last, atol=1e-6):
+            return now
+        last = now
+    raise AssertionError("the camera never settled")
+
+
 def hold(page: object, key: str, seconds: float = 0.4) -> None:
     time.sleep(DWELL_S + 0.05)
     page.keyboard.down(key)  # type: ignore[attr-defined]
@@ -158,8 +172,7 @@ def test_frame_and_skip_keys_leave_the_north_up_view_alone(stack: Stack, browser
     page = open_labeler(browser, app.labeler_url(stack.new_labeler("keys-view")))
     first = wait_segment(page)
     (session,) = app.sessions.values()
-    wait_until(lambda: view(session.client) is not None)
-    start = view(session.client)
+    start = settled_view(session.client)
     hold(page, "j")  # a frame key pauses: from here only the frame keys change the frame
     wait_until(lambda: not session.player.playing)
     frame = session.player.position  # at most the second-to-last frame, so one more fits
@@ -182,7 +195,7 @@ def test_a_revoked_labeler_is_told_without_pressing_a_key(stack: Stack, browser:
     created = stack.operator.create_labeler("revoked-mid-segment")
     page = open_labeler(browser, app.labeler_url(created.token))
     wait_segment(page)
-    assert stack.trainer.run(run.id).queue.leased == 2  # on screen and preloaded
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
     stack.operator.revoke(created.id)
     assert stack.trainer.run(run.id).queue.leased == 0  # back in the pool at once
     wait_text(page, "The service refused this token", timeout_s=15.0)
