@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import mujoco
@@ -171,5 +172,19 @@ def test_unknown_name_lists_valid_names() -> None:
         assert name in str(err.value)
 
 
-def test_raw_step_rate_is_positive() -> None:
-    assert raw_step_rate("point", steps=300) > 0
+def test_raw_step_rate_counts_every_step_it_times(monkeypatch: pytest.MonkeyPatch) -> None:
+    """300 steps through the env's own `step`, and a rate no lower than 300 over the whole call."""
+    calls = []
+
+    def counted(name: str, seed: int = 0) -> object:
+        env = make_env(name, seed=seed)
+        step = env.step
+        env.step = lambda action: calls.append(action) or step(action)  # type: ignore[method-assign]
+        return env
+
+    monkeypatch.setattr("trainer.envs.rate.make_env", counted)
+    start = time.perf_counter()
+    rate = raw_step_rate("point", steps=300)
+    wall = time.perf_counter() - start
+    assert len(calls) == 300
+    assert 300 / wall <= rate < math.inf  # the timed part is within the call

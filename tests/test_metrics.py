@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 import pathlib
 
+import matplotlib.image
 import numpy as np
 import pytest
 
 from collie.tasks import BAD, GOOD, NEUTRAL, get_task
+from trainer import plots
 from trainer.metrics import coverage_metrics, off_start_safe_ratio, start_block, travel_metrics
 
 
@@ -93,13 +95,12 @@ def test_matches_a_plain_loop_on_48_random_trajectories() -> None:
 
 
 def assert_real_png(path: pathlib.Path) -> None:
-    image = pytest.importorskip("matplotlib.image").imread(path)
+    image = matplotlib.image.imread(path)
     assert path.stat().st_size > 5_000
     assert image.ndim == 3 and image[..., :3].std() > 0.05  # not a blank canvas
 
 
 def test_skill_trajectory_plot_2d(tmp_path: pathlib.Path) -> None:
-    plots = pytest.importorskip("trainer.plots")
     angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     skills = np.stack([np.cos(angles), np.sin(angles)], axis=1)
     trajs = [np.linspace((0, 0), 30 * s, 50) for s in skills]
@@ -114,7 +115,6 @@ def test_skill_trajectory_plot_2d(tmp_path: pathlib.Path) -> None:
 
 
 def test_skill_trajectory_plot_1d_and_pitch_task(tmp_path: pathlib.Path) -> None:
-    plots = pytest.importorskip("trainer.plots")
     xs = [np.cumsum(np.full(100, d)) for d in np.linspace(-1, 1, 16)]
     one_hot = np.eye(16)
     assert len(set(plots.skill_colours(one_hot, 16))) == 16
@@ -129,7 +129,6 @@ def test_skill_trajectory_plot_1d_and_pitch_task(tmp_path: pathlib.Path) -> None
 
 
 def test_curves_plot(tmp_path: pathlib.Path) -> None:
-    plots = pytest.importorskip("trainer.plots")
     records = [{"epoch": e, "safe_ratio": e / 100, "safe_coverage": 3 * e} for e in range(0, 100, 10)]
     records.append({"epoch": 100, "loss": 1.0})  # keys may be missing from some records
     out = plots.plot_curves(records, ["safe_ratio", "safe_coverage", "loss"], tmp_path / "curves.png")

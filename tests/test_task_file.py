@@ -73,6 +73,7 @@ def test_polygon_is_the_even_odd_interior_with_the_edge_convention() -> None:
 def test_every_builtin_task_survives_its_wire_form() -> None:
     rng = np.random.default_rng(0)
     xy, pitch = rng.uniform(-30, 30, (3000, 2)), rng.uniform(-4, 4, 3000)
+    checked = set()
     for name in task_names():
         for env in ("point", "quadruped", "car"):
             try:
@@ -84,6 +85,8 @@ def test_every_builtin_task_survives_its_wire_form() -> None:
             assert again.to_dict() == task.to_dict(), (name, env)
             assert (again.classify(xy, pitch) == task.classify(xy, pitch)).all(), (name, env)
             assert np.allclose(again.boundary_distance(xy, pitch), task.boundary_distance(xy, pitch))
+            checked.add(name)
+    assert checked == set(task_names())  # every task is defined for one of these envs at least
 
 
 def test_a_rule_function_cannot_travel() -> None:

@@ -100,7 +100,7 @@ def test_a_stale_tab_never_labels_what_it_no_longer_holds(stack: Stack, browser:
         other.submit(run.id, shown, 1)
     press(front, "2")
     wait_text(front, "no longer holds")
-    after = wait_segment(front, shown)
+    wait_segment(front, shown)  # the refused tab moves on
     # two tabs of this labeler never show one segment: the newest tab to show it labels it
     back = tab(context, app.labeler_url(token))
     behind = wait_segment(back)
@@ -112,7 +112,6 @@ def test_a_stale_tab_never_labels_what_it_no_longer_holds(stack: Stack, browser:
     events = stack.trainer.label_events(run.id)
     assert [e.query_id for e in events if e.query_id == shown] == [shown]  # no revision of it
     assert all(e.revises_event_id is None for e in events), "a tab relabelled a segment it did not hold"
-    assert after != shown
     context.close()  # type: ignore[attr-defined]
 
 

@@ -47,8 +47,11 @@ def test_watch_replays_every_skill_and_claims_nothing(stack: Stack, browser: Bro
 def test_dashboard_rollouts_leave_the_states_out(stack: Stack) -> None:
     run = stack.post_run("ant", 0)
     stack.trainer.post_rollouts(run.id, evaluation(5, 2))
-    assert all(r.qpos for r in stack.trainer.rollouts(run.id)[-1].rollouts)  # the watch mode's read
+    full = stack.trainer.rollouts(run.id)[-1].rollouts
+    assert len(full) == 2 and all(r.qpos for r in full)  # the watch mode's read
     plain = stack.operator._http.get(f"/runs/{run.id}/rollouts", params={"limit": 1, "states": "false"}).json()
-    assert plain[0]["epoch"] == 5 and all(r["qpos"] is None for r in plain[0]["rollouts"])  # the map's read
+    assert plain[0]["epoch"] == 5 and len(plain[0]["rollouts"]) == 2
+    assert all(r["qpos"] is None for r in plain[0]["rollouts"])  # the map's read
     page = stack.operator._http.get(f"/dashboard/runs/{run.id}").json()
-    assert page["rollouts"]["epoch"] == 5 and all(r.get("qpos") is None for r in page["rollouts"]["rollouts"])
+    assert page["rollouts"]["epoch"] == 5 and len(page["rollouts"]["rollouts"]) == 2
+    assert all(r.get("qpos") is None for r in page["rollouts"]["rollouts"])
