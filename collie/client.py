@@ -63,6 +63,7 @@ from collie.schemas import (
     StreamEvent,
     Submission,
     UndoRequest,
+    VotesDiscarded,
 )
 
 M = TypeVar("M", bound=BaseModel)
@@ -374,6 +375,10 @@ class CollieClient:
         """Withdraw the caller's label; it comes back to them (to `tab`) under a fresh lease."""
         body = UndoRequest(query_id=query_id, client_request_id=client_request_id or new_request_id(), tab=tab)
         return self._post(LabelAck, f"/runs/{run_id}/undo", body)
+
+    def discard_votes(self, run_id: int, labeler_id: int) -> VotesDiscarded:
+        """Operator: withdraw every label one labeler gave in the run."""
+        return self._post(VotesDiscarded, f"/runs/{run_id}/labelers/{labeler_id}/discard")
 
     def label_events(self, run_id: int, after: int = 0, limit: int = 1000) -> list[LabelEventRead]:
         return self._list(LabelEventRead, f"/runs/{run_id}/labels", after=after, limit=limit)

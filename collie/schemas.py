@@ -468,6 +468,15 @@ class LabelAck(Wire):
     next: ClaimRead | None = Field(default=None, description="with ?next=true: the labeler's next query, if any")
 
 
+class VotesDiscarded(Wire):
+    """POST /runs/{id}/labelers/{labeler_id}/discard (operator): one labeler's votes in a run withdrawn."""
+
+    run_id: int
+    labeler: str
+    queries: list[QueryId] = Field(description="the queries whose vote of this labeler was withdrawn")
+    withdrawn: list[QueryId] = Field(description="those whose effective label went with it (the trainer is told)")
+
+
 class MyLabel(Wire):
     """One query the caller labelled in a run (GET /runs/{id}/labels/mine): their latest label of it."""
 

@@ -10,6 +10,8 @@ from backend.routes.deps import (
     DB,
     AnyCaller,
     LabelerCaller,
+    OperatorCaller,
+    PrincipalId,
     RunId,
     SettingsDep,
     TrainerCaller,
@@ -27,6 +29,7 @@ from collie.schemas import (
     LabelSubmit,
     MyLabel,
     UndoRequest,
+    VotesDiscarded,
 )
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["labels"])
@@ -80,6 +83,14 @@ async def undo(run_id: RunId, request: Request, caller: LabelerCaller, db: DB, s
     body = await parse_body(request, UndoRequest)
     with db.write() as conn:
         return _ack_response(labels.undo(conn, run_id, caller, body, settings.lease_s))
+
+
+@router.post("/labelers/{labeler_id}/discard")
+def discard_votes(run_id: RunId, labeler_id: PrincipalId, _: OperatorCaller, db: DB) -> VotesDiscarded:
+    """Withdraw every label one labeler gave in this run (the trainer is told of each effective label
+    withdrawn; the queries go back to the pool for others)."""
+    with db.write() as conn:
+        return labels.discard_votes(conn, run_id, labeler_id)
 
 
 @router.get("/labels")

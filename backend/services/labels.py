@@ -14,6 +14,8 @@ effective label. Who may write:
 - undo: a labeler withdraws their own vote (the query comes back to them under a fresh lease, to
   relabel at once, within MAX_HOLD: their last preloaded query goes back to the pool); an operator
   without a vote withdraws every vote (the query returns to the pool);
+- discard: an operator withdraws every vote of one labeler in a run (a careless or malicious
+  labeler), each as an `undo` in that labeler's name, so the events replay to the same state;
 - every submission is idempotent by (labeler, client_request_id): a repeat returns the first answer.
 Gold copies (services/gold.py) take labels the same way with r = 1, but never touch the stream.
 """
@@ -21,6 +23,7 @@ Gold copies (services/gold.py) take labels the same way with r = 1, but never to
 from __future__ import annotations
 
 import json
+import secrets
 import time
 from typing import Any
 
@@ -41,6 +44,7 @@ from collie.schemas import (
     MyLabel,
     NotHeldReason,
     UndoRequest,
+    VotesDiscarded,
 )
 
 _EVENT_COLUMNS = (
@@ -335,6 +339,51 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     if q.label is not None:
         _announce(conn, run_id, q, caller, "withdrawn", event.id, None, now)
     return LabelAck(event=event, label=None, query_status=status, duplicate=False)
+
+
+_VOTED_BY = (
+    select(
+        Query.id,
+        Query.query_id,
+        Query.session,
+        Query.status,
+        Query.label,
+        Query.lease_expires_at,
+        Query.gold_of,
+        LabelVote.event_id.label("vote_event_id"),
+    )
+    .join(LabelVote, LabelVote.query_pk == Query.id)
+    .where(Query.run_id == bindparam("run"), LabelVote.labeler_id == bindparam("who"), Query.gold_of.is_(None))
+    .order_by(Query.id)
+)
+
+
+def discard_votes(conn: Connection, run_id: int, labeler_id: int) -> VotesDiscarded:
+    """Withdraw every vote of one labeler in a run (gold copies aside: they measure the labeler and
+    never reach the trainer). Each is an `undo` event in the labeler's name (consensus.replay: the
+    vote goes, the effective label with it); the query goes back to the pool to gather its r votes
+    again (a lease someone holds on it now stands; a retired query stays retired), and the stream
+    tells the trainer of every effective label withdrawn."""
+    runs.row(conn, run_id)
+    who = conn.execute(select(Principal.id, Principal.name, Principal.role).where(Principal.id == labeler_id)).first()
+    if who is None:
+        raise NotFound(f"no principal {labeler_id}")
+    caller, now = Caller(who.id, who.name, who.role), time.time()
+    queries, withdrawn = [], []
+    for q in conn.execute(_VOTED_BY, {"run": run_id, "who": labeler_id}).all():
+        conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": labeler_id})
+        request_id = f"discard-{secrets.token_hex(8)}"
+        event = _record(conn, run_id, q, caller, "undo", None, None, request_id, now, q.vote_event_id)
+        held = q.status == "leased" and q.lease_expires_at is not None and q.lease_expires_at > now
+        change: dict[str, Any] = {"label": None, "label_event_id": None}
+        if q.status == "labelled" or (q.status == "leased" and not held):
+            change |= {"status": "pending", "lease_owner_id": None, "lease_expires_at": None, "lease_tab": None}
+        conn.execute(_SET_QUERY, {"pk": q.id, **change})
+        if q.label is not None:
+            _announce(conn, run_id, q, caller, "withdrawn", event.id, None, now)
+            withdrawn.append(q.query_id)
+        queries.append(q.query_id)
+    return VotesDiscarded(run_id=run_id, labeler=who.name, queries=queries, withdrawn=withdrawn)
 
 
 def count_reached(conn: Connection, run_id: int, now: float) -> list[str]:

@@ -46,6 +46,7 @@ POLICY: dict[tuple[str, str], str] = {
     ("GET", "/api/runs/{run_id}/labelled"): TRAINER,
     ("POST", "/api/runs/{run_id}/labels"): LABELER,
     ("POST", "/api/runs/{run_id}/undo"): LABELER,
+    ("POST", "/api/runs/{run_id}/labelers/{labeler_id}/discard"): OPERATOR,
     ("GET", "/api/runs/{run_id}/labels"): ANY,
     ("GET", "/api/runs/{run_id}/labels/effective"): ANY,
     ("GET", "/api/runs/{run_id}/labels/mine"): LABELER,

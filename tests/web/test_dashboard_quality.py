@@ -102,7 +102,7 @@ def test_the_panel_counts_labels_not_revisions_and_explains_each_metric(page: An
     explained = page.eval_on_selector_all("#labeling-body dd", "dds => dds.map(d => !!d.querySelector('.explain'))")
     assert explained and all(explained)  # every metric has its line
     help_terms = page.eval_on_selector_all("#labeling-body .explain-list b", "bs => bs.map(b => b.textContent)")
-    assert help_terms == ["labels", "skips", "median", "oracle agrees", "α", "gold"]
+    assert help_terms == ["labels", "skips", "median", "oracle agrees", "α", "gold", "discard labels"]
 
 
 def test_disagreements_are_listed_with_their_paths(page: Any) -> None:

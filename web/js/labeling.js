@@ -18,16 +18,23 @@ const COLUMN_HELP = [
   ["oracle agrees", "share of their labels the task rule gives too"],
   ["α", "Krippendorff's α of their labels against the other labelers' on the same queries"],
   ["gold", "gold segments (the rule knows the answer, never sent to the trainer) they labelled right / labelled"],
+  ["discard labels", "withdraw every label they gave in this run (the trainer drops them; the segments go back to the queue for others)"],
 ];
 
+// A labeler's labels in this run can be discarded (operator; a second click confirms: `discard.armed`
+// names the labeler whose button waits for it, `discard.message` says what the last one did).
+const discardButton = (l, armed) => (l.labels ? `<button type="button" class="danger" data-discard="${escapeHtml(l.name)}">${
+  armed === l.name ? `Confirm: discard ${l.labels}` : "Discard labels"}</button>` : "");
+
 // `ruleless`: the run has no task rule (only an instruction), so there is no oracle to agree with.
-export function renderLabeling(element, view, ruleless = false) {
+export function renderLabeling(element, view, ruleless = false, discard = { armed: null, message: "" }) {
   const s = view.labeling;
   const rows = s.labelers.map((l) => `<tr data-labeler="${escapeHtml(l.name)}">
       <td>${escapeHtml(l.name)}</td><td class="labels">${l.labels}</td><td>${l.skips}</td>
       <td>${l.median_s == null ? "—" : `${num(l.median_s, 1)} s`}</td><td>${percent(l.agreement)}</td>
       <td>${l.alpha == null ? "—" : num(l.alpha, 2)}</td>
       <td>${l.gold_answered ? `${percent(l.gold_accuracy)} of ${l.gold_answered}` : "—"}</td>
+      <td>${discardButton(l, discard.armed)}</td>
     </tr>`).join("");
   const quality = `${s.redundancy === 1 ? "1 label per query" : `${s.redundancy} labels per query from distinct labelers`}${
     s.gold_rate ? ` · ${percent(s.gold_rate)} gold` : ""}`;
@@ -56,8 +63,9 @@ export function renderLabeling(element, view, ruleless = false) {
       <dd id="between-labelers">${s.shared_queries ? `${percent(s.between_labelers)} on ${s.shared_queries} shared segments` : "no segment labelled by two yet"}
           <p class="explain">share of labeler pairs that gave the same label (needs no rule)</p></dd>
     </dl>
-    ${rows ? `<table id="labelers-stats"><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th><th>α</th><th>gold</th></tr></thead>
+    ${rows ? `<table id="labelers-stats"><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th><th>α</th><th>gold</th><th></th></tr></thead>
       <tbody>${rows}</tbody></table>
+      <p id="discard-message" class="message">${escapeHtml(discard.message)}</p>
       <ul class="explain-list">${COLUMN_HELP.map(([k, v]) => `<li><b>${k}</b>: ${v}</li>`).join("")}</ul>`
     : '<p class="muted">no labelers yet</p>'}`;
 }

@@ -29,11 +29,17 @@ export class RunPage {
     this.renderCurves = coalesce(() => this.curves.render(), 200);
     this.source = null;
     this.timer = null;
+    this.discard = { armed: null, message: "" };
+    root.querySelector("#labeling-body").addEventListener("click", (event) => {
+      const button = event.target.closest("button[data-discard]");
+      if (button) this.discardLabels(button.dataset.discard);
+    });
   }
 
   async open(runId, watchUrl) {
     this.close();
     this.runId = runId;
+    this.discard = { armed: null, message: "" };
     let page;
     try {
       page = await api(`dashboard/runs/${runId}?max_points=${MAX_POINTS}`);
@@ -113,7 +119,8 @@ export class RunPage {
   }
 
   renderLabeling(view) {
-    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null);
+    this.labelingView = view;
+    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null, this.discard);
     if (this.run) {  // another operator may have changed them: the form's untouched inputs follow
       const { redundancy, gold_rate } = view.labeling;
       this.quality.show({ ...this.run, redundancy, gold_rate });
@@ -121,6 +128,27 @@ export class RunPage {
     // the labeling UI's review mode (labeling_ui/review.py) replays one query, labelling nothing
     const replay = this.watchUrl ? (queryId) => this.uiLink({ review: this.runId, query: queryId }) : null;
     renderDisagreements(this.root.querySelector("#disagreements-body"), this.root.querySelector("#disagreements-count"), view, this.task, this.labelNames ?? [], replay);
+  }
+
+  // The first click arms a labeler's button, the second discards their labels in this run.
+  async discardLabels(name) {
+    if (this.discard.armed !== name) {
+      this.discard = { armed: name, message: "" };
+      this.renderLabeling(this.labelingView);
+      return;
+    }
+    const runId = this.runId;
+    this.discard = { armed: null, message: "" };
+    try {
+      const who = (await api("labelers")).find((p) => p.name === name);
+      if (!who) throw new Error(`no principal named ${name}`);
+      const done = await api(`runs/${runId}/labelers/${who.id}/discard`, { method: "POST" });
+      const n = done.queries.length;
+      this.discard.message = `discarded ${n} label${n === 1 ? "" : "s"} of ${done.labeler}; ${done.withdrawn.length} had counted and were withdrawn from the trainer`;
+    } catch (error) {
+      this.discard.message = error.message; // the service names what is wrong (not an operator, a finished run)
+    }
+    if (runId === this.runId) await this.loadLabeling();
   }
 
   seeEpoch(epoch) {
