@@ -88,6 +88,9 @@ _LOOKUP = (
     .join(Run, Run.id == Query.run_id)
     .outerjoin(LabelVote, and_(LabelVote.query_pk == Query.id, LabelVote.labeler_id == bindparam("me")))
     .where(Query.run_id == bindparam("run"), Query.query_id == bindparam("query_id"))
+    # PostgreSQL: the row is locked as it is read, so a label, an undo and a discard of one query
+    # each decide on what the one before wrote (SQLite's writers are serialised already)
+    .with_for_update(of=Query)
 )
 _SEEN = (
     select(LabelEvent.id, LabelEvent.run_id, LabelEvent.kind, LabelEvent.value, Query.query_id)
@@ -355,6 +358,7 @@ _VOTED_BY = (
     .join(LabelVote, LabelVote.query_pk == Query.id)
     .where(Query.run_id == bindparam("run"), LabelVote.labeler_id == bindparam("who"), Query.gold_of.is_(None))
     .order_by(Query.id)
+    .with_for_update(of=Query)  # as _LOOKUP: two discards, or a discard and a label, never decide on one state
 )
 
 
@@ -364,7 +368,9 @@ def discard_votes(conn: Connection, run_id: int, labeler_id: int) -> VotesDiscar
     vote goes, the effective label with it); the query goes back to the pool to gather its r votes
     again (a lease someone holds on it now stands; a retired query stays retired), and the stream
     tells the trainer of every effective label withdrawn."""
-    runs.row(conn, run_id)
+    run = runs.row(conn, run_id)
+    if run.status in FINISHED:
+        raise Conflict(f"run {run_id} is {run.status}: its labels stay as they are")
     who = conn.execute(select(Principal.id, Principal.name, Principal.role).where(Principal.id == labeler_id)).first()
     if who is None:
         raise NotFound(f"no principal {labeler_id}")

@@ -4,16 +4,18 @@ and the events still replay to the stored state."""
 
 from __future__ import annotations
 
+import threading
 from collections import defaultdict
 from collections.abc import Callable
 
 import pytest
 
+from backend.server import BackgroundServer
 from backend.services.consensus import VoteEvent, replay
 from collie.client import ApiError, CollieClient
 from collie.schemas import LabelChangedEvent, WithdrawnEvent
 
-from .conftest import make_run_spec, make_session
+from .conftest import TOKENS, make_run_spec, make_session
 
 Labelers = Callable[[str], CollieClient]
 
@@ -50,6 +52,13 @@ def replayed(trainer: CollieClient, run_id: int, r: int) -> dict[str, int]:
     return {q: label for q, label in labels.items() if label is not None}
 
 
+def stored(trainer: CollieClient, run_id: int) -> dict[str, int]:
+    """The effective labels the query rows hold (status labelled, a label)."""
+    rows = trainer.queries(run_id)
+    assert all((q.status == "labelled") == (q.label is not None) for q in rows), rows
+    return {q.query_id: q.label for q in rows if q.label is not None}
+
+
 def test_discarding_a_labelers_labels_withdraws_them_and_frees_their_queries(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
@@ -65,11 +74,11 @@ def test_discarding_a_labelers_labels_withdraws_them_and_frees_their_queries(
     state = trainer.run(run.id)
     assert state.n_labels == 1 and state.queue.labelled == 1 and state.queue.pending == 3
     assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {kept[0]: 1}
-    assert replayed(trainer, run.id, 1) == {kept[0]: 1}
+    assert replayed(trainer, run.id, 1) == stored(trainer, run.id) == {kept[0]: 1}
     assert {i.query.query_id for i in trainer.labelled(run.id)} == set(kept)
     relabel = new_labeler("relabeller")
     assert label_all(relabel, run.id, [1, 1, 1])[:2] == theirs  # back in the pool, oldest first
-    assert replayed(trainer, run.id, 1) == {e.query_id: e.label for e in trainer.effective_labels(run.id)}
+    assert replayed(trainer, run.id, 1) == stored(trainer, run.id)
     again = operator.discard_votes(run.id, careless.me().id)  # nothing left of theirs
     assert (again.queries, again.withdrawn) == ([], [])
 
@@ -90,7 +99,7 @@ def test_with_redundancy_two_the_other_vote_stays_and_the_query_counts_at_two_ag
     label_all(c, run.id, [1])
     assert {e.query_id: e.label for e in trainer.effective_labels(run.id)} == {"0-0": 1}  # b and c agree
     assert stream(trainer, run.id)[-2:] == [("withdrawn", "0-0", None), ("label", "0-0", 1)]
-    assert replayed(trainer, run.id, 2) == {"0-0": 1}
+    assert replayed(trainer, run.id, 2) == stored(trainer, run.id) == {"0-0": 1}
 
 
 def test_discard_needs_an_operator_and_a_known_labeler(
@@ -107,3 +116,54 @@ def test_discard_needs_an_operator_and_a_known_labeler(
     with pytest.raises(ApiError) as err:
         operator.discard_votes(10**6, someone.me().id)
     assert err.value.status == 404
+
+
+def test_a_live_lease_stands_gold_copies_stay_and_a_finished_run_is_refused(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 2}))
+    trainer.post_session(run.id, make_session(0, 2))
+    leaving, holder = new_labeler("leaving-r2"), new_labeler("holder-r2")
+    label_all(leaving, run.id, [1, 1])  # one vote of two on each: nothing counts yet
+    held = holder.claim(run.id)
+    assert held is not None  # 0-0, on holder's screen now
+    gone = operator.discard_votes(run.id, leaving.me().id)
+    assert (gone.queries, gone.withdrawn) == (["0-0", "0-1"], [])  # nothing had counted
+    assert trainer.query(run.id, "0-0").status == "leased" and trainer.query(run.id, "0-0").lease_owner == "holder-r2"
+    assert trainer.query(run.id, "0-1").status == "pending"
+    holder.submit(run.id, "0-0", 0)  # the lease held through the discard
+    assert stored(trainer, run.id) == {}  # one vote of two again
+    trainer.set_status(run.id, "finished")
+    with pytest.raises(ApiError) as err:
+        operator.discard_votes(run.id, holder.me().id)
+    assert err.value.status == 409 and "finished" in err.value.detail
+
+
+def test_two_discards_at_once_withdraw_each_label_once(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers, live: BackgroundServer
+) -> None:
+    """On PostgreSQL the query rows are locked as they are read: two operators discarding the two
+    labelers of the same queries at once withdraw each effective label once, never twice."""
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 2}))
+    trainer.post_session(run.id, make_session(0, 12))
+    a, b = new_labeler("race-a"), new_labeler("race-b")
+    label_all(a, run.id, [1] * 12)
+    label_all(b, run.id, [1] * 12)
+    assert trainer.run(run.id).n_labels == 12
+    start = threading.Barrier(2)
+
+    def discard(who: CollieClient, labeler_id: int) -> None:
+        with CollieClient(live.url, TOKENS["operator"]) as own:
+            start.wait()
+            own.discard_votes(run.id, labeler_id)
+
+    threads = [threading.Thread(target=discard, args=(c, c.me().id)) for c in (a, b)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    withdrawn = [e for e in trainer.events(run.id).events if isinstance(e, WithdrawnEvent)]
+    assert len(withdrawn) == 12 and len({e.data.query_id for e in withdrawn}) == 12
+    state = trainer.run(run.id)
+    assert state.n_labels == 0 and state.queue.labelled == 0 and state.queue.pending == 12
+    assert stored(trainer, run.id) == {}

@@ -210,6 +210,32 @@ def test_a_revoked_labelers_gold_copy_is_retired(
     assert trainer.run(run.id).queue.model_dump() == {"pending": 2, "leased": 0, "labelled": 1, "retired": 0}
 
 
+def test_a_discard_leaves_the_labelers_gold_answers(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    run = trainer.create_run(make_run_spec(task="north"))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    a = new_labeler("gold-first")
+    a.submit(run.id, a.claim(run.id).query.query_id, 1)
+    operator.set_quality(run.id, gold_rate=0.5)
+    trainer.post_session(run.id, north_session(1, [1.0, 1.0]))
+    b = new_labeler("gold-discarded")
+    gold = b.claim(run.id)  # gold first: a copy of 0-0
+    assert gold is not None and gold.query.query_id not in {"0-0", "1-0", "1-1"}
+    b.submit(run.id, gold.query.query_id, 1)
+    real = b.claim(run.id)
+    assert real is not None and real.query.query_id == "1-0"
+    b.submit(run.id, "1-0", 1)
+    gone = operator.discard_votes(run.id, b.me().id)
+    assert (gone.queries, gone.withdrawn) == (["1-0"], ["1-0"])  # the gold copy is not among them
+    with live.app.state.db.read() as conn:
+        status = conn.execute(
+            text("SELECT status FROM queries WHERE run_id = :run AND query_id = :q"),
+            {"run": run.id, "q": gold.query.query_id},
+        ).scalar_one()
+    assert status == "labelled"  # their gold answer still measures them
+
+
 def test_agreement_and_disagreements_on_the_dashboard(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:

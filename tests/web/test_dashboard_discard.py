@@ -19,9 +19,9 @@ WAIT_MS = 30_000
 
 @pytest.fixture(scope="module")
 def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -> RunRead:
-    """Three queries: two labelled by a careless labeler, one by a careful one."""
+    """Four queries: two labelled by a careless labeler, one by a careful one, one for a newcomer."""
     created = trainer.create_run(make_run_spec())
-    trainer.post_session(created.id, make_session(0, 3))
+    trainer.post_session(created.id, make_session(0, 4))
     for name, values in (("careless-web", [0, 0]), ("careful-web", [1])):
         with CollieClient(live.url, operator.create_labeler(name).token) as client:
             for value in values:
@@ -62,7 +62,7 @@ def test_two_clicks_discard_a_labelers_labels(page: Any, trainer: CollieClient, 
     assert page.query_selector(button) is None  # nothing left to discard
     assert labels_of(page, "careful-web") == "1"
     state = trainer.run(run.id)
-    assert state.n_labels == 1 and state.queue.pending == 2
+    assert state.n_labels == 1 and state.queue.pending == 3
     withdrawn = [e.data.query_id for e in trainer.events(run.id).events if isinstance(e, WithdrawnEvent)]
     assert len(withdrawn) == 2
 

@@ -138,17 +138,18 @@ export class RunPage {
       return;
     }
     const runId = this.runId;
-    this.discard = { armed: null, message: "" };
+    const state = { armed: null, message: "" }; // this run's: another run opened meanwhile has its own
+    this.discard = state;
     try {
       const who = (await api("labelers")).find((p) => p.name === name);
       if (!who) throw new Error(`no principal named ${name}`);
       const done = await api(`runs/${runId}/labelers/${who.id}/discard`, { method: "POST" });
       const n = done.queries.length;
-      this.discard.message = `discarded ${n} label${n === 1 ? "" : "s"} of ${done.labeler}; ${done.withdrawn.length} had counted and were withdrawn from the trainer`;
+      state.message = `discarded ${n} label${n === 1 ? "" : "s"} of ${done.labeler}; ${done.withdrawn.length} had counted and were withdrawn from the trainer`;
     } catch (error) {
-      this.discard.message = error.message; // the service names what is wrong (not an operator, a finished run)
+      state.message = error.message; // the service names what is wrong (not an operator, a finished run)
     }
-    if (runId === this.runId) await this.loadLabeling();
+    if (runId === this.runId) this.refreshLabeling(); // a failed reload marks the connection down
   }
 
   seeEpoch(epoch) {
