@@ -86,11 +86,11 @@ async def undo(run_id: RunId, request: Request, caller: LabelerCaller, db: DB, s
 
 
 @router.post("/labelers/{labeler_id}/discard")
-def discard_votes(run_id: RunId, labeler_id: PrincipalId, _: OperatorCaller, db: DB) -> VotesDiscarded:
+def discard_votes(run_id: RunId, labeler_id: PrincipalId, caller: OperatorCaller, db: DB) -> VotesDiscarded:
     """Withdraw every label one labeler gave in this run (the trainer is told of each effective label
     withdrawn; the queries go back to the pool for others)."""
     with db.write() as conn:
-        return labels.discard_votes(conn, run_id, labeler_id)
+        return labels.discard_votes(conn, run_id, labeler_id, caller)
 
 
 @router.get("/labels")

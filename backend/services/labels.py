@@ -362,12 +362,13 @@ _VOTED_BY = (
 )
 
 
-def discard_votes(conn: Connection, run_id: int, labeler_id: int) -> VotesDiscarded:
+def discard_votes(conn: Connection, run_id: int, labeler_id: int, operator: Caller) -> VotesDiscarded:
     """Withdraw every vote of one labeler in a run (gold copies aside: they measure the labeler and
     never reach the trainer). Each is an `undo` event in the labeler's name (consensus.replay: the
     vote goes, the effective label with it); the query goes back to the pool to gather its r votes
     again (a lease someone holds on it now stands; a retired query stays retired), and the stream
-    tells the trainer of every effective label withdrawn."""
+    tells the trainer of every effective label withdrawn. Each event's client_request_id names the
+    operator who discarded (`discard-by-<principal id>-…`), for the audit."""
     run = runs.row(conn, run_id)
     if run.status in FINISHED:
         raise Conflict(f"run {run_id} is {run.status}: its labels stay as they are")
@@ -378,7 +379,7 @@ def discard_votes(conn: Connection, run_id: int, labeler_id: int) -> VotesDiscar
     queries, withdrawn = [], []
     for q in conn.execute(_VOTED_BY, {"run": run_id, "who": labeler_id}).all():
         conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": labeler_id})
-        request_id = f"discard-{secrets.token_hex(8)}"
+        request_id = f"discard-by-{operator.id}-{secrets.token_hex(8)}"
         event = _record(conn, run_id, q, caller, "undo", None, None, request_id, now, q.vote_event_id)
         held = q.status == "leased" and q.lease_expires_at is not None and q.lease_expires_at > now
         change: dict[str, Any] = {"label": None, "label_event_id": None}

@@ -70,6 +70,9 @@ def test_discarding_a_labelers_labels_withdraws_them_and_frees_their_queries(
     assert trainer.run(run.id).n_labels == 3
     gone = operator.discard_votes(run.id, careless.me().id)
     assert (gone.labeler, gone.queries, gone.withdrawn) == ("careless", theirs, theirs)
+    undos = [e for e in trainer.label_events(run.id) if e.kind == "undo"]
+    assert [(e.query_id, e.labeler) for e in undos] == [(q, "careless") for q in theirs]
+    assert all(e.client_request_id.startswith(f"discard-by-{operator.me().id}-") for e in undos)  # who discarded
     assert stream(trainer, run.id)[-2:] == [("withdrawn", q, None) for q in theirs]  # the trainer is told
     state = trainer.run(run.id)
     assert state.n_labels == 1 and state.queue.labelled == 1 and state.queue.pending == 3
