@@ -6,6 +6,7 @@ from fastapi import APIRouter, Request
 
 from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId, json_body, parse_body
 from backend.services import auth, leases
+from backend.services.auth import Caller
 from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, Me
 
 router = APIRouter(tags=["labelers"])
@@ -36,7 +37,7 @@ async def revoke_labeler(labeler_id: PrincipalId, _: OperatorCaller, db: DB, req
     """Revoke a principal's token: its open streams end and its claims go back to the pool now."""
     with db.write() as conn:
         read = auth.revoke(conn, labeler_id)
-        leases.release_all_held_by(conn, labeler_id)
+        leases.release_all_held_by(conn, Caller(read.id, read.name, read.role))
     request.app.state.tokens.clear()
     request.app.state.feed.end_streams_of(labeler_id)
     return read

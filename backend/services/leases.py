@@ -173,14 +173,12 @@ def release(conn: Connection, run_id: int, caller: Caller, query_id: str) -> Que
     return row.status
 
 
-def release_all_held_by(conn: Connection, principal_id: int) -> int:
+def release_all_held_by(conn: Connection, principal: Caller) -> int:
     """A revoked principal's claims, in every run, go back to the pool now rather than when their
-    leases expire; gold copies leased to them are retired (as `release` does). Returns how many
-    queries went back to the pool."""
-    mine = (Query.status == "leased") & (Query.lease_owner_id == principal_id)
-    conn.execute(update(Query).where(mine, Query.gold_of.is_not(None)).values(status="retired", lease_expires_at=None))
-    pool = {"status": "pending", "lease_owner_id": None, "lease_tab": None, "lease_expires_at": time.time()}
-    return conn.execute(update(Query).where(mine, Query.gold_of.is_(None)).values(**pool)).rowcount
+    leases expire, each as `release` hands one back (a gold copy is retired). Returns how many went
+    back to the pool."""
+    held = select(Query.run_id, Query.query_id).where(Query.status == "leased", Query.lease_owner_id == principal.id)
+    return sum(release(conn, r.run_id, principal, r.query_id) == "pending" for r in conn.execute(held).all())
 
 
 def make_room(conn: Connection, run_id: int, caller: Caller, now: float, tab: str | None = None) -> list[str]:

@@ -18,7 +18,7 @@ from backend.db import Database
 from backend.migrate import alembic_config, upgrade
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
-from collie.schemas import LabelChangedEvent, RunRead, WithdrawnEvent
+from collie.schemas import ClaimRead, LabelChangedEvent, RunRead, WithdrawnEvent
 from trainer.feedback.http import HttpFeedback
 
 from .conftest import DIMS, TOKENS, make_run_spec, make_session
@@ -188,52 +188,50 @@ def test_gold_segments_are_served_scored_and_kept_from_the_trainer(
     assert view["labeling"]["gold_rate"] == 0.5
 
 
+def gold_served(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers, name: str
+) -> tuple[RunRead, CollieClient, ClaimRead]:
+    """A north run whose 0-0 another labeler labelled, gold at 0.5, session 1 posted (1-0, 1-1);
+    labeler `name`'s first claim is gold (a copy of 0-0). Returns (run, that labeler, the claim)."""
+    run = trainer.create_run(make_run_spec(task="north"))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    first = new_labeler(f"{name}-first")
+    first.submit(run.id, first.claim(run.id).query.query_id, 1)
+    operator.set_quality(run.id, gold_rate=0.5)
+    trainer.post_session(run.id, north_session(1, [1.0, 1.0]))
+    labeler = new_labeler(name)
+    gold = labeler.claim(run.id)
+    assert gold is not None and gold.query.query_id not in {"0-0", "1-0", "1-1"}
+    return run, labeler, gold
+
+
+def status_of(live: BackgroundServer, run_id: int, query_id: str) -> str:
+    """A query row's status, gold copies included (the API never lists them)."""
+    with live.app.state.db.read() as conn:
+        found = text("SELECT status FROM queries WHERE run_id = :run AND query_id = :q")
+        return str(conn.execute(found, {"run": run_id, "q": query_id}).scalar_one())
+
+
 def test_a_revoked_labelers_gold_copy_is_retired(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
-    run = trainer.create_run(make_run_spec(task="north"))
-    trainer.post_session(run.id, north_session(0, [1.0]))
-    a = new_labeler("gold-labelled")
-    a.submit(run.id, a.claim(run.id).query.query_id, 1)
-    operator.set_quality(run.id, gold_rate=0.5)
-    trainer.post_session(run.id, north_session(1, [1.0, 1.0]))
-    b = new_labeler("gold-revoked")
-    gold = b.claim(run.id)  # b's first segment is gold: a copy of 0-0
-    assert gold is not None and gold.query.query_id not in {"0-0", "1-0", "1-1"}
+    run, b, gold = gold_served(trainer, operator, new_labeler, "gold-revoked")
     operator.revoke(b.me().id)
-    with live.app.state.db.read() as conn:
-        status = conn.execute(
-            text("SELECT status FROM queries WHERE run_id = :run AND query_id = :q"),
-            {"run": run.id, "q": gold.query.query_id},
-        ).scalar_one()
-    assert status == "retired"  # never back in the pool: a gold copy is its labeler's
+    assert status_of(live, run.id, gold.query.query_id) == "retired"  # never back in the pool: it is b's
     assert trainer.run(run.id).queue.model_dump() == {"pending": 2, "leased": 0, "labelled": 1, "retired": 0}
 
 
 def test_a_discard_leaves_the_labelers_gold_answers(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
-    run = trainer.create_run(make_run_spec(task="north"))
-    trainer.post_session(run.id, north_session(0, [1.0]))
-    a = new_labeler("gold-first")
-    a.submit(run.id, a.claim(run.id).query.query_id, 1)
-    operator.set_quality(run.id, gold_rate=0.5)
-    trainer.post_session(run.id, north_session(1, [1.0, 1.0]))
-    b = new_labeler("gold-discarded")
-    gold = b.claim(run.id)  # gold first: a copy of 0-0
-    assert gold is not None and gold.query.query_id not in {"0-0", "1-0", "1-1"}
+    run, b, gold = gold_served(trainer, operator, new_labeler, "gold-discarded")
     b.submit(run.id, gold.query.query_id, 1)
     real = b.claim(run.id)
     assert real is not None and real.query.query_id == "1-0"
     b.submit(run.id, "1-0", 1)
     gone = operator.discard_votes(run.id, b.me().id)
     assert (gone.queries, gone.withdrawn) == (["1-0"], ["1-0"])  # the gold copy is not among them
-    with live.app.state.db.read() as conn:
-        status = conn.execute(
-            text("SELECT status FROM queries WHERE run_id = :run AND query_id = :q"),
-            {"run": run.id, "q": gold.query.query_id},
-        ).scalar_one()
-    assert status == "labelled"  # their gold answer still measures them
+    assert status_of(live, run.id, gold.query.query_id) == "labelled"  # their gold answer still measures them
 
 
 def test_agreement_and_disagreements_on_the_dashboard(

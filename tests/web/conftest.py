@@ -4,7 +4,9 @@ over a SQLite file) and its clients, and Debian's Chromium (tests/chromium.py)."
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 from chromium import chromium
@@ -24,3 +26,19 @@ def artifacts() -> Path:
 def browser() -> Iterator[Browser]:
     with chromium() as b:
         yield b
+
+
+@contextmanager
+def operator_page(browser: Browser, url: str, *, clipboard: bool = False, wait_ms: int = 30_000) -> Iterator[Any]:
+    """The dashboard at `url` in a fresh Chromium context (1400 × 1000), closed on exit."""
+    # bypass_csp: Playwright evaluates its predicates as strings, which the dashboard's CSP refuses
+    context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1000})
+    if clipboard:
+        context.grant_permissions(["clipboard-read", "clipboard-write"], origin=url.split("/?")[0])
+    page = context.new_page()
+    page.set_default_timeout(wait_ms)
+    page.goto(url)
+    try:
+        yield page
+    finally:
+        context.close()

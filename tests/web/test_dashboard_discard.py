@@ -14,6 +14,8 @@ from backend.server import BackgroundServer
 from collie.client import CollieClient
 from collie.schemas import RunRead, WithdrawnEvent
 
+from .conftest import operator_page
+
 WAIT_MS = 30_000
 
 
@@ -33,13 +35,9 @@ def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -
 
 @pytest.fixture(scope="module")
 def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
-    context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    page.set_default_timeout(WAIT_MS)
-    page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run.id}")
-    page.wait_for_selector('#labelers-stats tr[data-labeler="careless-web"]')
-    yield page
-    context.close()
+    with operator_page(browser, f"{live.url}/?token={TOKENS['operator']}#run={run.id}", wait_ms=WAIT_MS) as page:
+        page.wait_for_selector('#labelers-stats tr[data-labeler="careless-web"]')
+        yield page
 
 
 def labels_of(page: Any, name: str) -> str:

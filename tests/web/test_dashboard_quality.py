@@ -15,6 +15,8 @@ from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.schemas import MetricsIn, Rollout, RolloutsIn, RunRead
 
+from .conftest import operator_page
+
 WAIT_MS = 30_000
 UI = "http://labeling.example:8080/"
 
@@ -47,15 +49,10 @@ def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -
 
 @pytest.fixture(scope="module")
 def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
-    # bypass_csp: Playwright evaluates its predicates as strings, which the dashboard's CSP refuses
-    context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1000})
-    context.grant_permissions(["clipboard-read", "clipboard-write"], origin=live.url)
-    page = context.new_page()
-    page.set_default_timeout(WAIT_MS)
-    page.goto(f"{live.url}/?token={TOKENS['operator']}&ui={UI}#run={run.id}")
-    page.wait_for_selector("#labelers-stats")
-    yield page
-    context.close()
+    url = f"{live.url}/?token={TOKENS['operator']}&ui={UI}#run={run.id}"
+    with operator_page(browser, url, clipboard=True, wait_ms=WAIT_MS) as page:
+        page.wait_for_selector("#labelers-stats")
+        yield page
 
 
 def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: BackgroundServer) -> None:
