@@ -81,6 +81,7 @@ class LabelledSegment(Read):
 
 
 class LabelerStats(Read):
+    id: int = Field(description="the labeler's principal id (POST /runs/{id}/labelers/{labeler_id}/discard)")
     name: str
     labels: int = Field(description="queries they hold a label on now (a revision replaces, an undo withdraws)")
     skips: int

@@ -118,7 +118,8 @@ def labeler_stats(events: Sequence[Any], votes: list[Vote], oracle: dict[int, in
     with the oracle, their α against the other labelers, and their gold accuracy."""
     real = [v for v in votes if v.gold_answer is None]
     units = units_of(real)
-    names = sorted({e.name for e in events} | {v.name for v in votes})
+    ids = {e.name: e.labeler_id for e in events}  # every vote has its label event
+    names = sorted(ids)
     result = []
     for name in names:
         mine = [v for v in real if v.name == name]
@@ -127,6 +128,7 @@ def labeler_stats(events: Sequence[Any], votes: list[Vote], oracle: dict[int, in
         judged = [v for v in mine if oracle.get(v.query_pk) is not None]
         result.append(
             LabelerStats(
+                id=ids[name],
                 name=name,
                 labels=len(mine),
                 skips=sum(e.kind == "skip" and e.name == name and not e.gold for e in events),
@@ -223,6 +225,7 @@ def view(conn: Connection, run: Any, task: Task | None, cache: SegmentCache) -> 
             LabelEvent.kind,
             LabelEvent.created_at,
             Principal.name,
+            Principal.id.label("labeler_id"),
             Query.gold_of.is_not(None).label("gold"),
         )
         .join(Principal, Principal.id == LabelEvent.labeler_id)

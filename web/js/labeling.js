@@ -22,9 +22,9 @@ const COLUMN_HELP = [
 ];
 
 // A labeler's labels in this run can be discarded (operator; a second click confirms: `discard.armed`
-// names the labeler whose button waits for it, `discard.message` says what the last one did).
-const discardButton = (l, armed) => (l.labels ? `<button type="button" class="danger" data-discard="${escapeHtml(l.name)}">${
-  armed === l.name ? `Confirm: discard ${l.labels}` : "Discard labels"}</button>` : "");
+// is the id of the labeler whose button waits for it, `discard.message` says what the last one did).
+const discardButton = (l, armed) => (l.labels ? `<button type="button" class="danger" data-discard="${l.id}">${
+  armed === l.id ? `Confirm: discard ${l.labels}` : "Discard labels"}</button>` : "");
 
 // `ruleless`: the run has no task rule (only an instruction), so there is no oracle to agree with.
 export function renderLabeling(element, view, ruleless = false, discard = { armed: null, message: "" }) {

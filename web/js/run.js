@@ -32,7 +32,7 @@ export class RunPage {
     this.discard = { armed: null, message: "" };
     root.querySelector("#labeling-body").addEventListener("click", (event) => {
       const button = event.target.closest("button[data-discard]");
-      if (button) this.discardLabels(button.dataset.discard);
+      if (button) this.discardLabels(Number(button.dataset.discard));
     });
   }
 
@@ -131,9 +131,9 @@ export class RunPage {
   }
 
   // The first click arms a labeler's button, the second discards their labels in this run.
-  async discardLabels(name) {
-    if (this.discard.armed !== name) {
-      this.discard = { armed: name, message: "" };
+  async discardLabels(labelerId) {
+    if (this.discard.armed !== labelerId) {
+      this.discard = { armed: labelerId, message: "" };
       this.renderLabeling(this.labelingView);
       return;
     }
@@ -141,9 +141,7 @@ export class RunPage {
     const state = { armed: null, message: "" }; // this run's: another run opened meanwhile has its own
     this.discard = state;
     try {
-      const who = (await api("labelers")).find((p) => p.name === name);
-      if (!who) throw new Error(`no principal named ${name}`);
-      const done = await api(`runs/${runId}/labelers/${who.id}/discard`, { method: "POST" });
+      const done = await api(`runs/${runId}/labelers/${labelerId}/discard`, { method: "POST" });
       const n = done.queries.length;
       state.message = `discarded ${n} label${n === 1 ? "" : "s"} of ${done.labeler}; ${done.withdrawn.length} had counted and were withdrawn from the trainer`;
     } catch (error) {
