@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -57,7 +58,13 @@ def fast_ops_pay(device: torch.device) -> bool:
     return device.type == "cpu" and torch.backends.cpu.get_cpu_capability() == "AVX2"
 
 
-def mlp(inp: int, hidden: int, layers: int, out: int, act: type[nn.Module] = nn.ReLU) -> nn.Sequential:
+def relu_in_place() -> nn.ReLU:
+    """ReLU writing over its input, a Linear's output, which that Linear's backward does not read:
+    the same values and gradients without a fresh activation buffer per layer."""
+    return nn.ReLU(inplace=True)
+
+
+def mlp(inp: int, hidden: int, layers: int, out: int, act: Callable[[], nn.Module] = relu_in_place) -> nn.Sequential:
     mods: list[nn.Module] = []
     width = inp
     for _ in range(layers):
@@ -124,7 +131,7 @@ class TwinQ(nn.Module):
         for i, layer in enumerate(self.layers):
             x = layer(x)
             if i < len(self.layers) - 1:
-                x = F.relu(x)
+                x = F.relu_(x)  # in place, as relu_in_place
         return x.squeeze(-1)
 
 

@@ -14,7 +14,7 @@ from trainer.config import make_config
 from trainer.guidance import CDIST_MM_ROWS, EMPTY_CLASS_DISTANCE, LabelledSets, class_distances, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
-from trainer.networks import EnsembleLinear, Tanh, fast_ops_pay
+from trainer.networks import EnsembleLinear, SkillLatent, Tanh, TwinQ, fast_ops_pay
 from trainer.optim import adam, step_together
 from trainer.skills import SkillPrior
 
@@ -300,3 +300,37 @@ def test_one_output_ensemble_layer_fast_path_equals_bmm(shape):
     torch.testing.assert_close(out, exact(x2), rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(x.grad, x2.grad, rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(fast.weight.grad, exact.weight.grad, rtol=1e-5, atol=1e-6)
+
+
+def test_in_place_relu_gives_out_of_place_values_and_gradients_bit_for_bit():
+    torch.manual_seed(0)
+    phi, qf = SkillLatent(OBS, 2, 32, 2), TwinQ(OBS + 2 + ACT, 32, 2, fast=False)
+    obs, z, act = torch.randn(BATCH, OBS), torch.randn(BATCH, 2), torch.randn(BATCH, ACT)
+    assert all(m.inplace for m in phi.modules() if isinstance(m, torch.nn.ReLU))
+
+    def phi_out_of_place() -> torch.Tensor:
+        *hidden, last = [m for m in phi.net if isinstance(m, torch.nn.Linear)]
+        x = obs
+        for layer in hidden:
+            x = torch.relu(layer(x))
+        return last(x)
+
+    def qf_out_of_place() -> torch.Tensor:
+        x = torch.cat([obs, z, act], -1).expand(2, -1, -1)
+        *hidden, last = qf.layers
+        for layer in hidden:
+            x = torch.relu(torch.baddbmm(layer.bias, x, layer.weight))
+        return torch.baddbmm(last.bias, x, last.weight).squeeze(-1)
+
+    def values_and_grads(net: torch.nn.Module, forward) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        net.zero_grad(set_to_none=True)
+        (out := forward()).pow(2).sum().backward()
+        return out.detach(), [p.grad.clone() for p in net.parameters()]
+
+    for net, ours, reference in (
+        (phi, lambda: phi(obs), phi_out_of_place),
+        (qf, lambda: qf(obs, z, act), qf_out_of_place),
+    ):
+        (out_a, g_a), (out_b, g_b) = values_and_grads(net, ours), values_and_grads(net, reference)
+        assert torch.equal(out_a, out_b)
+        assert all(torch.equal(a, b) for a, b in zip(g_a, g_b, strict=True))
