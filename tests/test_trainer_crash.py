@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from collie.client import CollieClient
+from collie.schemas import QueriesEvent, StatusEvent
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -35,7 +36,23 @@ def wait_until(pred, timeout_s: float = 180.0) -> None:
     raise TimeoutError("condition not reached")
 
 
-def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
+def waits_and_sessions(client: CollieClient, run_id: int) -> tuple[list[int], dict[int, int]]:
+    """The epochs at which the trainer reported waiting for labels, and each session's epoch."""
+    waits, sessions, after = [], {}, 0
+    while page := client.events(run_id, after=after).events:
+        for e in page:
+            if isinstance(e, StatusEvent) and e.data.status == "waiting_for_labels":
+                waits.append(e.data.epoch)
+            elif isinstance(e, QueriesEvent):
+                sessions[e.data.session] = e.data.epoch
+        after = page[-1].id
+    return waits, sessions
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_trainer_stopped_while_waiting_for_labels_resumes_in_that_wait(tmp_path, sig):
+    """kill -9 resumes from the last periodic checkpoint (the epoch before), SIGTERM from its final
+    one, written in the wait: either way the session is asked again at its own epoch, never later."""
     info = tmp_path / "service.json"
     service = cli(
         "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
@@ -64,8 +81,12 @@ def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
         run_id = json.loads(memo.read_text())["run_id"]
         with CollieClient(api, TOKENS["operator"]) as client:
             wait_until(lambda: client.run(run_id).status == "waiting_for_labels")
-            trainer.send_signal(signal.SIGKILL)
-            trainer.wait()
+            stopped_at = client.run(run_id).epoch
+            trainer.send_signal(sig)
+            assert trainer.wait(timeout=60) == (0 if sig == signal.SIGTERM else -signal.SIGKILL)
+            if sig == signal.SIGTERM:  # the final checkpoint holds the session it waited on
+                ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+                assert ckpt["epoch"] == stopped_at and [s.query_id for s in ckpt["asking"]] == ["s0-q0", "s0-q1"]
             teacher = cli(
                 "teacher",
                 "--api",
@@ -81,10 +102,12 @@ def test_kill_9_while_waiting_for_labels_then_resume(tmp_path):
             assert restarted.wait(timeout=300) == 0, (tmp_path / "trainer.log").read_text()[-3000:]
             teacher.wait(timeout=60)
             in_db = {e.query_id: e.label for e in client.effective_labels(run_id)}
+            waits, sessions = waits_and_sessions(client, run_id)
         ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
         applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
         assert applied == in_db and len(applied) == ckpt["config"]["total_queries"]
-        assert ckpt["epoch"] == ckpt["config"]["epochs"]
+        assert ckpt["epoch"] == ckpt["config"]["epochs"] and ckpt["asking"] is None
+        assert set(waits) == set(sessions.values()), f"waited at epochs {waits}; sessions asked at {sessions}"
     finally:
         service.terminate()
         service.wait(timeout=30)

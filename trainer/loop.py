@@ -12,7 +12,8 @@ The loop talks to one `FeedbackSource` and does not know who labels. It evaluate
 networks, optimisers, RNG and labelled sets in checkpoint.pt, the replay as append-only chunks
 (trainer/replay_log.py). SIGTERM or SIGINT ends the process at the end of the current epoch (at
 once while it waits for labels or a pause) with a final checkpoint and status "interrupted",
-which is not reported to the feedback source (the run is not over); `--resume` continues exactly.
+which is not reported to the feedback source (the run is not over); `--resume` continues exactly:
+a run stopped while it waited for a session's labels waits for that session again, at that epoch.
 """
 
 from __future__ import annotations
@@ -164,6 +165,7 @@ class Trainer:
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
         self._waiting = False  # blocked on labels or a pause: a signal stops at once
+        self._asking: list[Segment] | None = None  # the session being waited on (checkpointed)
 
     # ---- guidance -------------------------------------------------------------------------
     def beta(self) -> float:
@@ -253,14 +255,18 @@ class Trainer:
             if ev.query_id in self.asked:
                 self.labelled.set(ev.query_id, self.asked[ev.query_id], ev.label)
 
-    def feedback_session(self) -> None:
-        segments = self.make_segments()
-        startup.mark("query selection", self.epoch)
+    def feedback_session(self, asking: list[Segment] | None = None) -> None:
+        """Lines 5–7. `asking`: the segments a stopped run was waiting on, asked again as they were."""
+        if asking is None:
+            asking = self.make_segments()
+            startup.mark("query selection", self.epoch)
+        segments = self._asking = asking  # a stop during the wait checkpoints them
         self._waiting = True  # a signal now stops at once
         try:
             events = self.feedback.collect(self.session, self.epoch, segments)  # may swap in a session posted before
         finally:
             self._waiting = False
+        self._asking = None
         for s in segments:
             self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
         self.apply_labels(events)
@@ -438,6 +444,7 @@ class Trainer:
             "feedback": self.feedback.state_dict(),
             "last_info": self.last_info,
             "instruction": self.instruction.state_dict() if self.instruction is not None else None,
+            "asking": self._asking,  # set only when a stop came during a feedback wait
         }
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
@@ -458,6 +465,7 @@ class Trainer:
         if s["cuda_rng"] is not None and torch.cuda.is_available():
             torch.cuda.set_rng_state_all(s["cuda_rng"])
         random.setstate(s["python_rng"])
+        self._asking = s.get("asking")  # this epoch's rollouts are in; its feedback, update, … are not
         # checkpoints from before the source kept its own state stored the oracle's RNG as teacher_rng
         self.feedback.load_state_dict(s.get("feedback", {"rng": s.get("teacher_rng")}))
 
@@ -555,9 +563,10 @@ class Trainer:
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
             startup.mark("evaluate", 0)
+        asking = self._asking
         bar = tqdm(
             total=self.cfg.epochs,
-            initial=self.epoch,
+            initial=self.epoch - (asking is not None),
             disable=not self.progress,
             unit="epoch",
             dynamic_ncols=True,
@@ -567,7 +576,9 @@ class Trainer:
         record: dict[str, Any] | None = None
         previous_handlers = self._install_signal_handlers()
         try:
-            while self.epoch < self.cfg.epochs:
+            if asking is not None:  # resumed in the feedback wait of epoch self.epoch: its rest first
+                record = self.rest_of_epoch(bar, asking) or record
+            while self.epoch < self.cfg.epochs and self._signalled is None:
                 if not self.wait_while_paused(bar):
                     status = "stopped"
                     break
@@ -575,31 +586,9 @@ class Trainer:
                 bar.set_description("training")
                 self.collect_epoch()
                 startup.mark("collect", self.epoch)
-                if self.is_feedback_epoch():
-                    bar.set_description("waiting for labels")
-                    self.feedback_session()
-                    bar.set_description("training")
-                self.apply_labels(self.feedback.revisions())
-                self.train_epoch()
-                self.log_scalars()
-                startup.mark("update", self.epoch)
-                if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
-                    record = self.evaluate()
-                    startup.mark("evaluate", self.epoch)
-                    bar.set_postfix(
-                        labels=len(self.labelled),
-                        safe_cov=record.get("safe_coverage", "-"),  # absent without a rule
-                        bins=record["n_bins"],
-                        lam=f"{record['lambda']:.1f}",
-                    )
-                if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
-                    self.checkpoint()
-                    startup.mark("checkpoint", self.epoch)
-                bar.update(1)
-                self.report_progress()
-                if self._signalled is not None:
-                    status = "stopped"
-                    break
+                record = self.rest_of_epoch(bar) or record
+            if self._signalled is not None:
+                status = "stopped"
         except StopRequested:
             status = "stopped"
         finally:
@@ -613,6 +602,34 @@ class Trainer:
         if status in ("stopped", "interrupted"):
             self.checkpoint()
         return self.finish(status, record)
+
+    def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:
+        """The epoch after its rollouts: the feedback session (`asking`: the one a stopped run was
+        waiting on), revisions, the update, and the evaluation (returned, if due) and checkpoint."""
+        record = None
+        if asking is not None or self.is_feedback_epoch():
+            bar.set_description("waiting for labels")
+            self.feedback_session(asking)
+            bar.set_description("training")
+        self.apply_labels(self.feedback.revisions())
+        self.train_epoch()
+        self.log_scalars()
+        startup.mark("update", self.epoch)
+        if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
+            record = self.evaluate()
+            startup.mark("evaluate", self.epoch)
+            bar.set_postfix(
+                labels=len(self.labelled),
+                safe_cov=record.get("safe_coverage", "-"),  # absent without a rule
+                bins=record["n_bins"],
+                lam=f"{record['lambda']:.1f}",
+            )
+        if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
+            self.checkpoint()
+            startup.mark("checkpoint", self.epoch)
+        bar.update(1)
+        self.report_progress()
+        return record
 
     def report_progress(self) -> None:
         """The current epoch for live views, at most once a second (best effort, skipped while the
