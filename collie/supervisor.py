@@ -35,7 +35,8 @@ class Child:
     name: str
     args: Callable[[], list[str]]  # evaluated at each start (a restarted trainer adds --resume)
     env: dict[str, str]
-    done_when_ok: bool  # exit 0 means its work is over (trainer, teacher): not restarted
+    # called on exit 0: is its work over (trainer, teacher: not restarted)? None: it never is (service)
+    done_when_ok: Callable[[], bool] | None
     pass_fds: tuple[int, ...] = ()  # inherited by each start (the service's listening socket)
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
@@ -64,7 +65,7 @@ class Supervisor:
         name: str,
         args: Callable[[], list[str]],
         env: dict[str, str],
-        done_when_ok: bool = False,
+        done_when_ok: Callable[[], bool] | None = None,
         pass_fds: tuple[int, ...] = (),
     ) -> subprocess.Popen:
         child = Child(name, args, env, done_when_ok, pass_fds)
@@ -109,14 +110,14 @@ class Supervisor:
             if code is None:
                 continue
             child.exit_codes.append(code)
-            if code == 0 and child.done_when_ok:
+            if code == 0 and child.done_when_ok is not None and child.done_when_ok():
                 child.finished = True
                 self.log(f"{child.name} finished (exit 0)")
                 continue
             if now - child.started_at >= self.stable_s:
                 child.failures = 0
             child.failures += 1
-            how = f"signal {-code}" if code < 0 else f"code {code}"
+            how = f"signal {-code}" if code < 0 else f"code {code}" + (" (interrupted)" if code == 0 else "")
             if child.failures > self.max_restarts:
                 self.log(f"{child.name} exited with {how}; {self.max_restarts} restarts did not help, giving up")
                 raise ChildFailed(f"the {child.name} keeps exiting (last: {how}); see {self.out / 'logs'}")

@@ -258,7 +258,18 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
 
     # OpenMP threads that sleep while idle (trainer/threads.py); `collie train` picks the thread count
     trainer_env = {**child_env(tokens["trainer"]), "OMP_WAIT_POLICY": "PASSIVE"}
-    trainer = stack.start("trainer", train_args, trainer_env, done_when_ok=True)  # it waits for the service itself
+
+    def run_is_over() -> bool:
+        """A trainer's exit 0 ends the run unless it was interrupted (a SIGTERM from outside the
+        stack; summary.json says so): then it is restarted, and resumes, like one that died."""
+        try:
+            return json.loads((trainer_out / "summary.json").read_text()).get("status") != "interrupted"
+        except (OSError, ValueError):
+            return True
+
+    trainer = stack.start(
+        "trainer", train_args, trainer_env, done_when_ok=run_is_over
+    )  # it waits for the service itself
     from collie.client import CollieClient
 
     logs = out / "logs"
@@ -273,7 +284,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
         teach += ["--seed", str(args.seed), *(["--rate", str(args.teacher_rate)] if args.teacher_rate else [])]
-        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), done_when_ok=True)
+        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), done_when_ok=lambda: True)
     labeler_url = None
     if not args.no_label_ui:
         ui_info = out / "labeling_ui.json"

@@ -87,34 +87,41 @@ def test_tokens_starting_with_a_dash_stay_out_of_argv_logs_and_open_files(tmp_pa
     assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
 
 
-def test_a_teacher_and_labeling_ui_killed_mid_run_are_restarted_and_the_run_finishes(tmp_path):
+def test_parts_killed_or_terminated_mid_run_are_restarted_and_the_run_finishes(tmp_path):
+    """kill -9 of the teacher and the labeling UI, and SIGTERM of the trainer (which checkpoints and
+    exits 0, "interrupted": not the end of the run)."""
     proc = subprocess.Popen(
         up_command(tmp_path, "--teacher-rate", "2"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
     )
     killed: dict[str, int] = {}
     try:
         deadline = time.monotonic() + 300
-        while proc.poll() is None and time.monotonic() < deadline and len(killed) < 2:
+        while proc.poll() is None and time.monotonic() < deadline and len(killed) < 3:
             info = tmp_path / "info.json"
             if info.exists() and not killed:
                 meta = json.loads(info.read_text())
                 with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
                     run = client.run(meta["run_id"])
                 if 0 < run.n_labels < run.n_total:  # mid-run: some labels given, more to come
-                    for name in ("teacher", "labeling_ui"):
+                    for name, sig in (
+                        ("teacher", signal.SIGKILL),
+                        ("labeling_ui", signal.SIGKILL),
+                        ("trainer", signal.SIGTERM),
+                    ):
                         killed[name] = children(tmp_path)[name]
-                        os.kill(killed[name], signal.SIGKILL)
+                        os.kill(killed[name], sig)
             time.sleep(0.1)
         assert proc.wait(timeout=300) == 0, proc.stdout.read().decode()[-3000:]
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert set(killed) == {"teacher", "labeling_ui"}
+    assert set(killed) == {"teacher", "labeling_ui", "trainer"}
     now = children(tmp_path)
     assert all(now[name] != pid for name, pid in killed.items())  # each was started again
     up_log = (tmp_path / "logs" / "up.log").read_text()
     assert "teacher exited with signal 9; restarting" in up_log
     assert "labeling_ui exited with signal 9; restarting" in up_log
+    assert "trainer exited with code 0 (interrupted); restarting" in up_log
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["n_labels"] == summary["config"]["total_queries"]
 
