@@ -88,17 +88,25 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import DBAPIError
+
     from backend.main import create_app
     from backend.server import bind, uvicorn_server
     from collie.startup import mark
 
     mark("imports")  # FastAPI, SQLAlchemy, the routes
 
+    if args.db is not None and args.db.is_dir():
+        raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
     try:
         settings, tokens, generated = settings_from(args)
         app = create_app(settings)
     except Conflict as exc:  # e.g. one token given for two roles
         raise SystemExit(f"collie serve: error: {exc}") from None
+    except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
+        where = args.db or make_url(Settings().database_url).render_as_string(hide_password=True)
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {exc.orig}") from None
     mark("app built")  # the database opened and migrated
     sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file

@@ -5,6 +5,7 @@ OUT/logs/up.log; OUT/children.json names the live process of each part (for tool
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import signal
@@ -20,6 +21,15 @@ from collie.startup import PART_ENV, mark
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def end_with_parent() -> None:
+    """In the child, before exec: SIGTERM when `collie up` dies, even by SIGKILL (Linux's
+    PR_SET_PDEATHSIG; the trainer checkpoints on it), instead of running on unsupervised. Children
+    are spawned from the main thread only, whose end is what the kernel watches."""
+    if sys.platform == "linux":
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class Closeable(Protocol):
@@ -48,8 +58,11 @@ class Child:
 
 
 class Supervisor:
-    def __init__(self, out: Path, max_restarts: int = 5, stable_s: float = 60.0) -> None:
+    def __init__(
+        self, out: Path, max_restarts: int = 5, stable_s: float = 60.0, inherited: tuple[int, ...] = ()
+    ) -> None:
         self.out, self.max_restarts, self.stable_s = out, max_restarts, stable_s
+        self.inherited = inherited  # descriptors every child holds too (OUT's lock)
         self.children: dict[str, Child] = {}
         self._after_stop: list[Closeable] = []  # closed once every child is down
         (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -81,7 +94,8 @@ class Supervisor:
             stderr=subprocess.STDOUT,
             env=env,
             start_new_session=True,  # our Ctrl-C is handled here, not by children
-            pass_fds=child.pass_fds,
+            pass_fds=child.pass_fds + self.inherited,
+            preexec_fn=end_with_parent,
         )
         log.close()  # the child holds its own copy
         child.started_at, child.restart_at = time.monotonic(), None

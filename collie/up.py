@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import fcntl
 import json
 import os
+import re
 import secrets
 import signal
 import socket
@@ -67,15 +69,21 @@ class Stopped(Exception):
     """Ctrl-C (or SIGTERM) while the stack was starting."""
 
 
+EXCEPTION_LINE = re.compile(r"[A-Za-z_][\w.]*(Error|Exception): ")
+
+
 def last_error(log: Path) -> str:
-    """The last line a child wrote to its log that says what went wrong (empty if none)."""
+    """The last line a child wrote to its log that says what went wrong (empty if none): one of our
+    commands' "collie …: error:" lines, else an exception's line, else any line naming an error."""
     try:
         lines = log.read_text(errors="replace").splitlines()
     except OSError:
         return ""
     said = [line.strip() for line in lines if line.strip()]
-    errors = [line for line in said if "error" in line.lower()]
-    return (errors or said or [""])[-1][:300]
+    ours = [line for line in said if line.startswith("collie ") and ": error:" in line]  # our CLIs' own words
+    raised = [line for line in said if EXCEPTION_LINE.match(line)]  # a traceback's last line
+    other = [line for line in said if "error" in line.lower() and not line.startswith("(Background on this error")]
+    return (ours or raised or other or said or [""])[-1][:300]
 
 
 def wait_for(
@@ -157,15 +165,47 @@ def checked(args: argparse.Namespace) -> Path:
     return out
 
 
+def made(folder: Path, what: str) -> None:
+    """`folder` exists as a folder afterwards, else ValueError naming `what` and why."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"cannot create {what} {folder}: {exc.strerror or exc}") from None
+
+
+def locked(out: Path) -> int:
+    """An exclusive lock on OUT/up.lock, held by this stack and every part of it (children inherit
+    the descriptor), so a second `collie up` on the same OUT — or on what a killed one left running
+    — is refused; ValueError naming the processes in the way."""
+    fd = os.open(out / "up.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        try:
+            before = json.loads((out / "children.json").read_text())
+            pids = [f"collie up {before['up']}"] + [f"{n} {p}" for n, p in before["children"].items()]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            pids = ["see OUT/children.json"]
+        raise ValueError(
+            f"another collie up runs on --out {out} ({', '.join(pids)}): stop it (Ctrl-C there, or kill "
+            "these processes), or give another --out"
+        ) from None
+    return fd
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         out = checked(args)
+        if args.info_json is not None:
+            made(args.info_json.parent, "the folder of --info-json")
+        made(out, "--out")
+        lock = locked(out)
     except ValueError as exc:
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
-    out.mkdir(parents=True, exist_ok=True)
     db = args.db or out / "collie.db"
-    stack = Supervisor(out, max_restarts=args.max_restarts)
+    stack = Supervisor(out, max_restarts=args.max_restarts, inherited=(lock,))
     stopping = {"flag": False}
 
     def on_signal(signum: int, _frame: object) -> None:
@@ -173,6 +213,8 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal stops the stack; nohup does not
+        signal.signal(signal.SIGHUP, on_signal)
     try:
         return supervise(args, out, db, stack, stopping)
     except Stopped:
@@ -273,7 +315,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     from collie.client import CollieClient
 
     logs = out / "logs"
-    with CollieClient(api, tokens["operator"]) as client:
+    # short requests: one sent to our socket before a service that then died is never answered
+    with CollieClient(api, tokens["operator"], timeout_s=WATCH_TIMEOUT_S) as client:
         wait_healthy(client, service, logs / "service.log", stopping)
     mark("waited: service healthy")
     if resume:

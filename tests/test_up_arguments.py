@@ -28,6 +28,8 @@ def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.Completed
         (["--train-args=--out elsewhere --epochs 2"], "--train-args may not set --out"),
         (["--train-args", "--api=http://x"], "--train-args may not set --api"),  # a value that is one flag
         (["--teacher-rate", "-1", "--teacher", "oracle"], "--teacher-rate must be > 0"),
+        (["--out", "/proc/nope"], "cannot create --out /proc/nope: No such file or directory"),
+        (["--info-json", "afile/info.json"], "cannot create the folder of --info-json afile: File exists"),
     ],
 )
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path: Path, args: list[str], said: str) -> None:
@@ -41,6 +43,14 @@ def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) 
     proc = up(tmp_path, "--env", "nope", "--port", "0", "--out", str(tmp_path / "o"))
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert "the trainer exited with code 2 before it was ready: collie train: error: unknown env 'nope'" in proc.stderr
+
+
+def test_a_service_that_cannot_open_its_database_is_named_with_the_reason(tmp_path: Path) -> None:
+    (tmp_path / "notes.db").write_text("not a database")
+    proc = up(tmp_path, "--db", "notes.db", "--port", "0", "--out", "o")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert "the service exited with code 1: collie serve: error: cannot open the database" in proc.stderr
+    assert "notes.db: file is not a database" in proc.stderr
 
 
 def test_waiting_for_a_part_ends_when_asked_to_stop(tmp_path: Path) -> None:
@@ -59,6 +69,11 @@ def test_the_last_error_line_of_a_log(tmp_path: Path) -> None:
     log = tmp_path / "part.log"
     log.write_text("starting\nTraceback (most recent call last):\n  ...\nOverflowError: bind(): port\n\ndone\n")
     assert last_error(log) == "OverflowError: bind(): port"
+    log.write_text(
+        "Traceback (most recent call last):\n  ...\nsqlalchemy.exc.OperationalError: (sqlite3.OperationalError) "
+        "file is not a database\n(Background on this error at: https://sqlalche.me/e/21/e3q8)\n"
+    )
+    assert last_error(log).startswith("sqlalchemy.exc.OperationalError: (sqlite3.OperationalError) file is not")
     log.write_text("only this\n")
     assert last_error(log) == "only this" and last_error(tmp_path / "missing.log") == ""
 

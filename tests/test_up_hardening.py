@@ -190,3 +190,61 @@ def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
     assert code == 1 and len(killed) == 2, err[-2000:]
     assert "the teacher keeps exiting" in err
     assert "giving up" in (tmp_path / "logs" / "up.log").read_text()
+
+
+def alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"  # a zombie has ended
+    except (OSError, IndexError):
+        return False
+
+
+def started_stack(out: Path) -> tuple[subprocess.Popen, dict[str, int]]:
+    """A `collie up` whose service, teacher and labeling UI run and whose trainer is past its first
+    epoch (its signal handlers in place; a slow teacher keeps the run going)."""
+    proc = subprocess.Popen(up_command(out, "--teacher-rate", "0.2"), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 180
+    while not ((out / "info.json").exists() and len(children(out)) == 4):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read().decode()[-2000:]
+        time.sleep(0.1)
+    meta = json.loads((out / "info.json").read_text())
+    with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+        while client.run(meta["run_id"]).epoch < 1:
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read().decode()[-2000:]
+            time.sleep(0.1)
+    return proc, children(out)
+
+
+def test_a_second_stack_on_one_out_is_refused_and_a_killed_stack_takes_its_parts_along(tmp_path):
+    proc, parts = started_stack(tmp_path)
+    try:
+        second = subprocess.run(up_command(tmp_path), capture_output=True, text=True, timeout=60)
+        assert second.returncode == 2 and "Traceback" not in second.stderr
+        assert (
+            f"another collie up runs on --out {tmp_path} (collie up {proc.pid}, service {parts['service']}"
+            in second.stderr
+        )
+        proc.kill()  # SIGKILL: no handler runs in collie up; its parts get SIGTERM from the kernel
+        proc.wait()
+        deadline = time.monotonic() + 60
+        while any(alive(pid) for pid in parts.values()) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not [name for name, pid in parts.items() if alive(pid)]
+    finally:
+        for pid in parts.values():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["status"] == "interrupted"  # the trainer's SIGTERM path: checkpointed, resumable
+
+
+def test_a_closed_terminal_stops_the_stack_like_ctrl_c(tmp_path):
+    proc, parts = started_stack(tmp_path)
+    try:
+        proc.send_signal(signal.SIGHUP)
+        assert proc.wait(timeout=60) == 130
+        assert not [name for name, pid in parts.items() if alive(pid)]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "stopped" in (tmp_path / "logs" / "up.log").read_text()
