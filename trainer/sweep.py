@@ -5,7 +5,9 @@ Resumable: a run folder whose summary.json says "finished" is not rerun (one mad
 preset or other train flags, as its sweep_run.json records, is named in a warning); a run with a
 checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
 SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
-already holds its task from its final policy is not re-evaluated. Folders:
+already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a
+local sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a
+final checkpoint; rerunning the sweep resumes it). Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
@@ -20,9 +22,11 @@ import importlib
 import json
 import os
 import shlex
+import signal
 import socket
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -34,6 +38,46 @@ from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
+
+
+class Interrupted(RuntimeError):
+    """A run the sweep did not start because it was told to stop."""
+
+
+class Stop:
+    """A local sweep told to end: no run starts after it, and each running child process gets one
+    SIGTERM (children run in their own session, so a terminal's Ctrl-C reaches only the sweep and
+    a trainer never sees two signals, the second of which would skip its final checkpoint)."""
+
+    def __init__(self) -> None:
+        self.asked = threading.Event()
+        self._running: set[subprocess.Popen] = set()
+        self._lock = threading.Lock()
+
+    def handle(self, _signum: int, _frame: object) -> None:
+        self.asked.set()
+        with self._lock:
+            running = list(self._running)
+        for proc in running:
+            proc.send_signal(signal.SIGTERM)
+
+    def run(self, cmd: list[str], **popen: Any) -> int:
+        """`cmd`'s exit code; Interrupted without starting it once the sweep was told to stop."""
+        if self.asked.is_set():
+            raise Interrupted("not started: the sweep was interrupted")
+        proc = subprocess.Popen(cmd, start_new_session=True, **popen)
+        with self._lock:
+            self._running.add(proc)
+        if self.asked.is_set():  # the signal came between the check and the registration
+            proc.send_signal(signal.SIGTERM)
+        try:
+            return proc.wait()
+        finally:
+            with self._lock:
+                self._running.discard(proc)
+
+
+STOP = Stop()  # the sweep of this process (Ray workers never get a signal from it)
 
 
 @dataclass(frozen=True)
@@ -140,9 +184,9 @@ def downstream_done(out: str | Path) -> bool:
 def _call(cmd: list[str], log: Path) -> None:
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "a") as f:
-        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
-    if proc.returncode != 0:
-        raise RuntimeError(f"failed ({proc.returncode}): {shlex.join(cmd)} — see {log}")
+        code = STOP.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    if code != 0:
+        raise RuntimeError(f"failed ({code}): {shlex.join(cmd)} — see {log}")
 
 
 def run_downstream_task(out: Path, flags: tuple[str, ...] = ()) -> None:
@@ -154,6 +198,8 @@ def run_downstream_task(out: Path, flags: tuple[str, ...] = ()) -> None:
 def run_one(spec: RunSpec) -> dict[str, Any]:
     """Train (or resume, or skip) one run, then its downstream task if asked; returns summary.json."""
     out = Path(spec.out)
+    if STOP.asked.is_set():
+        raise Interrupted("not started: the sweep was interrupted")
     if not is_finished(out):
         out.mkdir(parents=True, exist_ok=True)
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
@@ -284,6 +330,8 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> s
             return f"task {task} on --env {args.env}: {exc}"
     if args.seeds < 1:
         return "--seeds must be ≥ 1"
+    if args.jobs < 1:
+        return "--jobs must be ≥ 1"
     if args.first_seed < 0:
         return "--first-seed must be ≥ 0"
     if not all(c.isalnum() or c == "_" for c in args.variant):  # a folder-name part: no "/", "+" or "-"
@@ -301,6 +349,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     (methods, empty_method), (tasks, empty_task) = names("--methods", args.methods), names("--tasks", args.tasks)
+    methods, tasks = list(dict.fromkeys(methods)), list(dict.fromkeys(tasks))  # a name twice: one run folder
     wrong = empty_method or empty_task or problem(args, methods, tasks)
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
@@ -328,6 +377,10 @@ def run(args: argparse.Namespace) -> int:
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"
     )
     failed: list[tuple[RunSpec, Exception]] = []
+    if not args.ray:  # a Ray sweep's runs belong to the cluster; Ctrl-C ends only this client
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
+                signal.signal(sig, STOP.handle)
     try:
         with tqdm(total=len(specs), desc="sweep", unit="run") as bar:
             for spec, result in run_all(specs, args.jobs, args.ray):
@@ -337,6 +390,14 @@ def run(args: argparse.Namespace) -> int:
     except RuntimeError as exc:  # the engine itself could not start
         print(f"collie sweep: error: {exc}", file=sys.stderr)
         return 2
+    if STOP.asked.is_set():
+        stopped = sum(not isinstance(e, Interrupted) for _, e in failed)
+        print(
+            f"collie sweep: interrupted; {stopped} run(s) stopped, "
+            f"{len(failed) - stopped} not started; rerun the same command to resume",
+            file=sys.stderr,
+        )
+        return 130
     for spec, error in failed:
         print(f"FAILED {spec.out}: {error}", file=sys.stderr)
     if not args.no_report:

@@ -1,8 +1,10 @@
 """`collie sweep`: finished runs are not rerun, interrupted ones resume, folders name their runs."""
 
 import json
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -32,9 +34,9 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeyp
     def fake_run(cmd, **kw):
         calls.append(cmd)
         (tmp_path / "half" / "summary.json").write_text(json.dumps({"status": "finished"}))
-        return subprocess.CompletedProcess(cmd, 0)
+        return 0
 
-    monkeypatch.setattr(sweep.subprocess, "run", fake_run)
+    monkeypatch.setattr(sweep.STOP, "run", fake_run)
     results = {s.out: r for s, r in run_all([done, half], jobs=2)}
     assert results[done.out]["safe_coverage"] == 7.0
     assert len(calls) == 1 and calls[0][-1] == "--resume" and "--epochs" in calls[0]
@@ -43,7 +45,7 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeyp
 
 
 def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
-    monkeypatch.setattr(sweep.subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(cmd, 1))
+    monkeypatch.setattr(sweep.STOP, "run", lambda cmd, **kw: 1)
     finished(tmp_path / "ok")
     specs = [
         RunSpec("point", "north", "metra", 0, str(tmp_path / "bad")),
@@ -63,9 +65,9 @@ def test_a_run_stopped_by_a_signal_is_not_evaluated_and_a_stale_evaluation_is_re
     def stopped(cmd, **kw):  # `collie train` exits 0 after SIGINT, with a final checkpoint
         calls.append(cmd)
         (tmp_path / "run" / "summary.json").write_text(json.dumps({"status": "interrupted", "epochs_done": 658}))
-        return subprocess.CompletedProcess(cmd, 0)
+        return 0
 
-    monkeypatch.setattr(sweep.subprocess, "run", stopped)
+    monkeypatch.setattr(sweep.STOP, "run", stopped)
     with pytest.raises(RuntimeError, match=r"stopped before its last epoch .*'interrupted'.* rerun the sweep"):
         run_one(spec)
     assert len(calls) == 1 and "train" in calls[0]  # no downstream task on the unfinished policy
@@ -132,15 +134,14 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--methods", "metra,"], "--methods 'metra,': entry 2 of 2 is empty"),
         (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
         (["--out", "{file}"], "--out {file} is a file, not a folder"),
+        (["--jobs", "0"], "--jobs must be ≥ 1"),
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
     from collie.cli import main
 
     launched = []  # a run that would start is recorded (and fails) instead of training
-    monkeypatch.setattr(
-        sweep.subprocess, "run", lambda cmd, **kw: launched.append(cmd) or subprocess.CompletedProcess(cmd, 1)
-    )
+    monkeypatch.setattr(sweep.STOP, "run", lambda cmd, **kw: launched.append(cmd) or 1)
     file = tmp_path / "a-file"
     file.write_text("")
     out = ["--out", str(tmp_path / "runs")] if "--out" not in given else []
@@ -192,3 +193,55 @@ def test_help_shows_the_full_grid_and_a_train_flag_before_the_separator_gets_a_h
     with pytest.raises(SystemExit):
         main(["archive", "--help"])
     assert "(default: ./results)" in " ".join(capsys.readouterr().out.split())
+
+
+def sweep_command(out, *more: str) -> list[str]:
+    return [sys.executable, "-m", "collie.cli", "sweep", "--preset", "smoke", "--out", str(out), "--no-report", *more]
+
+
+def test_a_name_given_twice_is_one_run(tmp_path):
+    done = subprocess.run(
+        sweep_command(
+            tmp_path, "--tasks", "north,north", "--methods", "lsd,lsd", "--seeds", "1", "--", "--epochs", "1"
+        ),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0 and done.stdout.startswith("1 runs"), done.stdout + done.stderr
+
+
+def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_other(tmp_path):
+    more = (
+        "--tasks",
+        "north",
+        "--methods",
+        "lsd",
+        "--seeds",
+        "3",
+        "--jobs",
+        "1",
+        "--",
+        "--epochs",
+        "100000",
+        "--eval-every",
+        "1",
+    )
+    proc = subprocess.Popen(sweep_command(tmp_path, *more), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = tmp_path / "point-north-lsd-s0"
+    try:
+        deadline = time.monotonic() + 180
+        metrics = first / "metrics.jsonl"
+        while not (metrics.exists() and len(metrics.read_text().splitlines()) >= 2):  # epoch 1: in the loop
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)  # to the sweep alone, as a terminal's Ctrl-C now reaches it
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "collie sweep: interrupted; 1 run(s) stopped, 2 not started; rerun the same command to resume" in err
+    assert json.loads((first / "summary.json").read_text())["status"] == "interrupted"
+    assert (first / "checkpoint.pt").exists()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == [first.name]  # seeds 1 and 2 never began
