@@ -254,3 +254,41 @@ def test_a_run_labelled_through_the_service_is_not_resumed_with_the_oracle(run_c
     before = digest(run_copy / "checkpoint.pt")
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "--api", "service_run.json")
     assert digest(run_copy / "checkpoint.pt") == before
+
+
+def test_a_second_trainer_in_a_run_folder_in_use_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    first = subprocess.Popen(
+        [*TRAIN, "--out", str(out), "--epochs", "100000", "--checkpoint-every", "100000"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "metrics.jsonl").exists():
+            assert first.poll() is None and time.monotonic() < deadline
+            time.sleep(0.1)
+        refused(train("--out", str(out)), f"another collie train (pid {first.pid}) is training in {out}")
+        assert first.poll() is None  # the first goes on
+    finally:
+        first.kill()
+        first.wait()
+    assert train("--out", str(out), "--epochs", "1").returncode == 0  # its lock ends with it
+
+
+def test_a_run_without_its_config_json_resumes_with_its_checkpoints_config(run_copy: Path) -> None:
+    (run_copy / "config.json").unlink()
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--preset", "cpu")  # cpu: other net sizes
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
+    assert json.loads((run_copy / "config.json").read_text())["hidden"] == 64  # smoke's, from the checkpoint
+
+
+def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, tmp_path: Path) -> None:
+    other = tmp_path / "other"
+    assert train("--epochs", "1", "--out", str(other), "--method", "diayn").returncode == 0
+    shutil.copyfile(other / "checkpoint.pt", run_copy / "checkpoint.pt")
+    refused(
+        train("--out", str(run_copy), "--resume"),
+        f"{run_copy / 'checkpoint.pt'} does not fit this run's config.json (copied from another run?)",
+    )

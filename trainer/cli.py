@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import fcntl
 import json
 import os
 import sys
@@ -258,6 +259,36 @@ def check_out(out: Path, resume: bool) -> list[Path]:
     return made
 
 
+LOCK_FILE = "train.lock"
+
+
+def checkpoint_config(out: Path) -> dict[str, Any]:
+    """The config a run's checkpoint.pt carries (for a run folder whose config.json was lost)."""
+    from trainer.checkpoint import load_checkpoint
+
+    config = load_checkpoint(out / "checkpoint.pt").get("config")
+    if not isinstance(config, dict):
+        raise ResumeError(f"{out / 'checkpoint.pt'} holds no config, and {out / 'config.json'} is missing")
+    return dict(config)
+
+
+def lock_run_folder(out: Path) -> int:
+    """An exclusive lock on OUT/train.lock for this process's life (the descriptor stays open), so
+    two trainers never write one run folder; ValueError naming the one that holds it."""
+    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+        os.close(fd)
+        raise ValueError(
+            f"another collie train (pid {holder}) is training in {out}: wait for it or stop it, or choose another --out"
+        ) from None
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
+    return fd
+
+
 def remove_if_empty(folders: list[Path]) -> None:
     """Undo check_out's folders after a refused start (deepest first; any that holds a file stays)."""
     for folder in folders:
@@ -276,25 +307,27 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
         made = check_out(Path(cfg.out), args.resume)
+        lock_run_folder(Path(cfg.out))  # held until this process ends
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
             raise ValueError(  # the oracle would label a run people label through the service
                 f"--resume: {cfg.out} takes its labels from a labeling service (service_run.json): give --api "
                 "and the trainer's token (or run `collie up` again with the same --out)"
             )
         if args.resume:
+            # the run's own config wins, the command line may only extend epochs; a damaged config.json:
+            # RunFolderError naming it; a missing one: the checkpoint's copy
             saved = Path(cfg.out) / "config.json"
-            if saved.exists():  # the run's own config wins; the command line may only extend epochs
-                stored = read_json_object(saved)  # a damaged one: RunFolderError naming it
-                stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
-                stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-                stored |= {k: getattr(cfg, k) for k in RESUME_RUNTIME if k in args.given}
-                asked, cfg = cfg, Config.from_stored(stored)
-                ignored = ignored_on_resume(args, asked, cfg)
-                if ignored:
-                    print(
-                        f"collie train: warning: --resume keeps the run's config; ignored: {', '.join(ignored)}",
-                        file=sys.stderr,
-                    )
+            stored = read_json_object(saved) if saved.exists() else checkpoint_config(Path(cfg.out))
+            stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
+            stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
+            stored |= {k: getattr(cfg, k) for k in RESUME_RUNTIME if k in args.given}
+            asked, cfg = cfg, Config.from_stored(stored)
+            ignored = ignored_on_resume(args, asked, cfg)
+            if ignored:
+                print(
+                    f"collie train: warning: --resume keeps the run's config; ignored: {', '.join(ignored)}",
+                    file=sys.stderr,
+                )
         from trainer.threads import apply_openmp_env, resolve_threads
 
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
@@ -322,7 +355,9 @@ def run(args: argparse.Namespace) -> int:
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
         mark("trainer built")  # envs, observation statistics, networks, replay
     except (ValueError, FileNotFoundError) as exc:
-        remove_if_empty(made)  # a refused start leaves no empty run folder behind
+        if made:  # a refused start leaves no empty run folder behind
+            (Path(cfg.out) / LOCK_FILE).unlink(missing_ok=True)
+            remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
     try:

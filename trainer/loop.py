@@ -491,8 +491,17 @@ class Trainer:
         return {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
 
     def resume(self) -> None:
-        state = load_checkpoint(self.out / "checkpoint.pt")
-        self.load_state_dict(state)
+        path = self.out / "checkpoint.pt"
+        state = load_checkpoint(path)
+        try:
+            self.load_state_dict(state)
+        except ResumeError:  # a file of the run named already (a replay chunk missing)
+            raise
+        except (RuntimeError, KeyError, ValueError) as exc:  # e.g. networks of another size or method
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ResumeError(
+                f"{path} does not fit this run's config.json (copied from another run?): {first[:200]}"
+            ) from None
         metrics = self.out / "metrics.jsonl"  # drop evaluations written after that checkpoint
         if metrics.exists():
             lines = [ln for ln in metrics.read_text(errors="replace").splitlines() if ln]
