@@ -314,7 +314,7 @@ def markdown(
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
     if broken:
-        parts.append("Left out (unreadable): " + ", ".join(f"`{path}` ({why})" for path, why in broken))
+        parts.append("Left out (unreadable or twice): " + ", ".join(f"`{path}` ({why})" for path, why in broken))
     for metric, title, digits in METRICS:
         if any(metric in r.metrics for r in runs):
             parts.append(f"## {title}\n\n{metric_table(runs, metric, digits)}")
@@ -328,6 +328,27 @@ def markdown(
     return "\n\n".join(parts) + "\n"
 
 
+def _config(run: RunResult) -> dict[str, Any]:
+    """The run's config without where its folder was (a moved or archived copy is the same run)."""
+    cfg = run.metrics.get("config")
+    return {k: v for k, v in cfg.items() if k != "out"} if isinstance(cfg, dict) else {}
+
+
+def once_each(runs: list[RunResult]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
+    """The runs with one per (env, task, method, variant, seed) — the first in path order — and the
+    others, each with why: a run found twice (a run root and its archive given together, say) is
+    one seed, not two, and two configurations under one name are no seeds of one cell."""
+    kept: dict[tuple[str, str, str, str, int], RunResult] = {}
+    left: list[tuple[Path, str]] = []
+    for r in runs:
+        first = kept.setdefault((r.env, r.task, r.method, r.variant, r.seed), r)
+        if first is not r:
+            same = _config(first) == _config(r)
+            why = "the same run" if same else "the same env, task, method, variant and seed, another configuration"
+            left.append((r.path, f"{why} as `{first.path}`, counted once"))
+    return list(kept.values()), left
+
+
 def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str, Path]:
     """Find the runs under `roots`, write report.md, metrics.csv, runs.csv and figures into `out`."""
     found, unreadable = find_runs(roots)
@@ -335,6 +356,8 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     broken = [(path, why) for path, why in unreadable if out not in path.parents]
     runs = [r for r in every if r.status == "finished"]
     skipped = [r for r in every if r.status != "finished"]
+    runs, duplicates = once_each(runs)
+    broken += duplicates
     for r in list(runs):
         try:
             add_diagnostics(r)

@@ -47,12 +47,22 @@ def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
     return traj.xy, traj.skill
 
 
+def drawable(run: RunResult) -> bool:
+    """Its final skills can be drawn: saved, or to be rolled out again from its checkpoint (a run
+    folder that lost both still counts in the tables)."""
+    return (run.path / "eval_latest.npz").exists() or (run.path / "checkpoint.pt").exists()
+
+
 def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
     """One PNG per (env, task) present in `runs`; returns their paths."""
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for env, task_name in sorted({(r.env, r.task) for r in runs}):
-        group = sorted((r for r in runs if (r.env, r.task) == (env, task_name)), key=lambda r: (r.order(), r.seed))
+        group = sorted(
+            (r for r in runs if (r.env, r.task) == (env, task_name) and drawable(r)), key=lambda r: (r.order(), r.seed)
+        )
+        if not group:
+            continue
         first = list({r.label: r for r in reversed(group)}.values())[::-1]  # lowest seed per method
         first.sort(key=RunResult.order)
         dims = env_class(env).position_dims

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -183,7 +184,7 @@ def test_a_broken_run_folder_is_named_and_left_out_and_given_alone_is_a_one_line
     assert main(["report", str(runs), "--no-figures"]) == 0
     out = capsys.readouterr().out
     assert "| Oracle | 9.00 |" in out  # the others are reported
-    assert f"Left out (unreadable): `{broken}` ({broken / 'summary.json'}" in out and why in out
+    assert f"Left out (unreadable or twice): `{broken}` ({broken / 'summary.json'}" in out and why in out
     assert main(["report", str(broken), "--no-figures"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"collie report: error: {broken / 'summary.json'}") and why in err
@@ -205,7 +206,35 @@ def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, c
     assert main(["report", str(runs)]) == 0
     out = capsys.readouterr().out
     assert "| Oracle | 9.00 |" in out and "METRA" not in out.split("Left out")[0]
-    assert f"Left out (unreadable): `{cut.parent}` ({cut}: not a readable .npz" in out
+    assert f"Left out (unreadable or twice): `{cut.parent}` ({cut}: not a readable .npz" in out
     assert main(["report", str(cut.parent), "--no-figures"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"collie report: error: {cut}: not a readable .npz") and len(err.strip().splitlines()) == 1
+
+
+def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_is_named(tmp_path):
+    from trainer.report import write_report
+
+    run = fake_run(tmp_path / "runs", "point", "north", "oracle", 0, 9.0)
+    fake_run(tmp_path / "runs", "point", "north", "oracle", 1, 7.0)
+    shutil.copytree(run, tmp_path / "archive" / run.name)  # the run and its archive, given together
+    other = fake_run(tmp_path / "older", "point", "north", "oracle", 0, 1.0)
+    summary = json.loads((other / "summary.json").read_text())
+    summary["config"]["epochs"] = 12  # another configuration under the same name
+    (other / "summary.json").write_text(json.dumps(summary))
+    roots = [tmp_path / "archive", tmp_path / "runs", tmp_path / "older"]
+    text = write_report(roots, tmp_path / "report", figures=False)["markdown"].read_text()
+    assert "2 finished runs; seeds per cell: 2." in text and "| Oracle | 8.00 ± 1.41 |" in text
+    assert f"`{run}` (the same run as `{tmp_path / 'archive' / run.name}`, counted once)" in text
+    assert f"`{other}` (the same env, task, method, variant and seed, another configuration as" in text
+
+
+def test_a_run_folder_without_its_final_skills_is_in_the_tables_not_the_figures(tmp_path):
+    from trainer.report import write_report
+
+    fake_run(tmp_path, "point", "north", "oracle", 0, 9.0)
+    (fake_run(tmp_path, "point", "north", "metra", 0, 3.0) / "eval_latest.npz").unlink()  # and no checkpoint
+    paths = write_report([tmp_path], tmp_path / "report")
+    text = paths["markdown"].read_text()
+    assert "| Oracle | 9.00 |" in text and "| METRA | 3.00 |" in text
+    assert (tmp_path / "report" / "figures" / "skills_point_north.png").exists()
