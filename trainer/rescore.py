@@ -82,6 +82,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     if not saved.exists():
         raise RescoreError(f"{source} has no eval_latest.npz (its final skills were not saved)")
     rule = get_task(task, cfg["env"], layout_seed=int(cfg["seed"]))  # fails with the valid task names
+    if task == cfg["task"]:
+        raise RescoreError(f"{source} is judged by {task} already (its summary.json holds those figures)")
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
     if (out / "summary.json").exists():
         held = read_json_object(out / "summary.json")  # RunFolderError, a ValueError, names a broken one

@@ -68,6 +68,8 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     source, _ = finished_run(tmp_path)
     assert main(["rescore", str(source), "--task", "nowhere"]) == 2
     assert "unknown task 'nowhere'" in capsys.readouterr().err
+    assert main(["rescore", str(source), "--task", "north"]) == 2  # its own task
+    assert f"{source} is judged by north already" in capsys.readouterr().err
     assert main(["rescore", str(source), "--task", "hole"]) == 0
     assert main(["rescore", str(source), "--task", "hole"]) == 2
     assert "already holds a run" in capsys.readouterr().err
