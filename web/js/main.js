@@ -41,11 +41,14 @@ async function openSelected() {
   const runId = selectedRun() ?? runs[0]?.id ?? null;
   renderRuns(runsBody, runs, runId);
   if (runId == null || runId === runPage.runId) return;
+  $("#runs-message").textContent = "";
   try {
     await runPage.open(runId, sessionStorage.getItem("collie-ui"));
   } catch (error) {
-    if (error.status === 401) askForToken(error.message);
-    else $("#control-message").textContent = `could not load run ${runId}: ${error.message}`;
+    if (error.status === 401) return askForToken(error.message);
+    // the run's own section stays hidden: say it above, where the runs to pick from are
+    $("#runs-message").textContent = `could not open run ${runId}: ${error.message}; pick one above`;
+    showConnection(error.status === 404 ? "no such run" : "down");
   }
 }
 
