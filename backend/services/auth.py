@@ -17,7 +17,7 @@ from typing import Any
 from sqlalchemy import Connection, Row, insert, inspect, select, update
 
 from backend.db import Database, make_engine
-from backend.models import Principal
+from backend.models import Principal, Run
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import LabelerRead, Role
 
@@ -128,6 +128,11 @@ def create_principal(conn: Connection, name: str, role: Role, runs: list[int] | 
         raise Conflict(f"name '{name}' is taken")
     token = new_token()
     scope = None if runs is None else sorted(set(runs))
+    if scope:
+        known = set(conn.execute(select(Run.id).where(Run.id.in_(scope))).scalars())
+        unknown = [str(r) for r in scope if r not in known]
+        if unknown:
+            raise NotFound(f"no run {', '.join(unknown)}: a labeler's runs must exist")
     conn.execute(
         insert(Principal).values(
             name=name, role=role, token_sha256=hash_token(token), created_at=time.time(), runs=scope

@@ -115,3 +115,10 @@ def test_the_last_operator_cannot_be_revoked(tmp_path: Path) -> None:
             with pytest.raises(ApiError) as again:
                 other.revoke(second.id)
             assert again.value.status == 409
+
+
+def test_a_labeler_for_a_run_that_does_not_exist_is_refused(operator: CollieClient) -> None:
+    with pytest.raises(ApiError) as refused:
+        operator.create_labeler("for-nothing", runs=[99999])
+    assert refused.value.status == 404 and "no run 99999" in str(refused.value.detail)
+    assert "for-nothing" not in [p.name for p in operator.labelers()]
