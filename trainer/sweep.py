@@ -31,7 +31,7 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from trainer.config import PRESETS
 from trainer.methods import METHODS
@@ -256,6 +256,34 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
 # ---- `collie sweep` ------------------------------------------------------------------------------
 # `collie` adds this to "unrecognized arguments" (collie/cli.py): a train flag given before --.
 UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
+DASHED_VALUE_OPTIONS = ("--downstream-flags",)  # its value is flags: `--downstream-flags "--kind zero_shot"`
+
+
+class _Refusal(Exception):
+    pass
+
+
+class _TrainParser(argparse.ArgumentParser):
+    """`collie train`'s parser, raising instead of exiting."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _Refusal(message)
+
+
+def train_flags_problem(specs: list[RunSpec]) -> str | None:
+    """What `collie train` would refuse in the runs' commands (a bad flag after --, a value out of
+    range), found by parsing each method's and task's command once, before any run starts."""
+    from trainer import cli as train_cli
+
+    parser = _TrainParser(prog="collie train")
+    train_cli.add_arguments(parser)
+    for spec in {(s.method, s.task): s for s in specs}.values():
+        argv = train_command(spec)[4:]  # after `python -m collie.cli train`
+        try:
+            train_cli.config_from_args(parser.parse_args(argv))
+        except (_Refusal, ValueError) as exc:
+            return f"collie train would refuse {spec.method} on {spec.task} ({shlex.join(spec.flags)}): {exc}"
+    return None
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -367,6 +395,10 @@ def run(args: argparse.Namespace) -> int:
         downstream=args.downstream,
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
+    wrong = train_flags_problem([s for s in specs if not is_finished(s.out)])
+    if wrong:
+        print(f"collie sweep: error: {wrong}", file=sys.stderr)
+        return 2
     todo = sum(not is_finished(s.out) for s in specs)
     for spec in specs:
         differs = made_otherwise(spec) if is_finished(spec.out) else None

@@ -135,6 +135,14 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
         (["--out", "{file}"], "--out {file} is a file, not a folder"),
         (["--jobs", "0"], "--jobs must be ≥ 1"),
+        (
+            ["--methods", "lsd", "--tasks", "north", "--", "--epochs", "-5"],
+            "collie train would refuse lsd on north (--epochs -5): --epochs must be ≥ 1, got -5",
+        ),
+        (
+            ["--methods", "lsd", "--", "--bogus"],
+            "collie train would refuse lsd on north (--bogus): unrecognized arguments",
+        ),
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
