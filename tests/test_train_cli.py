@@ -208,6 +208,8 @@ def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
     assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"
     assert "--threads" not in warnings[0]  # a runtime setting: the resumed run uses what it is given
     assert json.loads((run_copy / "config.json").read_text())["threads"] == 2
+    fewer = train("--out", str(run_copy), "--resume", "--epochs", "1")  # epochs may only be extended
+    assert fewer.returncode == 0 and "ignored: --epochs 1 (the run's: 3)" in fewer.stderr, fewer.stderr[-3000:]
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:

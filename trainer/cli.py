@@ -111,11 +111,14 @@ RESUME_RUNTIME = ("threads",)
 
 
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
-    """The given flags whose values differ from the resumed run's own config (which wins)."""
+    """The given flags whose values differ from the resumed run's own config (which wins), and
+    --epochs below the run's own (epochs may only be extended)."""
+    shorter = ["epochs"] if "epochs" in args.given and asked.epochs < run.epochs else []
     return [
         f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
         for k in sorted(args.given)
-        if k not in (*RESUME_MAY_CHANGE, *RESUME_RUNTIME) and hasattr(run, k) and getattr(asked, k) != getattr(run, k)
+        if k in shorter
+        or (k not in (*RESUME_MAY_CHANGE, *RESUME_RUNTIME) and hasattr(run, k) and getattr(asked, k) != getattr(run, k))
     ]
 
 
