@@ -1,8 +1,8 @@
 """make bench-guidance: METRA, COLLIE and Oracle on point North, Range, Hole and Hole-North with the
 `cpu` preset, 3 seeds each. Runs are independent processes (1 torch thread each, `--jobs` at a
 time; the runner of `collie sweep`, trainer/sweep.py); a finished run folder is not rerun. Prints
-mean ± std of the paper's metrics and the wall time per run, and writes the same table as markdown
-next to the runs.
+mean ± population std (ddof 0; `collie report` gives the sample std) of the paper's metrics and the
+wall time per run, and writes the same table as markdown next to the runs.
 
 Expected (issue 2): on North, COLLIE's safe ratio ≥ 0.90 while METRA's stays ≤ 0.5; COLLIE's safe
 coverage above METRA's on every task; each run ≤ 10 minutes.
@@ -66,7 +66,7 @@ def main() -> None:
     md = table(results, tasks, methods)
     cmd = "make bench-guidance" + (f"  (extra: {' '.join(a.extra)})" if a.extra else "")
     header = (
-        f"env `{a.env}`, preset `cpu`, {a.seeds} seeds, mean ± std over seeds; "
+        f"env `{a.env}`, preset `cpu`, {a.seeds} seeds, mean ± population std (ddof 0) over seeds; "
         f"{platform.machine()} with {os.cpu_count()} cores, {a.jobs} runs at a time; command: `{cmd}`\n\n"
     )
     (root / "results.md").write_text(header + md + "\n")
