@@ -178,6 +178,8 @@ def test_a_bad_spec_file_names_the_file_the_key_and_what_was_expected(
         load_task_file(path)
     message = str(caught.value)
     assert str(path) in message and where in message and expected in message, message
+    # pydantic's framing stays out: no "Value error," prefix, no whole file as the value given, one "got"
+    assert "Value error" not in message and "(top level)" not in message and message.count("got ") <= 1, message
 
 
 def test_bad_json_names_its_line(tmp_path: Path) -> None:
@@ -240,6 +242,8 @@ def test_bad_python_task_files_are_refused_clearly(tmp_path: Path) -> None:
     """
     with pytest.raises(TaskFileError, match="registers two_a_test, two_b_test; pick one with --task"):
         load_task_file(write(tmp_path, "two.py", two))
+    with pytest.raises(TaskFileError, match="registers two_c_test, two_d_test, not 'zzz'; pick one of them"):
+        load_task_file(write(tmp_path, "two_more.py", two.replace("two_a", "two_c").replace("two_b", "two_d")), "zzz")
 
 
 def test_a_run_has_a_rule_or_an_instruction_not_both() -> None:

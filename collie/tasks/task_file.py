@@ -85,8 +85,11 @@ def parse_spec(path: Path, data: dict[str, Any]) -> TaskDefinition:
         definition = TaskDefinition.model_validate(data)
     except ValidationError as exc:
         first = exc.errors()[0]
-        got = "" if first["type"] == "missing" else f" (got {_shown(first.get('input'))})"
-        raise TaskFileError(path, _key(first["loc"]), f"{first['msg']}{got}") from None
+        msg = first["msg"].removeprefix("Value error, ")  # our validators' own words
+        # the value given, unless the words name it already, or it is the whole file (a rule across fields)
+        quiet = first["type"] == "missing" or not first["loc"] or "got " in msg
+        got = "" if quiet else f" (got {_shown(first.get('input'))})"
+        raise TaskFileError(path, _key(first["loc"]), f"{msg}{got}") from None
     if definition.name in task_names():
         raise TaskFileError(path, "name", f"{definition.name!r} is already a registered task; choose another name")
     try:
@@ -110,7 +113,9 @@ def _from_python(path: Path, task: str | None, env: str, layout_seed: int) -> Ta
     if not added:
         raise TaskFileError(path, "", "registers no task; decorate a factory with @collie.tasks.register_task('name')")
     if task is None or task not in added:
-        if task is not None or len(added) > 1:
+        if task is not None:
+            raise TaskFileError(path, "", f"registers {', '.join(added)}, not {task!r}; pick one of them with --task")
+        if len(added) > 1:
             raise TaskFileError(path, "", f"registers {', '.join(added)}; pick one with --task")
         task = added[0]
     try:
@@ -140,7 +145,7 @@ def _key(loc: tuple[Any, ...]) -> str:
             out += f"[{part}]"
         elif part not in REGION_KINDS:
             out += f".{part}" if out else str(part)
-    return out or "(top level)"
+    return out
 
 
 def _shown(value: Any) -> str:
