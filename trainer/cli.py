@@ -245,6 +245,9 @@ def check_out(out: Path, resume: bool) -> list[Path]:
         raise ValueError(f"--out {out} is a file, not a folder")
     if resume and not (out / "checkpoint.pt").is_file():
         raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
+    source = read_json_object(out / "summary.json").get("rescored_from") if (out / "summary.json").is_file() else None
+    if resume and source:
+        raise ValueError(f"--resume: {out} is {source} judged by another task (collie rescore): resume {source}")
     if not resume and any((out / name).exists() for name in RUN_FILES):
         raise ValueError(
             f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"

@@ -93,6 +93,8 @@ def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new
     assert ((out / "summary.json").stat().st_mtime_ns, (out / "downstream.json").stat().st_mtime_ns) == written
     assert main(["rescore", str(out), "--task", "hole", "--out", str(out), "--keep-existing"]) == 2
     assert "already holds a run" in capsys.readouterr().err  # rescored from another run: still refused
+    assert main(["train", "--env", "point", "--out", str(out), "--resume"]) == 2  # its networks only, no replay
+    assert f"is {source} judged by another task (collie rescore): resume {source}" in capsys.readouterr().err
 
 
 def test_a_downstream_task_without_a_checkpoint_is_refused_with_the_reason(tmp_path, capsys):
