@@ -128,3 +128,15 @@ def test_a_damaged_final_evaluation_is_a_one_line_error_naming_it(tmp_path, caps
     err = capsys.readouterr().err
     assert err.startswith(f"collie rescore: error: {saved}: not a readable .npz") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "ant-range-metra-s0").exists()
+
+
+def test_the_downstream_command_on_an_archived_run_says_its_networks_are_not_kept(tmp_path, capsys):
+    from trainer.downstream.__main__ import main as downstream
+
+    source, _ = finished_run(tmp_path)  # as `collie archive` keeps it: no checkpoint.pt
+    (source / "config.json").write_text(json.dumps({"env": "ant", "task": "north", "method": "metra", "seed": 0}))
+    assert downstream([str(source)]) == 2
+    assert f"downstream: error: {source} has no checkpoint.pt: its networks are not kept" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        downstream([str(source), "--trajectories", "0"])
+    assert "--trajectories must be ≥ 1, got 0" in capsys.readouterr().err

@@ -101,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
             help=f"PPO {f.name} (default: by the run's preset)",
         )
     a = p.parse_args(argv)
+    if a.trajectories < 1:
+        p.error(f"--trajectories must be ≥ 1, got {a.trajectories}")
     torch.set_num_threads(a.threads)
     overrides = {
         f.name: getattr(a, f"ppo_{f.name}")
