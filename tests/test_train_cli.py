@@ -182,7 +182,9 @@ def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> Non
     )
 
 
-@pytest.mark.parametrize(("flag", "value"), [("--seed", "-1"), ("--run-id", "abc"), ("--episode-steps", "0")])
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--seed", "-1"), ("--run-id", "abc"), ("--episode-steps", "0"), ("--threads", "-2")]
+)
 def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> None:
     refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), flag, value)
     assert not (tmp_path / "run").exists()

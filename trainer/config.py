@@ -163,6 +163,7 @@ class Config:
         need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
         need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
         need(self.physics_threads >= 0, f"physics_threads must be ≥ 0, got {self.physics_threads}")
+        need(self.threads >= 0, f"--threads must be ≥ 0 (0: chosen for this machine), got {self.threads}")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
         need(self.init in INITS, f"unknown init {self.init!r}; valid: {', '.join(INITS)}")
         need(self.acting in ACTING_PATHS, f"unknown acting path {self.acting!r}; valid: {', '.join(ACTING_PATHS)}")
