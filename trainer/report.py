@@ -403,6 +403,10 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         print(f"collie report: error: not a folder: {', '.join(missing)}", file=sys.stderr)
         return 2
+    empty = [str(r) for r in roots if next(r.rglob("summary.json"), None) is None]
+    if empty:
+        print(f"collie report: error: no run folder (none has summary.json) under {', '.join(empty)}", file=sys.stderr)
+        return 2
     for root in roots:  # a run folder given itself: a broken one is an error, not a line in the report
         if (root / "summary.json").exists():
             try:

@@ -91,6 +91,10 @@ def test_collie_report_cli(tmp_path, capsys):
     assert "| Oracle | 9.00 |" in capsys.readouterr().out
     assert (tmp_path / "report" / "report.md").exists()
     assert report.run(argparse.Namespace(roots=[str(tmp_path / "nope")], out=None, no_figures=True)) == 2
+    (tmp_path / "empty").mkdir()
+    assert report.run(argparse.Namespace(roots=[str(tmp_path / "empty")], out=None, no_figures=True)) == 2
+    assert f"no run folder (none has summary.json) under {tmp_path / 'empty'}" in capsys.readouterr().err
+    assert not (tmp_path / "empty" / "report").exists()
 
 
 def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
