@@ -305,21 +305,26 @@ def markdown(
     broken: Sequence[tuple[Path, str]] = (),
 ) -> str:
     seeds = sorted({len(g) for g in _group(runs).values()})
+    tables = [
+        f"## {title}\n\n{metric_table(runs, metric, digits)}"
+        for metric, title, digits in METRICS
+        if any(metric in r.metrics for r in runs)
+    ]
+    tables += [f"## {title}\n\n{table}" for title, table in downstream_tables(runs)]
+    paper = (
+        ' "(paper)" columns: the paper\'s published tables at its own budget.' if "(paper)" in "".join(tables) else ""
+    )
     parts = [
         f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
         "Cells: mean ± sample std over seeds of each run's final evaluation; coverage by the reference's "
-        f"corner bin rule (as the paper; {VISITED_MARK}: a run without corner figures, shown by the visited rule). "
-        '"(paper)" columns: the paper\'s published Tables 1–2 at its own budget.'
+        f"corner bin rule (as the paper; {VISITED_MARK}: a run without corner figures, shown by the visited rule)."
+        + paper
     ]
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
     if broken:
         parts.append("Left out (unreadable or twice): " + ", ".join(f"`{path}` ({why})" for path, why in broken))
-    for metric, title, digits in METRICS:
-        if any(metric in r.metrics for r in runs):
-            parts.append(f"## {title}\n\n{metric_table(runs, metric, digits)}")
-    for title, table in downstream_tables(runs):
-        parts.append(f"## {title}\n\n{table}")
+    parts += tables
     if figures:
         parts.append(
             "## Skills (final evaluation, lowest seed)\n\n"

@@ -89,7 +89,7 @@ def test_collie_report_cli(tmp_path, capsys):
     args = argparse.Namespace(roots=[str(tmp_path)], out=None, no_figures=True)
     assert report.run(args) == 0
     assert "| Oracle | 9.00 |" in capsys.readouterr().out
-    assert (tmp_path / "report" / "report.md").exists()
+    assert '"(paper)" columns' not in (tmp_path / "report" / "report.md").read_text()  # the paper has no point mass
     assert report.run(argparse.Namespace(roots=[str(tmp_path / "nope")], out=None, no_figures=True)) == 2
     (tmp_path / "empty").mkdir()
     assert report.run(argparse.Namespace(roots=[str(tmp_path / "empty")], out=None, no_figures=True)) == 2

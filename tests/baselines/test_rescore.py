@@ -48,6 +48,7 @@ def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_
     assert json.loads((out / "downstream.json").read_text()) == {"hierarchical": done["hierarchical"]}
     md = write_report([tmp_path / "runs"], tmp_path / "report", figures=False)["markdown"].read_text()
     assert "| method | ant north | ant north (paper) | ant range | ant range (paper) |" in md
+    assert '"(paper)" columns: the paper\'s published tables' in md
 
 
 @pytest.mark.parametrize(
