@@ -61,7 +61,12 @@ def test_a_change_made_elsewhere_shows_live(page: Any, live: BackgroundServer, r
 
 
 def test_a_bad_value_is_refused_and_said(page: Any, trainer: CollieClient, run: RunRead) -> None:
-    page.fill("#policy-seconds", "-3")
+    for nothing in ("-3", "0"):  # said at once, without asking the service
+        page.fill("#policy-seconds", nothing)
+        page.click("#policy-apply")
+        page.wait_for_function("document.querySelector('#control-message').textContent.includes('more than 0')")
+        page.evaluate("document.querySelector('#control-message').textContent = ''")
+    page.fill("#policy-seconds", "1e9")  # past the service's week
     page.click("#policy-apply")
     page.wait_for_function("document.querySelector('#control-message').textContent.includes('422')")
     assert trainer.run(run.id).feedback_timeout_s == 2.5

@@ -28,8 +28,8 @@ export class Controls {
     this.policy.form.addEventListener("submit", (event) => {
       event.preventDefault();
       const text = this.policy.seconds.value.trim();
-      if (text === "" || !Number.isFinite(Number(text))) {
-        this.message.textContent = "enter the seconds to wait for a session's labels";
+      if (text === "" || !Number.isFinite(Number(text)) || Number(text) <= 0) {
+        this.message.textContent = "enter the seconds (more than 0) to wait for a session's labels";
         return;
       }
       this.setPolicy(Number(text));
