@@ -9,11 +9,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ctypes
 import multiprocessing
 import os
 import pickle
-import signal
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -27,6 +25,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from backend.services.errors import Unavailable
+from collie.processes import end_with_parent
 from collie.schemas import EnvDims, QueryFrames, SessionPost
 
 FRAME_FIELDS = frozenset(QueryFrames.model_fields)
@@ -92,13 +91,6 @@ def prepare_session(body_path: str) -> tuple[str, Any]:
     return "ok", out
 
 
-def _die_with_parent() -> None:
-    """A worker that outlived a killed service would hold its memory forever: on Linux, the kernel
-    ends it when the service goes (prctl PR_SET_PDEATHSIG); elsewhere nothing is done."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
-
-
 class SessionParser:
     """One worker process (spawned: the service's threads make fork unsafe), started with the
     first big session (a service that never gets one never starts it) and kept. A worker that
@@ -114,8 +106,8 @@ class SessionParser:
 
     def _worker(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(
-                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
+            self._pool = ProcessPoolExecutor(  # a worker that outlived a killed service would hold its memory
+                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=end_with_parent
             )
         return self._pool
 

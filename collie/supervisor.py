@@ -5,7 +5,7 @@ OUT/logs/up.log; OUT/children.json names the live process of each part (for tool
 
 from __future__ import annotations
 
-import ctypes
+import functools
 import json
 import os
 import signal
@@ -17,19 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from collie.processes import end_with_parent
 from collie.startup import PART_ENV, mark
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-
-def end_with_parent() -> None:
-    """In the child, before exec: SIGTERM when `collie up` dies, even by SIGKILL (Linux's
-    PR_SET_PDEATHSIG; the trainer checkpoints on it), instead of running on unsupervised. Children
-    are spawned from the main thread only, whose end is what the kernel watches."""
-    if sys.platform == "linux":
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class Closeable(Protocol):
@@ -95,7 +87,9 @@ class Supervisor:
             env=env,
             start_new_session=True,  # our Ctrl-C is handled here, not by children
             pass_fds=child.pass_fds + self.inherited,
-            preexec_fn=end_with_parent,
+            # SIGTERM when `collie up` dies, even by SIGKILL (the trainer checkpoints on it); children
+            # are spawned from the main thread only, whose end is what the kernel watches
+            preexec_fn=functools.partial(end_with_parent, os.getpid()),
         )
         log.close()  # the child holds its own copy
         child.started_at, child.restart_at = time.monotonic(), None

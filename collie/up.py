@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import fcntl
 import json
 import os
 import re
@@ -25,6 +24,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from collie.argtypes import port
+from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import TOKEN_ENV, read_tokens_file, write_secret
@@ -177,11 +177,9 @@ def locked(out: Path) -> int:
     """An exclusive lock on OUT/up.lock, held by this stack and every part of it (children inherit
     the descriptor), so a second `collie up` on the same OUT — or on what a killed one left running
     — is refused; ValueError naming the processes in the way."""
-    fd = os.open(out / "up.lock", os.O_RDWR | os.O_CREAT, 0o600)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
+        return hold_lock(out / "up.lock")
+    except LockHeld:
         try:
             before = json.loads((out / "children.json").read_text())
             pids = [f"collie up {before['up']}"] + [f"{n} {p}" for n, p in before["children"].items()]
@@ -191,7 +189,6 @@ def locked(out: Path) -> int:
             f"another collie up runs on --out {out} ({', '.join(pids)}): stop it (Ctrl-C there, or kill "
             "these processes), or give another --out"
         ) from None
-    return fd
 
 
 def run(args: argparse.Namespace) -> int:

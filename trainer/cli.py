@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import fcntl
 import json
 import os
 import sys
@@ -14,13 +13,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from collie.argtypes import http_url
+from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, flag, make_config, people_schedule
 from trainer.methods import METHODS
-from trainer.run_files import read_json_object
+from trainer.run_files import RunFolderError, read_json_object
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
@@ -245,8 +245,8 @@ def check_out(out: Path, resume: bool) -> list[Path]:
         raise ValueError(f"--out {out} is a file, not a folder")
     if resume and not (out / "checkpoint.pt").is_file():
         raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
-    source = read_json_object(out / "summary.json").get("rescored_from") if (out / "summary.json").is_file() else None
-    if resume and source:
+    source = rescored_from(out) if resume else None
+    if source:
         raise ValueError(f"--resume: {out} is {source} judged by another task (collie rescore): resume {source}")
     if not resume and any((out / name).exists() for name in RUN_FILES):
         raise ValueError(
@@ -281,18 +281,22 @@ def checkpoint_config(out: Path) -> dict[str, Any]:
 def lock_run_folder(out: Path) -> int:
     """An exclusive lock on OUT/train.lock for this process's life (the descriptor stays open), so
     two trainers never write one run folder; ValueError naming the one that holds it."""
-    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
-        os.close(fd)
+        return hold_lock(out / LOCK_FILE)
+    except LockHeld as held:
         raise ValueError(
-            f"another collie train (pid {holder}) is training in {out}: wait for it or stop it, or choose another --out"
+            f"another collie train (pid {held.holder or '?'}) is training in {out}: wait for it or stop it, "
+            "or choose another --out"
         ) from None
-    os.ftruncate(fd, 0)
-    os.write(fd, str(os.getpid()).encode())
-    return fd
+
+
+def rescored_from(out: Path) -> str | None:
+    """The run `collie rescore` made `out` from, if it did (a damaged summary.json: none, as a
+    killed run may leave it; the resume does not read it)."""
+    try:
+        return read_json_object(out / "summary.json").get("rescored_from") if (out / "summary.json").is_file() else None
+    except RunFolderError:
+        return None
 
 
 def remove_if_empty(folders: list[Path]) -> None:
@@ -308,12 +312,13 @@ def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
     made: list[Path] = []
+    locked = False
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
         made = check_out(Path(cfg.out), args.resume)
-        lock_run_folder(Path(cfg.out))  # held until this process ends
+        locked = lock_run_folder(Path(cfg.out)) >= 0  # held until this process ends
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
             raise ValueError(  # the oracle would label a run people label through the service
                 f"--resume: {cfg.out} takes its labels from a labeling service (service_run.json): give --api "
@@ -361,9 +366,9 @@ def run(args: argparse.Namespace) -> int:
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
         mark("trainer built")  # envs, observation statistics, networks, replay
     except (ValueError, FileNotFoundError) as exc:
-        if made:  # a refused start leaves no empty run folder behind
+        if made and locked:  # a refused start leaves no empty run folder behind (another's lock stays)
             (Path(cfg.out) / LOCK_FILE).unlink(missing_ok=True)
-            remove_if_empty(made)
+        remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
     try:

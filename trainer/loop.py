@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import re
 import signal
 import threading
 import time
@@ -497,7 +498,9 @@ class Trainer:
             self.load_state_dict(state)
         except ResumeError:  # a file of the run named already (a replay chunk missing)
             raise
-        except (RuntimeError, KeyError, ValueError) as exc:  # e.g. networks of another size or method
+        except (RuntimeError, ValueError, KeyError) as exc:  # networks or optimisers of another run's shape
+            if not isinstance(exc, KeyError) and not re.search(r"state[ _]dict", str(exc)):
+                raise  # not a mismatch (out of memory, say): as it is
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise ResumeError(
                 f"{path} does not fit this run's config.json (copied from another run?): {first[:200]}"
@@ -660,7 +663,9 @@ class Trainer:
             "wall_s": round(self.wall_s(), 2),
             "config": self.cfg.to_dict(),
         }
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        partial = self.out / "summary.json.partial"  # renamed whole: a kill mid-write leaves the old one
+        partial.write_text(json.dumps(summary, indent=2))
+        partial.replace(self.out / "summary.json")
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
         if status != "interrupted":  # an interrupted run is not over for the service

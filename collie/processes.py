@@ -1,0 +1,52 @@
+"""Process plumbing for the commands that start or guard other processes (`collie up`, `collie
+sweep`, `collie train`, the service's parsing worker): children that end with their parent, and a
+lock file that one process, and the children it hands the descriptor to, holds."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import os
+import signal
+import sys
+from pathlib import Path
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform == "linux" else None  # loaded once, not in each child
+
+
+def end_with_parent(parent: int | None = None) -> None:
+    """In a child (a `preexec_fn`, a worker's initializer): SIGTERM from the kernel when the thread
+    that started it ends, even by SIGKILL (Linux's PR_SET_PDEATHSIG; elsewhere nothing), instead of
+    running on unsupervised. `parent`: its pid, for a parent that died before this call."""
+    if _LIBC is None:
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if parent is not None and os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+class LockHeld(Exception):
+    """Another process holds the lock; `holder` is the pid it wrote ("" if none)."""
+
+    def __init__(self, holder: str) -> None:
+        super().__init__(holder)
+        self.holder = holder
+
+
+def hold_lock(path: Path) -> int:
+    """An exclusive lock on `path` (made if missing, readable by its owner only) for as long as the
+    returned descriptor is open here or in a child it was passed to; the file names our pid.
+    LockHeld if another process holds it."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 32).decode(errors="replace").strip()
+        os.close(fd)
+        raise LockHeld(holder) from None
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
+    return fd
