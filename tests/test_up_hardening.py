@@ -201,17 +201,26 @@ def alive(pid: int) -> bool:
 
 def started_stack(out: Path) -> tuple[subprocess.Popen, dict[str, int]]:
     """A `collie up` whose service, teacher and labeling UI run and whose trainer is past its first
-    epoch (its signal handlers in place; a slow teacher keeps the run going)."""
-    proc = subprocess.Popen(up_command(out, "--teacher-rate", "0.2"), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    epoch (its signal handlers in place; a long run keeps it going however slow the machine)."""
+    proc = subprocess.Popen(
+        up_command(out, "--teacher-rate", "0.2", "--train-args=--epochs 100000"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     deadline = time.monotonic() + 180
-    while not ((out / "info.json").exists() and len(children(out)) == 4):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read().decode()[-2000:]
+
+    def check() -> None:
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(proc.communicate()[1].decode()[-2000:])
         time.sleep(0.1)
+
+    while not ((out / "info.json").exists() and len(children(out)) == 4):
+        check()
     meta = json.loads((out / "info.json").read_text())
     with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
         while client.run(meta["run_id"]).epoch < 1:
-            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read().decode()[-2000:]
-            time.sleep(0.1)
+            check()
     return proc, children(out)
 
 

@@ -333,10 +333,14 @@ def markdown(
     return "\n\n".join(parts) + "\n"
 
 
+# where a run's folder and task file were and how it used the machine: a moved, archived or resumed
+# copy of one run may differ in these and is still that run
+NOT_THE_RUN = ("out", "task_file", "threads", "device", "compile", "fast_ops", "fused_adam")
+
+
 def _config(run: RunResult) -> dict[str, Any]:
-    """The run's config without where its folder was (a moved or archived copy is the same run)."""
     cfg = run.metrics.get("config")
-    return {k: v for k, v in cfg.items() if k != "out"} if isinstance(cfg, dict) else {}
+    return {k: v for k, v in cfg.items() if k not in NOT_THE_RUN} if isinstance(cfg, dict) else {}
 
 
 def once_each(runs: list[RunResult]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
@@ -350,7 +354,7 @@ def once_each(runs: list[RunResult]) -> tuple[list[RunResult], list[tuple[Path, 
         if first is not r:
             same = _config(first) == _config(r)
             why = "the same run" if same else "the same env, task, method, variant and seed, another configuration"
-            left.append((r.path, f"{why} as `{first.path}`, counted once"))
+            left.append((r.path, f"{why} as `{first.path}`, which is the one counted"))
     return list(kept.values()), left
 
 

@@ -18,6 +18,7 @@ for `collie report`. After the runs, the report of OUT is written to OUT/report/
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import json
 import os
@@ -33,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
+from collie.processes import end_with_parent
 from trainer.config import PRESETS
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object
@@ -44,40 +46,43 @@ class Interrupted(RuntimeError):
     """A run the sweep did not start because it was told to stop."""
 
 
+class StoppedEarly(RuntimeError):
+    """A run whose training ended before its last epoch (a signal: it wrote a final checkpoint)."""
+
+
 class Stop:
     """A local sweep told to end: no run starts after it, and each running child process gets one
-    SIGTERM (children run in their own session, so a terminal's Ctrl-C reaches only the sweep and
-    a trainer never sees two signals, the second of which would skip its final checkpoint)."""
+    SIGTERM, however many signals the sweep gets (children run in their own session, so a
+    terminal's Ctrl-C reaches only the sweep; a trainer's second signal would skip its final
+    checkpoint). Children also get SIGTERM if the sweep itself is killed."""
 
     def __init__(self) -> None:
         self.asked = threading.Event()
         self._running: set[subprocess.Popen] = set()
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # taken by the workers and the handler, never held by the main thread
 
     def handle(self, _signum: int, _frame: object) -> None:
+        if self.asked.is_set():
+            return
         self.asked.set()
         with self._lock:
-            running = list(self._running)
-        for proc in running:
-            proc.send_signal(signal.SIGTERM)
+            for proc in self._running:
+                proc.send_signal(signal.SIGTERM)
 
     def run(self, cmd: list[str], **popen: Any) -> int:
         """`cmd`'s exit code; Interrupted without starting it once the sweep was told to stop."""
-        if self.asked.is_set():
-            raise Interrupted("not started: the sweep was interrupted")
-        proc = subprocess.Popen(cmd, start_new_session=True, **popen)
-        with self._lock:
+        with self._lock:  # the handler signals every child registered before it, none twice
+            if self.asked.is_set():
+                raise Interrupted("not started: the sweep was interrupted")
+            # spawned by the pool's threads, which live until every run is over (what PDEATHSIG watches)
+            parent_death = functools.partial(end_with_parent, os.getpid())
+            proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death, **popen)
             self._running.add(proc)
-        if self.asked.is_set():  # the signal came between the check and the registration
-            proc.send_signal(signal.SIGTERM)
         try:
             return proc.wait()
         finally:
             with self._lock:
                 self._running.discard(proc)
-
-
-STOP = Stop()  # the sweep of this process (Ray workers never get a signal from it)
 
 
 @dataclass(frozen=True)
@@ -144,11 +149,13 @@ def made_otherwise(spec: RunSpec) -> str | None:
 
 
 def train_command(spec: RunSpec) -> list[str]:
-    cmd = [
-        sys.executable,
-        "-m",
-        "collie.cli",
-        "train",
+    resume = ["--resume"] if (Path(spec.out) / "checkpoint.pt").exists() else []
+    return [sys.executable, "-m", "collie.cli", "train", *train_argv(spec), *resume]
+
+
+def train_argv(spec: RunSpec) -> list[str]:
+    """`collie train`'s arguments for `spec` (a resume aside)."""
+    return [
         "--env",
         spec.env,
         "--task",
@@ -166,9 +173,6 @@ def train_command(spec: RunSpec) -> list[str]:
         "--no-progress",
         *spec.flags,
     ]
-    if (Path(spec.out) / "checkpoint.pt").exists():
-        cmd.append("--resume")
-    return cmd
 
 
 def downstream_done(out: str | Path) -> bool:
@@ -181,49 +185,52 @@ def downstream_done(out: str | Path) -> bool:
     return bool(results) and all(r.get("epoch", done) == done for r in results.values() if isinstance(r, dict))
 
 
-def _call(cmd: list[str], log: Path) -> None:
+def _call(cmd: list[str], log: Path, stop: Stop) -> None:
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "a") as f:
-        code = STOP.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        code = stop.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
     if code != 0:
         raise RuntimeError(f"failed ({code}): {shlex.join(cmd)} — see {log}")
 
 
-def run_downstream_task(out: Path, flags: tuple[str, ...] = ()) -> None:
+def run_downstream_task(out: Path, flags: tuple[str, ...] = (), stop: Stop | None = None) -> None:
     """`python -m trainer.downstream OUT` in its own one-thread process, logged beside the run folder
     (OUT.downstream.log); raises RuntimeError naming the log if it fails."""
-    _call([sys.executable, "-m", "trainer.downstream", str(out), *flags], out.with_suffix(".downstream.log"))
+    cmd = [sys.executable, "-m", "trainer.downstream", str(out), *flags]
+    _call(cmd, out.with_suffix(".downstream.log"), stop or Stop())
 
 
-def run_one(spec: RunSpec) -> dict[str, Any]:
-    """Train (or resume, or skip) one run, then its downstream task if asked; returns summary.json."""
-    out = Path(spec.out)
-    if STOP.asked.is_set():
+def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
+    """Train (or resume, or skip) one run, then its downstream task if asked; returns summary.json.
+    `stop`: the local sweep's (a Ray task runs without one)."""
+    out, stop = Path(spec.out), stop or Stop()
+    if stop.asked.is_set():
         raise Interrupted("not started: the sweep was interrupted")
     if not is_finished(out):
         out.mkdir(parents=True, exist_ok=True)
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
-        _call(train_command(spec), out.with_suffix(".log"))
+        _call(train_command(spec), out.with_suffix(".log"), stop)
         if not is_finished(out):  # stopped by SIGINT / SIGTERM: a final checkpoint, not a final policy
             summary = out / "summary.json"
             status = json.loads(summary.read_text()).get("status") if summary.exists() else None
-            raise RuntimeError(f"{out} stopped before its last epoch (status {status!r}); rerun the sweep to resume it")
+            raise StoppedEarly(f"{out} stopped before its last epoch (status {status!r}); rerun the sweep to resume it")
     if spec.downstream and not downstream_done(out):
-        run_downstream_task(out, spec.downstream_flags)
+        run_downstream_task(out, spec.downstream_flags, stop)
     return json.loads((out / "summary.json").read_text())
 
 
 def run_all(
-    specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None
+    specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None, stop: Stop | None = None
 ) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
     """Yield (spec, summary or the exception it raised) as runs end. Local: `jobs` runs at a time,
-    each a child process. Ray: one task per run (1 CPU each) on the cluster at `ray_address`;
-    the run folders must be on a file system the cluster's nodes share."""
+    each a child process, ended early by `stop`. Ray: one task per run (1 CPU each) on the cluster
+    at `ray_address`; the run folders must be on a file system the cluster's nodes share."""
     if ray_address:
         yield from _run_on_ray(specs, ray_address)
         return
     with ThreadPoolExecutor(max(1, jobs)) as pool:
-        futures = {pool.submit(run_one, s): s for s in specs}
+        stop = stop or Stop()
+        futures = {pool.submit(run_one, s, stop): s for s in specs}
         for fut in as_completed(futures):
             exc = fut.exception()
             yield futures[fut], (exc if isinstance(exc, Exception) else fut.result())
@@ -269,6 +276,9 @@ class _TrainParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         raise _Refusal(message)
 
+    def exit(self, status: int = 0, message: str | None = None) -> NoReturn:  # e.g. -- --help
+        raise _Refusal(message or "a flag that ends `collie train` at once (--help?) is no run's flag")
+
 
 def train_flags_problem(specs: list[RunSpec]) -> str | None:
     """What `collie train` would refuse in the runs' commands (a bad flag after --, a value out of
@@ -278,9 +288,8 @@ def train_flags_problem(specs: list[RunSpec]) -> str | None:
     parser = _TrainParser(prog="collie train")
     train_cli.add_arguments(parser)
     for spec in {(s.method, s.task): s for s in specs}.values():
-        argv = train_command(spec)[4:]  # after `python -m collie.cli train`
         try:
-            train_cli.config_from_args(parser.parse_args(argv))
+            train_cli.config_from_args(parser.parse_args(train_argv(spec)))
         except (_Refusal, ValueError) as exc:
             return f"collie train would refuse {spec.method} on {spec.task} ({shlex.join(spec.flags)}): {exc}"
     return None
@@ -409,29 +418,35 @@ def run(args: argparse.Namespace) -> int:
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"
     )
     failed: list[tuple[RunSpec, Exception]] = []
+    stop, before = Stop(), {}
     if not args.ray:  # a Ray sweep's runs belong to the cluster; Ctrl-C ends only this client
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
-                signal.signal(sig, STOP.handle)
+                before[sig] = signal.signal(sig, stop.handle)
     try:
         with tqdm(total=len(specs), desc="sweep", unit="run") as bar:
-            for spec, result in run_all(specs, args.jobs, args.ray):
+            for spec, result in run_all(specs, args.jobs, args.ray, stop):
                 if isinstance(result, Exception):
                     failed.append((spec, result))
                 bar.update(1)
     except RuntimeError as exc:  # the engine itself could not start
         print(f"collie sweep: error: {exc}", file=sys.stderr)
         return 2
-    if STOP.asked.is_set():
-        stopped = sum(not isinstance(e, Interrupted) for _, e in failed)
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+    for spec, error in failed:
+        if not isinstance(error, Interrupted | StoppedEarly) or not stop.asked.is_set():
+            print(f"FAILED {spec.out}: {error}", file=sys.stderr)
+    if stop.asked.is_set():
+        stopped = sum(isinstance(e, StoppedEarly) for _, e in failed)
+        never = sum(isinstance(e, Interrupted) for _, e in failed)
         print(
-            f"collie sweep: interrupted; {stopped} run(s) stopped, "
-            f"{len(failed) - stopped} not started; rerun the same command to resume",
+            f"collie sweep: interrupted; {stopped} run(s) stopped, {never} not started; "
+            "rerun the same command to resume",
             file=sys.stderr,
         )
         return 130
-    for spec, error in failed:
-        print(f"FAILED {spec.out}: {error}", file=sys.stderr)
     if not args.no_report:
         from trainer.report import write_report
 

@@ -229,7 +229,7 @@ def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_
     roots = [tmp_path / "archive", tmp_path / "runs", tmp_path / "older"]
     text = write_report(roots, tmp_path / "report", figures=False)["markdown"].read_text()
     assert "2 finished runs; seeds per cell: 2." in text and "| Oracle | 8.00 ± 1.41 |" in text
-    assert f"`{run}` (the same run as `{tmp_path / 'archive' / run.name}`, counted once)" in text
+    assert f"`{run}` (the same run as `{tmp_path / 'archive' / run.name}`, which is the one counted)" in text
     assert f"`{other}` (the same env, task, method, variant and seed, another configuration as" in text
 
 

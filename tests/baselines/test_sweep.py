@@ -36,7 +36,7 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeyp
         (tmp_path / "half" / "summary.json").write_text(json.dumps({"status": "finished"}))
         return 0
 
-    monkeypatch.setattr(sweep.STOP, "run", fake_run)
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: fake_run(cmd))
     results = {s.out: r for s, r in run_all([done, half], jobs=2)}
     assert results[done.out]["safe_coverage"] == 7.0
     assert len(calls) == 1 and calls[0][-1] == "--resume" and "--epochs" in calls[0]
@@ -45,7 +45,7 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resume(tmp_path, monkeyp
 
 
 def test_a_failed_run_is_reported_and_the_others_go_on(tmp_path, monkeypatch):
-    monkeypatch.setattr(sweep.STOP, "run", lambda cmd, **kw: 1)
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: 1)
     finished(tmp_path / "ok")
     specs = [
         RunSpec("point", "north", "metra", 0, str(tmp_path / "bad")),
@@ -67,7 +67,7 @@ def test_a_run_stopped_by_a_signal_is_not_evaluated_and_a_stale_evaluation_is_re
         (tmp_path / "run" / "summary.json").write_text(json.dumps({"status": "interrupted", "epochs_done": 658}))
         return 0
 
-    monkeypatch.setattr(sweep.STOP, "run", stopped)
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: stopped(cmd))
     with pytest.raises(RuntimeError, match=r"stopped before its last epoch .*'interrupted'.* rerun the sweep"):
         run_one(spec)
     assert len(calls) == 1 and "train" in calls[0]  # no downstream task on the unfinished policy
@@ -149,7 +149,7 @@ def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsy
     from collie.cli import main
 
     launched = []  # a run that would start is recorded (and fails) instead of training
-    monkeypatch.setattr(sweep.STOP, "run", lambda cmd, **kw: launched.append(cmd) or 1)
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: launched.append(cmd) or 1)
     file = tmp_path / "a-file"
     file.write_text("")
     out = ["--out", str(tmp_path / "runs")] if "--out" not in given else []
@@ -241,9 +241,12 @@ def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_othe
         deadline = time.monotonic() + 180
         metrics = first / "metrics.jsonl"
         while not (metrics.exists() and len(metrics.read_text().splitlines()) >= 2):  # epoch 1: in the loop
-            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail(proc.communicate()[1][-3000:])
             time.sleep(0.1)
         proc.send_signal(signal.SIGINT)  # to the sweep alone, as a terminal's Ctrl-C now reaches it
+        proc.send_signal(signal.SIGINT)  # twice: the trainer still gets one SIGTERM, and checkpoints
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:

@@ -46,7 +46,8 @@ async function openSelected() {
     await runPage.open(runId, sessionStorage.getItem("collie-ui"));
   } catch (error) {
     if (error.status === 401) return askForToken(error.message);
-    // the run's own section stays hidden: say it above, where the runs to pick from are
+    // no run shown (not the one open before): say it above, where the runs to pick from are
+    $("#run").hidden = true;
     $("#runs-message").textContent = `could not open run ${runId}: ${error.message}; pick one above`;
     showConnection(error.status === 404 ? "no such run" : "down");
   }
