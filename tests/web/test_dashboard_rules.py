@@ -89,3 +89,18 @@ def test_curve_titles_and_legends_do_not_overlap_on_a_narrow_screen(
             assert r1 <= l2 or r2 <= l1 or b1 <= t2 or b2 <= t1, "two panels' titles overlap"
     page.locator("#curves").screenshot(path=str(artifacts / "curves-820px.png"))
     page.close()
+
+
+def test_the_north_wedge_covers_a_small_view_far_from_its_apex(browser: Any, live: BackgroundServer) -> None:
+    """A segment's path picture (Disagreements) is a box a few units wide: at y ≈ 40 the wedge must
+    still be drawn there, not stop near y ≈ the box's width."""
+    page = browser.new_page()
+    page.set_default_timeout(WAIT_MS)
+    page.goto(f"{live.url}/?token={TOKENS['operator']}")
+    path = page.evaluate(
+        """async () => (await import('/js/regions.js')).regionPath(
+            {kind: 'wedge_north', apex: [0, 0], desirability: 1}, {x0: 12, x1: 20, y0: 38, y1: 50}, false)"""
+    )
+    ys = [float(pair.split(",")[1]) for pair in path.strip("MZ").split("L")]  # "Mx,yLx,yLx,yZ"
+    assert max(ys) >= 50, path  # the whole box lies inside the triangle drawn
+    page.close()

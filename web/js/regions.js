@@ -37,7 +37,8 @@ export function regionPath(region, box, oneD) {
     case "wedge_north": {
       if (oneD) return null;
       const [ax, ay] = region.apex;
-      const reach = Math.max(x1 - x0, y1 - y0);
+      // tall enough to cover the box wherever it lies (a segment's small box far up the wedge too)
+      const reach = Math.max(x1 - x0, y1 - y0, y1 - ay);
       return polygon([[ax, ay], [ax + reach, ay + reach], [ax - reach, ay + reach]]);
     }
     default:
