@@ -30,6 +30,7 @@ class LabelingApp:
         self.server.initial_camera.position = (0.0, -6.0, 3.6)  # from due south: north up, as in the inset
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
+        self.tab_labels: dict[str, list[tuple[int, str]]] = {}  # each browser tab's labels, across its reloads
         self._closing: list[LabelerSession] = []  # closed tabs still in their grace period
         self._lock = threading.Lock()
         self.server.on_client_connect(self._connect)
@@ -58,7 +59,7 @@ class LabelingApp:
         return f"{self.url}?token={quote(token, safe='')}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        session = LabelerSession(client, self.config, self._shown_in)
+        session = LabelerSession(client, self.config, self._shown_in, self.tab_labels)
         with self._lock:
             self.sessions[client.client_id] = session
         session.start()

@@ -49,8 +49,11 @@ class LabelerSession:
         client: viser.ClientHandle,
         config: UiConfig,
         on_show: Callable[[LabelerSession, Key], None] = lambda *_: None,
+        tab_labels: dict[str, list[Key]] | None = None,
     ) -> None:
-        """`on_show(session, key)`: the app tells this labeler's other tabs that this one took a segment."""
+        """`on_show(session, key)`: the app tells this labeler's other tabs that this one took a segment.
+        `tab_labels`: each tab's labels by tab id, kept by the app across the tab's reloads."""
+        self.tab_labels = {} if tab_labels is None else tab_labels
         self.client = client
         self.config = config
         state = TabState(Rules(config.min_dwell_s, config.min_played))
@@ -198,6 +201,8 @@ class LabelerSession:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         with self.tab as state:
             state.watch_run, state.review = opened.watch, opened.review
+            if opened.tab:  # the labels this tab made before a reload: U walks back through them
+                state.labelled = self.tab_labels.setdefault(opened.tab, state.labelled)
         self.identity.tab_id = opened.tab  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)

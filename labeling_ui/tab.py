@@ -116,7 +116,9 @@ class TabState:
     ahead: list[Segment] = field(default_factory=list)  # claimed and prepared, shown next
     held: set[Key] = field(default_factory=set)  # leases this tab holds
     moved: set[Key] = field(default_factory=set)  # segments another tab of this labeler took over
-    labelled: list[Key] = field(default_factory=list)  # this tab's labels, newest last (undo walks back)
+    # this tab's labels, newest last (undo walks back); changed in place: the app keeps it by tab id,
+    # so a reloaded tab (a new connection, the same tab) undoes its own labels, not another tab's
+    labelled: list[Key] = field(default_factory=list)
     waiting_on: tuple[int, int] | None = None  # (run, last event id) while nothing is claimable
     recheck_at: float = 0.0  # while waiting: when to try a claim again without a wake-up (monotonic)
     watch_run: int | None = None
@@ -164,6 +166,8 @@ class TabState:
         """The service took the token. Returns the previous name when this tab's identity changed
         (the page says so, loudly), else None."""
         before = self.who or self.was
+        if before is not None and before != name:  # another labeler: the labels here are not theirs to undo
+            self.labelled.clear()
         self.who, self.role, self.was = name, role, name
         if self.review is not None:
             self.phase = Phase.REVIEWING
@@ -178,12 +182,12 @@ class TabState:
         self.phase = Phase.SIGNED_OUT
 
     def forget(self) -> None:
-        """Everything tied to one identity (the driver hands the held claims back first)."""
+        """Everything tied to one sign-in (the driver hands the held claims back first); the tab's
+        labels stay until another labeler signs in here (`accepted`)."""
         self.shown, self.waiting_on = None, None
         self.ahead.clear()
         self.held.clear()
         self.moved.clear()
-        self.labelled.clear()
 
     # ---------------------------------------------------------------- claims
 
@@ -314,7 +318,7 @@ class TabState:
         key = submit.segment.key
         self.held.discard(key)
         if submit.value != "skip":
-            self.labelled = [*[k for k in self.labelled if k != key][-(self.rules.history - 1) :], key]
+            self.labelled[:] = [*[k for k in self.labelled if k != key][-(self.rules.history - 1) :], key]
         if self.shown is submit.segment:
             self.shown = None
             self.phase = Phase.WAITING
@@ -342,7 +346,7 @@ class TabState:
 
     def undo_refused(self, withdraw: Withdraw) -> None:
         """The service would not undo it (e.g. already revised elsewhere): undo walks past it."""
-        self.labelled = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
+        self.labelled[:] = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
 
     def relabelling(self, segment: Segment) -> None:
         """One of this labeler's labelled segments is picked to replay: a label on it is a revision
@@ -355,7 +359,7 @@ class TabState:
     def withdrawn(self, withdraw: Withdraw, segment: Segment) -> None:
         """The label is undone and its segment claimed again: it is shown next, before whatever
         was on screen (that one comes back after the relabel)."""
-        self.labelled = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
+        self.labelled[:] = [k for k in self.labelled if k != (withdraw.run_id, withdraw.query_id)]
         if self.shown is not None and self.shown.key != segment.key:
             self.ahead.insert(0, self.shown)
         self.ahead = [s for s in self.ahead if s.key != segment.key]

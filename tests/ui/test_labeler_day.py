@@ -16,6 +16,7 @@ from collie.schemas import MetricsIn
 
 from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, segment_id, wait_segment, wait_text
 from .stack import TOKENS, Stack
+from .test_labeling_ui import wait_until
 from .test_watch import evaluation
 
 pytestmark = pytest.mark.slow
@@ -134,6 +135,26 @@ def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Bro
     wait_segment(page, first)
     (event,) = stack.trainer.label_events(run.id)
     assert event.query_id == first and event.seconds is not None and event.seconds > 0
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_undo_after_a_reload_withdraws_this_tabs_label_not_another_tabs(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 6, seed=5)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0, release_grace_s=30.0)
+    context = profile(browser)
+    url = app.labeler_url(stack.new_labeler("two-tabs-undo"))
+    first, second = tab(context, url), tab(context, url)
+    mine = wait_segment(first)
+    press(first, "1")
+    wait_until(lambda: any(e.query_id == mine for e in stack.trainer.label_events(run.id)))
+    theirs = wait_segment(second)
+    press(second, "2")  # the labeler's newest label now: the other tab's
+    wait_until(lambda: any(e.query_id == theirs for e in stack.trainer.label_events(run.id)))
+    first.reload()
+    wait_segment(first)
+    press(first, "u")
+    wait_until(lambda: stack.trainer.label_events(run.id)[-1].kind == "undo")
+    assert stack.trainer.label_events(run.id)[-1].query_id == mine != theirs
     context.close()  # type: ignore[attr-defined]
 
 
