@@ -40,7 +40,8 @@ LEGEND = (
     f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
     f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
     f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
-    "red bad area, green good area. The blue **N** arrow points north (up in the inset)."
+    "red bad area, green good area (none in a run with only an instruction). The blue **N** arrow "
+    "points north (up in the inset)."
 )
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
@@ -288,12 +289,12 @@ class Panels:
             for m in mine[:MINE_SHOWN]
         ]
         more = f"  \n… and {len(mine) - MINE_SHOWN} older" if len(mine) > MINE_SHOWN else ""
+        undone = sum(not m.in_effect for m in mine)  # they are no label now: the total counts without them
+        counted = f"{len(mine) - undone} labelled in this run" + (f" ({undone} more undone)" if undone else "")
         with self.client.atomic():
             self.mine_folder.visible = bool(mine)
             self.mine_list.content = (
-                f"{len(mine)} labelled in this run, newest first  \n\n| segment | label | when |\n|---|---|---|\n"
-                + "\n".join(rows)
-                + more
+                f"{counted}, newest first  \n\n| segment | label | when |\n|---|---|---|\n" + "\n".join(rows) + more
             )
             options = [m.query_id for m in mine] or ["—"]
             keep = self.mine_pick.value if self.mine_pick.value in options else options[0]

@@ -180,6 +180,7 @@ def test_my_labels_survive_a_reload_and_can_be_relabelled(stack: Stack, browser:
     assert wait_segment(page, shown) == labelled[-1]
     kinds = [(e.query_id, e.kind) for e in stack.trainer.label_events(run.id)]
     assert kinds[-1] == (labelled[-1], "undo")
+    wait_text(page, "1 labelled in this run (1 more undone)")  # as the totals count it
     press(page, "1")
     before = wait_segment(page, labelled[-1])
     # pick one from the list to replay it and relabel it: a revision event
