@@ -92,6 +92,10 @@ class Presenter:
         earlier = np.asarray(query.path_xy, float)[: query.start + 1] if query.path_xy else None
         with self.tab as state:  # keys from now on apply to this segment
             state.present(segment, time.perf_counter())
+            again = segment.key in state.skipped and not segment.revising
+        if again:  # the queue came round: say so, or it looks like the skip did nothing
+            back = f"{query.query_id} is back: the others are labelled or skipped"
+            self.panels.notify("Skipped before", back, "gray")
         with self.screen.client.atomic():
             if poser is not None:
                 self.scene.set_segment(poser, earlier)

@@ -119,6 +119,7 @@ class TabState:
     # this tab's labels, newest last (undo walks back); changed in place: the app keeps it by tab id,
     # so a reloaded tab (a new connection, the same tab) undoes its own labels, not another tab's
     labelled: list[Key] = field(default_factory=list)
+    skipped: set[Key] = field(default_factory=set)  # skipped here: one back on screen is said to be
     waiting_on: tuple[int, int] | None = None  # (run, last event id) while nothing is claimable
     recheck_at: float = 0.0  # while waiting: when to try a claim again without a wake-up (monotonic)
     watch_run: int | None = None
@@ -319,6 +320,8 @@ class TabState:
         self.held.discard(key)
         if submit.value != "skip":
             self.labelled[:] = [*[k for k in self.labelled if k != key][-(self.rules.history - 1) :], key]
+        else:
+            self.skipped.add(key)
         if self.shown is submit.segment:
             self.shown = None
             self.phase = Phase.WAITING

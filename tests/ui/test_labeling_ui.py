@@ -255,3 +255,17 @@ def test_sign_in_field_and_reload_stays_signed_in(stack: Stack, browser: Browser
     page.reload()  # the token is remembered in the page's storage; the claim is still ours
     assert wait_segment(page) == first
     page.context.close()
+
+
+def test_a_skipped_segment_that_comes_round_again_is_said_to(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 2)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("round-skipper")))
+    first = wait_segment(page)
+    press(page, "x")
+    second = wait_segment(page, first)
+    press(page, "x")
+    assert wait_segment(page, second) == first  # nothing else to show: the first skipped one again
+    wait_text(page, "Skipped before")
+    wait_text(page, f"{first} is back: the others are labelled or skipped")
+    page.context.close()
