@@ -296,3 +296,20 @@ def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, tmp_pa
         train("--out", str(run_copy), "--resume"),
         f"{run_copy / 'checkpoint.pt'} does not fit this run's config.json (copied from another run?)",
     )
+
+
+def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path) -> None:
+    marks = tmp_path / "startup.jsonl"
+    env = {**os.environ, "COLLIE_STARTUP_LOG": str(marks)}
+    proc = subprocess.Popen(
+        [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"], stderr=subprocess.PIPE, text=True, env=env
+    )
+    deadline = time.monotonic() + 120
+    while not (marks.exists() and '"imports"' in marks.read_text()):  # torch loaded; the envs come next
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(proc.communicate()[1][-3000:])
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]

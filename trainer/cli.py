@@ -7,6 +7,7 @@ import argparse
 import dataclasses
 import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -308,8 +309,16 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
+def _as_ctrl_c(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt  # `collie train: interrupted`, exit 130, as Ctrl-C says it
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
+
+    # SIGTERM while the run starts (imports, envs) ends it as Ctrl-C does, with a line, not by the
+    # signal; the training loop puts its own handler over this one (a final checkpoint)
+    signal.signal(signal.SIGTERM, _as_ctrl_c)
 
     made: list[Path] = []
     locked = False
