@@ -256,6 +256,16 @@ def test_speed_and_loop_persist_per_labeler(stack: Stack, browser: Browser) -> N
     deadline = time.monotonic() + 30
     while session.player.loop and time.monotonic() < deadline:
         time.sleep(0.1)
+
+    def stored() -> str:  # the browser has the new preferences (they travel after the player changed)
+        return page.evaluate(
+            "Object.keys(localStorage).filter(k => k.includes('collie-prefs-jo'))"
+            ".map(k => localStorage.getItem(k)).join(' ')"
+        )
+
+    while '"loop": false' not in stored() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert '"loop": false' in stored(), stored()
     page.reload()
     wait_segment(page)
     wait_text(page, "Speed 2×")
