@@ -14,6 +14,7 @@ import viser
 from collie.mjmodels import MODEL_NAMES
 from collie.startup import mark
 from labeling_ui.models import warm_models
+from labeling_ui.scene import south_view
 from labeling_ui.session import LabelerSession, UiConfig
 
 
@@ -27,7 +28,7 @@ class LabelingApp:
         self.server.gui.set_panel_label("collie labeling")
         # the replayed robot always sits at the origin (the world moves under it)
         self.server.initial_camera.up = (0.0, 0.0, 1.0)
-        self.server.initial_camera.position = (0.0, -6.0, 3.6)  # from due south: north up, as in the inset
+        self.server.initial_camera.position = south_view()  # as a segment aims it: no jump when it loads
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
         self.tab_labels: dict[str, list[tuple[int, str]]] = {}  # each browser tab's labels, across its reloads

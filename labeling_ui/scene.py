@@ -37,6 +37,13 @@ def polyline(points: np.ndarray) -> np.ndarray:
     return np.stack([points[:-1], points[1:]], axis=1)
 
 
+def south_view(size: float = 0.0) -> tuple[float, float, float]:
+    """The camera's place for a robot of `size`: due south of it and above, far enough to frame it
+    (north up the screen, as in the inset); the server's first view is the smallest one."""
+    distance = max(5.0, 5.0 * size)
+    return (0.0, -distance, 0.6 * distance)
+
+
 class ReplayScene:
     """The 3D view of one client. `load(env)` builds the robot once per env (reused across that
     env's segments); `set_segment` draws a segment's paths; `show(position)` poses the robot."""
@@ -99,10 +106,9 @@ class ReplayScene:
         camera = self.client.camera
         if camera.update_timestamp == 0.0:
             return
-        distance = max(5.0, 5.0 * self._size)
         # position first: setting it shifts look_at along, so look_at is set after it
         camera.up_direction = (0.0, 0.0, 1.0)
-        camera.position = (0.0, -distance, 0.6 * distance)
+        camera.position = south_view(self._size)
         camera.look_at = (0.0, 0.0, 0.0)
 
     def _add_compass(self) -> None:
