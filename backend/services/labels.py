@@ -68,18 +68,22 @@ _REQUEST_SEEN = (
     .where(LabelEvent.labeler_id == bindparam("me"), LabelEvent.client_request_id == bindparam("request_id"))
     .scalar_subquery()
 )
+# what _record, _announce and the pool updates read of a query row (a label's lookup, a discard's list)
+_QUERY_STATE = (
+    Query.id,
+    Query.query_id,
+    Query.session,
+    Query.status,
+    Query.label,
+    Query.label_event_id,
+    Query.lease_owner_id,
+    Query.lease_expires_at,
+    Query.lease_tab,
+    Query.gold_of,
+)
 _LOOKUP = (
     select(
-        Query.id,
-        Query.query_id,
-        Query.session,
-        Query.status,
-        Query.label,
-        Query.label_event_id,
-        Query.lease_owner_id,
-        Query.lease_expires_at,
-        Query.lease_tab,
-        Query.gold_of,
+        *_QUERY_STATE,
         Run.status.label("run_status"),
         Run.redundancy,
         LabelVote.event_id.label("my_vote_event_id"),
@@ -345,16 +349,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
 
 
 _VOTED_BY = (
-    select(
-        Query.id,
-        Query.query_id,
-        Query.session,
-        Query.status,
-        Query.label,
-        Query.lease_expires_at,
-        Query.gold_of,
-        LabelVote.event_id.label("vote_event_id"),
-    )
+    select(*_QUERY_STATE, LabelVote.event_id.label("vote_event_id"))
     .join(LabelVote, LabelVote.query_pk == Query.id)
     .where(Query.run_id == bindparam("run"), LabelVote.labeler_id == bindparam("who"), Query.gold_of.is_(None))
     .order_by(Query.id)
