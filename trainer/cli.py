@@ -114,11 +114,10 @@ RESUME_RUNTIME = ("threads",)
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
     """The given flags whose values differ from the resumed run's own config (which wins), and
     --epochs below the run's own (epochs may only be extended)."""
-    shorter = ["epochs"] if "epochs" in args.given and asked.epochs < run.epochs else []
     return [
         f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
         for k in sorted(args.given)
-        if k in shorter
+        if (k == "epochs" and asked.epochs < run.epochs)
         or (k not in (*RESUME_MAY_CHANGE, *RESUME_RUNTIME) and hasattr(run, k) and getattr(asked, k) != getattr(run, k))
     ]
 
@@ -327,7 +326,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
         made = check_out(Path(cfg.out), args.resume)
-        locked = lock_run_folder(Path(cfg.out)) >= 0  # held until this process ends
+        lock_run_folder(Path(cfg.out))  # held until this process ends (the descriptor stays open)
+        locked = True
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
             raise ValueError(  # the oracle would label a run people label through the service
                 f"--resume: {cfg.out} takes its labels from a labeling service (service_run.json): give --api "
