@@ -64,7 +64,7 @@ class TabIdentity:
     review: tuple[int, str] | None = None
 
 
-def _run(client: viser.ClientHandle, source: str) -> None:
+def run_script(client: viser.ClientHandle, source: str) -> None:
     client._websock_connection.queue_message(_messages.RunJavascriptMessage(source=source))
 
 
@@ -77,7 +77,7 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
         "legacy": json.dumps(LEGACY_KEY),
         "handoff": json.dumps(_STORAGE_PREFIX + handoff),
     }
-    _run(client, script)
+    run_script(client, script)
     try:
         raw = client.local_storage.get_item(handoff, timeout=timeout_s)
     except (RuntimeError, TimeoutError):
@@ -106,9 +106,9 @@ def remember_token(client: viser.ClientHandle, token: str | None) -> None:
     """Keep (or forget) the token in this tab only."""
     key = json.dumps(TOKEN_KEY)
     if token:
-        _run(client, f"sessionStorage.setItem({key}, {json.dumps(token)});")
+        run_script(client, f"sessionStorage.setItem({key}, {json.dumps(token)});")
     else:
-        _run(client, f"sessionStorage.removeItem({key});")
+        run_script(client, f"sessionStorage.removeItem({key});")
 
 
 def load_prefs(client: viser.ClientHandle, who: str, timeout_s: float = 10.0) -> dict[str, object]:

@@ -7,11 +7,12 @@ import itertools
 
 import numpy as np
 
+from collie.class_colours import PALE, to_rgb
 from collie.tasks import Task
 from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB
 
 SIZE = 240  # pixels, square
-CLASS_RGB = {0: (248, 200, 200), 1: (232, 234, 238), 2: (200, 238, 206)}
+CLASS_RGB = {c: to_rgb(colour) for c, colour in PALE.items()}  # as the dashboard's map
 AXIS_RGB = (200, 200, 205)
 SEGMENT_RGB, HEAD_RGB = TO_COME_RGB, PLAYED_RGB  # the 3D view's colours (colours.py)
 START_RGB = (30, 30, 30)

@@ -1,17 +1,47 @@
-"""Keyboard-first labeling: viser commands with hotkeys (they fire anywhere on the page except
-while typing in a text field, so the token field never labels by accident). No key here is one of
-viser's camera keys (W A S D Q E and the arrows, which its page binds and no option turns off), so
-stepping a frame or skipping never turns the north-up view."""
+"""Keyboard-first labeling: viser commands with hotkeys. No key here is one of viser's camera keys
+(W A S D Q E and the arrows, which its page binds and no option turns off), so stepping a frame or
+skipping never turns the north-up view.
+
+viser's hotkeys ignore every key pressed while an <input> has focus, so a click on the Loop box, the
+Frame box or the Segment list used to silence 1 2 3 until the labeler clicked elsewhere. A script
+hands such a key back to the page; only the sign-in field (a text input) keeps its keys. The Frame
+box shows the frame and takes no typing (its digits would be labels): the slider and J L move it.
+"""
 
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Callable
 
 import viser
 
 from collie.labels import Label
+from labeling_ui.browser import run_script
 from labeling_ui.panels import Actions
+
+_HAND_KEYS_BACK = """
+(() => {
+  if (window.collieKeysHandedBack) return;  // once per page: a reload starts a new one
+  window.collieKeysHandedBack = true;
+  const keys = new Set(%(keys)s);
+  const typedInto = (el) => el.classList.contains("mantine-TextInput-input");
+  window.addEventListener("focusin", (event) => {
+    const el = event.target;
+    if (el instanceof HTMLInputElement && el.classList.contains("mantine-NumberInput-input")) el.blur();
+  }, true);
+  window.addEventListener("keydown", (event) => {
+    const el = event.target;
+    if (!(el instanceof HTMLInputElement) || typedInto(el) || event.ctrlKey || event.metaKey || event.altKey) return;
+    const listOpen = el.getAttribute("aria-expanded") === "true";  // an open list keeps its keys
+    if (!keys.has(event.key.toLowerCase()) || listOpen) return;
+    event.preventDefault();
+    event.stopImmediatePropagation();
+    el.blur();
+    document.body.dispatchEvent(new KeyboardEvent("keydown", {key: event.key, code: event.code, bubbles: true}));
+  }, true);
+})();
+"""
 
 
 def _run(do: Callable[[], None], _event: object) -> None:
@@ -32,3 +62,5 @@ def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
     for key, label, do in bindings:
         command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]  # viser's hotkey Literal lists every key name
         command.on_trigger(functools.partial(_run, do))
+    page_keys = [" " if key == "space" else key.lower() for key, _, _ in bindings]
+    run_script(client, _HAND_KEYS_BACK % {"keys": json.dumps(page_keys)})

@@ -40,8 +40,8 @@ LEGEND = (
     f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
     f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
     f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
-    "red bad area, green good area (none in a run with only an instruction). The blue **N** arrow "
-    "points north (up in the inset)."
+    "red bad area, yellow good area, as on the dashboard (none in a run with only an instruction). The "
+    "blue **N** arrow points north (up in the inset)."
 )
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
@@ -116,7 +116,7 @@ class Panels:
             self.query = gui.add_markdown("")
             bad = gui.add_button("1 · Bad", color="red", hint="key 1")
             neutral = gui.add_button("2 · Neutral", color="gray", hint="key 2")
-            good = gui.add_button("3 · Good", color="green", hint="key 3")
+            good = gui.add_button("3 · Good", color="yellow", hint="key 3")  # the class colours of every screen
             skip = gui.add_button("X · Skip", color="dark", hint="key X: not a label; someone else gets it")
             undo = gui.add_button("U · Undo last label", color="dark", hint="key U")
             gui.add_markdown(KEYMAP)

@@ -9,15 +9,16 @@ from typing import Any
 
 import numpy as np
 
-from collie.tasks import Task
+from collie.class_colours import PALE, STRONG, to_rgb
+from collie.tasks import BAD, GOOD, Task
 from labeling_ui.inset import class_map
 
 FLOOR_Z = 0.02  # lines sit this far above the floor so they do not z-fight with the grid
 REGION_EXTENT = 60.0  # how far unbounded edges (wedge rays, half-planes) are drawn
-CLASS_RGB = {0: (220, 50, 47), 1: (120, 130, 150), 2: (40, 170, 80)}
+EDGE_RGB = {c: to_rgb(colour) for c, colour in STRONG.items()}  # the class colours of every screen
 TINT_Z = 0.005  # just above the floor grid, which would hide anything below it
 TINT_GRID_Z = 0.012  # our own grid lines over the tint keep the motion cue inside tinted areas
-TINT_RGB = {0: (255, 190, 185), 2: (185, 240, 200)}  # neutral stays untinted
+TINT_RGB = {c: to_rgb(PALE[c]) for c in (BAD, GOOD)}  # neutral stays untinted
 REACH = 3  # cells either side of a run's end searched for the region edge at a row's top and bottom
 REFINE_STEPS = 12  # bisection steps placing a tint edge on the region edge: a cell's width / 1024
 
@@ -60,7 +61,7 @@ def region_outline(region: dict[str, Any]) -> np.ndarray | None:
 def edge_rgb(region: dict[str, Any], task: dict[str, Any] | None) -> tuple[int, int, int]:
     """Red for a safety edge (bad on one side), else the colour of the region's class."""
     borders_bad = region["desirability"] == 0 or (task is not None and task.get("background") == 0)
-    return CLASS_RGB[0] if borders_bad else CLASS_RGB.get(region["desirability"], (0, 0, 0))
+    return EDGE_RGB[BAD] if borders_bad else EDGE_RGB.get(region["desirability"], (0, 0, 0))
 
 
 def _refine(

@@ -21,10 +21,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from collie.class_colours import STRONG
 from collie.tasks import BAD, CLASS_NAMES, GOOD, NEUTRAL, Disc, Task
 
-# Undesirable red, neutral green, desirable yellow, as in the paper's figures.
-CLASS_COLOURS: dict[int, str] = {BAD: "#d62728", NEUTRAL: "#2ca02c", GOOD: "#f5c400"}
+CLASS_COLOURS = STRONG  # undesirable red, neutral green, desirable yellow, as in the paper's figures
 REGION_ALPHA = 0.22
 DPI = 100
 _GRID = 300  # shading resolution per axis

@@ -269,3 +269,22 @@ def test_a_skipped_segment_that_comes_round_again_is_said_to(stack: Stack, brows
     wait_text(page, "Skipped before")
     wait_text(page, f"{first} is back: the others are labelled or skipped")
     page.context.close()
+
+
+def test_label_keys_work_after_a_click_on_a_replay_control(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 3, task="range_north")
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("clicker")))
+    first = wait_segment(page)
+    loop = page.get_by_label("Loop")
+    loop.click()  # the checkbox has focus now; viser's page alone would ignore the next key
+    assert page.evaluate("document.activeElement?.type") == "checkbox"
+    press(page, "3")
+    second = wait_segment(page, first)
+    frame_box = page.locator(".mantine-NumberInput-input").first
+    frame_box.click()  # it shows the frame and takes no typing: a digit is a label
+    press(page, "1")
+    wait_segment(page, second)
+    assert {e.query_id: e.label for e in stack.trainer.effective_labels(run.id)} == {first: 2, second: 0}
+    assert not loop.is_checked()  # the click itself did what it does
+    page.context.close()

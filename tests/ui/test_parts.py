@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from collie.schemas import MAX_HOLD, MAX_TABS
-from collie.tasks import get_task
+from collie.tasks import BAD, NEUTRAL, get_task
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
-from labeling_ui.inset import SIZE, render_inset, view_box
+from labeling_ui.inset import CLASS_RGB, SIZE, render_inset, view_box
 from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
@@ -122,8 +122,8 @@ def test_inset_is_north_up_and_paints_the_task() -> None:
     image = render_inset(task, np.array([[0.0, 1.0], [0.0, 3.0]]), np.array([[0.0, 0.0], [0.0, 1.0]]))
     assert image.shape == (SIZE, SIZE, 3) and image.dtype == np.uint8
     top, bottom = image[5, SIZE // 2 + 20], image[-5, SIZE // 2 + 20]  # beside the drawn y axis
-    assert tuple(top) == (232, 234, 238)  # north of the origin: the (neutral) wedge
-    assert tuple(bottom) == (248, 200, 200)  # south: bad
+    assert tuple(top) == CLASS_RGB[NEUTRAL]  # north of the origin: the (neutral) wedge
+    assert tuple(bottom) == CLASS_RGB[BAD]  # south: bad
     cx, cy, half = view_box(np.array([[10.0, 10.0]]))
     assert half >= 5 and 0 <= cx <= 10 and 0 <= cy <= 10  # holds the origin and the path
 

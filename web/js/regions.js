@@ -2,7 +2,8 @@
 // red undesirable, green neutral, yellow desirable. The background class fills the plot area,
 // then each region is painted over it in order (later wins), as the task rule decides.
 
-export const CLASS_COLOURS = ["#d62728", "#2ca02c", "#e6b800"]; // bad, neutral, good
+// bad, neutral, good: collie/class_colours.py (the plots and the labeling UI), held equal by a test
+export const CLASS_COLOURS = ["#d62728", "#2ca02c", "#e6b800"];
 export const FILL = ["#f9d9d9", "#d9efd9", "#fbefb8"]; // opaque, so a region replaces what is under it
 const CIRCLE_STEPS = 96;
 
