@@ -288,3 +288,14 @@ def test_a_directory_or_non_utf8_spec_is_named(tmp_path: Path) -> None:
     latin.write_bytes('# a comment\nname = "caf\xe9"\n'.encode("latin-1"))
     with pytest.raises(TaskFileError, match=r"latin.toml: line 2: not UTF-8 text"):
         load_task_file(latin)
+
+
+def test_a_pitch_rule_on_the_point_mass_is_refused(tmp_path: Path) -> None:
+    spec = tmp_path / "upright.toml"
+    spec.write_text(
+        'name = "upright"\ndescription = "stay upright"\n'
+        '[[regions]]\nkind = "pitch_beyond"\ndesirability = "bad"\nlimit = 1.0\n'
+    )
+    assert load_task_file(spec, env="ant").name == "upright"
+    with pytest.raises(TaskFileError, match="regions: a pitch_beyond region needs a body that can tip over; point"):
+        load_task_file(spec, env="point")

@@ -22,9 +22,9 @@ from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.schemas import FINISHED
 from collie.task_schemas import TaskDefinition
-from collie.tasks import from_definition
+from collie.tasks import BAD, from_definition
 from collie.teacher import segment_label
-from labeling_ui.regions import region_outline, tint_meshes
+from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
 from labeling_ui.rule import rule_text, run_task
 from trainer.metrics import coverage_metrics
 
@@ -104,7 +104,7 @@ def test_a_polygon_spec_file_runs_through_collie_up_with_the_oracle(tmp_path: Pa
     assert outline is not None
     assert {tuple(p) for p in outline[:, :2].round(6).tolist()} >= {tuple(v) for v in EAST_WEDGE}
     tinted = {rgb for rgb, _, _ in tint_meshes(task, 10.0, 0.0, 20.0)}
-    assert (255, 190, 185) in tinted  # the bad wedge is tinted on the floor
+    assert TINT_RGB[BAD] in tinted  # the bad wedge is tinted on the floor
     assert page["task"]["regions"] == [{"kind": "polygon", "desirability": 0, "vertices": EAST_WEDGE}]
     assert page["labeling"]["judged"] == summary["n_labels"] and page["labeling"]["agreement"] == 1.0
 

@@ -87,7 +87,7 @@ def test_single_constraint_tasks_never_good() -> None:
     grid = np.stack(np.meshgrid(np.linspace(-40, 40, 41), np.linspace(-40, 40, 41)), -1).reshape(-1, 2)
     pitch = np.linspace(-4, 4, len(grid))
     for name in ("north", "right", "range", "hole", "not_flip"):
-        task = get_task(name)
+        task = get_task(name, "ant")
         assert not task.can_be_good
         assert GOOD not in task.classify(grid, pitch)
     for name in ("range_north", "hole_north"):
@@ -120,13 +120,13 @@ def test_boundary_distance() -> None:
     assert np.allclose(get_task("range_north").boundary_distance(pts), get_task("range").boundary_distance(pts))
     pitch = np.array([0.0, math.pi / 2, 2.0, -math.pi])
     assert np.allclose(
-        get_task("not_flip").boundary_distance(pts, pitch), [math.pi / 2, 0, 2 - math.pi / 2, math.pi / 2]
+        get_task("not_flip", "ant").boundary_distance(pts, pitch), [math.pi / 2, 0, 2 - math.pi / 2, math.pi / 2]
     )
 
 
 def test_to_dict_is_json_and_describes_regions() -> None:
     for name in TASK_NAMES:
-        d = json.loads(json.dumps(get_task(name).to_dict()))
+        d = json.loads(json.dumps(get_task(name, "ant").to_dict()))
         assert d["name"] == name and d["description"] and set(d["meaning"]) == {"0", "1", "2"}
     d = get_task("range_north").to_dict()
     assert d["background"] == NEUTRAL and d["can_be_good"]
@@ -135,7 +135,13 @@ def test_to_dict_is_json_and_describes_regions() -> None:
         {"kind": "outside_disc", "desirability": BAD, "centre": [0.0, 5.0], "radius": 20.0},
     ]
     assert get_task("right").to_dict()["regions"][0]["kind"] == "halfplane_left"
-    assert get_task("not_flip").to_dict()["uses_pitch"]
+    assert get_task("not_flip", "ant").to_dict()["uses_pitch"]
+
+
+def test_not_flip_needs_a_body_that_can_tip_over() -> None:
+    with pytest.raises(ValueError, match="not defined for env 'point'") as err:
+        get_task("not_flip", "point")  # its pitch is undefined: every state would be neutral
+    assert "half_cheetah" in str(err.value) and "not_flip" not in task_registry.tasks_for("point")
 
 
 def test_unknown_task_lists_valid_names() -> None:

@@ -50,6 +50,9 @@ ENV_GEOMETRY: dict[str, Geometry] = {
 }
 
 
+PITCHLESS_ENVS = ("point",)  # no body orientation: its pitch is undefined (nan), so Not-Flip would judge nothing
+
+
 def geometry(env: str) -> Geometry:
     if env not in ENV_GEOMETRY:
         raise EnvNotSupported(list(ENV_GEOMETRY))
@@ -113,6 +116,8 @@ def hole(env: str) -> Task:
 @register_task("not_flip")
 def not_flip(env: str) -> Task:
     geometry(env)
+    if env in PITCHLESS_ENVS:
+        raise EnvNotSupported([e for e in ENV_GEOMETRY if e not in PITCHLESS_ENVS])
     return Task(
         "not_flip",
         "Do not flip over: the body's pitch must stay within ±90°.",

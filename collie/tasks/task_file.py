@@ -24,6 +24,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from collie.task_schemas import REGION_KINDS, TaskDefinition
+from collie.tasks.builtin import PITCHLESS_ENVS
 from collie.tasks.definition import NotDeclarative, from_definition, to_definition
 from collie.tasks.registry import get_task, task_names
 
@@ -47,12 +48,15 @@ def load_task_file(
     if not path.is_file():
         raise TaskFileError(path, "", "no such file")
     if path.suffix == ".py":
-        return _from_python(path, task, env, layout_seed)
-    if path.suffix not in SPEC_SUFFIXES:
+        definition = _from_python(path, task, env, layout_seed)
+    elif path.suffix not in SPEC_SUFFIXES:
         raise TaskFileError(path, "", f"expected a .toml, .json or .py file, got {path.suffix or 'no suffix'!r}")
-    definition = parse_spec(path, _read_spec(path))
+    else:
+        definition = parse_spec(path, _read_spec(path))
     if task is not None and task != definition.name:
         raise TaskFileError(path, "name", f"the file defines task {definition.name!r}, not {task!r}")
+    if env in PITCHLESS_ENVS and any(region.kind == "pitch_beyond" for region in definition.regions):
+        raise TaskFileError(path, "regions", f"a pitch_beyond region needs a body that can tip over; {env} has none")
     return definition
 
 
