@@ -26,6 +26,7 @@ from collie.tasks import BAD, from_definition
 from collie.teacher import segment_label
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
 from labeling_ui.rule import rule_text, run_task
+from trainer.downstream.__main__ import run_downstream
 from trainer.metrics import coverage_metrics
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
@@ -184,6 +185,8 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
     assert {s["query_id"]: s["label"] for s in page["labelled"]} == given
     assert any("w" in r["extra"] for r in page["rollouts"]["rollouts"])  # the map can colour by w(s)
     assert run_task(run) is None and rule_text(run, None)[:2] == ("Instruction", instruction)
+    with pytest.raises(ValueError, match="instruction alone: zero-shot motion needs a rule"):
+        run_downstream(out, trajectories=2)
 
 
 def test_a_resumed_run_keeps_its_rule_when_the_file_was_edited(tmp_path: Path) -> None:
@@ -202,6 +205,8 @@ def test_a_resumed_run_keeps_its_rule_when_the_file_was_edited(tmp_path: Path) -
     assert last["epoch"] == 6
     again_metrics = coverage_metrics(list(final["xy"]), list(final["pitch"]), from_definition(stored))
     assert last["safe_coverage"] == again_metrics["safe_coverage"] and last["n_good_bins"] == 0
+    zero_shot = run_downstream(out, trajectories=4)["zero_shot"]  # judged by the saved rule, not a built-in
+    assert zero_shot["trajectories"] == 4 and np.isfinite(zero_shot["mean"])
 
 
 def test_collie_up_refuses_a_bad_task_file_and_an_oracle_for_an_instruction_before_starting(tmp_path: Path) -> None:

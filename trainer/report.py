@@ -37,11 +37,11 @@ from typing import Any
 
 import numpy as np
 
-from collie.tasks import Task, get_task
+from collie.tasks import Task
 from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.run_files import RunFolderError, read_arrays, read_json_object
-from trainer.task_choice import saved_rule
+from trainer.task_choice import judged_by
 
 METRICS: tuple[tuple[str, str, int], ...] = (
     ("safe_coverage", "Safe state coverage (Table 1)", 2),
@@ -131,8 +131,7 @@ def load_run(folder: Path) -> RunResult:
 def run_task(run: RunResult) -> Task | None:
     """The rule the run was judged by: its own saved rule (task files; None for an instruction
     alone), else the built-in task."""
-    saved = saved_rule(run.path)
-    return saved.task if saved is not None else get_task(run.task, run.env, layout_seed=run.seed)
+    return judged_by(run.path, run.env, run.task, run.seed)
 
 
 def add_diagnostics(run: RunResult) -> None:

@@ -69,3 +69,10 @@ def saved_rule(out: str | Path) -> RunRule | None:
     except (ValueError, KeyError) as exc:  # pydantic's errors are ValueErrors
         first = str(exc).splitlines()[0]
         raise ValueError(f"{path} (the run's rule) is damaged: {type(exc).__name__}: {first}") from None
+
+
+def judged_by(out: str | Path, env: str, task: str, seed: int) -> Task | None:
+    """The rule a finished run was judged by: its own saved rule (a task file's; None for an
+    instruction alone), else the built-in task of its config."""
+    saved = saved_rule(out)
+    return saved.task if saved is not None else get_task(task, env, layout_seed=seed)

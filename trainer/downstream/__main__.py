@@ -24,6 +24,7 @@ from trainer.downstream.goal import GoalOptions
 from trainer.downstream.ppo import PpoConfig, evaluate, greedy, train_ppo
 from trainer.downstream.zero_shot import zero_shot
 from trainer.pretrained import TrainedSkills, load_skills
+from trainer.task_choice import judged_by
 
 PPO_PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},
@@ -69,7 +70,11 @@ def run_downstream(
     kind = pick_kind(skills) if kind == "auto" else kind
     t0 = time.perf_counter()
     if kind == "zero_shot":
-        result = zero_shot(skills, trajectories=trajectories, seed=seed)
+        cfg = skills.cfg
+        task = judged_by(run_dir, cfg.env, cfg.task, cfg.seed)  # a task file's rule is in the run folder
+        if task is None:
+            raise ValueError(f"{run_dir} was guided by an instruction alone: zero-shot motion needs a rule for safety")
+        result = zero_shot(skills, task, trajectories=trajectories, seed=seed)
     elif kind == "hierarchical":
         values = {**PPO_PRESETS.get(skills.cfg.preset, {}), **(ppo_overrides or {})}
         result = hierarchical(skills, PpoConfig(**values), seed)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from collie.tasks import BAD, Task, get_task
+from collie.tasks import BAD, Task
 from trainer.acting import acting_path
 from trainer.envs import VectorEnv
 from trainer.pretrained import TrainedSkills
@@ -30,11 +30,11 @@ def motion_returns(xy: np.ndarray, classes: np.ndarray, dt: float) -> np.ndarray
 
 
 def zero_shot(
-    skills: TrainedSkills, task: Task | None = None, trajectories: int = 160, seed: int = 0, deterministic: bool = False
+    skills: TrainedSkills, task: Task, trajectories: int = 160, seed: int = 0, deterministic: bool = False
 ) -> dict[str, Any]:
-    """Average, spread and best return of `trajectories` skills z ~ p(z) (stochastic π by default)."""
+    """Average, spread and best return of `trajectories` skills z ~ p(z) (stochastic π by default),
+    `task` judging which states are unsafe."""
     cfg = skills.cfg
-    task = task or get_task(cfg.task, cfg.env, layout_seed=cfg.seed)
     env = VectorEnv(cfg.env, trajectories, episode_steps=cfg.episode_steps, layout_seed=cfg.seed)
     first = env.envs[0]
     dt = float(first.model.opt.timestep * first.frame_skip)
