@@ -163,3 +163,51 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
     finally:
         service.terminate()
         service.wait(timeout=30)
+
+
+def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
+    """An operator revokes the token of a trainer waiting for labels: it ends with one line (no
+    traceback) and a checkpoint in the wait, and an operator's token resumes the run to its end."""
+    info = tmp_path / "service.json"
+    service = cli(
+        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
+    )
+    try:
+        wait_until(info.exists)
+        api = json.loads(info.read_text())["api"]
+        out, log = tmp_path / "trainer", tmp_path / "trainer.log"
+        train = [
+            "train",
+            "--preset",
+            "smoke",
+            "--out",
+            str(out),
+            "--api",
+            api,
+            "--no-progress",
+            "--checkpoint-every",
+            "1",
+        ]
+        with CollieClient(api, TOKENS["operator"]) as operator:
+            lab_trainer = operator.create_labeler("lab-trainer", role="trainer")
+            trainer = cli(*train, "--token", lab_trainer.token, log=log)
+            wait_until((out / "service_run.json").exists)
+            run_id = json.loads((out / "service_run.json").read_text())["run_id"]
+            wait_until(lambda: operator.run(run_id).status == "waiting_for_labels")
+            stopped_at = operator.run(run_id).epoch
+            operator.revoke(lab_trainer.id)
+            assert trainer.wait(timeout=60) == 2
+            said = log.read_text()
+            assert "Traceback" not in said
+            assert f"collie train: error: the labeling service refused the trainer's token for run {run_id}" in said
+            assert f"the run is checkpointed at epoch {stopped_at}" in said
+            ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+            assert ckpt["epoch"] == stopped_at and [s.query_id for s in ckpt["asking"]] == ["s0-q0", "s0-q1"]
+            teacher = cli("teacher", "--api", api, "--run", str(run_id), "--until-done", log=tmp_path / "teacher.log")
+            resumed = cli(*train, "--token", TOKENS["operator"], "--resume", log=log)
+            assert resumed.wait(timeout=300) == 0, log.read_text()[-3000:]
+            teacher.wait(timeout=60)
+            assert operator.run(run_id).status == "finished"
+    finally:
+        service.terminate()
+        service.wait(timeout=30)

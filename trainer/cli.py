@@ -380,10 +380,19 @@ def run(args: argparse.Namespace) -> int:
         remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
+    from trainer.feedback import SourceRefused
+
     try:
         summary = trainer.run(resume=args.resume)
     except ResumeError as exc:  # a damaged or missing file of the run folder, named
         print(f"collie train: error: {exc}", file=sys.stderr)
+        return 2
+    except SourceRefused as exc:  # e.g. an operator revoked the token mid-run
+        print(
+            f"collie train: error: {exc}: resume it with --resume and this run's trainer token, or an "
+            "operator's (a trainer acts only on the runs it created)",
+            file=sys.stderr,
+        )
         return 2
     keys = (  # as summary.json: the last evaluation's epoch and metrics, the run's epochs and wall time
         "epochs_done",

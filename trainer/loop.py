@@ -39,7 +39,7 @@ from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
-from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, StopRequested
+from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
@@ -586,6 +586,7 @@ class Trainer:
         )
         status: LoopStatus = "finished"
         record: dict[str, Any] | None = None
+        refused: SourceRefused | None = None
         previous_handlers = self._install_signal_handlers()
         try:
             if asking is not None:  # resumed in the feedback wait of epoch self.epoch: its rest first
@@ -603,6 +604,8 @@ class Trainer:
                 status = "stopped"
         except StopRequested:
             status = "stopped"
+        except SourceRefused as exc:  # no label can come: end resumable, as after a signal
+            status, refused = "interrupted", exc
         finally:
             for sig, handler in previous_handlers.items():
                 signal.signal(sig, handler)
@@ -613,7 +616,10 @@ class Trainer:
             status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
         if status in ("stopped", "interrupted"):
             self.checkpoint()
-        return self.finish(status, record)
+        summary = self.finish(status, record)
+        if refused is not None:  # the caller says why, now that the run is saved
+            raise SourceRefused(f"{refused}; the run is checkpointed at epoch {self.epoch}")
+        return summary
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:
         """The epoch after its rollouts: the feedback session (`asking`: the one a stopped run was

@@ -20,6 +20,11 @@ class StopRequested(Exception):
     """Raised by a source when an operator stops the run while the trainer waits."""
 
 
+class SourceRefused(Exception):
+    """Raised by a source whose service refuses the trainer (a revoked or wrong token): no label
+    can come, so the run ends resumable, checkpointed, as after a signal."""
+
+
 @dataclass
 class Segment:
     """One query: H consecutive states of one training trajectory (σ = (s_t, …, s_{t+H−1}))."""

@@ -37,7 +37,7 @@ from typing import Any, Literal, TypeVar
 import numpy as np
 
 from collie import startup
-from collie.client import ApiError, Backoff, CollieClient, Unreachable, retrying
+from collie.client import ApiError, Backoff, CollieClient, Unauthorized, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
 from collie.schemas import (
@@ -53,7 +53,7 @@ from collie.schemas import (
     StreamEvent,
     WithdrawnEvent,
 )
-from trainer.feedback.base import FeedbackSource, LabelEvent, Segment, StopRequested
+from trainer.feedback.base import FeedbackSource, LabelEvent, Segment, SourceRefused, StopRequested
 from trainer.feedback.http_reporter import HttpReporter
 from trainer.telemetry import StatusReport
 
@@ -88,6 +88,7 @@ class HttpFeedback(FeedbackSource):
         self._changed: set[str] = set()  # queries whose label moved since the last revisions()
         self._control: Literal["run", "pause", "stop"] = "run"
         self._swept = False  # leftovers of sessions before the first collect retired?
+        self._refused: SourceRefused | None = None  # met between epochs: raised at the next control()
 
     @classmethod
     def create(cls, api: str, token: str, spec: RunCreate, **kwargs: Any) -> HttpFeedback:
@@ -145,6 +146,9 @@ class HttpFeedback(FeedbackSource):
     def revisions(self) -> list[LabelEvent]:
         try:
             self._pump(0.0, patient=False)
+        except Unauthorized as exc:  # raised at the epoch's end (control), where a checkpoint resumes exactly
+            self._refused = self._refusal(exc)
+            return []
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, revisions wait: %s", exc)
             return []
@@ -153,8 +157,12 @@ class HttpFeedback(FeedbackSource):
     def control(self) -> Literal["run", "pause", "stop"]:
         try:
             self._pump(0.0, patient=False)
+        except Unauthorized as exc:
+            self._refused = self._refusal(exc)
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, keeping control=%s: %s", self._control, exc)
+        if self._refused is not None:
+            raise self._refused
         if self._control == "pause":
             self._show("paused", None)
         elif self.reporter.shown == "paused":
@@ -247,7 +255,13 @@ class HttpFeedback(FeedbackSource):
                 raise StopRequested(self.interrupted)
             return call()
 
-        return retrying(attempt, Backoff(max_s=self.max_backoff_s))
+        try:
+            return retrying(attempt, Backoff(max_s=self.max_backoff_s))
+        except Unauthorized as exc:
+            raise self._refusal(exc) from None
+
+    def _refusal(self, exc: Unauthorized) -> SourceRefused:
+        return SourceRefused(f"the labeling service refused the trainer's token for run {self.run_id} ({exc})")
 
 
 # ---------------------------------------------------------------- conversions
