@@ -1,16 +1,20 @@
 """How a client process gets its token without it showing in a command line (/proc/*/cmdline is
 world-readable): `--token-file PATH` (a file only its owner may read) or the COLLIE_TOKEN environment
 variable, before the role's COLLIE_<ROLE>_TOKEN. `--token VALUE` is still accepted for people who
-type it (write `--token=-abc` for a token that starts with a dash)."""
+type it (write `--token=-abc` for a token that starts with a dash). A tokens file (`collie up`'s
+OUT/tokens.json) also serves as a --token-file: its entry for the client's role is taken."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import re
+import sys
 from pathlib import Path
 
 TOKEN_ENV = "COLLIE_TOKEN"
+HEADER_SAFE = re.compile(r"[!-~]+")  # printable ASCII without spaces: what a bearer header carries
 
 
 def add_token_arguments(parser: argparse.ArgumentParser, role: str) -> None:
@@ -22,21 +26,44 @@ def add_token_arguments(parser: argparse.ArgumentParser, role: str) -> None:
 
 def resolve_token(args: argparse.Namespace, role: str, from_env: bool = True) -> str | None:
     """The token from --token, --token-file, COLLIE_TOKEN or COLLIE_<ROLE>_TOKEN, first found
-    (from_env=False: only what was asked for on the command line)."""
+    (from_env=False: only what was asked for on the command line). A token goes into an HTTP
+    header, so one that cannot is refused here, naming where it came from but never its text."""
     if getattr(args, "token", None):
-        return args.token
+        return checked(args.token, "--token")
     path: Path | None = getattr(args, "token_file", None)
     if path is not None:
-        try:
-            token = path.read_text().strip()
-        except OSError as exc:
-            raise ValueError(f"--token-file {path}: {exc.strerror}") from None
-        if not token:
-            raise ValueError(f"--token-file {path} is empty")
-        return token
+        return _from_file(path, role)
     if not from_env:
         return None
-    return os.environ.get(TOKEN_ENV) or os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or None
+    for name in (TOKEN_ENV, f"COLLIE_{role.upper()}_TOKEN"):
+        if os.environ.get(name):
+            return checked(os.environ[name], name)
+    return None
+
+
+def checked(token: str, source: str) -> str:
+    if not HEADER_SAFE.fullmatch(token):
+        raise ValueError(f"{source} does not hold a token (one line of printable characters, no spaces)")
+    return token
+
+
+def _from_file(path: Path, role: str) -> str:
+    """A file holding one token, or a tokens file (`collie up`'s OUT/tokens.json): its `role` token."""
+    try:
+        text = path.read_text().strip()
+        mode = path.stat().st_mode
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--token-file {path}: {getattr(exc, 'strerror', None) or 'not text'}") from None
+    if not text:
+        raise ValueError(f"--token-file {path} is empty")
+    if mode & 0o077:
+        print(f"collie: warning: --token-file {path} is readable by others (chmod 600 it)", file=sys.stderr)
+    if not text.startswith("{"):
+        return checked(text, f"--token-file {path}")
+    tokens = read_tokens_file(path)
+    if role not in tokens:
+        raise ValueError(f"--token-file {path} is a tokens file without a {role} token (it has: {', '.join(tokens)})")
+    return checked(tokens[role], f"--token-file {path} ({role})")
 
 
 def write_secret(path: Path, text: str) -> None:

@@ -40,12 +40,15 @@ def run(args: argparse.Namespace) -> int:
     unknown = [e for e in warm if e not in MODEL_NAMES]
     if unknown:
         raise SystemExit(f"collie label-ui: error: --warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}")
+    try:
+        token = resolve_token(args, "labeler", from_env=False)
+    except ValueError as exc:
+        raise SystemExit(f"collie label-ui: error: {exc}") from None
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
     mark("serving")  # viser's server is up; models compile in the background
     if args.port and app.port != args.port:  # viser moves on from a port in use: say so, not only the URL
         print(f"collie labeling UI: port {args.port} is in use; serving on port {app.port} instead", flush=True)
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
-    token = resolve_token(args, "labeler", from_env=False)
     if token:  # asked for by the person who started it: their terminal, not a log
         print(f"labeler URL: {app.labeler_url(token)}", flush=True)
     if args.info_json is not None:  # how `collie up` learns the port when it asked for any free one

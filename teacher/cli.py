@@ -79,5 +79,11 @@ def run(args: argparse.Namespace) -> int:
             n = loop.run(until_done=args.until_done)
         except KeyboardInterrupt:
             n = loop.labelled
+        except ApiError as exc:  # e.g. a trainer's token, or one revoked meanwhile
+            print(
+                f"collie teacher: error: the labeling service answered {exc} (after {loop.labelled} labels)",
+                file=sys.stderr,
+            )
+            return 2
     print(f"collie teacher: labelled {n} queries of run {args.run}", flush=True)
     return 0

@@ -2,6 +2,7 @@
 COLLIE_TOKEN keep it out of argv, and files holding secrets are 0600 from the start."""
 
 import argparse
+import json
 import os
 import stat
 
@@ -39,3 +40,27 @@ def test_a_missing_or_empty_token_file_is_a_clear_error(tmp_path):
     (tmp_path / "empty").write_text("\n")
     with pytest.raises(ValueError, match="is empty"):
         resolve_token(parse("--token-file", str(tmp_path / "empty")), "trainer")
+
+
+def test_a_tokens_file_gives_the_role_and_a_bad_file_never_echoes_its_text(tmp_path, capsys):
+    tokens = tmp_path / "tokens.json"
+    write_secret(tokens, json.dumps({"api": "http://x", "tokens": {"operator": "OP-secret", "trainer": "tr-1"}}))
+    assert resolve_token(parse("--token-file", str(tokens)), "trainer") == "tr-1"
+    with pytest.raises(ValueError, match="a tokens file without a labeler token \\(it has: operator, trainer\\)"):
+        resolve_token(parse("--token-file", str(tokens)), "labeler")
+    two_lines = tmp_path / "two"
+    write_secret(two_lines, "OP-secret\nsecond line\n")
+    with pytest.raises(ValueError, match="does not hold a token") as refused:
+        resolve_token(parse("--token-file", str(two_lines)), "trainer")
+    assert "secret" not in str(refused.value)
+    open_file = tmp_path / "open"
+    open_file.write_text("tok-1\n")
+    open_file.chmod(0o644)
+    assert resolve_token(parse("--token-file", str(open_file)), "trainer") == "tok-1"
+    assert "readable by others (chmod 600 it)" in capsys.readouterr().err
+
+
+def test_a_token_with_a_space_from_the_environment_is_refused_by_name(monkeypatch):
+    monkeypatch.setenv("COLLIE_TOKEN", "two words")
+    with pytest.raises(ValueError, match=r"^COLLIE_TOKEN does not hold a token"):
+        resolve_token(parse(), "trainer")

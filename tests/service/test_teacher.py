@@ -44,6 +44,18 @@ def test_cli_labels_every_query_by_the_rule(live: BackgroundServer, trainer: Col
     assert {e.labeler for e in trainer.label_events(run.id)} == {"labeler"}
 
 
+def test_a_token_the_service_refuses_to_label_with_is_one_line(live: BackgroundServer, trainer: CollieClient) -> None:
+    run = trainer.create_run(make_run_spec())
+    trainer.post_session(run.id, make_session(0, 2))
+    command = [sys.executable, "-m", "collie.cli", "teacher", "--api", live.url, "--run", str(run.id)]
+    out = subprocess.run([*command, "--token", TOKENS["trainer"]], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert (
+        out.stderr.startswith("collie teacher: error: the labeling service answered 403")
+        and "(after 0 labels)" in out.stderr
+    )
+
+
 def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:
     """Ctrl-C where a command has no handler of its own (here `--wait` for the service) ends it with
     a line and status 130, not a traceback."""
