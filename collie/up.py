@@ -52,7 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--teacher-rate", type=float, default=None, help="oracle labels per second (like a person)")
     p.add_argument("--noise-band", type=float, default=0.0, help="oracle R_error noise band")
-    p.add_argument("--db", type=Path, default=None, help="SQLite file (default OUT/collie.db)")
+    p.add_argument(
+        "--db", type=Path, default=None, help="SQLite file (default: COLLIE_DATABASE_URL when set, else OUT/collie.db)"
+    )
     p.add_argument("--out", type=Path, default=None, help="folder for everything (default runs/up-ENV-TASK)")
     p.add_argument("--port", type=port, default=8000, help="service port (0 = any free port; default 8000)")
     p.add_argument("--info-json", type=Path, default=None, help="write URLs, run id and tokens here")
@@ -201,7 +203,10 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
-    db = args.db or out / "collie.db"
+    # an explicit --db, else the lab's database when COLLIE_DATABASE_URL names one, else OUT's SQLite file
+    db = args.db or (None if os.environ.get("COLLIE_DATABASE_URL") else out / "collie.db")
+    if db is None:
+        print("collie up: database: COLLIE_DATABASE_URL (give --db FILE for a SQLite file instead)", flush=True)
     stack = Supervisor(out, max_restarts=args.max_restarts, inherited=(lock,))
     stopping = {"flag": False}
 
@@ -244,7 +249,7 @@ def child_env(token: str | None = None) -> dict[str, str]:
     return {**env, TOKEN_ENV: token} if token is not None else env
 
 
-def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, stopping: dict) -> int:
+def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Supervisor, stopping: dict) -> int:
     timeline = out / "logs" / "startup.jsonl"  # every part's startup marks (collie/startup.py), this start's only
     timeline.unlink(missing_ok=True)
     os.environ[LOG_ENV] = str(timeline.resolve())  # for our own marks and, through child_env, the parts'
@@ -260,7 +265,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path, stack: Supervisor, 
     sock = listening_socket(args.port)
     stack.closing(sock)
     api = f"http://127.0.0.1:{sock.getsockname()[1]}"
-    serve = ["serve", "--fd", str(sock.fileno()), "--db", str(db), "--tokens-json", str(tokens_file)]
+    serve = ["serve", "--fd", str(sock.fileno()), *(["--db", str(db)] if db else []), "--tokens-json", str(tokens_file)]
     service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
     trainer_out = out / "trainer"
     memo = trainer_out / "service_run.json"

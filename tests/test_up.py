@@ -3,6 +3,7 @@ oracle teacher over HTTP. Every feedback session completes, and the labels in th
 exactly those the trainer applied (no label lost, none counted twice)."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -40,8 +41,12 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
         str(info),
         "--exit-when-done",
     ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    # point: the lab's database named by COLLIE_DATABASE_URL (here a SQLite URL), not OUT/collie.db
+    db = tmp_path / ("lab.db" if env == "point" else "collie.db")
+    lab = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{db}"} if env == "point" else None
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=lab)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert db.exists() and (env != "point" or not (tmp_path / "collie.db").exists())
     meta = json.loads(info.read_text())
     assert set(meta) >= {"api", "labeling_ui", "dashboard", "run_id", "tokens"}
     assert set(meta["tokens"]) == {"operator", "labeler", "trainer"}
@@ -66,7 +71,7 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
             "collie.cli",
             "export",
             "--db",
-            str(tmp_path / "collie.db"),
+            str(db),
             "--run",
             str(meta["run_id"]),
             "--format",
