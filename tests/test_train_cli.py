@@ -212,6 +212,7 @@ def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
     assert json.loads((run_copy / "config.json").read_text())["threads"] == 2
     fewer = train("--out", str(run_copy), "--resume", "--epochs", "1")  # epochs may only be extended
     assert fewer.returncode == 0 and "ignored: --epochs 1 (the run's: 3)" in fewer.stderr, fewer.stderr[-3000:]
+    assert "finished all its 3 epochs: nothing to train (--epochs above 3 extends it)" in fewer.stderr
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:
@@ -240,6 +241,24 @@ def test_help_lists_every_registered_task() -> None:
     assert proc.returncode == 0, proc.stderr
     flat = " ".join(proc.stdout.split())
     assert "hazard" in task_names() and all(name in flat for name in task_names())
+    assert "--hidden HIDDEN width of every MLP layer" in flat  # each hyperparameter says what it is
+
+
+def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Path) -> None:
+    from trainer.config import make_config
+
+    out = tmp_path / "never"
+    proc = subprocess.run(
+        [*TRAIN[:4], "--env", "ant", "--preset", "cpu", "--lr", "3e-4", "--print-config", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    shown = json.loads(proc.stdout)
+    assert shown == {**make_config("cpu", "ant", lr=3e-4, out=str(out)).to_dict(), "fast_ops": None}
+    assert not out.exists()
+    refused(train("--out", str(out), "--resume", "--print-config"), "--print-config shows what flags make")
 
 
 def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None:

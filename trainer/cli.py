@@ -19,7 +19,7 @@ from collie.startup import mark
 from collie.tasks import task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
-from trainer.config import PRESETS, Config, flag, make_config, people_schedule
+from trainer.config import PRESETS, Config, field_notes, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
@@ -72,11 +72,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="people label this run: its first session comes earlier where the preset's warm-up would keep "
         "them waiting (trainer/config.py people_schedule), unless --epochs/--warmup/--feedback-every are given",
     )
-    group = p.add_argument_group("hyperparameters (override the preset)")
+    p.add_argument(
+        "--print-config", action="store_true", help="print the config these flags make (JSON) and exit: no run"
+    )
+    group = p.add_argument_group("hyperparameters (override the preset; --print-config shows its values)")
+    notes = field_notes()
     for f in dataclasses.fields(Config):
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
             continue
-        option = flag(f.name)
+        option, note = flag(f.name), notes.get(f.name)
         if f.type in ("bool", bool, "bool | None"):  # None: the option's own default (e.g. fast_ops)
             # a bare flag means true (`--compile`); `--compile false` still works
             group.add_argument(
@@ -88,10 +92,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                 nargs="?",
                 const=True,
                 action=_Given,
+                help=note,
             )
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given)
+            group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given, help=note)
 
 
 class _Given(argparse.Action):
@@ -268,6 +273,13 @@ def check_out(out: Path, resume: bool) -> list[Path]:
 LOCK_FILE = "train.lock"
 
 
+def finished_at(out: Path) -> int | None:
+    """The epochs of a run that finished (summary.json), else None."""
+    path = out / "summary.json"
+    summary = read_json_object(path) if path.exists() else {}
+    return int(summary["epochs_done"]) if summary.get("status") == "finished" else None
+
+
 def checkpoint_config(out: Path) -> dict[str, Any]:
     """The config a run's checkpoint.pt carries (for a run folder whose config.json was lost)."""
     from trainer.checkpoint import load_checkpoint
@@ -325,6 +337,11 @@ def run(args: argparse.Namespace) -> int:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
+        if args.print_config:
+            if args.resume:
+                raise ValueError("--print-config shows what flags make; a run's own config is OUT/config.json")
+            print(json.dumps(cfg.to_dict(), indent=2))
+            return 0
         made = check_out(Path(cfg.out), args.resume)
         lock_run_folder(Path(cfg.out))  # held until this process ends (the descriptor stays open)
         locked = True
@@ -346,6 +363,12 @@ def run(args: argparse.Namespace) -> int:
             if ignored:
                 print(
                     f"collie train: warning: --resume keeps the run's config; ignored: {', '.join(ignored)}",
+                    file=sys.stderr,
+                )
+            if finished_at(Path(cfg.out)) == cfg.epochs:
+                print(
+                    f"collie train: {cfg.out} finished all its {cfg.epochs} epochs: nothing to train "
+                    f"(--epochs above {cfg.epochs} extends it)",
                     file=sys.stderr,
                 )
         from trainer.threads import apply_openmp_env, resolve_threads

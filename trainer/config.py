@@ -9,6 +9,7 @@ for tests.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import re
 from dataclasses import dataclass, field
@@ -52,29 +53,29 @@ class Config:
     fast_ops: bool | None = None
     acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)
-    hidden: int = 1024
-    layers: int = 2
+    hidden: int = 1024  # width of every MLP layer (φ, π, Q)
+    layers: int = 2  # hidden layers per MLP
     encoder: Literal["separate", "shared"] = "separate"  # pixel envs: a CNN per network, or one for all
     init: Literal["reference", "torch"] = "reference"  # weight init: the reference's Xavier schemes, or torch's
     log_std_min: float = REFERENCE_LOG_STD_MIN  # the policy's log-std floor (the reference's; −5 before)
     obs_norm: Literal["reference", "rollout"] = "rollout"  # ant/half_cheetah default to METRA's preset
-    lr: float = 1e-4
-    batch_size: int = 256
-    gamma: float = 0.99
+    lr: float = 1e-4  # Adam's learning rate, every network
+    batch_size: int = 256  # transitions per gradient step
+    gamma: float = 0.99  # discount
     tau: float = 0.005  # Polyak: target ← (1 − τ)·target + τ·online, i.e. smoothing coefficient 0.995
-    alpha_init: float = 0.01
+    alpha_init: float = 0.01  # SAC's entropy temperature at the start (learned)
     target_entropy_scale: float = -0.5  # target entropy = scale · |A|
     # METRA dual (Eq. 10)
-    lambda_init: float = 30.0
-    epsilon: float = 1e-3
+    lambda_init: float = 30.0  # METRA's dual variable λ at the start (learned)
+    epsilon: float = 1e-3  # ε of METRA's constraint slack
     # skills
-    skill_dim: int = 2
-    discrete_skills: bool = False
+    skill_dim: int = 2  # dimensions of z (one-hot count with discrete skills)
+    discrete_skills: bool = False  # one-hot z (HalfCheetah), else z on the unit sphere
     # data collection
-    epochs: int = 10_000
-    episodes_per_epoch: int = 8
-    episode_steps: int = 200
-    grad_steps: int = 50
+    epochs: int = 10_000  # rollouts + gradient steps; the run's length
+    episodes_per_epoch: int = 8  # episodes rolled out per epoch
+    episode_steps: int = 200  # steps per episode
+    grad_steps: int = 50  # gradient steps per epoch
     start_transitions: int = 10_000  # no gradient step before this many transitions are stored
     replay_capacity: int = 1_000_000  # transitions
     # COLLIE feedback schedule and guidance (Table 6)
@@ -83,9 +84,9 @@ class Config:
     queries_per_session: int = 5  # M
     total_queries: int = 40  # N_total (segments)
     segment_length: int = 20  # H
-    k_beta: float = 5.0
+    k_beta: float = 5.0  # k_β: how fast guidance fades in after the first labels (smoothing β, Section 4.5)
     candidates: int = 50  # N_c
-    knn_k: int = 5
+    knn_k: int = 5  # k of the k-NN particle entropy that picks queries (Algorithm 2)
     query_strategy: Literal["entropy", "uniform", "uncertainty", "latent"] = "entropy"
     w_at: Literal["next", "current"] = "next"  # evaluate w at s′ (reference, issue) or s (paper's notation)
     noise_band: float = 0.0  # oracle teacher's R_error
@@ -97,10 +98,10 @@ class Config:
     projection_dim: int = 8  # DDG*: output width of ψ's encoder, the state projection φ reads
     diayn: Literal["reference", "sphere"] = "reference"  # DIAYN: z ~ N(0, I), α = 0.1, learned std; or ours
     # evaluation, logging, checkpoints
-    eval_every: int = 500
-    eval_trajectories: int = 48
+    eval_every: int = 500  # epochs between evaluations (metrics, maps)
+    eval_trajectories: int = 48  # skills rolled out per evaluation
     bin_rule: Literal["visited", "corner"] = "visited"  # headline metric rule; both are always logged
-    checkpoint_every: int = 100
+    checkpoint_every: int = 100  # epochs between checkpoints (networks, optimisers, labels)
     out: str = "runs/latest"
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -144,30 +145,38 @@ class Config:
         for name in ("lr", "alpha_init", "lambda_init", "epsilon", "k_beta"):
             need(getattr(self, name) > 0, f"{flag(name)} must be > 0, got {getattr(self, name)}")
         # after the sizes themselves, so that `--episode-steps 0` is named as such
-        need(self.segment_length <= self.episode_steps + 1, "segment_length must be ≤ episode_steps + 1")
-        need(self.queries_per_session <= self.candidates, "queries_per_session (M) must be ≤ candidates (N_c)")
+        need(
+            self.segment_length <= self.episode_steps + 1,
+            f"--segment-length {self.segment_length} must be ≤ --episode-steps + 1 = {self.episode_steps + 1}",
+        )
+        need(
+            self.queries_per_session <= self.candidates,
+            f"--queries-per-session (M) {self.queries_per_session} must be ≤ --candidates (N_c) {self.candidates}",
+        )
         need(
             self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
-            "replay_capacity must hold at least one epoch of transitions",
+            f"--replay-capacity {self.replay_capacity} must hold one epoch of transitions "
+            f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
         )
         need(
             re.fullmatch(DEVICE_NAMES, self.device) is not None,
             f"unknown --device {self.device!r}; valid: auto, cpu, cuda, cuda:N, mps",
         )
-        need(self.w_at in ("next", "current"), "w_at must be 'next' or 'current'")
+        need(self.w_at in ("next", "current"), f"--w-at must be 'next' or 'current', got {self.w_at!r}")
         need(self.distance in DISTANCES, f"unknown distance {self.distance!r}; valid: {', '.join(DISTANCES)}")
         need(
             self.reward_form in REWARD_FORMS,
             f"unknown reward form {self.reward_form!r}; valid: {', '.join(REWARD_FORMS)}",
         )
-        need(self.obs_noise >= 0, f"obs_noise must be ≥ 0, got {self.obs_noise}")
-        need(self.classifier_steps > 0 and self.projection_dim > 0, "classifier_steps and projection_dim must be > 0")
-        need(self.physics_threads >= 0, f"physics_threads must be ≥ 0, got {self.physics_threads}")
+        need(self.obs_noise >= 0, f"--obs-noise must be ≥ 0, got {self.obs_noise}")
+        for name in ("classifier_steps", "projection_dim"):
+            need(getattr(self, name) > 0, f"{flag(name)} must be > 0, got {getattr(self, name)}")
+        need(self.physics_threads >= 0, f"--physics-threads must be ≥ 0, got {self.physics_threads}")
         need(self.threads >= 0, f"--threads must be ≥ 0 (0: chosen for this machine), got {self.threads}")
         need(self.encoder in ENCODERS, f"unknown encoder {self.encoder!r}; valid: {', '.join(ENCODERS)}")
         need(self.init in INITS, f"unknown init {self.init!r}; valid: {', '.join(INITS)}")
         need(self.acting in ACTING_PATHS, f"unknown acting path {self.acting!r}; valid: {', '.join(ACTING_PATHS)}")
-        need(self.log_std_min < 2.0, f"log_std_min must be below the cap 2, got {self.log_std_min}")
+        need(self.log_std_min < 2.0, f"--log-std-min must be below the cap 2, got {self.log_std_min}")
         need(self.bin_rule in BIN_RULES, f"unknown bin rule {self.bin_rule!r}; valid: {', '.join(BIN_RULES)}")
         need(self.diayn in DIAYN_VARIANTS, f"unknown diayn variant {self.diayn!r}; valid: {', '.join(DIAYN_VARIANTS)}")
         need(self.obs_norm in OBS_NORMS, f"unknown obs_norm {self.obs_norm!r}; valid: {', '.join(OBS_NORMS)}")
@@ -339,6 +348,12 @@ PRESET_ENV_VALUES: dict[str, dict[str, dict[str, Any]]] = {
     preset: {"quadruped": values, "humanoid": values} for preset, values in PIXEL_PRESETS.items()
 }
 PRESET_ENV_VALUES["cpu"].update(ROBOT_CPU)
+
+
+def field_notes() -> dict[str, str]:
+    """Each Config field's inline comment (what `collie train --help` says of its flag)."""
+    note = re.compile(r"^    (\w+): [^#]*#\s*(.+)$")
+    return {m[1]: m[2] for line in inspect.getsource(Config).splitlines() if (m := note.match(line))}
 
 
 def flag(name: str) -> str:
