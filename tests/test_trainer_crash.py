@@ -144,6 +144,11 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
             trainer.send_signal(signal.SIGKILL)
             trainer.wait()
             assert not (out / "checkpoint.pt").exists()
+            fresh = cli(*train, log=tmp_path / "fresh.log")  # a new run would orphan this one: refused
+            assert fresh.wait(timeout=120) == 2
+            said = (tmp_path / "fresh.log").read_text()
+            assert f"belongs to run {run_id} of the service but holds no checkpoint: give --run-id {run_id}" in said
+            assert len(labeler.runs()) == 1
             teacher = cli("teacher", "--api", api, "--run", str(run_id), "--until-done", log=tmp_path / "teacher.log")
             restarted = cli(*train, "--run-id", str(run_id), log=tmp_path / "trainer.log")
             assert restarted.wait(timeout=300) == 0, (tmp_path / "trainer.log").read_text()[-3000:]

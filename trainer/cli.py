@@ -191,11 +191,17 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     wait_for_service(args.api, token)
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
-    if run_id is None and memo.exists() and args.resume:
+    if run_id is None and memo.exists():
         try:
-            run_id = int(read_json_object(memo)["run_id"])
+            held = int(read_json_object(memo)["run_id"])
         except (ValueError, KeyError, TypeError) as exc:  # RunFolderError is a ValueError
-            raise ValueError(f"--resume: {memo} is damaged ({exc}); give the run's --run-id") from None
+            raise ValueError(f"{memo} is damaged ({exc}); give the run's --run-id") from None
+        if not args.resume:  # a trainer that died before its first checkpoint: a new run would orphan it
+            raise ValueError(
+                f"{cfg.out} belongs to run {held} of the service but holds no checkpoint: give --run-id {held} to "
+                f"train it again from epoch 0 (its labels are kept), or remove {memo} to create a new run"
+            )
+        run_id = held
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
