@@ -43,6 +43,8 @@ LEGEND = (
     "red bad area, yellow good area, as on the dashboard (none in a run with only an instruction). The "
     "blue **N** arrow points north (up in the inset)."
 )
+CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns: controls (right), context (left)
+NARROW_WINDOW_PX = 960  # below this the context column starts minimized
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
 
@@ -102,7 +104,7 @@ class Panels:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False, brand_color=(230, 120, 20))
         main = gui.main_panel
         main.dock_right()
-        main.set_width(360)
+        main.set_width(CONTROLS_PX)
 
         self.title = gui.add_markdown("**collie · labeling** — not signed in")
         self.status = gui.add_markdown("Connecting…")
@@ -174,7 +176,19 @@ class Panels:
             gui.add_markdown(LEGEND)
             self.segment = gui.add_markdown("")
         self.context_panel.dock_left()
-        self.context_panel.set_width(300)
+        self.context_panel.set_width(CONTEXT_PX)
+        self._fitted = False
+        client.camera.on_update(self._fit_window)
+
+    def _fit_window(self, camera: viser.CameraHandle) -> None:
+        """In a narrow window the context column opens minimized (a rail the labeler can open), so
+        the 3D view is more than a strip between the two columns. Once per tab, when the column
+        first shows: never against the labeler's own choice."""
+        if self._fitted or not self.context_panel.visible:
+            return
+        self._fitted = True
+        if camera.image_width + CONTROLS_PX + CONTEXT_PX < NARROW_WINDOW_PX:  # the canvas lies between the columns
+            self.context_panel.minimize()
 
     # ---------------------------------------------------------------- screens
 

@@ -10,7 +10,9 @@ import pytest
 import viser
 from playwright.sync_api import Browser
 
-from .page import canvas_pixels, open_labeler, segment_id, wait_segment, wait_text
+from collie.tasks import get_task
+
+from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, open_labeler, segment_id, wait_segment, wait_text
 from .stack import Stack
 
 pytestmark = pytest.mark.slow
@@ -288,3 +290,18 @@ def test_label_keys_work_after_a_click_on_a_replay_control(stack: Stack, browser
     assert {e.query_id: e.label for e in stack.trainer.effective_labels(run.id)} == {first: 2, second: 0}
     assert not loop.is_checked()  # the click itself did what it does
     page.context.close()
+
+
+def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 2)
+    url = stack.ui(run.id).labeler_url(stack.new_labeler("narrow"))
+    description = get_task("north", "point").description
+    for width, shown in ((800, False), (VIEWPORT["width"], True)):
+        context = browser.new_context(viewport={"width": width, "height": 600})
+        context.set_default_timeout(TIMEOUT_S * 1000)
+        page = context.new_page()
+        page.goto(url)
+        wait_segment(page)
+        time.sleep(1.0)  # the column's place is settled by the browser's first camera report
+        assert page.get_by_text(description).first.is_visible() is shown, width
+        context.close()

@@ -182,7 +182,7 @@ def test_a_tab_too_many_keeps_the_services_reason(stack: Stack) -> None:
 def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path: Path) -> None:
     info = tmp_path / "ui.json"
     cmd = [sys.executable, "-m", "labeling_ui.cli"]
-    args = ["--api", stack.api, "--port", "0", "--info-json", str(info), "--token", "tok en"]
+    args = ["--api", stack.api, "--port", "0", "--info-json", str(info), "--token", "tok&en"]
     proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30
@@ -195,7 +195,7 @@ def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0
-    assert f"labeler URL: {served['url']}?token=tok%20en" in out
+    assert f"labeler URL: {served['url']}?token=tok%26en" in out
 
 
 def test_a_port_in_use_is_said_with_the_port_served_instead(stack: Stack, tmp_path: Path) -> None:
