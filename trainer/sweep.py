@@ -13,6 +13,7 @@ for `collie report`. After the runs, the report of OUT is written to OUT/report/
 
     collie sweep --env point --tasks north,range --methods metra,collie --seeds 3 --out runs/sweep
     collie sweep --methods collie --variant additive --out runs/ablations -- --reward-form additive
+    collie sweep --task-file charger.toml --methods metra,collie --out runs/charger   # a task from a file
 """
 
 from __future__ import annotations
@@ -97,6 +98,7 @@ class RunSpec:
     flags: tuple[str, ...] = ()  # extra `collie train` flags
     downstream: bool = False
     downstream_flags: tuple[str, ...] = field(default=())
+    task_file: str = ""  # the file that defines `task` (`collie sweep --task-file`), absolute
 
 
 def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, variant: str = "") -> Path:
@@ -105,13 +107,19 @@ def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, va
 
 
 def grid(
-    root: str | Path, env: str, tasks: list[str], methods: list[str], seeds: list[int], **kw: Any
+    root: str | Path,
+    env: str,
+    tasks: list[str],
+    methods: list[str],
+    seeds: list[int],
+    task_files: dict[str, str] | None = None,
+    **kw: Any,
 ) -> list[RunSpec]:
     """Every (task, method, seed) as a RunSpec under `root`, seed by seed (a sweep cut short still
-    holds whole comparisons)."""
-    variant = kw.get("variant", "")
+    holds whole comparisons); `task_files`: the file of each task that comes from one."""
+    variant, files = kw.get("variant", ""), task_files or {}
     return [
-        RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), **kw)
+        RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), task_file=files.get(t, ""), **kw)
         for s in seeds
         for t in tasks
         for m in methods
@@ -160,6 +168,7 @@ def train_argv(spec: RunSpec) -> list[str]:
         spec.env,
         "--task",
         spec.task,
+        *(("--task-file", spec.task_file) if spec.task_file else ()),
         "--method",
         spec.method,
         "--preset",
@@ -264,6 +273,7 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
 # `collie` adds this to "unrecognized arguments" (collie/cli.py): a train flag given before --.
 UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
 DASHED_VALUE_OPTIONS = ("--downstream-flags",)  # its value is flags: `--downstream-flags "--kind zero_shot"`
+DEFAULT_TASKS = "north,range,hole_north"
 
 
 class _Refusal(Exception):
@@ -303,8 +313,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point", help=f"one of: {', '.join(ENV_NAMES)} (default: %(default)s)")
     p.add_argument(
         "--tasks",
-        default="north,range,hole_north",
-        help=f"comma-separated, of: {', '.join(task_names())} (default: %(default)s)",
+        default=None,
+        help=f"comma-separated, of: {', '.join(task_names())} or a --task-file's task (default: {DEFAULT_TASKS}) "
+        "— with --task-file and no --tasks, the files' tasks alone",
+    )
+    p.add_argument(
+        "--task-file",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a task rule from a file (docs/tasks.md), one task per file: its task joins the sweep's tasks "
+        "(repeat it for more files)",
     )
     p.add_argument(
         "--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)} (default: %(default)s)"
@@ -327,7 +346,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
     p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
-    tasks, seeds = len(p.get_default("tasks").split(",")), p.get_default("seeds")
+    tasks, seeds = len(DEFAULT_TASKS.split(",")), p.get_default("seeds")
     p.epilog = (
         f"A bare `collie sweep` runs the full grid the defaults name: {len(METHODS)} methods × {tasks} tasks × "
         f"{seeds} seeds on {p.get_default('env')} at the {p.get_default('preset')} preset, "
@@ -345,22 +364,56 @@ def names(flag: str, given: str) -> tuple[list[str], str | None]:
     return listed, None
 
 
-def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> str | None:
+def file_tasks(files: list[str], env: str, layout_seed: int) -> tuple[dict[str, str], str | None]:
+    """{task name: its file, absolute} for each --task-file, each loaded once for `env` (as every
+    run will load it), or the first problem: a file `collie train` would refuse, one that registers
+    several tasks, two files defining one name."""
+    from collie.tasks.task_file import load_task_file
+
+    found: dict[str, str] = {}
+    for given in files:
+        path = str(Path(given).resolve())  # runs start elsewhere (a Ray node, another cwd)
+        try:
+            name = load_task_file(path, None, env, layout_seed=layout_seed).name
+        except ValueError as exc:  # TaskFileError: the file, the line or key, and why
+            several = "; pick one with --task"  # a Python file registering several: a sweep takes one per file
+            return found, f"--task-file {given}: {exc}".replace(several, "; a sweep takes one task per file")
+        if name in found:
+            return found, f"--task-file {given} defines task {name!r}, as --task-file {found[name]} does"
+        found[name] = path
+    return found, None
+
+
+def chosen_tasks(given: str | None, from_files: dict[str, str]) -> tuple[list[str], str | None]:
+    """The sweep's tasks: --tasks (default DEFAULT_TASKS, or none beside task files) and then each
+    file's task not named there; or the problem naming --tasks' empty entry."""
+    if given is None and from_files:
+        return list(from_files), None
+    tasks, empty = names("--tasks", given or DEFAULT_TASKS)
+    return list(dict.fromkeys([*tasks, *from_files])), empty
+
+
+def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from_files: dict[str, str]) -> str | None:
     """The first thing wrong with the sweep's arguments, found before any run is launched (a bad
     name would otherwise fail every run, each in its own process); None if there is none."""
     from collie.tasks import get_task, task_names
     from trainer.envs.registry import ENV_NAMES
 
-    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in task_names()]
+    known = [*task_names(), *from_files]
+    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in known]
     if bad_methods:
         return f"unknown method(s) {', '.join(bad_methods)}; valid: {', '.join(METHODS)}"
     if args.env not in ENV_NAMES:
         return f"unknown --env {args.env!r}; valid: {', '.join(ENV_NAMES)}"
     if bad_tasks:
-        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(task_names())}"
+        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(known)} (or a task from a --task-file)"
     if args.preset not in PRESETS:
         return f"unknown --preset {args.preset!r}; valid: {', '.join(PRESETS)}"
-    for task in tasks:  # a known task on an env it has no geometry for (north on car, hazard on point)
+    if any(f == "--task-file" or f.startswith("--task-file=") for f in args.train_flags):
+        return (
+            "--task-file goes before --: `collie sweep --task-file FILE` runs the file's task (its runs alone get it)"
+        )
+    for task in (t for t in tasks if t not in from_files):  # one with no geometry for the env (north on car)
         try:
             get_task(task, args.env, layout_seed=args.first_seed)
         except ValueError as exc:
@@ -385,9 +438,13 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> s
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    (methods, empty_method), (tasks, empty_task) = names("--methods", args.methods), names("--tasks", args.tasks)
+    from_files, wrong_file = file_tasks(args.task_file, args.env, args.first_seed)
+    (methods, empty_method), (tasks, empty_task) = (
+        names("--methods", args.methods),
+        chosen_tasks(args.tasks, from_files),
+    )
     methods, tasks = list(dict.fromkeys(methods)), list(dict.fromkeys(tasks))  # a name twice: one run folder
-    wrong = empty_method or empty_task or problem(args, methods, tasks)
+    wrong = empty_method or empty_task or wrong_file or problem(args, methods, tasks, from_files)
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
@@ -398,6 +455,7 @@ def run(args: argparse.Namespace) -> int:
         tasks,
         methods,
         list(range(args.first_seed, args.first_seed + args.seeds)),
+        from_files,
         preset=args.preset,
         variant=args.variant,
         flags=flags,
