@@ -486,7 +486,8 @@ def run(args: argparse.Namespace) -> int:
             for spec, result in run_all(specs, args.jobs, args.ray, stop):
                 if isinstance(result, Exception):
                     failed.append((spec, result))
-                bar.update(1)
+                if not (stop.asked.is_set() and isinstance(result, Interrupted | StoppedEarly)):
+                    bar.update(1)  # done: finished or failed, not stopped by us or never started
     except RuntimeError as exc:  # the engine itself could not start
         print(f"collie sweep: error: {exc}", file=sys.stderr)
         return 2

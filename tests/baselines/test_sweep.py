@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -258,6 +259,7 @@ def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_othe
             proc.kill()
     assert proc.returncode == 130, err
     assert "collie sweep: interrupted; 1 run(s) stopped, 2 not started; rerun the same command to resume" in err
+    assert re.findall(r"\| (\d)/3 \[", err)[-1] == "0", err  # the progress bar counts no run as done
     assert json.loads((first / "summary.json").read_text())["status"] == "interrupted"
     assert (first / "checkpoint.pt").exists()
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == [first.name]  # seeds 1 and 2 never began
