@@ -18,10 +18,9 @@ import argparse
 import shutil
 import sys
 from pathlib import Path
-from typing import Any
 
 from trainer.run_files import RunFolderError, read_json_object
-from trainer.same_run import comparable, differing_keys
+from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
 
@@ -35,14 +34,6 @@ SHOWN_KEYS = 4  # a refusal names at most this many differing keys with their va
 class ArchiveError(ValueError):
     """The folder is not a finished run (or its summary.json cannot be read), or the archive already
     holds another run of its name."""
-
-
-def run_config(folder: Path) -> dict[str, Any]:
-    """The config a run folder holds: summary.json's, else config.json's ({} if neither has one)."""
-    config = read_json_object(folder / "summary.json").get("config")
-    if isinstance(config, dict):
-        return config
-    return read_json_object(folder / "config.json") if (folder / "config.json").exists() else {}
 
 
 def another_run(held: Path, source: Path) -> str | None:

@@ -5,9 +5,11 @@ its command would make again)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from trainer.config import FIRST_VERSION, Config, make_config
+from trainer.run_files import read_json_object
 
 # where a run's folder and task file were and how it used the machine: a moved, archived or resumed
 # copy of one run may differ in these and is still that run
@@ -37,3 +39,12 @@ def preset_defaults(cfg: dict[str, Any]) -> dict[str, Any]:
         return make_config(str(cfg.get("preset", Config.preset)), str(cfg.get("env", Config.env))).to_dict()
     except ValueError:
         return {}
+
+
+def run_config(folder: Path) -> dict[str, Any]:
+    """The config a run folder holds: summary.json's, else config.json's ({} if neither has one);
+    RunFolderError naming a file that cannot be read."""
+    config = read_json_object(folder / "summary.json").get("config")
+    if isinstance(config, dict):
+        return config
+    return read_json_object(folder / "config.json") if (folder / "config.json").exists() else {}

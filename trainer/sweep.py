@@ -1,8 +1,9 @@
 """`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
-Resumable: a run folder whose summary.json says "finished" is not rerun (one made with another
-preset or other train flags, as its sweep_run.json records, is named in a warning); a run with a
+Resumable: a run folder whose summary.json says "finished" is not rerun — unless the command asks
+only for more --epochs, when it is extended from its checkpoint as `collie train --resume --epochs N`
+would; one of another configuration is named in a warning with the keys that differ —; a run with a
 checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
 SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
 already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a
@@ -36,11 +37,13 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from collie.processes import end_with_parent
-from trainer.config import PRESETS
+from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object
+from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
+SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
 
 
 class Interrupted(RuntimeError):
@@ -138,17 +141,70 @@ def is_finished(out: str | Path) -> bool:
         return False
 
 
+def intended_config(spec: RunSpec) -> dict[str, Any] | None:
+    """The config `collie train` makes of `spec`'s command (None if it would refuse it)."""
+    from trainer import cli as train_cli
+
+    parser = _TrainParser(prog="collie train")
+    train_cli.add_arguments(parser)
+    try:
+        return train_cli.config_from_args(parser.parse_args(train_argv(spec))).to_dict()
+    except (_Refusal, ValueError):
+        return None
+
+
+def config_change(spec: RunSpec) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+    """The keys in which the run in `spec.out` differs from what `spec`'s command would make (where
+    and how it ran aside: trainer.same_run.NOT_THE_RUN), and both configs, comparable; no keys if
+    either config is unknown."""
+    try:
+        made = run_config(Path(spec.out))
+    except RunFolderError:
+        return [], {}, {}
+    asked = intended_config(spec)
+    if not made or asked is None:
+        return [], {}, {}
+    return differing_keys(made, asked), comparable(made), comparable(asked)
+
+
+def extension(spec: RunSpec) -> tuple[int, int] | None:
+    """(its epochs, the new ones) for a finished run that only more --epochs would change and that
+    has the checkpoint to resume from: the sweep extends it, as `collie train --resume --epochs N`
+    does exactly; None otherwise."""
+    keys, made, asked = config_change(spec)
+    if keys != ["epochs"] or asked["epochs"] <= made["epochs"] or not (Path(spec.out) / "checkpoint.pt").is_file():
+        return None
+    return made["epochs"], asked["epochs"]
+
+
+def to_train(spec: RunSpec) -> bool:
+    """Not finished (or never begun), or finished and to be extended to more epochs."""
+    return not is_finished(spec.out) or extension(spec) is not None
+
+
 def made_otherwise(spec: RunSpec) -> str | None:
-    """How a run folder's recorded preset and train flags (sweep_run.json, written when it was
-    launched) differ from `spec`'s, as "--preset P -- FLAGS, not …"; None if they are the same or
-    there is no record. A finished run is not rerun, so new flags would silently not apply to it."""
+    """How a finished run that is not rerun differs from what `spec`'s command would make: its
+    recorded preset and train flags (sweep_run.json) against `spec`'s, then each differing key's
+    values; None if it is the same run or is extended. New flags would silently not apply to it."""
+    keys, made, asked = config_change(spec)
+    if not keys or extension(spec) is not None:
+        return None
+    values = "; ".join(f"{flag(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
+    values += f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
+    grew = keys == ["epochs"] and asked["epochs"] > made["epochs"]
+    return f"{recorded(spec)} ({values}{'; no checkpoint.pt to extend it from' if grew else ''})"
+
+
+def recorded(spec: RunSpec) -> str:
+    """ "--preset P -- FLAGS, not …": the run's recorded command (sweep_run.json) against `spec`'s,
+    or "another configuration" where there is no record or it reads the same."""
     try:
         made = read_json_object(Path(spec.out) / "sweep_run.json")
     except RunFolderError:
-        return None
+        return "another configuration"
     old_preset, old_flags = made.get("preset"), tuple(made.get("flags") or ())
     if (old_preset, old_flags) == (spec.preset, spec.flags):
-        return None
+        return "another configuration"
 
     def shown(preset: Any, flags: tuple[Any, ...]) -> str:
         return f"--preset {preset} -- {shlex.join(map(str, flags))}" if flags else f"--preset {preset}, no train flags"
@@ -215,7 +271,7 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
     out, stop = Path(spec.out), stop or Stop()
     if stop.asked.is_set():
         raise Interrupted("not started: the sweep was interrupted")
-    if not is_finished(out):
+    if to_train(spec):
         out.mkdir(parents=True, exist_ok=True)
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
         _call(train_command(spec), out.with_suffix(".log"), stop)
@@ -435,6 +491,18 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
     return None
 
 
+def say_what_finished_runs_get(specs: list[RunSpec]) -> None:
+    """A line for each finished run the sweep extends to more epochs, and a warning for each that
+    another configuration would not be rerun."""
+    for spec in (s for s in specs if is_finished(s.out)):
+        grows = extension(spec)
+        differs = made_otherwise(spec)
+        if grows:
+            print(f"{spec.out}: finished at {grows[0]} epochs; extended to {grows[1]} (resumed from its checkpoint)")
+        elif differs:
+            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -462,15 +530,12 @@ def run(args: argparse.Namespace) -> int:
         downstream=args.downstream,
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
-    wrong = train_flags_problem([s for s in specs if not is_finished(s.out)])
+    wrong = train_flags_problem([s for s in specs if to_train(s)])
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
-    todo = sum(not is_finished(s.out) for s in specs)
-    for spec in specs:
-        differs = made_otherwise(spec) if is_finished(spec.out) else None
-        if differs:
-            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
+    todo = sum(to_train(s) for s in specs)
+    say_what_finished_runs_get(specs)
     print(
         f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"

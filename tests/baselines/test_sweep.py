@@ -117,12 +117,23 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     assert again.returncode == 0 and "1 already finished" in again.stdout
     assert summary.stat().st_mtime_ns == stamp
     assert "warning" not in again.stderr  # the same flags: nothing to say
-    other = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
-    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # still not rerun, but said so:
+    run = tmp_path / "point-north-lsd-s1"
+    longer = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
+    assert longer.returncode == 0, longer.stderr
+    assert f"{run}: finished at 2 epochs; extended to 4 (resumed from its checkpoint)" in longer.stdout
+    assert json.loads(summary.read_text())["epochs_done"] == 4 and "0 already finished" in longer.stdout
+    epochs = [json.loads(line)["epoch"] for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert epochs == sorted(set(epochs)), epochs  # continued, not trained again from epoch 0
+    stamp = summary.stat().st_mtime_ns
+    other = subprocess.run([*cmd[:-1], "4", "--hidden", "32"], capture_output=True, text=True, timeout=300)
+    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # not rerun, but said so:
     assert (
-        f"warning: {tmp_path / 'point-north-lsd-s1'} finished with --preset smoke -- --epochs 2, "
-        "not --preset smoke -- --epochs 4; not rerun (remove it to rerun)"
+        f"warning: {run} finished with --preset smoke -- --epochs 4, not --preset smoke -- --epochs 4 --hidden 32 "
+        "(--hidden 64, not 32); not rerun (remove it to rerun)"
     ) in other.stderr
+    shorter = subprocess.run(cmd, capture_output=True, text=True, timeout=300)  # -- --epochs 2
+    assert shorter.returncode == 0 and summary.stat().st_mtime_ns == stamp
+    assert "(--epochs 4, not 2); not rerun (remove it to rerun)" in shorter.stderr
 
 
 @pytest.mark.parametrize(
