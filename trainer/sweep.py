@@ -1,14 +1,14 @@
 """`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
-Resumable: a run folder whose summary.json says "finished" is not rerun — unless the command asks
-only for more --epochs, when it is extended from its checkpoint as `collie train --resume --epochs N`
-would; one of another configuration is named in a warning with the keys that differ —; a run with a
+Resumable: a run folder whose summary.json says "finished" is not rerun unless the command asks
+only for more --epochs: then it is extended from its checkpoint as `collie train --resume --epochs N`
+would (one of another configuration is named in a warning with the keys that differ); a run with a
 checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
 SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
 already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a
-local sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a
-final checkpoint; rerunning the sweep resumes it). Folders:
+sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a final
+checkpoint; rerunning the sweep resumes it), on Ray through `ray.cancel` of each run's task. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
@@ -44,6 +44,9 @@ from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
+POLL_S = 0.5  # how often a wait looks up from a child process or the cluster (a stop asked, a Ray cancel)
+# how long a stopped run may take to write its final checkpoint (the rest of its epoch) and end
+STOP_WAIT_S = 300.0
 
 
 class Interrupted(RuntimeError):
@@ -55,10 +58,11 @@ class StoppedEarly(RuntimeError):
 
 
 class Stop:
-    """A local sweep told to end: no run starts after it, and each running child process gets one
-    SIGTERM, however many signals the sweep gets (children run in their own session, so a
-    terminal's Ctrl-C reaches only the sweep; a trainer's second signal would skip its final
-    checkpoint). Children also get SIGTERM if the sweep itself is killed."""
+    """A sweep (or a Ray task's run) told to end: no run starts after it, and each running child
+    process gets one SIGTERM, however many signals the sweep gets (children run in their own
+    session, so a terminal's Ctrl-C reaches only the sweep; a trainer's second signal would skip its
+    final checkpoint). Children also get SIGTERM if the sweep itself is killed. In a Ray worker the
+    stop is the sweep's `ray.cancel`, which raises KeyboardInterrupt in the task (`_wait`)."""
 
     def __init__(self) -> None:
         self.asked = threading.Event()
@@ -83,10 +87,27 @@ class Stop:
             proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death, **popen)
             self._running.add(proc)
         try:
-            return proc.wait()
+            return self._wait(proc)
         finally:
             with self._lock:
                 self._running.discard(proc)
+
+    def _wait(self, proc: subprocess.Popen) -> int:
+        """`proc`'s exit code, polled: Ray's cancellation of a task is a KeyboardInterrupt raised
+        between bytecodes, never inside a blocking wait. On it, `proc` is stopped as a signal to the
+        sweep would stop it, and waited for (StoppedEarly if it outlasts STOP_WAIT_S)."""
+        try:
+            while True:
+                try:
+                    return proc.wait(timeout=POLL_S)
+                except subprocess.TimeoutExpired:
+                    continue
+        except KeyboardInterrupt:
+            self.handle(signal.SIGINT, None)
+            try:
+                return proc.wait(timeout=STOP_WAIT_S)
+            except subprocess.TimeoutExpired:
+                raise StoppedEarly(f"pid {proc.pid} did not end {STOP_WAIT_S:.0f} s after its SIGTERM") from None
 
 
 @dataclass(frozen=True)
@@ -287,25 +308,29 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
 def run_all(
     specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None, stop: Stop | None = None
 ) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
-    """Yield (spec, summary or the exception it raised) as runs end. Local: `jobs` runs at a time,
-    each a child process, ended early by `stop`. Ray: one task per run (1 CPU each) on the cluster
+    """Yield (spec, summary or the exception it raised) as runs end; `stop` ends them early. Local:
+    `jobs` runs at a time, each a child process. Ray: one task per run (1 CPU each) on the cluster
     at `ray_address`; the run folders must be on a file system the cluster's nodes share."""
+    stop = stop or Stop()
     if ray_address:
-        yield from _run_on_ray(specs, ray_address)
+        yield from _run_on_ray(specs, connect_ray(ray_address), stop)
         return
     with ThreadPoolExecutor(max(1, jobs)) as pool:
-        stop = stop or Stop()
         futures = {pool.submit(run_one, s, stop): s for s in specs}
         for fut in as_completed(futures):
             exc = fut.exception()
             yield futures[fut], (exc if isinstance(exc, Exception) else fut.result())
 
 
-def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+def connect_ray(address: str) -> Any:
+    """The `ray` module, connected to the cluster at `address` (once per process); RuntimeError
+    saying why not."""
     try:
         ray = importlib.import_module("ray")
     except ModuleNotFoundError as exc:
         raise RuntimeError("--ray needs the `ray` package on this machine and the cluster (pip install ray)") from exc
+    if ray.is_initialized():
+        return ray
     head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
     host, _, port = head.rpartition(":")
     if host and port.isdigit():  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
@@ -314,15 +339,42 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
         except OSError as exc:
             raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
     ray.init(address=address)
+    return ray
+
+
+def _run_on_ray(specs: list[RunSpec], ray: Any, stop: Stop) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
     remote = ray.remote(num_cpus=1)(run_one)
     pending = {remote.remote(s): s for s in specs}
-    while pending:
-        done, _ = ray.wait(list(pending), num_returns=1)
-        spec = pending.pop(done[0])
-        try:
-            yield spec, ray.get(done[0])
-        except Exception as exc:  # a failed run is reported, the others go on
-            yield spec, exc
+    while pending and not stop.asked.is_set():
+        done, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_S)  # a timeout: looks up for a stop
+        for ref in done:
+            yield _outcome(ray, ref, pending.pop(ref))
+    if pending:
+        yield from _stop_on_ray(ray, pending)
+
+
+def _stop_on_ray(ray: Any, pending: dict[Any, RunSpec]) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+    """Cancel the runs left as a local sweep stops its own: a queued one never starts, a running one
+    gets KeyboardInterrupt in its worker, whose Stop hands its `collie train` one SIGTERM and waits
+    for its final checkpoint. Waits for them all, at most STOP_WAIT_S (and a margin for the news)."""
+    for ref in pending:
+        ray.cancel(ref, force=False)  # force would kill the worker, and Ray its trainer: no checkpoint
+    ray.wait(list(pending), num_returns=len(pending), timeout=STOP_WAIT_S + 30)
+    for ref, spec in pending.items():
+        yield _outcome(ray, ref, spec)
+
+
+def _outcome(ray: Any, ref: Any, spec: RunSpec) -> tuple[RunSpec, dict[str, Any] | Exception]:
+    """(spec, its summary or why not): a run cancelled before it started is Interrupted; one that
+    raised is its exception (StoppedEarly for a stopped training: Ray's error is a subclass)."""
+    try:
+        return spec, ray.get(ref, timeout=0)
+    except ray.exceptions.TaskCancelledError:
+        return spec, Interrupted("not started: the sweep was interrupted")
+    except ray.exceptions.GetTimeoutError:
+        return spec, StoppedEarly(f"{spec.out} did not end {STOP_WAIT_S:.0f} s after the sweep was interrupted")
+    except Exception as exc:  # a failed run is reported, the others go on
+        return spec, exc
 
 
 # ---- `collie sweep` ------------------------------------------------------------------------------
@@ -542,10 +594,15 @@ def run(args: argparse.Namespace) -> int:
     )
     failed: list[tuple[RunSpec, Exception]] = []
     stop, before = Stop(), {}
-    if not args.ray:  # a Ray sweep's runs belong to the cluster; Ctrl-C ends only this client
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
-                before[sig] = signal.signal(sig, stop.handle)
+    try:
+        if args.ray:  # before our handlers: ray.init puts its own over SIGTERM's
+            connect_ray(args.ray)
+    except RuntimeError as exc:
+        print(f"collie sweep: error: {exc}", file=sys.stderr)
+        return 2
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # Ray's runs too: each is cancelled, and stops
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
+            before[sig] = signal.signal(sig, stop.handle)
     try:
         with tqdm(total=len(specs), desc="sweep", unit="run") as bar:
             for spec, result in run_all(specs, args.jobs, args.ray, stop):
