@@ -6,7 +6,9 @@ sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_la
 DIR/<the run folder's name>, a folder `collie report` reads like the run itself (tables, skill
 figures, diagnostics). A ROOT (a folder holding run folders, as `collie sweep --out` writes) has
 each finished run below it archived at the same relative path under DIR; the unfinished ones, and
-those whose summary.json cannot be read, are named and left out. No checkpoint or replay is
+those whose summary.json cannot be read, are named and left out. A run whose name the archive
+already holds for another configuration is refused naming what differs (where and how each ran
+aside: trainer.same_run.NOT_THE_RUN); the others are archived, and the exit code is 2. No checkpoint or replay is
 copied, so an archived run cannot be resumed or given a downstream task; run those before archiving.
 """
 
@@ -18,6 +20,7 @@ import sys
 from pathlib import Path
 
 from trainer.run_files import RunFolderError, read_json_object
+from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
 
@@ -25,15 +28,32 @@ REQUIRED = ("summary.json", "eval_latest.npz")
 OPTIONAL = ("config.json", TASK_JSON, "sweep_run.json", "downstream.json", "metrics.jsonl")
 
 
+SHOWN_KEYS = 4  # a refusal names at most this many differing keys with their values
+
+
 class ArchiveError(ValueError):
     """The folder is not a finished run (or its summary.json cannot be read), or the archive already
     holds another run of its name."""
 
 
+def another_run(held: Path, source: Path) -> str | None:
+    """How the run archived at `held` differs from `source`'s ("seed 0 archived, 7 here"), None if
+    it is the same run (where and how each ran aside: trainer.same_run.NOT_THE_RUN)."""
+    old, new = run_config(held), run_config(source)
+    keys = differing_keys(old, new)
+    if not keys:
+        return None
+    a, b = comparable(old), comparable(new)
+    shown = [f"{k} {a.get(k)!r} archived, {b.get(k)!r} here" for k in keys[:SHOWN_KEYS]]
+    more = f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
+    return "; ".join(shown) + more
+
+
 def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
     """Copy `source`'s results into `out_root`/<relative, default source's name>; returns that
-    folder. Archiving the same run again refreshes it (a downstream task run since, say); another
-    run of the same name (a different configuration) is refused."""
+    folder. Archiving the same run again refreshes it (a downstream task run since, say, or the same
+    run from another folder); another run of the same name (a different configuration) is refused,
+    naming what differs."""
     for name in REQUIRED:
         if not (source / name).exists():
             raise ArchiveError(f"{source} has no {name}: not a run folder, or its final skills were not saved")
@@ -44,9 +64,9 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
         out = out_root / (relative or source.resolve().name)
         if out.resolve() == source.resolve():
             raise ArchiveError(f"{source} is already in {out_root}")
-        held = out / "summary.json"
-        if held.exists() and read_json_object(held).get("config") != summary.get("config"):
-            raise ArchiveError(f"{out} holds another run of that name (its configuration differs); remove it first")
+        differs = another_run(out, source) if (out / "summary.json").exists() else None
+        if differs:
+            raise ArchiveError(f"{out} holds another run of that name ({differs}); remove it first")
     except RunFolderError as exc:  # the message names the file
         raise ArchiveError(str(exc)) from None
     out.mkdir(parents=True, exist_ok=True)
@@ -79,31 +99,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def jobs_in(given: Path, out_root: Path) -> list[tuple[Path, Path | None]]:
+    """(run folder, its path under the archive or None for its name) for `given`: a run folder or a
+    root holding them (its unfinished and unreadable ones named on stdout); ArchiveError if it is
+    neither."""
+    if not given.is_dir():
+        raise ArchiveError(f"{given} is not a folder")
+    if (given / "summary.json").exists():
+        return [(given, None)]
+    finished, unfinished, unreadable = runs_below(given)
+    if not finished and not unfinished and not unreadable:
+        raise ArchiveError(f"{given} holds no run folder (none has summary.json)")
+    for left in unfinished:
+        print(f"left out (not finished): {left}")
+    for why in unreadable:
+        print(f"left out (unreadable): {why}")
+    return [(f, f.relative_to(given)) for f in finished if out_root.resolve() not in f.resolve().parents]
+
+
 def run(args: argparse.Namespace) -> int:
     out_root = Path(args.out)
-    for given in map(Path, args.runs):
-        if not given.is_dir():
-            print(f"collie archive: error: {given} is not a folder", file=sys.stderr)
-            return 2
-        jobs: list[tuple[Path, Path | None]]
-        if (given / "summary.json").exists():
-            jobs = [(given, None)]
-        else:
-            finished, unfinished, unreadable = runs_below(given)
-            if not finished and not unfinished and not unreadable:
-                print(f"collie archive: error: {given} holds no run folder (none has summary.json)", file=sys.stderr)
-                return 2
-            for left in unfinished:
-                print(f"left out (not finished): {left}")
-            for why in unreadable:
-                print(f"left out (unreadable): {why}")
-            jobs = [(f, f.relative_to(given)) for f in finished if out_root.resolve() not in f.resolve().parents]
-        for source, relative in jobs:
-            try:
-                out = archive(source, out_root, relative)
-            except ArchiveError as exc:
-                print(f"collie archive: error: {exc}", file=sys.stderr)
-                return 2
-            size = sum(f.stat().st_size for f in out.iterdir())
-            print(f"{source} → {out} ({size / 1e3:.0f} kB)")
-    return 0
+    jobs: list[tuple[Path, Path | None]] = []
+    try:  # every folder given is checked before anything is copied
+        for given in map(Path, args.runs):
+            jobs += jobs_in(given, out_root)
+    except ArchiveError as exc:
+        print(f"collie archive: error: {exc}", file=sys.stderr)
+        return 2
+    refused: list[Path] = []
+    for source, relative in jobs:  # one refused run does not keep the others out of the archive
+        try:
+            out = archive(source, out_root, relative)
+        except ArchiveError as exc:
+            print(f"collie archive: error: {exc}", file=sys.stderr)
+            refused.append(source)
+            continue
+        size = sum(f.stat().st_size for f in out.iterdir())
+        print(f"{source} → {out} ({size / 1e3:.0f} kB)")
+    if refused and len(jobs) > 1:
+        names = ", ".join(map(str, refused))
+        print(f"collie archive: {len(refused)} of {len(jobs)} runs not archived: {names}", file=sys.stderr)
+    return 2 if refused else 0

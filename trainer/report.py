@@ -4,7 +4,7 @@ CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
     report.md       safe coverage (Table 1), safe ratio (Table 2), composite and weighted composite
                     coverage, wall time per run, zero-shot (Table 3) and hierarchical (Table 4)
                     downstream returns when downstream.json exists; methods in the paper's order
-    metrics.csv     one row per (env, task, method, variant, metric): mean, std, n, seeds
+    metrics.csv     one row per (env, task, method, variant, setting, metric): mean, std, n, seeds
     runs.csv        one row per run folder with its final metrics
     figures/skills_<env>_<task>.png   one panel per method: its lowest seed's final evaluation
                     skills over the task's shaded regions
@@ -16,7 +16,10 @@ visits, three of which the corner rule judges at a corner outside a wedge whose 
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
 are folders whose files cannot be read, each with why. ± is the sample standard deviation over
-seeds (as the paper's tables); a single seed shows its value alone.
+seeds (as the paper's tables); a single seed shows its value alone. A cell never averages runs
+whose configurations differ (beyond `trainer.same_run.NOT_THE_RUN`: folder, threads, device…):
+each configuration has its own row, named by the keys that differ ("COLLIE (distance=l2)";
+`name_settings`), and report.md says which rows were split.
 
 Coverage cells use the reference's corner bin rule (the `corner_*` figures every run logs), as the
 paper's tables do, and where the paper published a cell (`trainer/paper_results.py`: Ant,
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import sys
 from collections.abc import Sequence
@@ -41,6 +45,7 @@ from collie.tasks import Task
 from trainer.metrics import off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.run_files import RunFolderError, read_arrays, read_json_object
+from trainer.same_run import PLACED, comparable, preset_defaults
 from trainer.task_choice import judged_by
 
 METRICS: tuple[tuple[str, str, int], ...] = (
@@ -83,19 +88,27 @@ class RunResult:
     metrics: dict[str, Any]
     variant: str = ""
     downstream: dict[str, Any] = field(default_factory=dict)
+    config: dict[str, Any] = field(default_factory=dict)
+    setting: str = ""  # how its configuration differs from others in its cell ("distance=l2"; name_settings)
 
     @property
     def label(self) -> str:
         name = DISPLAY.get(self.method, self.method)
-        return f"{name} ({self.variant})" if self.variant else name
+        extra = ", ".join(part for part in (self.variant, self.setting) if part)
+        return f"{name} ({extra})" if extra else name
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """Its configuration but for where and how it ran and what its row and column say."""
+        return {k: v for k, v in comparable(self.config).items() if k not in PLACED}
 
     @property
     def column(self) -> str:
         return f"{self.env} {self.task}"
 
-    def order(self) -> tuple[int, str]:
+    def order(self) -> tuple[int, str, str]:
         rank = METHOD_ORDER.index(self.method) if self.method in METHOD_ORDER else len(METHOD_ORDER)
-        return rank, self.variant
+        return rank, self.variant, self.setting
 
 
 def load_run(folder: Path) -> RunResult:
@@ -125,6 +138,7 @@ def load_run(folder: Path) -> RunResult:
         summary,
         read_json_object(sweep).get("variant", "") if sweep.exists() else "",
         read_json_object(down) if down.exists() else {},
+        cfg,
     )
 
 
@@ -262,7 +276,7 @@ def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
 
 
 def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
-    """metrics.csv: one row per (env, task, method, variant, metric)."""
+    """metrics.csv: one row per (env, task, method, variant, setting, metric)."""
     rows = []
     for (_, _), g in sorted(_group(runs).items(), key=lambda kv: (kv[1][0].column, kv[1][0].order())):
         r0 = g[0]
@@ -278,6 +292,7 @@ def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
                     "task": r0.task,
                     "method": r0.method,
                     "variant": r0.variant,
+                    "setting": r0.setting,
                     "label": r0.label,
                     "metric": metric,
                     "mean": float(a.mean()),
@@ -319,6 +334,8 @@ def markdown(
         f"corner bin rule (as the paper; {VISITED_MARK}: a run without corner figures, shown by the visited rule)."
         + paper
     ]
+    if settings_note(runs):
+        parts.append(settings_note(runs))
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
     if broken:
@@ -332,29 +349,57 @@ def markdown(
     return "\n\n".join(parts) + "\n"
 
 
-# where a run's folder and task file were and how it used the machine: a moved, archived or resumed
-# copy of one run may differ in these and is still that run
-NOT_THE_RUN = ("out", "task_file", "threads", "device", "compile", "fast_ops", "fused_adam")
-
-
-def _config(run: RunResult) -> dict[str, Any]:
-    cfg = run.metrics.get("config")
-    return {k: v for k, v in cfg.items() if k not in NOT_THE_RUN} if isinstance(cfg, dict) else {}
+def _setting_key(run: RunResult) -> str:
+    return json.dumps(run.settings, sort_keys=True, default=str)
 
 
 def once_each(runs: list[RunResult]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
-    """The runs with one per (env, task, method, variant, seed) — the first in path order — and the
-    others, each with why: a run found twice (a run root and its archive given together, say) is
-    one seed, not two, and two configurations under one name are no seeds of one cell."""
-    kept: dict[tuple[str, str, str, str, int], RunResult] = {}
+    """The runs with one per (env, task, method, variant, seed, configuration) — the first in path
+    order — and the others, each with why: a run found twice (a run root and its archive given
+    together, say) is one seed, not two. Another configuration is another run (name_settings)."""
+    kept: dict[tuple[str, str, str, str, int, str], RunResult] = {}
     left: list[tuple[Path, str]] = []
     for r in runs:
-        first = kept.setdefault((r.env, r.task, r.method, r.variant, r.seed), r)
+        first = kept.setdefault((r.env, r.task, r.method, r.variant, r.seed, _setting_key(r)), r)
         if first is not r:
-            same = _config(first) == _config(r)
-            why = "the same run" if same else "the same env, task, method, variant and seed, another configuration"
-            left.append((r.path, f"{why} as `{first.path}`, which is the one counted"))
+            left.append((r.path, f"the same run as `{first.path}`, which is the one counted"))
     return list(kept.values()), left
+
+
+def _shown(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def name_settings(runs: list[RunResult]) -> None:
+    """Give each run of a cell (method, variant, env, task) that holds several configurations a
+    `setting` naming how it differs, so that no cell averages runs of different configurations:
+    the keys whose values differ in that cell, those where the run departs from its preset's
+    default ("distance=l2"; the preset itself when presets differ). A run at every default keeps
+    the plain row."""
+    cells: dict[tuple[str, str, str, str], list[RunResult]] = {}
+    for r in runs:
+        cells.setdefault((r.method, r.variant, r.env, r.task), []).append(r)
+    for cell in cells.values():
+        settings = [r.settings for r in cell]
+        keys = sorted({k for s in settings for k in s if any(o.get(k) != s.get(k) for o in settings)})
+        for r, s in zip(cell, settings, strict=True):
+            base = preset_defaults(r.config)
+            named = [k for k in keys if k == "preset" or base.get(k) != s.get(k)]
+            named.sort(key=lambda k: k != "preset")  # the preset first: the other values depart from it
+            r.setting = ", ".join(f"{k}={_shown(s.get(k))}" for k in named)
+
+
+def settings_note(runs: list[RunResult]) -> str:
+    """A line naming the rows split by configuration (empty when none is)."""
+    split = list(dict.fromkeys(r.label for r in sorted(runs, key=RunResult.order) if r.setting))
+    if not split:
+        return ""
+    return (
+        "Runs of one method and task whose configurations differ are not averaged: each configuration "
+        "has its row, named by the keys that differ where it departs from its preset's defaults: "
+        + ", ".join(split)
+        + "."
+    )
 
 
 def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str, Path]:
@@ -366,6 +411,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     skipped = [r for r in every if r.status != "finished"]
     runs, duplicates = once_each(runs)
     broken += duplicates
+    name_settings(runs)
     for r in list(runs):
         try:
             add_diagnostics(r)
@@ -388,6 +434,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
                 "task": r.task,
                 "method": r.method,
                 "variant": r.variant,
+                "setting": r.setting,
                 "seed": r.seed,
                 **{m: metric_value(r, m) for m, _, _ in METRICS},
                 **{f"visited_{m}": r.metrics.get(f"visited_{m}") for m in CORNER_METRICS},

@@ -1,18 +1,20 @@
 """`collie sweep`: methods × tasks × seeds of `collie train`, each run its own process (one torch
 thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADDRESS` is given.
 
-Resumable: a run folder whose summary.json says "finished" is not rerun (one made with another
-preset or other train flags, as its sweep_run.json records, is named in a warning); a run with a
+Resumable: a run folder whose summary.json says "finished" is not rerun unless the command asks
+only for more --epochs: then it is extended from its checkpoint as `collie train --resume --epochs N`
+would (one of another configuration is named in a warning with the keys that differ); a run with a
 checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
 SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
 already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a
-local sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a
-final checkpoint; rerunning the sweep resumes it). Folders:
+sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a final
+checkpoint; rerunning the sweep resumes it), on Ray through `ray.cancel` of each run's task. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`. After the runs, the report of OUT is written to OUT/report/.
 
     collie sweep --env point --tasks north,range --methods metra,collie --seeds 3 --out runs/sweep
     collie sweep --methods collie --variant additive --out runs/ablations -- --reward-form additive
+    collie sweep --task-file charger.toml --methods metra,collie --out runs/charger   # a task from a file
 """
 
 from __future__ import annotations
@@ -35,11 +37,16 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from collie.processes import end_with_parent
-from trainer.config import PRESETS
+from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object
+from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
+SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
+POLL_S = 0.5  # how often a wait looks up from a child process or the cluster (a stop asked, a Ray cancel)
+# how long a stopped run may take to write its final checkpoint (the rest of its epoch) and end
+STOP_WAIT_S = 300.0
 
 
 class Interrupted(RuntimeError):
@@ -51,10 +58,11 @@ class StoppedEarly(RuntimeError):
 
 
 class Stop:
-    """A local sweep told to end: no run starts after it, and each running child process gets one
-    SIGTERM, however many signals the sweep gets (children run in their own session, so a
-    terminal's Ctrl-C reaches only the sweep; a trainer's second signal would skip its final
-    checkpoint). Children also get SIGTERM if the sweep itself is killed."""
+    """A sweep (or a Ray task's run) told to end: no run starts after it, and each running child
+    process gets one SIGTERM, however many signals the sweep gets (children run in their own
+    session, so a terminal's Ctrl-C reaches only the sweep; a trainer's second signal would skip its
+    final checkpoint). Children also get SIGTERM if the sweep itself is killed. In a Ray worker the
+    stop is the sweep's `ray.cancel`, which raises KeyboardInterrupt in the task (`_wait`)."""
 
     def __init__(self) -> None:
         self.asked = threading.Event()
@@ -79,10 +87,27 @@ class Stop:
             proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death, **popen)
             self._running.add(proc)
         try:
-            return proc.wait()
+            return self._wait(proc)
         finally:
             with self._lock:
                 self._running.discard(proc)
+
+    def _wait(self, proc: subprocess.Popen) -> int:
+        """`proc`'s exit code, polled: Ray's cancellation of a task is a KeyboardInterrupt raised
+        between bytecodes, never inside a blocking wait. On it, `proc` is stopped as a signal to the
+        sweep would stop it, and waited for (StoppedEarly if it outlasts STOP_WAIT_S)."""
+        try:
+            while True:
+                try:
+                    return proc.wait(timeout=POLL_S)
+                except subprocess.TimeoutExpired:
+                    continue
+        except KeyboardInterrupt:
+            self.handle(signal.SIGINT, None)
+            try:
+                return proc.wait(timeout=STOP_WAIT_S)
+            except subprocess.TimeoutExpired:
+                raise StoppedEarly(f"pid {proc.pid} did not end {STOP_WAIT_S:.0f} s after its SIGTERM") from None
 
 
 @dataclass(frozen=True)
@@ -97,6 +122,7 @@ class RunSpec:
     flags: tuple[str, ...] = ()  # extra `collie train` flags
     downstream: bool = False
     downstream_flags: tuple[str, ...] = field(default=())
+    task_file: str = ""  # the file that defines `task` (`collie sweep --task-file`), absolute
 
 
 def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, variant: str = "") -> Path:
@@ -105,13 +131,19 @@ def run_folder(root: str | Path, env: str, task: str, method: str, seed: int, va
 
 
 def grid(
-    root: str | Path, env: str, tasks: list[str], methods: list[str], seeds: list[int], **kw: Any
+    root: str | Path,
+    env: str,
+    tasks: list[str],
+    methods: list[str],
+    seeds: list[int],
+    task_files: dict[str, str] | None = None,
+    **kw: Any,
 ) -> list[RunSpec]:
     """Every (task, method, seed) as a RunSpec under `root`, seed by seed (a sweep cut short still
-    holds whole comparisons)."""
-    variant = kw.get("variant", "")
+    holds whole comparisons); `task_files`: the file of each task that comes from one."""
+    variant, files = kw.get("variant", ""), task_files or {}
     return [
-        RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), **kw)
+        RunSpec(env, t, m, s, str(run_folder(root, env, t, m, s, variant)), task_file=files.get(t, ""), **kw)
         for s in seeds
         for t in tasks
         for m in methods
@@ -130,17 +162,70 @@ def is_finished(out: str | Path) -> bool:
         return False
 
 
+def intended_config(spec: RunSpec) -> dict[str, Any] | None:
+    """The config `collie train` makes of `spec`'s command (None if it would refuse it)."""
+    from trainer import cli as train_cli
+
+    parser = _TrainParser(prog="collie train")
+    train_cli.add_arguments(parser)
+    try:
+        return train_cli.config_from_args(parser.parse_args(train_argv(spec))).to_dict()
+    except (_Refusal, ValueError):
+        return None
+
+
+def config_change(spec: RunSpec) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+    """The keys in which the run in `spec.out` differs from what `spec`'s command would make (where
+    and how it ran aside: trainer.same_run.NOT_THE_RUN), and both configs, comparable; no keys if
+    either config is unknown."""
+    try:
+        made = run_config(Path(spec.out))
+    except RunFolderError:
+        return [], {}, {}
+    asked = intended_config(spec)
+    if not made or asked is None:
+        return [], {}, {}
+    return differing_keys(made, asked), comparable(made), comparable(asked)
+
+
+def extension(spec: RunSpec) -> tuple[int, int] | None:
+    """(its epochs, the new ones) for a finished run that only more --epochs would change and that
+    has the checkpoint to resume from: the sweep extends it, as `collie train --resume --epochs N`
+    does exactly; None otherwise."""
+    keys, made, asked = config_change(spec)
+    if keys != ["epochs"] or asked["epochs"] <= made["epochs"] or not (Path(spec.out) / "checkpoint.pt").is_file():
+        return None
+    return made["epochs"], asked["epochs"]
+
+
+def to_train(spec: RunSpec) -> bool:
+    """Not finished (or never begun), or finished and to be extended to more epochs."""
+    return not is_finished(spec.out) or extension(spec) is not None
+
+
 def made_otherwise(spec: RunSpec) -> str | None:
-    """How a run folder's recorded preset and train flags (sweep_run.json, written when it was
-    launched) differ from `spec`'s, as "--preset P -- FLAGS, not …"; None if they are the same or
-    there is no record. A finished run is not rerun, so new flags would silently not apply to it."""
+    """How a finished run that is not rerun differs from what `spec`'s command would make: its
+    recorded preset and train flags (sweep_run.json) against `spec`'s, then each differing key's
+    values; None if it is the same run or is extended. New flags would silently not apply to it."""
+    keys, made, asked = config_change(spec)
+    if not keys or extension(spec) is not None:
+        return None
+    values = "; ".join(f"{flag(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
+    values += f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
+    grew = keys == ["epochs"] and asked["epochs"] > made["epochs"]
+    return f"{recorded(spec)} ({values}{'; no checkpoint.pt to extend it from' if grew else ''})"
+
+
+def recorded(spec: RunSpec) -> str:
+    """ "--preset P -- FLAGS, not …": the run's recorded command (sweep_run.json) against `spec`'s,
+    or "another configuration" where there is no record or it reads the same."""
     try:
         made = read_json_object(Path(spec.out) / "sweep_run.json")
     except RunFolderError:
-        return None
+        return "another configuration"
     old_preset, old_flags = made.get("preset"), tuple(made.get("flags") or ())
     if (old_preset, old_flags) == (spec.preset, spec.flags):
-        return None
+        return "another configuration"
 
     def shown(preset: Any, flags: tuple[Any, ...]) -> str:
         return f"--preset {preset} -- {shlex.join(map(str, flags))}" if flags else f"--preset {preset}, no train flags"
@@ -160,6 +245,7 @@ def train_argv(spec: RunSpec) -> list[str]:
         spec.env,
         "--task",
         spec.task,
+        *(("--task-file", spec.task_file) if spec.task_file else ()),
         "--method",
         spec.method,
         "--preset",
@@ -206,7 +292,7 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
     out, stop = Path(spec.out), stop or Stop()
     if stop.asked.is_set():
         raise Interrupted("not started: the sweep was interrupted")
-    if not is_finished(out):
+    if to_train(spec):
         out.mkdir(parents=True, exist_ok=True)
         (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
         _call(train_command(spec), out.with_suffix(".log"), stop)
@@ -222,25 +308,29 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
 def run_all(
     specs: list[RunSpec], jobs: int = 1, ray_address: str | None = None, stop: Stop | None = None
 ) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
-    """Yield (spec, summary or the exception it raised) as runs end. Local: `jobs` runs at a time,
-    each a child process, ended early by `stop`. Ray: one task per run (1 CPU each) on the cluster
+    """Yield (spec, summary or the exception it raised) as runs end; `stop` ends them early. Local:
+    `jobs` runs at a time, each a child process. Ray: one task per run (1 CPU each) on the cluster
     at `ray_address`; the run folders must be on a file system the cluster's nodes share."""
+    stop = stop or Stop()
     if ray_address:
-        yield from _run_on_ray(specs, ray_address)
+        yield from _run_on_ray(specs, connect_ray(ray_address), stop)
         return
     with ThreadPoolExecutor(max(1, jobs)) as pool:
-        stop = stop or Stop()
         futures = {pool.submit(run_one, s, stop): s for s in specs}
         for fut in as_completed(futures):
             exc = fut.exception()
             yield futures[fut], (exc if isinstance(exc, Exception) else fut.result())
 
 
-def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+def connect_ray(address: str) -> Any:
+    """The `ray` module, connected to the cluster at `address` (once per process); RuntimeError
+    saying why not."""
     try:
         ray = importlib.import_module("ray")
     except ModuleNotFoundError as exc:
         raise RuntimeError("--ray needs the `ray` package on this machine and the cluster (pip install ray)") from exc
+    if ray.is_initialized():
+        return ray
     head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
     host, _, port = head.rpartition(":")
     if host and port.isdigit():  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
@@ -249,21 +339,49 @@ def _run_on_ray(specs: list[RunSpec], address: str) -> Iterator[tuple[RunSpec, d
         except OSError as exc:
             raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
     ray.init(address=address)
+    return ray
+
+
+def _run_on_ray(specs: list[RunSpec], ray: Any, stop: Stop) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
     remote = ray.remote(num_cpus=1)(run_one)
     pending = {remote.remote(s): s for s in specs}
-    while pending:
-        done, _ = ray.wait(list(pending), num_returns=1)
-        spec = pending.pop(done[0])
-        try:
-            yield spec, ray.get(done[0])
-        except Exception as exc:  # a failed run is reported, the others go on
-            yield spec, exc
+    while pending and not stop.asked.is_set():
+        done, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_S)  # a timeout: looks up for a stop
+        for ref in done:
+            yield _outcome(ray, ref, pending.pop(ref))
+    if pending:
+        yield from _stop_on_ray(ray, pending)
+
+
+def _stop_on_ray(ray: Any, pending: dict[Any, RunSpec]) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
+    """Cancel the runs left as a local sweep stops its own: a queued one never starts, a running one
+    gets KeyboardInterrupt in its worker, whose Stop hands its `collie train` one SIGTERM and waits
+    for its final checkpoint. Waits for them all, at most STOP_WAIT_S (and a margin for the news)."""
+    for ref in pending:
+        ray.cancel(ref, force=False)  # force would kill the worker, and Ray its trainer: no checkpoint
+    ray.wait(list(pending), num_returns=len(pending), timeout=STOP_WAIT_S + 30)
+    for ref, spec in pending.items():
+        yield _outcome(ray, ref, spec)
+
+
+def _outcome(ray: Any, ref: Any, spec: RunSpec) -> tuple[RunSpec, dict[str, Any] | Exception]:
+    """(spec, its summary or why not): a run cancelled before it started is Interrupted; one that
+    raised is its exception (StoppedEarly for a stopped training: Ray's error is a subclass)."""
+    try:
+        return spec, ray.get(ref, timeout=0)
+    except ray.exceptions.TaskCancelledError:
+        return spec, Interrupted("not started: the sweep was interrupted")
+    except ray.exceptions.GetTimeoutError:
+        return spec, StoppedEarly(f"{spec.out} did not end {STOP_WAIT_S:.0f} s after the sweep was interrupted")
+    except Exception as exc:  # a failed run is reported, the others go on
+        return spec, exc
 
 
 # ---- `collie sweep` ------------------------------------------------------------------------------
 # `collie` adds this to "unrecognized arguments" (collie/cli.py): a train flag given before --.
 UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
 DASHED_VALUE_OPTIONS = ("--downstream-flags",)  # its value is flags: `--downstream-flags "--kind zero_shot"`
+DEFAULT_TASKS = "north,range,hole_north"
 
 
 class _Refusal(Exception):
@@ -303,8 +421,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point", help=f"one of: {', '.join(ENV_NAMES)} (default: %(default)s)")
     p.add_argument(
         "--tasks",
-        default="north,range,hole_north",
-        help=f"comma-separated, of: {', '.join(task_names())} (default: %(default)s)",
+        default=None,
+        help=f"comma-separated, of: {', '.join(task_names())} or a --task-file's task (default: {DEFAULT_TASKS}) "
+        "— with --task-file and no --tasks, the files' tasks alone",
+    )
+    p.add_argument(
+        "--task-file",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a task rule from a file (docs/tasks.md), one task per file: its task joins the sweep's tasks "
+        "(repeat it for more files)",
     )
     p.add_argument(
         "--methods", default=",".join(METHODS), help=f"comma-separated, of: {', '.join(METHODS)} (default: %(default)s)"
@@ -327,7 +454,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
     p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
-    tasks, seeds = len(p.get_default("tasks").split(",")), p.get_default("seeds")
+    tasks, seeds = len(DEFAULT_TASKS.split(",")), p.get_default("seeds")
     p.epilog = (
         f"A bare `collie sweep` runs the full grid the defaults name: {len(METHODS)} methods × {tasks} tasks × "
         f"{seeds} seeds on {p.get_default('env')} at the {p.get_default('preset')} preset, "
@@ -345,22 +472,56 @@ def names(flag: str, given: str) -> tuple[list[str], str | None]:
     return listed, None
 
 
-def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> str | None:
+def file_tasks(files: list[str], env: str, layout_seed: int) -> tuple[dict[str, str], str | None]:
+    """{task name: its file, absolute} for each --task-file, each loaded once for `env` (as every
+    run will load it), or the first problem: a file `collie train` would refuse, one that registers
+    several tasks, two files defining one name."""
+    from collie.tasks.task_file import load_task_file
+
+    found: dict[str, str] = {}
+    for given in files:
+        path = str(Path(given).resolve())  # runs start elsewhere (a Ray node, another cwd)
+        try:
+            name = load_task_file(path, None, env, layout_seed=layout_seed).name
+        except ValueError as exc:  # TaskFileError: the file, the line or key, and why
+            several = "; pick one with --task"  # a Python file registering several: a sweep takes one per file
+            return found, f"--task-file {given}: {exc}".replace(several, "; a sweep takes one task per file")
+        if name in found:
+            return found, f"--task-file {given} defines task {name!r}, as --task-file {found[name]} does"
+        found[name] = path
+    return found, None
+
+
+def chosen_tasks(given: str | None, from_files: dict[str, str]) -> tuple[list[str], str | None]:
+    """The sweep's tasks: --tasks (default DEFAULT_TASKS, or none beside task files) and then each
+    file's task not named there; or the problem naming --tasks' empty entry."""
+    if given is None and from_files:
+        return list(from_files), None
+    tasks, empty = names("--tasks", given or DEFAULT_TASKS)
+    return list(dict.fromkeys([*tasks, *from_files])), empty
+
+
+def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from_files: dict[str, str]) -> str | None:
     """The first thing wrong with the sweep's arguments, found before any run is launched (a bad
     name would otherwise fail every run, each in its own process); None if there is none."""
     from collie.tasks import get_task, task_names
     from trainer.envs.registry import ENV_NAMES
 
-    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in task_names()]
+    known = [*task_names(), *from_files]
+    bad_methods, bad_tasks = [m for m in methods if m not in METHODS], [t for t in tasks if t not in known]
     if bad_methods:
         return f"unknown method(s) {', '.join(bad_methods)}; valid: {', '.join(METHODS)}"
     if args.env not in ENV_NAMES:
         return f"unknown --env {args.env!r}; valid: {', '.join(ENV_NAMES)}"
     if bad_tasks:
-        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(task_names())}"
+        return f"unknown task(s) {', '.join(bad_tasks)}; valid: {', '.join(known)} (or a task from a --task-file)"
     if args.preset not in PRESETS:
         return f"unknown --preset {args.preset!r}; valid: {', '.join(PRESETS)}"
-    for task in tasks:  # a known task on an env it has no geometry for (north on car, hazard on point)
+    if any(f == "--task-file" or f.startswith("--task-file=") for f in args.train_flags):
+        return (
+            "--task-file goes before --: `collie sweep --task-file FILE` runs the file's task (its runs alone get it)"
+        )
+    for task in (t for t in tasks if t not in from_files):  # one with no geometry for the env (north on car)
         try:
             get_task(task, args.env, layout_seed=args.first_seed)
         except ValueError as exc:
@@ -382,12 +543,28 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str]) -> s
     return None
 
 
+def say_what_finished_runs_get(specs: list[RunSpec]) -> None:
+    """A line for each finished run the sweep extends to more epochs, and a warning for each that
+    another configuration would not be rerun."""
+    for spec in (s for s in specs if is_finished(s.out)):
+        grows = extension(spec)
+        differs = made_otherwise(spec)
+        if grows:
+            print(f"{spec.out}: finished at {grows[0]} epochs; extended to {grows[1]} (resumed from its checkpoint)")
+        elif differs:
+            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    (methods, empty_method), (tasks, empty_task) = names("--methods", args.methods), names("--tasks", args.tasks)
+    from_files, wrong_file = file_tasks(args.task_file, args.env, args.first_seed)
+    (methods, empty_method), (tasks, empty_task) = (
+        names("--methods", args.methods),
+        chosen_tasks(args.tasks, from_files),
+    )
     methods, tasks = list(dict.fromkeys(methods)), list(dict.fromkeys(tasks))  # a name twice: one run folder
-    wrong = empty_method or empty_task or problem(args, methods, tasks)
+    wrong = empty_method or empty_task or wrong_file or problem(args, methods, tasks, from_files)
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
@@ -398,37 +575,41 @@ def run(args: argparse.Namespace) -> int:
         tasks,
         methods,
         list(range(args.first_seed, args.first_seed + args.seeds)),
+        from_files,
         preset=args.preset,
         variant=args.variant,
         flags=flags,
         downstream=args.downstream,
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
-    wrong = train_flags_problem([s for s in specs if not is_finished(s.out)])
+    wrong = train_flags_problem([s for s in specs if to_train(s)])
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
-    todo = sum(not is_finished(s.out) for s in specs)
-    for spec in specs:
-        differs = made_otherwise(spec) if is_finished(spec.out) else None
-        if differs:
-            print(f"warning: {spec.out} finished with {differs}; not rerun (remove it to rerun)", file=sys.stderr)
+    todo = sum(to_train(s) for s in specs)
+    say_what_finished_runs_get(specs)
     print(
         f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
         f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"
     )
     failed: list[tuple[RunSpec, Exception]] = []
     stop, before = Stop(), {}
-    if not args.ray:  # a Ray sweep's runs belong to the cluster; Ctrl-C ends only this client
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
-                before[sig] = signal.signal(sig, stop.handle)
+    try:
+        if args.ray:  # before our handlers: ray.init puts its own over SIGTERM's
+            connect_ray(args.ray)
+    except RuntimeError as exc:
+        print(f"collie sweep: error: {exc}", file=sys.stderr)
+        return 2
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # Ray's runs too: each is cancelled, and stops
+        if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
+            before[sig] = signal.signal(sig, stop.handle)
     try:
         with tqdm(total=len(specs), desc="sweep", unit="run") as bar:
             for spec, result in run_all(specs, args.jobs, args.ray, stop):
                 if isinstance(result, Exception):
                     failed.append((spec, result))
-                bar.update(1)
+                if not (stop.asked.is_set() and isinstance(result, Interrupted | StoppedEarly)):
+                    bar.update(1)  # done: finished or failed, not stopped by us or never started
     except RuntimeError as exc:  # the engine itself could not start
         print(f"collie sweep: error: {exc}", file=sys.stderr)
         return 2

@@ -41,10 +41,15 @@ def test_an_archived_run_reports_as_the_run_itself_without_its_checkpoint_or_rep
     for name in ("summary.json", "eval_latest.npz"):
         (other / name).write_bytes((source / name).read_bytes())
     summary = json.loads((other / "summary.json").read_text())
+    summary["config"] |= {"out": str(other), "threads": 2}  # the same run, from another folder
+    (other / "summary.json").write_text(json.dumps(summary))
+    assert main(["archive", str(other), "--out", str(kept)]) == 0
+    assert json.loads((out / "summary.json").read_text())["config"]["out"] == str(other)
     summary["config"]["seed"] = 7
     (other / "summary.json").write_text(json.dumps(summary))
     assert main(["archive", str(other), "--out", str(kept)]) == 2
-    assert "holds another run of that name" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"{out} holds another run of that name (seed 0 archived, 7 here); remove it first" in err
 
 
 @pytest.mark.parametrize(
@@ -107,3 +112,28 @@ def test_an_unreadable_summary_is_named_and_left_out_and_given_alone_is_a_one_li
     assert main(["archive", str(broken.parent), "--out", str(kept)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"collie archive: error: {broken}: {why}") and len(err.strip().splitlines()) == 1
+
+
+def test_a_run_that_clashes_with_the_archive_is_named_with_what_differs_and_the_others_are_archived(tmp_path, capsys):
+    from trainer.config import make_config
+
+    sweep, kept = tmp_path / "runs", tmp_path / "results"
+    for seed in (0, 1):
+        d = sweep / f"point-north-metra-s{seed}"
+        d.mkdir(parents=True)
+        cfg = make_config("cpu", "point", method="metra", seed=seed, out=str(d)).to_dict()
+        (d / "summary.json").write_text(json.dumps({"status": "finished", "config": cfg}))
+        (d / "eval_latest.npz").write_bytes(b"saved")
+    held = kept / "point-north-metra-s0"
+    held.mkdir(parents=True)
+    cfg = make_config("cpu", "point", method="metra", seed=0, epochs=40, hidden=64).to_dict()
+    (held / "summary.json").write_text(json.dumps({"status": "finished", "config": cfg}))
+    assert main(["archive", str(sweep), "--out", str(kept)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"collie archive: error: {held} holds another run of that name "
+        "(epochs 40 archived, 400 here; hidden 64 archived, 256 here); remove it first"
+    ) in err
+    assert f"collie archive: 1 of 2 runs not archived: {sweep / 'point-north-metra-s0'}" in err
+    assert (kept / "point-north-metra-s1" / "eval_latest.npz").read_bytes() == b"saved"  # archived all the same
+    assert not (held / "eval_latest.npz").exists()  # the clash left as it was

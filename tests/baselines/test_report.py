@@ -11,14 +11,26 @@ from trainer.report import format_cell, write_report
 
 
 def fake_run(
-    root, env, task, method, seed, cov, status="finished", variant="", downstream=None, corner_cov=None, corner=True
+    root,
+    env,
+    task,
+    method,
+    seed,
+    cov,
+    status="finished",
+    variant="",
+    downstream=None,
+    corner_cov=None,
+    corner=True,
+    config=None,
 ):
     """A finished run folder. Its corner-rule figures equal the headline ones unless `corner_cov` is
-    given; `corner=False` writes none (a run from before the corner rule)."""
+    given; `corner=False` writes none (a run from before the corner rule); `config`: more of its
+    config (a whole one, from make_config, for instance)."""
     name = f"{env}-{task}-{method}{'+' + variant if variant else ''}-s{seed}"
     d = root / name
     d.mkdir(parents=True)
-    cfg = {"env": env, "task": task, "method": method, "seed": seed}
+    cfg = {**(config or {}), "env": env, "task": task, "method": method, "seed": seed}
     scores = {
         "safe_coverage": cov,
         "safe_ratio": 0.5 + seed / 10,
@@ -216,21 +228,49 @@ def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, c
     assert err.startswith(f"collie report: error: {cut}: not a readable .npz") and len(err.strip().splitlines()) == 1
 
 
-def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_is_named(tmp_path):
+def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_is_its_own_row(tmp_path):
     from trainer.report import write_report
 
     run = fake_run(tmp_path / "runs", "point", "north", "oracle", 0, 9.0)
     fake_run(tmp_path / "runs", "point", "north", "oracle", 1, 7.0)
     shutil.copytree(run, tmp_path / "archive" / run.name)  # the run and its archive, given together
-    other = fake_run(tmp_path / "older", "point", "north", "oracle", 0, 1.0)
-    summary = json.loads((other / "summary.json").read_text())
-    summary["config"]["epochs"] = 12  # another configuration under the same name
-    (other / "summary.json").write_text(json.dumps(summary))
+    other = fake_run(tmp_path / "older", "point", "north", "oracle", 0, 1.0, config={"epochs": 12})
     roots = [tmp_path / "archive", tmp_path / "runs", tmp_path / "older"]
     text = write_report(roots, tmp_path / "report", figures=False)["markdown"].read_text()
-    assert "2 finished runs; seeds per cell: 2." in text and "| Oracle | 8.00 ± 1.41 |" in text
+    assert "3 finished runs; seeds per cell: 1, 2." in text and "| Oracle | 8.00 ± 1.41 |" in text
     assert f"`{run}` (the same run as `{tmp_path / 'archive' / run.name}`, which is the one counted)" in text
-    assert f"`{other}` (the same env, task, method, variant and seed, another configuration as" in text
+    assert "| Oracle (epochs=12) | 1.00 |" in text and str(other) not in text
+
+
+def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_path):
+    """The researcher's mix: METRA at `--preset cpu --epochs 40` (seeds 0, 1) and a smoke seed 2,
+    COLLIE beside COLLIE-L2; where and how a run ran (its folder, threads) is no difference."""
+    from trainer.config import make_config
+
+    def config(preset, method, **more):
+        return make_config(preset, "point", method=method, **more).to_dict()
+
+    sw, mix = tmp_path / "sw", tmp_path / "mix"
+    for seed, cov in enumerate([10.0, 20.0]):
+        fake_run(sw, "point", "north", "metra", seed, cov, config=config("cpu", "metra", epochs=40, out=f"sw/{seed}"))
+        fake_run(sw, "point", "north", "collie", seed, 30.0 + seed, config=config("cpu", "collie", threads=seed))
+    fake_run(mix, "point", "north", "metra", 2, 99.0, config=config("smoke", "metra"))
+    fake_run(mix, "point", "north", "collie", 0, 5.0, config=config("cpu", "collie", distance="l2"))
+    fake_run(mix, "point", "range", "metra", 0, 7.0, config=config("smoke", "metra"))  # alone in its cell
+    text = write_report([sw, mix], tmp_path / "report", figures=False)["markdown"].read_text()
+    table = text.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    assert table.strip().splitlines()[2:] == [
+        "| METRA | – | 7.00 |",
+        "| METRA (preset=cpu, epochs=40) | 15.00 ± 7.07 | – |",
+        "| METRA (preset=smoke) | 99.00 | – |",
+        "| COLLIE | 30.50 ± 0.71 | – |",  # threads 0 and 1: one configuration
+        "| COLLIE (distance=l2) | 5.00 | – |",
+    ]
+    assert "configurations differ are not averaged" in text
+    assert "METRA (preset=cpu, epochs=40), METRA (preset=smoke), COLLIE (distance=l2)." in text
+    rows = list(csv.DictReader((tmp_path / "report" / "metrics.csv").read_text().splitlines()))
+    cov = {r["label"]: (r["setting"], r["n"]) for r in rows if r["metric"] == "safe_coverage"}
+    assert cov["COLLIE (distance=l2)"] == ("distance=l2", "1") and cov["COLLIE"] == ("", "2")
 
 
 def test_a_run_folder_without_its_final_skills_is_in_the_tables_not_the_figures(tmp_path):

@@ -1,6 +1,8 @@
 """`collie sweep`: finished runs are not rerun, interrupted ones resume, folders name their runs."""
 
+import argparse
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -115,12 +117,23 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     assert again.returncode == 0 and "1 already finished" in again.stdout
     assert summary.stat().st_mtime_ns == stamp
     assert "warning" not in again.stderr  # the same flags: nothing to say
-    other = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
-    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # still not rerun, but said so:
+    run = tmp_path / "point-north-lsd-s1"
+    longer = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
+    assert longer.returncode == 0, longer.stderr
+    assert f"{run}: finished at 2 epochs; extended to 4 (resumed from its checkpoint)" in longer.stdout
+    assert json.loads(summary.read_text())["epochs_done"] == 4 and "0 already finished" in longer.stdout
+    epochs = [json.loads(line)["epoch"] for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert epochs == sorted(set(epochs)), epochs  # continued, not trained again from epoch 0
+    stamp = summary.stat().st_mtime_ns
+    other = subprocess.run([*cmd[:-1], "4", "--hidden", "32"], capture_output=True, text=True, timeout=300)
+    assert other.returncode == 0 and summary.stat().st_mtime_ns == stamp  # not rerun, but said so:
     assert (
-        f"warning: {tmp_path / 'point-north-lsd-s1'} finished with --preset smoke -- --epochs 2, "
-        "not --preset smoke -- --epochs 4; not rerun (remove it to rerun)"
+        f"warning: {run} finished with --preset smoke -- --epochs 4, not --preset smoke -- --epochs 4 --hidden 32 "
+        "(--hidden 64, not 32); not rerun (remove it to rerun)"
     ) in other.stderr
+    shorter = subprocess.run(cmd, capture_output=True, text=True, timeout=300)  # -- --epochs 2
+    assert shorter.returncode == 0 and summary.stat().st_mtime_ns == stamp
+    assert "(--epochs 4, not 2); not rerun (remove it to rerun)" in shorter.stderr
 
 
 @pytest.mark.parametrize(
@@ -143,6 +156,10 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
             ["--methods", "lsd", "--", "--bogus"],
             "collie train would refuse lsd on north (--bogus): unrecognized arguments",
         ),
+        (["--tasks", "charger"], "unknown task(s) charger; valid: north, right, range,"),
+        (["--task-file", "{file}"], "--task-file {file}: task file {file}: expected a .toml, .json or .py file, got"),
+        (["--task-file", "{file}.toml"], "--task-file {file}.toml: task file {file}.toml: no such file"),
+        (["--methods", "lsd", "--", "--task-file", "{file}"], "--task-file goes before --: `collie sweep --task-file"),
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
@@ -253,6 +270,64 @@ def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_othe
             proc.kill()
     assert proc.returncode == 130, err
     assert "collie sweep: interrupted; 1 run(s) stopped, 2 not started; rerun the same command to resume" in err
+    assert re.findall(r"\| (\d)/3 \[", err)[-1] == "0", err  # the progress bar counts no run as done
     assert json.loads((first / "summary.json").read_text())["status"] == "interrupted"
     assert (first / "checkpoint.pt").exists()
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == [first.name]  # seeds 1 and 2 never began
+
+
+CHARGER = """\
+name = "charger"
+description = "Stay near the charger at (0, 0)."
+[[regions]]
+kind = "outside_disc"
+desirability = "bad"
+centre = [0, 0]
+radius = 15
+"""
+
+
+def test_a_sweep_runs_a_task_from_a_file_given_by_a_relative_path(tmp_path):
+    (tmp_path / "charger.toml").write_text(CHARGER)
+    cmd = sweep_command("runs", "--task-file", "charger.toml", "--methods", "metra", "--seeds", "1", "--jobs", "1")
+    done = subprocess.run([*cmd, "--", "--epochs", "1"], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0 and done.stdout.startswith("1 runs"), done.stdout + done.stderr
+    run = tmp_path / "runs" / "point-charger-metra-s0"
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["config"]["task"] == "charger"
+    assert json.loads((run / "task.json").read_text())["definition"]["name"] == "charger"
+
+
+def test_task_files_are_checked_before_any_run_starts(tmp_path, capsys, monkeypatch):
+    from collie.cli import main
+
+    launched = []
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: launched.append(cmd) or 1)
+    (tmp_path / "charger.toml").write_text(CHARGER)
+    (tmp_path / "also.json").write_text(json.dumps({"name": "charger", "description": "d", "regions": []}))
+    two = "from collie.tasks import Task, register_task\n"
+    two += "".join(f"register_task('{n}')(lambda env: Task('{n}', 'd'))\n" for n in ("sw_a_test", "sw_b_test"))
+    (tmp_path / "two.py").write_text(two)
+    argv = ["sweep", "--methods", "metra", "--seeds", "1", "--out", str(tmp_path / "runs")]
+    assert main([*argv, "--task-file", str(tmp_path / "charger.toml"), "--task-file", str(tmp_path / "also.json")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: --task-file {tmp_path / 'also.json'} defines task 'charger', as --task-file " in err
+    assert main([*argv, "--task-file", str(tmp_path / "two.py")]) == 2
+    assert "registers sw_a_test, sw_b_test; a sweep takes one task per file" in capsys.readouterr().err
+    assert main([*argv, "--task-file", str(tmp_path / "charger.toml"), "--tasks", "charger,nort"]) == 2
+    assert "unknown task(s) nort;" in capsys.readouterr().err
+    assert launched == [] and not (tmp_path / "runs").exists()
+
+
+def test_a_task_file_joins_the_tasks_given_and_only_its_runs_read_it(tmp_path):
+    (tmp_path / "charger.toml").write_text(CHARGER)
+    parser = argparse.ArgumentParser()
+    sweep.add_arguments(parser)
+    args = parser.parse_args(["--tasks", "north", "--task-file", str(tmp_path / "charger.toml")])
+    found, wrong = sweep.file_tasks(args.task_file, "point", 0)
+    tasks, _ = sweep.chosen_tasks(args.tasks, found)
+    assert wrong is None and tasks == ["north", "charger"]
+    specs = grid(tmp_path, "point", tasks, ["metra"], [0], found)
+    assert "--task-file" not in sweep.train_argv(specs[0])
+    assert sweep.train_argv(specs[1])[3:7] == ["charger", "--task-file", str(tmp_path / "charger.toml"), "--method"]
+    assert sweep.train_flags_problem(specs) is None  # `collie train` takes both commands

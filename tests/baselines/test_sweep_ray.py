@@ -12,7 +12,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -68,3 +68,53 @@ def test_sweep_on_a_ray_cluster_runs_every_run_and_a_rerun_skips_them(ray_head: 
     assert again.returncode == 0, again.stderr[-2000:]
     assert "2 runs, 2 already finished" in again.stdout
     assert {run: run.with_suffix(".log").stat().st_size for run in runs} == logs  # nothing trained again
+
+
+def epochs_logged(run: Path) -> list[int]:
+    metrics = run / "metrics.jsonl"
+    return [json.loads(line)["epoch"] for line in metrics.read_text().splitlines()] if metrics.exists() else []
+
+
+def interrupt_when(address: str, out: Path, ready: Callable[[], bool]) -> tuple[int, str]:
+    """Start a Ray sweep of three endless point runs (two at a time on the head's 2 CPUs), Ctrl-C
+    it twice once `ready()`, and return its exit code and stderr."""
+    cmd = [sys.executable, "-m", "collie.cli", "sweep", "--ray", address, "--env", "point", "--tasks", "north"]
+    cmd += ["--methods", "metra", "--seeds", "3", "--preset", "smoke", "--out", str(out), "--no-report", "--"]
+    cmd += ["--epochs", "100000", "--eval-every", "1", "--checkpoint-every", "100000"]  # no checkpoint but the last
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 240
+        while not ready():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail(proc.communicate()[1][-3000:])
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGINT)  # twice: each training still gets one SIGTERM, and checkpoints
+        _, err = proc.communicate(timeout=240)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, err
+
+
+def test_an_interrupted_ray_sweep_stops_its_runs_with_a_checkpoint_and_a_rerun_resumes_them(
+    ray_head: str, tmp_path: Path
+) -> None:
+    runs = [tmp_path / f"point-north-metra-s{seed}" for seed in (0, 1)]
+    code, err = interrupt_when(ray_head, tmp_path, lambda: all(len(epochs_logged(r)) >= 2 for r in runs))
+    assert code == 130, err[-3000:]
+    assert "collie sweep: interrupted; 2 run(s) stopped, 1 not started; rerun the same command to resume" in err
+    first = {}
+    for run in runs:  # each training got its SIGTERM: a final checkpoint, not a killed process
+        summary = json.loads((run / "summary.json").read_text())
+        assert summary["status"] == "interrupted" and (run / "checkpoint.pt").exists(), summary
+        first[run] = summary["epochs_done"]
+    assert not (tmp_path / "point-north-metra-s2").exists()  # queued, cancelled, never started
+
+    code, err = interrupt_when(ray_head, tmp_path, lambda: all(max(epochs_logged(r)) > first[r] for r in runs))
+    assert code == 130, err[-3000:]
+    for run in runs:  # resumed from the checkpoint: its epochs go on from where it stopped
+        assert json.loads((run / "summary.json").read_text())["epochs_done"] > first[run]
+        assert epochs_logged(run) == sorted(set(epochs_logged(run))), epochs_logged(run)
