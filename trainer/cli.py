@@ -193,15 +193,14 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     run_id = args.run_id
     if run_id is None and memo.exists():
         try:
-            held = int(read_json_object(memo)["run_id"])
+            run_id = int(read_json_object(memo)["run_id"])
         except (ValueError, KeyError, TypeError) as exc:  # RunFolderError is a ValueError
             raise ValueError(f"{memo} is damaged ({exc}); give the run's --run-id") from None
         if not args.resume:  # a trainer that died before its first checkpoint: a new run would orphan it
             raise ValueError(
-                f"{cfg.out} belongs to run {held} of the service but holds no checkpoint: give --run-id {held} to "
-                f"train it again from epoch 0 (its labels are kept), or remove {memo} to create a new run"
+                f"{cfg.out} belongs to run {run_id} of the service but holds no checkpoint: give --run-id {run_id} "
+                f"to train it again from epoch 0 (its labels are kept), or remove {memo} to create a new run"
             )
-        run_id = held
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
