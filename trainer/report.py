@@ -23,8 +23,9 @@ each configuration has its own row, named by the keys that differ ("COLLIE (dist
 
 Coverage cells use the reference's corner bin rule (the `corner_*` figures every run logs), as the
 paper's tables do, and where the paper published a cell (`trainer/paper_results.py`: Ant,
-HalfCheetah, Quadruped, Humanoid) its number stands in a "(paper)" column beside ours. A run that
-predates the corner figures shows its headline (visited-rule) value, marked †.
+HalfCheetah, Quadruped, Humanoid) its number stands in a "(paper)" column beside ours;
+`--bin-rule visited` shows the visited-rule figures instead. A run without figures by the chosen
+rule (one that predates the corner figures) shows its headline value, marked †.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from collie.tasks import Task
-from trainer.metrics import off_start_safe_ratio, standing_share
+from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.run_files import RunFolderError, read_arrays, read_json_object
 from trainer.same_run import PLACED, comparable, preset_defaults
@@ -64,7 +65,7 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("standing_share", "Share of the skills ending within one unit of their start (a diagnostic)", 2),
 )
 CORNER_METRICS = ("safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage")
-VISITED_MARK = "†"  # a cell with a run that logged no corner-rule figures
+HEADLINE_MARK = "†"  # a cell with a run that logged no figures by the report's bin rule (its headline shown)
 METHOD_ORDER = ("oracle", "diayn", "lsd", "metra", "ddg", "dodont", "collie")
 DISPLAY = {
     "oracle": "Oracle",
@@ -90,6 +91,7 @@ class RunResult:
     downstream: dict[str, Any] = field(default_factory=dict)
     config: dict[str, Any] = field(default_factory=dict)
     setting: str = ""  # how its configuration differs from others in its cell ("distance=l2"; name_settings)
+    bin_rule: str = "corner"  # the rule of the coverage figures shown (collie report --bin-rule)
 
     @property
     def label(self) -> str:
@@ -206,10 +208,15 @@ def _group(runs: list[RunResult]) -> dict[tuple[str, str], list[RunResult]]:
 
 
 def metric_value(r: RunResult, metric: str) -> float:
-    """The run's final `metric`: by the corner bin rule for coverage metrics (as the paper)."""
-    if metric in CORNER_METRICS and f"corner_{metric}" in r.metrics:
-        return r.metrics[f"corner_{metric}"]
+    """The run's final `metric`: coverage metrics by the report's bin rule (corner, as the paper,
+    unless --bin-rule visited), else, for a run without that rule's figures, its headline."""
+    if has_rule_figure(r, metric):
+        return r.metrics[f"{r.bin_rule}_{metric}"]
     return r.metrics.get(metric, math.nan)
+
+
+def has_rule_figure(r: RunResult, metric: str) -> bool:
+    return metric in CORNER_METRICS and f"{r.bin_rule}_{metric}" in r.metrics
 
 
 def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
@@ -220,8 +227,8 @@ def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
     paper_columns: set[str] = set()
     for (label, col), g in _group(runs).items():
         cell = format_cell([metric_value(r, metric) for r in g], digits)
-        visited = metric in CORNER_METRICS and any(f"corner_{metric}" not in r.metrics for r in g)
-        cells[(label, col)] = cell + (VISITED_MARK if visited and cell != "–" else "")
+        headline = metric in CORNER_METRICS and not all(has_rule_figure(r, metric) for r in g)
+        cells[(label, col)] = cell + (HEADLINE_MARK if headline and cell != "–" else "")
         paper = paper_cell(metric, g[0].env, g[0].task, g[0].method) if not g[0].variant else None
         if paper is not None:
             cells[(label, f"{col} (paper)")] = f"{paper[0]:.{digits}f} ± {paper[1]:.{digits}f}"
@@ -330,9 +337,7 @@ def markdown(
     )
     parts = [
         f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
-        "Cells: mean ± sample std over seeds of each run's final evaluation; coverage by the reference's "
-        f"corner bin rule (as the paper; {VISITED_MARK}: a run without corner figures, shown by the visited rule)."
-        + paper
+        "Cells: mean ± sample std over seeds of each run's final evaluation; " + rule_note(runs) + paper
     ]
     if settings_note(runs):
         parts.append(settings_note(runs))
@@ -402,8 +407,15 @@ def settings_note(runs: list[RunResult]) -> str:
     )
 
 
-def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str, Path]:
-    """Find the runs under `roots`, write report.md, metrics.csv, runs.csv and figures into `out`."""
+def rule_note(runs: list[RunResult]) -> str:
+    rule = runs[0].bin_rule if runs else "corner"
+    said = "the reference's corner bin rule (as the paper)" if rule == "corner" else "the visited bin rule (--bin-rule)"
+    return f"coverage by {said}; {HEADLINE_MARK}: a run without {rule}-rule figures, shown by its headline rule."
+
+
+def write_report(roots: list[Path], out: Path, figures: bool = True, bin_rule: str = "corner") -> dict[str, Path]:
+    """Find the runs under `roots`, write report.md, metrics.csv, runs.csv and figures into `out`;
+    coverage by `bin_rule` (corner as the paper's tables, or visited: each run's logged headline)."""
     found, unreadable = find_runs(roots)
     every = [r for r in found if out not in r.path.parents]
     broken = [(path, why) for path, why in unreadable if out not in path.parents]
@@ -412,6 +424,8 @@ def write_report(roots: list[Path], out: Path, figures: bool = True) -> dict[str
     runs, duplicates = once_each(runs)
     broken += duplicates
     name_settings(runs)
+    for r in runs:
+        r.bin_rule = bin_rule
     for r in list(runs):
         try:
             add_diagnostics(r)
@@ -450,6 +464,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("roots", nargs="+", help="folders holding run folders (searched recursively)")
     p.add_argument("--out", default=None, help="report folder (default: FIRST_ROOT/report)")
     p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.add_argument(
+        "--bin-rule",
+        choices=BIN_RULES,
+        default="corner",
+        help="coverage by the reference's corner rule (default, as the paper's tables) or the visited rule",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -470,7 +490,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie report: error: {exc}", file=sys.stderr)
                 return 2
     out = Path(args.out) if args.out else roots[0] / "report"
-    paths = write_report(roots, out, figures=not args.no_figures)
+    paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
     print((out / "report.md").read_text())
     print(f"written: {', '.join(str(p) for p in paths.values())}")
     return 0

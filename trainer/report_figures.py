@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
-from trainer.report import VISITED_MARK, RunResult, metric_value, run_task
+from trainer.report import HEADLINE_MARK, RunResult, has_rule_figure, metric_value, run_task
 from trainer.run_files import read_arrays
 
 MAX_COLUMNS = 4  # panels per row
@@ -73,8 +73,8 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
             xy, skill = final_skills(run)
             task = run_task(run)
             ax = fig.add_subplot(rows, cols, i + 1)
-            cov = metric_value(run, "safe_coverage")  # the tables' value: corner rule where logged
-            mark = "" if "corner_safe_coverage" in run.metrics else VISITED_MARK
+            cov = metric_value(run, "safe_coverage")  # the tables' value: by the report's rule where logged
+            mark = "" if has_rule_figure(run, "safe_coverage") else HEADLINE_MARK
             draw_skill_panel(
                 ax,
                 list(xy),

@@ -3,6 +3,7 @@
 import csv
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,13 +99,16 @@ def test_collie_report_cli(tmp_path, capsys):
     from trainer import report
 
     fake_run(tmp_path, "point", "north", "oracle", 0, 9.0)
-    args = argparse.Namespace(roots=[str(tmp_path)], out=None, no_figures=True)
-    assert report.run(args) == 0
+
+    def args(root: Path) -> argparse.Namespace:
+        return argparse.Namespace(roots=[str(root)], out=None, no_figures=True, bin_rule="corner")
+
+    assert report.run(args(tmp_path)) == 0
     assert "| Oracle | 9.00 |" in capsys.readouterr().out
     assert '"(paper)" columns' not in (tmp_path / "report" / "report.md").read_text()  # the paper has no point mass
-    assert report.run(argparse.Namespace(roots=[str(tmp_path / "nope")], out=None, no_figures=True)) == 2
+    assert report.run(args(tmp_path / "nope")) == 2
     (tmp_path / "empty").mkdir()
-    assert report.run(argparse.Namespace(roots=[str(tmp_path / "empty")], out=None, no_figures=True)) == 2
+    assert report.run(args(tmp_path / "empty")) == 2
     assert f"no run folder (none has summary.json) under {tmp_path / 'empty'}" in capsys.readouterr().err
     assert not (tmp_path / "empty" / "report").exists()
 
@@ -126,6 +130,12 @@ def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
     runs_csv = list(csv.DictReader((tmp_path / "report" / "runs.csv").read_text().splitlines()))
     row = next(r for r in runs_csv if r["method"] == "collie" and r["env"] == "ant" and r["seed"] == "0")
     assert float(row["safe_coverage"]) == 950.0 and float(row["visited_safe_coverage"]) == 900.0
+    assert "coverage by the reference's corner bin rule (as the paper)" in md
+
+    visited = write_report([runs], tmp_path / "visited", figures=False, bin_rule="visited")["markdown"].read_text()
+    table = visited.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    assert "| COLLIE | 950.00 ± 70.71 |" in table  # the visited figures: 900, 1000
+    assert "| METRA | -10.00† |" in table and "coverage by the visited bin rule (--bin-rule)" in visited
 
 
 def test_report_shows_the_safe_ratio_outside_the_start_bins_for_2d_bodies(tmp_path):
