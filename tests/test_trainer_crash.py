@@ -1,12 +1,14 @@
 """kill -9 of a trainer while it waits for labels, then a restart: it resumes from its checkpoint,
 rebuilds D0/D1/D2 from the service, and finishes — no label lost, none applied twice."""
 
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -36,6 +38,21 @@ def wait_until(pred, timeout_s: float = 180.0) -> None:
     raise TimeoutError("condition not reached")
 
 
+@contextlib.contextmanager
+def running_service(tmp_path: Path) -> Iterator[str]:
+    """`collie serve` on a SQLite file in tmp_path; yields its URL, stops it after."""
+    info = tmp_path / "service.json"
+    service = cli(
+        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
+    )
+    try:
+        wait_until(info.exists)
+        yield json.loads(info.read_text())["api"]
+    finally:
+        service.terminate()
+        service.wait(timeout=30)
+
+
 def waits_and_sessions(client: CollieClient, run_id: int) -> tuple[list[int], dict[int, int]]:
     """The epochs at which the trainer reported waiting for labels, and each session's epoch."""
     waits, sessions, after = [], {}, 0
@@ -53,13 +70,7 @@ def waits_and_sessions(client: CollieClient, run_id: int) -> tuple[list[int], di
 def test_a_trainer_stopped_while_waiting_for_labels_resumes_in_that_wait(tmp_path, sig):
     """kill -9 resumes from the last periodic checkpoint (the epoch before), SIGTERM from its final
     one, written in the wait: either way the session is asked again at its own epoch, never later."""
-    info = tmp_path / "service.json"
-    service = cli(
-        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
-    )
-    try:
-        wait_until(info.exists)
-        api = json.loads(info.read_text())["api"]
+    with running_service(tmp_path) as api:
         out = tmp_path / "trainer"
         train = [
             "train",
@@ -108,22 +119,13 @@ def test_a_trainer_stopped_while_waiting_for_labels_resumes_in_that_wait(tmp_pat
         assert applied == in_db and len(applied) == ckpt["config"]["total_queries"]
         assert ckpt["epoch"] == ckpt["config"]["epochs"] and ckpt["asking"] is None
         assert set(waits) == set(sessions.values()), f"waited at epochs {waits}; sessions asked at {sessions}"
-    finally:
-        service.terminate()
-        service.wait(timeout=30)
 
 
 def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_path):
     """No checkpoint since the start (as after a crash): the restarted trainer replays from epoch 0,
     reaches the sessions it posted before and gets them back — one session per position, the label
     given before the kill applied, the budget not spent twice."""
-    info = tmp_path / "service.json"
-    service = cli(
-        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
-    )
-    try:
-        wait_until(info.exists)
-        api = json.loads(info.read_text())["api"]
+    with running_service(tmp_path) as api:
         out = tmp_path / "trainer"
         train = ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--no-progress"]
         trainer = cli(*train, "--checkpoint-every", "100", log=tmp_path / "trainer.log")
@@ -165,21 +167,12 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
         total = ckpt["config"]["total_queries"]
         assert applied == in_db and len(applied) == total == len(asked)  # every query asked was used
         assert applied[given] == 2
-    finally:
-        service.terminate()
-        service.wait(timeout=30)
 
 
 def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
     """An operator revokes the token of a trainer waiting for labels: it ends with one line (no
     traceback) and a checkpoint in the wait, and an operator's token resumes the run to its end."""
-    info = tmp_path / "service.json"
-    service = cli(
-        "serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(info), log=tmp_path / "service.log"
-    )
-    try:
-        wait_until(info.exists)
-        api = json.loads(info.read_text())["api"]
+    with running_service(tmp_path) as api:
         out, log = tmp_path / "trainer", tmp_path / "trainer.log"
         train = [
             "train",
@@ -213,6 +206,3 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
             assert resumed.wait(timeout=300) == 0, log.read_text()[-3000:]
             teacher.wait(timeout=60)
             assert operator.run(run_id).status == "finished"
-    finally:
-        service.terminate()
-        service.wait(timeout=30)
