@@ -9,20 +9,24 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 from collections import Counter, defaultdict, deque
 
 import anyio
 from sqlalchemy import select
+from sqlalchemy.exc import DBAPIError
 
 from backend.db import Database
 from backend.models import Run
 from backend.services import events
+from backend.services.errors import first_line
 from backend.services.events import EventHub
 from collie.schemas import StreamEvent
 
 MAX_QUEUED = 2000  # frames a subscriber may fall behind before it re-reads the log itself
 
 Frame = tuple[int, str]  # (event id, SSE text)
+log = logging.getLogger("collie.service")
 
 
 def sse_frame(event: StreamEvent) -> str:
@@ -118,25 +122,43 @@ class StreamFeed:
     # ---------------------------------------------------------------- the one reader
 
     async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
-        polled = loop.time()
+        """Reads on through a database outage: one line when it starts, one when it ends; nothing
+        is lost meanwhile (the poll of the runs' last ids finds what the failed reads missed)."""
+        polled, failing = asyncio.get_running_loop().time(), False
         while True:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), max(0.0, polled + self.poll_s - loop.time()))
-            self._wake.clear()
-            woken, self._woken = self._woken, set()
-            watched = dict(self._cursor)
-            if watched and loop.time() >= polled + self.poll_s:  # which runs did other processes write to?
-                latest = await anyio.to_thread.run_sync(self._last_ids, list(watched))
-                woken |= {run_id for run_id, last in latest.items() if last > watched[run_id]}
-            if loop.time() >= polled + self.poll_s:
-                polled = loop.time()
-            for run_id in woken & set(watched):
-                page = await anyio.to_thread.run_sync(self._read, run_id, watched[run_id])
-                self._dispatch(run_id, page)
-                if len(page) == events.MAX_PAGE:
-                    self._woken.add(run_id)
-                    self._wake.set()
+            try:
+                polled = await self._step(polled)
+            except DBAPIError as exc:
+                if not failing:
+                    cause = first_line(exc.orig)
+                    log.warning("stream reader: database unreachable, retrying every %g s: %s", self.poll_s, cause)
+                failing = True
+                await asyncio.sleep(self.poll_s)
+                continue
+            if failing:
+                log.warning("stream reader: the database answers again")
+                failing = False
+
+    async def _step(self, polled: float) -> float:
+        """Wait for a wakeup or the next poll, hand out what is new; the time of the last poll."""
+        loop = asyncio.get_running_loop()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._wake.wait(), max(0.0, polled + self.poll_s - loop.time()))
+        self._wake.clear()
+        woken, self._woken = self._woken, set()
+        watched = dict(self._cursor)
+        if watched and loop.time() >= polled + self.poll_s:  # which runs did other processes write to?
+            latest = await anyio.to_thread.run_sync(self._last_ids, list(watched))
+            woken |= {run_id for run_id, last in latest.items() if last > watched[run_id]}
+        if loop.time() >= polled + self.poll_s:
+            polled = loop.time()
+        for run_id in woken & set(watched):
+            page = await anyio.to_thread.run_sync(self._read, run_id, watched[run_id])
+            self._dispatch(run_id, page)
+            if len(page) == events.MAX_PAGE:
+                self._woken.add(run_id)
+                self._wake.set()
+        return polled
 
     def _dispatch(self, run_id: int, page: list[StreamEvent]) -> None:
         if run_id not in self._cursor or not page:
