@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from sqlalchemy.exc import DBAPIError
 
     from backend.main import create_app
+    from backend.migrate import UnknownRevision
     from backend.server import bind, uvicorn_server
     from collie.startup import mark
 
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         settings, tokens, generated = settings_from(args)
         app = create_app(settings)
-    except Conflict as exc:  # e.g. one token given for two roles
+    except (Conflict, UnknownRevision) as exc:  # e.g. one token given for two roles, a newer collie's database
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
         where = args.db or make_url(Settings().database_url).render_as_string(hide_password=True)

@@ -21,6 +21,12 @@ def is_sqlite(url: str) -> bool:
     return make_url(url).get_backend_name() == "sqlite"
 
 
+def describe(url: str) -> str:
+    """The database as a person names it: a SQLite file's path, else the URL without its password."""
+    parsed = make_url(url)
+    return str(parsed.database) if is_sqlite(url) else parsed.render_as_string(hide_password=True)
+
+
 Synchronous = Literal["NORMAL", "FULL"]
 
 

@@ -7,7 +7,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from alembic.util.exc import CommandError
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import DBAPIError
 
@@ -43,13 +42,13 @@ def run(args: argparse.Namespace) -> int:
         if found is None:
             print(f"collie export: error: {where} is not a collie database (no schema version)", file=sys.stderr)
             return 2
-        if found != migrate.head():  # as `collie serve` would on start: older databases stay readable
-            try:
-                migrate.upgrade(db.engine)
-            except CommandError as exc:  # e.g. a revision this collie does not know: a newer collie's
-                print(f"collie export: error: {where} has schema {found}, unknown here ({exc})", file=sys.stderr)
-                return 2
-            print(f"collie export: upgraded {where} from schema {found} to {migrate.head()}", file=sys.stderr)
+        try:  # as `collie serve` does on start: older databases stay readable
+            older = migrate.bring_up_to_date(db.engine)
+        except migrate.UnknownRevision as exc:
+            print(f"collie export: error: {exc}", file=sys.stderr)
+            return 2
+        if older is not None:
+            print(f"collie export: {migrate.upgraded(url, older)}", file=sys.stderr)
         with db.read() as conn:
             text = export.render(export.rows(conn, args.run, args.effective), args.format, args.effective)
     except ServiceError as exc:

@@ -89,13 +89,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
 def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -> None:
     """A database from before the newest migration is brought up to date (as `collie serve` would)
     and exported; a file that is no database, or none at all, is a one-line error."""
-    old = Database(f"sqlite:///{tmp_path / 'old.db'}")
-    config = alembic_config(old.url)
-    with old.engine.begin() as conn:
-        config.attributes["connection"] = conn
-        command.upgrade(config, "0008")
-    old.dispose()
-    out = collie("export", "--db", str(tmp_path / "old.db"), "--run", "1", "--effective")
+    out = collie("export", "--db", str(migrated(tmp_path / "old.db", "0008")), "--run", "1", "--effective")
     assert (
         out.returncode == 1 and "no run 1" in out.stderr and "upgraded" in out.stderr and "Traceback" not in out.stderr
     )
@@ -193,3 +187,27 @@ def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     out = collie("serve", "--port", "0", "--db", str(tmp_path / "same.db"), env=env)
     assert out.returncode != 0 and "Traceback" not in out.stderr
     assert "already the token of 'operator'" in out.stderr
+
+
+def migrated(path: Path, revision: str) -> Path:
+    """A SQLite database at schema `revision`."""
+    db = Database(f"sqlite:///{path}")
+    config = alembic_config(db.url)
+    with db.engine.begin() as conn:
+        config.attributes["connection"] = conn
+        command.upgrade(config, revision)
+    db.dispose()
+    return path
+
+
+def test_a_newer_collies_database_is_a_one_line_error(tmp_path: Path) -> None:
+    db = migrated(tmp_path / "future.db", "head")
+    with Database(f"sqlite:///{db}").engine.begin() as conn:
+        conn.exec_driver_sql("UPDATE alembic_version SET version_num = '9999_future'")
+    out = collie("serve", "--port", "0", "--db", str(db))
+    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert f"{db} is at schema revision 9999_future, which this collie does not know" in out.stderr
+    assert "a newer collie made it" in out.stderr
+    out = collie("export", "--db", str(db), "--run", "1")  # the same words: one check for both commands
+    assert out.returncode == 2 and "9999_future, which this collie does not know" in out.stderr
+
