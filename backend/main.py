@@ -83,7 +83,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         background_checkpoints=True,
         synchronous=settings.sqlite_synchronous,
     )
-    migrate.upgrade(db.engine)
+    older = migrate.bring_up_to_date(db.engine)
+    if older is not None:  # a warning: an older collie can no longer open it
+        log.warning(migrate.upgraded(settings.database_url, older))
     with db.write() as conn:
         for role in auth.ROLES:
             token = getattr(settings, f"{role}_token")

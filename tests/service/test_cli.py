@@ -19,7 +19,7 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 
 from backend.db import Database
-from backend.migrate import alembic_config, upgrade
+from backend.migrate import alembic_config, head, upgrade
 from backend.models import Base
 from collie.client import CollieClient
 
@@ -211,3 +211,14 @@ def test_a_newer_collies_database_is_a_one_line_error(tmp_path: Path) -> None:
     out = collie("export", "--db", str(db), "--run", "1")  # the same words: one check for both commands
     assert out.returncode == 2 and "9999_future, which this collie does not know" in out.stderr
 
+
+def test_serve_says_it_upgraded_the_schema(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    db = migrated(tmp_path / "old.db", "0005")
+    server, _ = start_serve(db, None, env)
+    stop(server)
+    said = server.stderr.read()  # type: ignore[union-attr]
+    assert f"upgraded {db} from schema 0005 to {head()}" in said and "Traceback" not in said
+    server, _ = start_serve(db, None, env)  # up to date: nothing to say
+    stop(server)
+    assert "upgraded" not in server.stderr.read()  # type: ignore[union-attr]
