@@ -19,7 +19,7 @@ from pathlib import Path
 from pydantic import SecretStr
 
 from backend.services.auth import ROLES, builtin_principals, new_token
-from backend.services.errors import Conflict
+from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.argtypes import port
 from collie.tokens import read_tokens_file, write_secret
@@ -88,9 +88,9 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sqlalchemy.engine import make_url
     from sqlalchemy.exc import DBAPIError
 
+    from backend.db import UnusableDatabaseUrl, describe
     from backend.main import create_app
     from backend.migrate import UnknownRevision
     from backend.server import bind, uvicorn_server
@@ -103,11 +103,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         settings, tokens, generated = settings_from(args)
         app = create_app(settings)
-    except (Conflict, UnknownRevision) as exc:  # e.g. one token given for two roles, a newer collie's database
+    except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
-        where = args.db or make_url(Settings().database_url).render_as_string(hide_password=True)
-        raise SystemExit(f"collie serve: error: cannot open the database {where}: {exc.orig}") from None
+        where = describe(Settings().database_url) if args.db is None else args.db
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
     sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file

@@ -11,9 +11,9 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import DBAPIError
 
 from backend import migrate
-from backend.db import Database, is_sqlite
+from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sqlite
 from backend.services import export
-from backend.services.errors import ServiceError
+from backend.services.errors import ServiceError, first_line
 from backend.settings import Settings
 
 
@@ -26,18 +26,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
-    where = make_url(url).render_as_string(hide_password=True)
-    if is_sqlite(url):
-        where = str(args.db or make_url(url).database)
-        if not Path(make_url(url).database or "").is_file():  # never create an empty database by mistake
-            print(f"collie export: error: no database at {where}", file=sys.stderr)
-            return 2
+    try:
+        check_url(url)
+    except UnusableDatabaseUrl as exc:
+        print(f"collie export: error: {exc}", file=sys.stderr)
+        return 2
+    where = describe(url) if args.db is None else str(args.db)
+    if is_sqlite(url) and not Path(make_url(url).database or "").is_file():  # never create an empty one by mistake
+        print(f"collie export: error: no database at {where}", file=sys.stderr)
+        return 2
     db = Database(url)
     try:
         try:
             found = migrate.current(db.engine)
-        except DBAPIError as exc:
-            print(f"collie export: error: {where} is not a collie database ({exc.orig})", file=sys.stderr)
+        except DBAPIError as exc:  # a file that is no SQLite database, a server that refuses us
+            fault = "is not a collie database" if is_sqlite(url) else "cannot be read"
+            print(f"collie export: error: {where} {fault} ({first_line(exc.orig)})", file=sys.stderr)
             return 2
         if found is None:
             print(f"collie export: error: {where} is not a collie database (no schema version)", file=sys.stderr)

@@ -222,3 +222,21 @@ def test_serve_says_it_upgraded_the_schema(tmp_path: Path) -> None:
     server, _ = start_serve(db, None, env)  # up to date: nothing to say
     stop(server)
     assert "upgraded" not in server.stderr.read()  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "postgres://collie:s3cret@127.0.0.1:5432/collie",
+        "mysql://collie:s3cret@127.0.0.1/collie",
+        "hello",
+        "hello://collie:s3cret@",
+    ],
+)
+def test_a_database_url_collie_cannot_use_is_a_one_line_error(tmp_path: Path, url: str) -> None:
+    env = {**os.environ, "COLLIE_DATABASE_URL": url}
+    for args in (("serve", "--port", "0"), ("export", "--run", "1")):
+        out = collie(*args, env=env, cwd=tmp_path)
+        assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+        assert "COLLIE_DATABASE_URL" in out.stderr and "postgresql+psycopg://" in out.stderr
+        assert "s3cret" not in out.stderr and url.split(":")[0] in out.stderr
