@@ -21,14 +21,16 @@ from pydantic import SecretStr
 from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
-from collie.argtypes import port
+from collie.argtypes import port, sqlite_file
 from collie.tokens import read_tokens_file, write_secret
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=port, default=8000, help="port; 0 picks a free one (default 8000)")
-    parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
+    parser.add_argument(
+        "--db", type=sqlite_file, help="SQLite file (default: COLLIE_DATABASE_URL, e.g. PostgreSQL, else ./collie.db)"
+    )
     parser.add_argument(
         "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
     )

@@ -15,11 +15,14 @@ from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sq
 from backend.services import export
 from backend.services.errors import ServiceError, first_line
 from backend.settings import Settings
+from collie.argtypes import record_id, sqlite_file
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
-    parser.add_argument("--run", type=int, required=True, help="run id")
+    parser.add_argument(
+        "--db", type=sqlite_file, help="SQLite file (default: COLLIE_DATABASE_URL, e.g. PostgreSQL, else ./collie.db)"
+    )
+    parser.add_argument("--run", type=record_id, required=True, help="run id")
     parser.add_argument("--format", choices=("json", "csv"), default="json")
     parser.add_argument("--effective", action="store_true", help="one effective label per query, not every event")
 

@@ -240,3 +240,18 @@ def test_a_database_url_collie_cannot_use_is_a_one_line_error(tmp_path: Path, ur
         assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
         assert "COLLIE_DATABASE_URL" in out.stderr and "postgresql+psycopg://" in out.stderr
         assert "s3cret" not in out.stderr and url.split(":")[0] in out.stderr
+
+
+def test_export_bounds_the_run_id_and_takes_no_url_for_a_path(tmp_path: Path) -> None:
+    """Run ids are bounded as the API bounds them (PostgreSQL's INTEGER); a database URL given as
+    --db (a SQLite file's path, as for `collie serve`) is refused without echoing its password."""
+    db = str(migrated(tmp_path / "c.db", "head"))
+    out = collie("export", "--db", db, "--run", "99999999999")
+    assert out.returncode == 2 and "Traceback" not in out.stderr and "2147483647" in out.stderr
+    assert collie("export", "--db", db, "--run", "0").returncode == 2
+    url = "postgresql+psycopg://collie:s3cret@127.0.0.1:5432/collie"
+    for args in (("export", "--run", "1"), ("serve", "--port", "0")):
+        out = collie(*args, "--db", url, cwd=tmp_path)
+        assert out.returncode == 2 and "Traceback" not in out.stderr and "argument --db: takes a SQLite" in out.stderr
+        assert "s3cret" not in out.stderr and "COLLIE_DATABASE_URL" in out.stderr
+        assert not (tmp_path / "postgresql+psycopg:").exists()
