@@ -120,6 +120,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.db = db
     app.state.hub = hub
     app.state.session_parser = SessionParser()
+
+    def begin_shutdown() -> None:
+        """The server stops (backend/server.py calls this first): long polls answer, streams end."""
+        hub.close()
+        app.state.feed.close()
+
+    app.state.begin_shutdown = begin_shutdown
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")

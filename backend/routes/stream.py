@@ -58,7 +58,7 @@ async def events_page(
                 events.last_id(conn, run_id)  # 404 for an unknown run
                 checked = True
         remaining = deadline - loop.time()
-        if page or remaining <= 0:
+        if page or remaining <= 0 or hub.closed:  # closed: the service stops, the client asks again later
             # written straight from the typed page: FastAPI would turn it into dicts, then JSON
             body = EventPage(events=page, last_id=page[-1].id if page else after).model_dump_json()
             return Response(body, media_type="application/json")

@@ -66,6 +66,7 @@ class StreamFeed:
         self._task: asyncio.Task[None] | None = None
         self.open_by_caller: Counter[int] = Counter()
         self._revoked: set[int] = set()  # principals revoked in this process (a stream may be opening)
+        self._closed = False
         hub.listen(self._published)
 
     def start(self) -> None:
@@ -87,7 +88,7 @@ class StreamFeed:
             last = await anyio.to_thread.run_sync(self._last_id, run_id)
             self._cursor.setdefault(run_id, last)
         subscription = Subscription(run_id, after, caller_id)
-        subscription.ended = caller_id in self._revoked  # revoked between its check and now
+        subscription.ended = caller_id in self._revoked or self._closed  # revoked or stopping since its check
         self._subscribers[run_id].add(subscription)
         return subscription
 
@@ -100,6 +101,14 @@ class StreamFeed:
                 if subscription.caller_id == caller_id:
                     subscription.ended = True
                     subscription.signal.set()
+
+    def close(self) -> None:
+        """The service is stopping: every open stream ends now (clients resume from their last id)."""
+        self._closed = True
+        for subscribers in self._subscribers.values():
+            for subscription in subscribers:
+                subscription.ended = True
+                subscription.signal.set()
 
     def unsubscribe(self, subscription: Subscription) -> None:
         subscribers = self._subscribers.get(subscription.run_id)

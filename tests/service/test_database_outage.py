@@ -1,53 +1,23 @@
 """A PostgreSQL outage, for real: the server is stopped under a running service (as `pg_ctl stop
 -m fast` does) and started again. Meanwhile every route answers 503 JSON (health saying the
-database is unreachable, the others with Retry-After), the log gets one line per failure and no
+database is unreachable, the others with Retry-After), the log gets single lines and no
 traceback, and everything works again once the database is back: an SSE stream held open across
 the outage too (the one reader that feeds the streams survives it)."""
 
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import time
-from collections.abc import Iterator
-from typing import Any
 
 import httpx
-import pytest
 
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import CollieClient
 
-from .conftest import TOKENS, make_run_spec, settings_for
+from .conftest import TOKENS, make_run_spec, next_data, settings_for
 from .postgres import PostgresServer
-
-
-class Records(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(logging.DEBUG)
-        self.records: list[logging.LogRecord] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.records.append(record)
-
-
-@pytest.fixture
-def logged() -> Iterator[list[logging.LogRecord]]:
-    """What the service and uvicorn log (uvicorn's loggers do not propagate to the root)."""
-    handler = Records()
-    loggers = [logging.getLogger(name) for name in ("uvicorn.error", "collie.service")]
-    for logger in loggers:
-        logger.addHandler(handler)
-    yield handler.records
-    for logger in loggers:
-        logger.removeHandler(handler)
-
-
-def next_data(lines: Iterator[str]) -> dict[str, Any]:
-    """The next SSE event's data."""
-    return json.loads(next(line for line in lines if line.startswith("data: "))[len("data: ") :])
 
 
 def test_an_outage_is_503_json_and_the_service_recovers(logged: list[logging.LogRecord]) -> None:
