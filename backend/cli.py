@@ -18,11 +18,13 @@ from pathlib import Path
 
 from pydantic import SecretStr
 
-from backend.services.auth import ROLES, builtin_principals, new_token
+from backend.services.auth import ROLES, builtin_principals, new_token, weakness
 from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.argtypes import port, sqlite_file
 from collie.tokens import read_tokens_file, write_secret
+
+STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -62,19 +64,26 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
-    settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
     written = {} if args.no_generate_tokens else written_tokens(args.tokens_json)
+    given = {role: os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role) for role in ROLES}
+    for role, token in given.items():  # refused before the database is touched
+        why = None if token is None else weakness(token)
+        if why is not None:
+            variable = f"COLLIE_{role.upper()}_TOKEN"
+            source = variable if os.environ.get(variable) else f"the {role} token in {args.tokens_json}"
+            raise SystemExit(f"collie serve: error: {source} {why}; {STRONG}")
+    settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
     kept = set() if args.no_generate_tokens else builtin_principals(settings.database_url)
     tokens: dict[str, str] = {}
     new: set[str] = set()
     for role in ROLES:
-        given = os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role)
-        if given is None and role not in kept and not args.no_generate_tokens:
-            given = new_token()
+        token = given[role]
+        if token is None and role not in kept and not args.no_generate_tokens:
+            token = new_token()
             new.add(role)
-        if given is not None:
-            tokens[role] = given
-            overrides[f"{role}_token"] = SecretStr(given)
+        if token is not None:
+            tokens[role] = token
+            overrides[f"{role}_token"] = SecretStr(token)
     return Settings(**overrides), tokens, new  # type: ignore[arg-type]  # as above
 
 

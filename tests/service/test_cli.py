@@ -255,3 +255,19 @@ def test_export_bounds_the_run_id_and_takes_no_url_for_a_path(tmp_path: Path) ->
         assert out.returncode == 2 and "Traceback" not in out.stderr and "argument --db: takes a SQLite" in out.stderr
         assert "s3cret" not in out.stderr and "COLLIE_DATABASE_URL" in out.stderr
         assert not (tmp_path / "postgresql+psycopg:").exists()
+
+
+@pytest.mark.parametrize(
+    ("variable", "token", "why"),
+    [
+        ("COLLIE_OPERATOR_TOKEN", "change-me-operator", "placeholder"),
+        ("COLLIE_LABELER_TOKEN", "Zq9", "shorter than 16"),
+        ("COLLIE_TRAINER_TOKEN", "Change-Me-Please-0123456789", "placeholder"),
+    ],
+)
+def test_a_weak_bootstrap_token_is_refused_at_start(tmp_path: Path, variable: str, token: str, why: str) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    out = collie("serve", "--port", "0", "--db", str(tmp_path / "weak.db"), env={**env, variable: token})
+    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert variable in out.stderr and why in out.stderr and token not in out.stderr
+    assert not (tmp_path / "weak.db").exists()  # refused before anything was written
