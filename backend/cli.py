@@ -58,9 +58,10 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     return {role: tokens[role] for role in ROLES if role in tokens}
 
 
-def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str]]:
+def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str], set[str]]:
     """Settings from the environment, with --db and the bootstrap tokens filled in; the tokens
-    known (from the environment, the tokens file or new), and the roles whose token is new."""
+    known (from the environment, the tokens file or new), the roles whose token is new, and the
+    built-in principals an operator revoked (their tokens are left out: revoking is final)."""
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
@@ -73,18 +74,19 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
             source = variable if os.environ.get(variable) else f"the {role} token in {args.tokens_json}"
             raise SystemExit(f"collie serve: error: {source} {why}; {STRONG}")
     settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
-    kept = set() if args.no_generate_tokens else builtin_principals(settings.database_url)
+    known = builtin_principals(settings.database_url)
     tokens: dict[str, str] = {}
     new: set[str] = set()
     for role in ROLES:
-        token = given[role]
-        if token is None and role not in kept and not args.no_generate_tokens:
+        token = None if known.get(role) else given[role]  # a revoked one's token is valid nowhere: left out
+        if token is None and role not in known and not args.no_generate_tokens:
             token = new_token()
             new.add(role)
         if token is not None:
             tokens[role] = token
             overrides[f"{role}_token"] = SecretStr(token)
-    return Settings(**overrides), tokens, new  # type: ignore[arg-type]  # as above
+    revoked = {role for role, gone in known.items() if gone}
+    return Settings(**overrides), tokens, new, revoked  # type: ignore[arg-type]  # as above
 
 
 def inherited(fd: int) -> tuple[socket.socket, str]:
@@ -112,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     if args.db is not None and args.db.is_dir():
         raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
     try:
-        settings, tokens, generated = settings_from(args)
+        settings, tokens, generated, revoked = settings_from(args)
         app = create_app(settings)
     except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://
         raise SystemExit(f"collie serve: error: {exc}") from None
@@ -132,7 +134,9 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, server.handle_exit)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
     for role in ROLES:  # secrets given through the environment or a file stay out of logs
-        if role in generated:
+        if role in revoked:
+            shown = f"revoked (final: create another {role} with POST /api/labelers)"
+        elif role in generated:
             shown = tokens[role] if args.tokens_json is None else f"(in {args.tokens_json})"
         elif f"COLLIE_{role.upper()}_TOKEN" in os.environ:
             shown = "(from environment)"

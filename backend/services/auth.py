@@ -94,15 +94,15 @@ def lookup(conn: Connection, digest: str) -> Caller | None:
     return Caller(row.id, row.name, row.role, None if row.runs is None else frozenset(row.runs))
 
 
-def builtin_principals(database_url: str) -> set[str]:
-    """The built-in principals a database already has (none for a new database)."""
+def builtin_principals(database_url: str) -> dict[str, bool]:
+    """The built-in principals a database already has (none for a new database): name → revoked."""
     engine = make_engine(database_url)
     try:
         with engine.connect() as conn:
             if not inspect(conn).has_table(Principal.__tablename__):
-                return set()
-            rows = conn.execute(select(Principal.name).where(Principal.name.in_(ROLES)))
-            return {str(name) for name in rows.scalars()}
+                return {}
+            rows = conn.execute(select(Principal.name, Principal.revoked_at).where(Principal.name.in_(ROLES)))
+            return {str(row.name): row.revoked_at is not None for row in rows}
     finally:
         engine.dispose()
 

@@ -271,3 +271,23 @@ def test_a_weak_bootstrap_token_is_refused_at_start(tmp_path: Path, variable: st
     assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert variable in out.stderr and why in out.stderr and token not in out.stderr
     assert not (tmp_path / "weak.db").exists()  # refused before anything was written
+
+
+def test_a_revoked_built_in_token_is_never_presented_as_valid(tmp_path: Path) -> None:
+    """After an operator revokes the built-in labeler, no start writes its token to the tokens
+    file or calls it kept, whether COLLIE_LABELER_TOKEN still holds it or not."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    db, tokens_file = tmp_path / "rev.db", tmp_path / "tokens.json"
+    server, _ = start_serve(db, tokens_file, env)
+    try:
+        first = json.loads(tokens_file.read_text())
+        with CollieClient(first["api"], first["tokens"]["operator"]) as operator:
+            operator.revoke(next(p.id for p in operator.labelers() if p.name == "labeler"))
+    finally:
+        stop(server)
+    for extra in ({"COLLIE_LABELER_TOKEN": first["tokens"]["labeler"]}, {}):
+        server, lines = start_serve(db, tokens_file, {**env, **extra})
+        stop(server)
+        said = "".join(lines) + server.stderr.read()  # type: ignore[union-attr]
+        assert "labeler token: revoked" in said and "kept" not in said.split("labeler token:")[1].split("\n")[0]
+        assert "labeler" not in json.loads(tokens_file.read_text())["tokens"]
