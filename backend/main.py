@@ -25,6 +25,7 @@ from backend.settings import Settings
 from collie.schemas import (
     FeedbackPolicy,
     LabelerCreate,
+    LabelerScope,
     LabelSubmit,
     MetricsIn,
     QualitySettings,
@@ -50,6 +51,7 @@ RAW_BODIES = (
     MetricsIn,
     RolloutsIn,
     LabelerCreate,
+    LabelerScope,
     QualitySettings,
     RunInstructions,
 )

@@ -102,6 +102,14 @@ class StreamFeed:
                     subscription.ended = True
                     subscription.signal.set()
 
+    def end_streams_outside(self, caller_id: int, runs: list[int] | None) -> None:
+        """A labeler's scope shrank: its open streams of runs it may no longer see close now."""
+        for run_id, subscribers in self._subscribers.items():
+            for subscription in subscribers:
+                if subscription.caller_id == caller_id and runs is not None and run_id not in runs:
+                    subscription.ended = True
+                    subscription.signal.set()
+
     def close(self) -> None:
         """The service is stopping: every open stream ends now (clients resume from their last id)."""
         self._closed = True
