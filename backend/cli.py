@@ -18,17 +18,21 @@ from pathlib import Path
 
 from pydantic import SecretStr
 
-from backend.services.auth import ROLES, builtin_principals, new_token
-from backend.services.errors import Conflict
+from backend.services.auth import ROLES, builtin_principals, new_token, weakness
+from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
-from collie.argtypes import port
+from collie.argtypes import port, sqlite_file
 from collie.tokens import read_tokens_file, write_secret
+
+STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=port, default=8000, help="port; 0 picks a free one (default 8000)")
-    parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
+    parser.add_argument(
+        "--db", type=sqlite_file, help="SQLite file (default: COLLIE_DATABASE_URL, e.g. PostgreSQL, else ./collie.db)"
+    )
     parser.add_argument(
         "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
     )
@@ -54,26 +58,35 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     return {role: tokens[role] for role in ROLES if role in tokens}
 
 
-def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str]]:
+def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str], set[str]]:
     """Settings from the environment, with --db and the bootstrap tokens filled in; the tokens
-    known (from the environment, the tokens file or new), and the roles whose token is new."""
+    known (from the environment, the tokens file or new), the roles whose token is new, and the
+    built-in principals an operator revoked (their tokens are left out: revoking is final)."""
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
-    settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
     written = {} if args.no_generate_tokens else written_tokens(args.tokens_json)
-    kept = set() if args.no_generate_tokens else builtin_principals(settings.database_url)
+    given = {role: os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role) for role in ROLES}
+    for role, token in given.items():  # refused before the database is touched
+        why = None if token is None else weakness(token)
+        if why is not None:
+            variable = f"COLLIE_{role.upper()}_TOKEN"
+            source = variable if os.environ.get(variable) else f"the {role} token in {args.tokens_json}"
+            raise SystemExit(f"collie serve: error: {source} {why}; {STRONG}")
+    settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
+    known = builtin_principals(settings.database_url)
     tokens: dict[str, str] = {}
     new: set[str] = set()
     for role in ROLES:
-        given = os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role)
-        if given is None and role not in kept and not args.no_generate_tokens:
-            given = new_token()
+        token = None if known.get(role) else given[role]  # a revoked one's token is valid nowhere: left out
+        if token is None and role not in known and not args.no_generate_tokens:
+            token = new_token()
             new.add(role)
-        if given is not None:
-            tokens[role] = given
-            overrides[f"{role}_token"] = SecretStr(given)
-    return Settings(**overrides), tokens, new  # type: ignore[arg-type]  # as above
+        if token is not None:
+            tokens[role] = token
+            overrides[f"{role}_token"] = SecretStr(token)
+    revoked = {role for role, gone in known.items() if gone}
+    return Settings(**overrides), tokens, new, revoked  # type: ignore[arg-type]  # as above
 
 
 def inherited(fd: int) -> tuple[socket.socket, str]:
@@ -88,10 +101,11 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sqlalchemy.engine import make_url
     from sqlalchemy.exc import DBAPIError
 
+    from backend.db import UnusableDatabaseUrl, describe
     from backend.main import create_app
+    from backend.migrate import UnknownRevision
     from backend.server import bind, uvicorn_server
     from collie.startup import mark
 
@@ -100,13 +114,13 @@ def run(args: argparse.Namespace) -> int:
     if args.db is not None and args.db.is_dir():
         raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
     try:
-        settings, tokens, generated = settings_from(args)
+        settings, tokens, generated, revoked = settings_from(args)
         app = create_app(settings)
-    except Conflict as exc:  # e.g. one token given for two roles
+    except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
-        where = args.db or make_url(Settings().database_url).render_as_string(hide_password=True)
-        raise SystemExit(f"collie serve: error: cannot open the database {where}: {exc.orig}") from None
+        where = describe(Settings().database_url) if args.db is None else args.db
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
     sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
@@ -120,7 +134,9 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, server.handle_exit)
     print(f"collie service listening on {url}  (API docs: {url}/docs)", flush=True)
     for role in ROLES:  # secrets given through the environment or a file stay out of logs
-        if role in generated:
+        if role in revoked:
+            shown = f"revoked (final: create another {role} with POST /api/labelers)"
+        elif role in generated:
             shown = tokens[role] if args.tokens_json is None else f"(in {args.tokens_json})"
         elif f"COLLIE_{role.upper()}_TOKEN" in os.environ:
             shown = "(from environment)"

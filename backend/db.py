@@ -6,19 +6,47 @@ fails half way with SQLITE_BUSY); any other URL (PostgreSQL) is used as given.""
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, Literal
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.pool import StaticPool
 
 Publisher = Callable[[list[tuple[int, int]]], None]
 
 
+DRIVERS = ("pysqlite", "psycopg")  # the drivers collie installs and is tested on
+ACCEPTED = "a SQLite file (--db PATH, or sqlite:///PATH) or postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
+
+
+class UnusableDatabaseUrl(ValueError):
+    """A database URL that names no database collie can open."""
+
+
+def check_url(url: str) -> None:
+    """UnusableDatabaseUrl, in one line without the password, unless `url` is one of ACCEPTED."""
+    try:
+        parsed = make_url(url)
+        usable = parsed.get_dialect().driver in DRIVERS
+        shown = parsed.render_as_string(hide_password=True)
+    except (ArgumentError, NoSuchModuleError):  # not a URL; a dialect SQLAlchemy does not know
+        usable, shown = False, re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)
+    if not usable:
+        raise UnusableDatabaseUrl(f"COLLIE_DATABASE_URL {shown!r} is no database collie can use: give {ACCEPTED}")
+
+
 def is_sqlite(url: str) -> bool:
     return make_url(url).get_backend_name() == "sqlite"
+
+
+def describe(url: str) -> str:
+    """The database as a person names it: a SQLite file's path, else the URL without its password."""
+    parsed = make_url(url)
+    return str(parsed.database) if is_sqlite(url) else parsed.render_as_string(hide_password=True)
 
 
 Synchronous = Literal["NORMAL", "FULL"]
@@ -45,6 +73,7 @@ def _sqlite_begin(conn: Connection) -> None:
 
 
 def make_engine(url: str, background_checkpoints: bool = False, synchronous: Synchronous = "FULL") -> Engine:
+    check_url(url)
     if is_sqlite(url):
         in_memory = make_url(url).database in (None, "", ":memory:")
         # An in-memory database lives in one connection: share it (handy for tools and tests).

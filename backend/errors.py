@@ -5,18 +5,23 @@ body is written as ASCII JSON and echoed input is dropped unless it is small, pl
 from __future__ import annotations
 
 import json
+import logging
+import threading
+import time
 from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.exc import DBAPIError, IntegrityError, InterfaceError, OperationalError
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
-from backend.services.errors import ServiceError, TabNotHolding
+from backend.services.errors import DatabaseUnreachable, ServiceError, TabNotHolding, Unavailable
 
 MAX_ECHO = 200
+RETRY_AFTER = {"Retry-After": "5"}
+log = logging.getLogger("collie.service")
 
 
 class SafeJSONResponse(JSONResponse):
@@ -51,12 +56,44 @@ def plain_error(error: dict[str, Any]) -> dict[str, Any]:
     return plain
 
 
+class OutageLog:
+    """One warning line about an unreachable database every `every_s` at most, with the count of
+    answers refused since: an outage under load must not bury the log (nor be a traceback each)."""
+
+    def __init__(self, every_s: float = 10.0) -> None:
+        self.every_s = every_s
+        self._lock = threading.Lock()
+        self._next = 0.0
+        self._refused = 0
+
+    def note(self, cause: str) -> None:
+        with self._lock:
+            self._refused += 1
+            if time.monotonic() < self._next:
+                return
+            refused, self._refused, self._next = self._refused, 0, time.monotonic() + self.every_s
+        log.warning("database unreachable (%d answer(s) refused with 503): %s", refused, cause)
+
+
+def unreachable(exc: DBAPIError, dialect: str) -> DatabaseUnreachable | None:
+    """The database error as an outage, or None for a fault of ours. On a server database every
+    OperationalError is one (the DB-API's "errors related to the database's operation": connection
+    refused, shut down, too many connections); SQLite, a file, only loses a connection it had."""
+    lost = exc.connection_invalidated or (dialect != "sqlite" and isinstance(exc, OperationalError | InterfaceError))
+    return DatabaseUnreachable(exc.orig) if lost else None
+
+
 def install(app: FastAPI) -> None:
+    outages = OutageLog()
+
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
         if isinstance(exc, TabNotHolding):  # typed: the reason is a value (collie.schemas.NotHeld)
             return SafeJSONResponse(exc.body.model_dump(mode="json"), status_code=exc.status)
-        return SafeJSONResponse({"detail": clean_text(exc.detail)}, status_code=exc.status)
+        if isinstance(exc, DatabaseUnreachable):
+            outages.note(exc.cause)
+        headers = RETRY_AFTER if isinstance(exc, Unavailable) else None
+        return SafeJSONResponse({"detail": clean_text(exc.detail)}, status_code=exc.status, headers=headers)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
@@ -72,14 +109,17 @@ def install(app: FastAPI) -> None:
         # the client hung up before its body was whole: nobody to answer, nothing to log as an error
         return Response(status_code=400)
 
-    @app.exception_handler(OperationalError)
-    async def _database_busy(_: Request, exc: OperationalError) -> JSONResponse:
-        if "locked" not in str(exc.orig):  # anything else is a real fault: the 500 handler and its log
-            raise exc
+    @app.exception_handler(DBAPIError)
+    async def _database_error(request: Request, exc: DBAPIError) -> JSONResponse:
+        outage = unreachable(exc, request.app.state.db.engine.dialect.name)
+        if outage is not None:
+            return await _service_error(request, outage)
+        if not isinstance(exc, OperationalError) or "locked" not in str(exc.orig):
+            raise exc  # a real fault: the 500 handler and its log
         # SQLite's busy timeout ran out: another process holds the write lock (docs/service.md:
         # one service process per SQLite file); nothing was written, the client may retry
         detail = "the database is busy (another process holds its write lock); nothing was written, retry"
-        return SafeJSONResponse({"detail": detail}, status_code=503, headers={"Retry-After": "5"})
+        return SafeJSONResponse({"detail": detail}, status_code=503, headers=RETRY_AFTER)
 
     @app.exception_handler(IntegrityError)
     async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:

@@ -7,49 +7,55 @@ import argparse
 import sys
 from pathlib import Path
 
-from alembic.util.exc import CommandError
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import DBAPIError
 
 from backend import migrate
-from backend.db import Database, is_sqlite
+from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sqlite
 from backend.services import export
-from backend.services.errors import ServiceError
+from backend.services.errors import ServiceError, first_line
 from backend.settings import Settings
+from collie.argtypes import record_id, sqlite_file
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--db", type=Path, help="SQLite file (default: COLLIE_DATABASE_URL, else ./collie.db)")
-    parser.add_argument("--run", type=int, required=True, help="run id")
+    parser.add_argument(
+        "--db", type=sqlite_file, help="SQLite file (default: COLLIE_DATABASE_URL, e.g. PostgreSQL, else ./collie.db)"
+    )
+    parser.add_argument("--run", type=record_id, required=True, help="run id")
     parser.add_argument("--format", choices=("json", "csv"), default="json")
     parser.add_argument("--effective", action="store_true", help="one effective label per query, not every event")
 
 
 def run(args: argparse.Namespace) -> int:
     url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
-    where = make_url(url).render_as_string(hide_password=True)
-    if is_sqlite(url):
-        where = str(args.db or make_url(url).database)
-        if not Path(make_url(url).database or "").is_file():  # never create an empty database by mistake
-            print(f"collie export: error: no database at {where}", file=sys.stderr)
-            return 2
+    try:
+        check_url(url)
+    except UnusableDatabaseUrl as exc:
+        print(f"collie export: error: {exc}", file=sys.stderr)
+        return 2
+    where = describe(url) if args.db is None else str(args.db)
+    if is_sqlite(url) and not Path(make_url(url).database or "").is_file():  # never create an empty one by mistake
+        print(f"collie export: error: no database at {where}", file=sys.stderr)
+        return 2
     db = Database(url)
     try:
         try:
             found = migrate.current(db.engine)
-        except DBAPIError as exc:
-            print(f"collie export: error: {where} is not a collie database ({exc.orig})", file=sys.stderr)
+        except DBAPIError as exc:  # a file that is no SQLite database, a server that refuses us
+            fault = "is not a collie database" if is_sqlite(url) else "cannot be read"
+            print(f"collie export: error: {where} {fault} ({first_line(exc.orig)})", file=sys.stderr)
             return 2
         if found is None:
             print(f"collie export: error: {where} is not a collie database (no schema version)", file=sys.stderr)
             return 2
-        if found != migrate.head():  # as `collie serve` would on start: older databases stay readable
-            try:
-                migrate.upgrade(db.engine)
-            except CommandError as exc:  # e.g. a revision this collie does not know: a newer collie's
-                print(f"collie export: error: {where} has schema {found}, unknown here ({exc})", file=sys.stderr)
-                return 2
-            print(f"collie export: upgraded {where} from schema {found} to {migrate.head()}", file=sys.stderr)
+        try:  # as `collie serve` does on start: older databases stay readable
+            older = migrate.bring_up_to_date(db.engine)
+        except migrate.UnknownRevision as exc:
+            print(f"collie export: error: {exc}", file=sys.stderr)
+            return 2
+        if older is not None:
+            print(f"collie export: {migrate.upgraded(url, older)}", file=sys.stderr)
         with db.read() as conn:
             text = export.render(export.rows(conn, args.run, args.effective), args.format, args.effective)
     except ServiceError as exc:

@@ -25,6 +25,7 @@ from backend.settings import Settings
 from collie.schemas import (
     FeedbackPolicy,
     LabelerCreate,
+    LabelerScope,
     LabelSubmit,
     MetricsIn,
     QualitySettings,
@@ -50,6 +51,7 @@ RAW_BODIES = (
     MetricsIn,
     RolloutsIn,
     LabelerCreate,
+    LabelerScope,
     QualitySettings,
     RunInstructions,
 )
@@ -83,7 +85,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         background_checkpoints=True,
         synchronous=settings.sqlite_synchronous,
     )
-    migrate.upgrade(db.engine)
+    older = migrate.bring_up_to_date(db.engine)
+    if older is not None:  # a warning: an older collie can no longer open it
+        log.warning(migrate.upgraded(settings.database_url, older))
     with db.write() as conn:
         for role in auth.ROLES:
             token = getattr(settings, f"{role}_token")
@@ -118,6 +122,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.db = db
     app.state.hub = hub
     app.state.session_parser = SessionParser()
+
+    def begin_shutdown() -> None:
+        """The server stops (backend/server.py calls this first): long polls answer, streams end."""
+        hub.close()
+        app.state.feed.close()
+
+    app.state.begin_shutdown = begin_shutdown
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")

@@ -8,9 +8,16 @@ from alembic import command
 from alembic.config import Config
 from alembic.migration import MigrationContext
 from alembic.script import ScriptDirectory
+from alembic.util.exc import CommandError
 from sqlalchemy import Engine
 
+from backend.db import describe
+
 MIGRATIONS = Path(__file__).parent / "migrations"
+
+
+class UnknownRevision(Exception):
+    """The database's schema is a revision this code does not know: a newer collie made it."""
 
 
 def alembic_config(url: str) -> Config:
@@ -25,6 +32,37 @@ def upgrade(engine: Engine) -> None:
     with engine.begin() as conn:
         config.attributes["connection"] = conn
         command.upgrade(config, "head")
+
+
+def bring_up_to_date(engine: Engine) -> str | None:
+    """Upgrade the database to head (what `collie serve` and `collie export` do first); the revision
+    it was at when that was an older one (None for a new or current database)."""
+    found = current(engine)
+    if found == head():
+        return None
+    try:
+        upgrade(engine)
+    except CommandError:
+        if found is not None and not known(found):
+            where = describe(engine.url.render_as_string(hide_password=False))
+            raise UnknownRevision(
+                f"database {where} is at schema revision {found}, which this collie does not know: "
+                "a newer collie made it (upgrade collie)"
+            ) from None
+        raise
+    return found
+
+
+def upgraded(url: str, older: str) -> str:
+    """The one line `collie serve` and `collie export` say after upgrading a database."""
+    return f"upgraded {describe(url)} from schema {older} to {head()}"
+
+
+def known(revision: str) -> bool:
+    try:
+        return ScriptDirectory.from_config(alembic_config("sqlite://")).get_revision(revision) is not None
+    except CommandError:
+        return False
 
 
 def head() -> str:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import socket
 import threading
 import time
+from collections.abc import Callable
 
 import uvicorn
 from fastapi import FastAPI
@@ -23,10 +24,26 @@ def bind(host: str, port: int) -> tuple[socket.socket, str]:
     return sock, f"http://{shown}:{bound_port}"
 
 
+class Server(uvicorn.Server):
+    """uvicorn that tells the app a shutdown began (`app.state.begin_shutdown`, when it has one)
+    before it waits for the open requests: long polls answer and streams end at once, instead of
+    holding the exit until the graceful timeout and being cancelled (a 500 and a traceback each)."""
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+        super().__init__(config)
+        self.app = app
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        begin: Callable[[], object] | None = getattr(self.app.state, "begin_shutdown", None)
+        if begin is not None:
+            begin()
+        await super().shutdown(sockets)
+
+
 def uvicorn_server(app: FastAPI, log_level: str = "warning") -> uvicorn.Server:
-    # A short graceful shutdown: open event streams would otherwise hold the exit.
+    # A short graceful timeout: a request still running after the waits end should not hold the exit.
     config = uvicorn.Config(app, log_level=log_level, access_log=False, timeout_graceful_shutdown=2, lifespan="on")
-    return uvicorn.Server(config)
+    return Server(config, app)
 
 
 class BackgroundServer:

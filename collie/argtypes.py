@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from urllib.parse import urlsplit
 
 
@@ -27,3 +28,27 @@ def http_url(value: str) -> str:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{value!r}: {exc}") from None
     return value
+
+
+def record_id(value: str) -> int:
+    """A run's (or other record's) id: 1 to 2^31 − 1, as the API bounds them (PostgreSQL's INTEGER)."""
+    from collie.schemas import MAX_INT  # here: the other types need no pydantic
+
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not an id") from None
+    if not 1 <= number <= MAX_INT:
+        raise argparse.ArgumentTypeError(f"{number} is not an id: 1 to {MAX_INT}")
+    return number
+
+
+def sqlite_file(value: str) -> Path:
+    """A SQLite file's path. A database URL is refused without echoing it (it may hold a password):
+    PostgreSQL is reached through COLLIE_DATABASE_URL, for `collie serve` and `collie export` alike."""
+    if "://" in value:
+        raise argparse.ArgumentTypeError(
+            "takes a SQLite file's path, not a URL; for PostgreSQL leave --db out and set "
+            "COLLIE_DATABASE_URL=postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
+        )
+    return Path(value)

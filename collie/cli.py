@@ -10,7 +10,7 @@ import sys
 # name → (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("trainer.cli", "run Algorithm 1 (METRA / COLLIE / Oracle) on one env and task"),
-    "serve": ("backend.cli", "run the labeling service (FastAPI + SQLite)"),
+    "serve": ("backend.cli", "run the labeling service (FastAPI over a SQLite file or PostgreSQL)"),
     "teacher": ("teacher.cli", "label a run's queries through the API with the scripted oracle"),
     "label-ui": ("labeling_ui.cli", "serve the labeling UI (viser) for a labeling service"),
     "up": ("collie.up", "start service, trainer, labeling UI (and the oracle teacher) together on the embedded SQLite"),

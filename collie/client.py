@@ -35,6 +35,7 @@ from collie.schemas import (
     LabelerCreate,
     LabelerCreated,
     LabelerRead,
+    LabelerScope,
     LabelEventRead,
     LabelledPage,
     LabelledQuery,
@@ -238,6 +239,11 @@ class CollieClient:
 
     def revoke(self, labeler_id: int) -> LabelerRead:
         return LabelerRead.model_validate_json(self._send("DELETE", f"/labelers/{labeler_id}").content)
+
+    def set_labeler_runs(self, labeler_id: int, runs: list[int] | None) -> LabelerRead:
+        """Limit a labeler to `runs` from now on; None: every run."""
+        body = LabelerScope(runs=runs)
+        return LabelerRead.model_validate_json(self._send("PUT", f"/labelers/{labeler_id}/runs", body).content)
 
     # ---------------------------------------------------------------- runs and control
 

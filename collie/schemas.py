@@ -719,18 +719,35 @@ class RolloutsRead(RolloutsIn):
 MAX_SCOPED_RUNS = 1000
 
 
+def _some_runs(runs: list[int] | None) -> list[int] | None:
+    if runs == []:
+        raise ValueError("[] would make the token valid for no run: name at least one run, or null for every run")
+    return runs
+
+
+ScopedRuns = Annotated[
+    list[Annotated[int, Field(ge=1, le=MAX_INT)]] | None,
+    Field(max_length=MAX_SCOPED_RUNS, description="a labeler limited to these runs; null: every run"),
+    AfterValidator(_some_runs),
+]
+
+
 class LabelerCreate(Wire):
     name: Name
     role: Role = "labeler"
-    runs: list[Annotated[int, Field(ge=1, le=MAX_INT)]] | None = Field(
-        default=None, max_length=MAX_SCOPED_RUNS, description="a labeler limited to these runs; null: every run"
-    )
+    runs: ScopedRuns = None
 
     @model_validator(mode="after")
     def _runs_for_labelers(self) -> LabelerCreate:
         if self.runs is not None and self.role != "labeler":
             raise ValueError(f"only a labeler token can be limited to runs, not a {self.role} token")
         return self
+
+
+class LabelerScope(Wire):
+    """PUT /labelers/{id}/runs: the runs a labeler may work on from now on (null: every run)."""
+
+    runs: ScopedRuns
 
 
 class LabelerRead(Wire):

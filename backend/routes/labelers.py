@@ -1,4 +1,5 @@
-"""People and their tokens: an operator creates, lists and revokes principals of any role."""
+"""People and their tokens: an operator creates, lists and revokes principals of any role, and
+sets the runs a labeler may work on."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from fastapi import APIRouter, Request
 from backend.routes.deps import DB, AnyCaller, OperatorCaller, PrincipalId, json_body, parse_body
 from backend.services import auth, leases
 from backend.services.auth import Caller
-from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, Me
+from collie.schemas import LabelerCreate, LabelerCreated, LabelerRead, LabelerScope, Me
 
 router = APIRouter(tags=["labelers"])
 
@@ -40,4 +41,15 @@ async def revoke_labeler(labeler_id: PrincipalId, _: OperatorCaller, db: DB, req
         leases.release_all_held_by(conn, Caller(read.id, read.name, read.role))
     request.app.state.tokens.clear()
     request.app.state.feed.end_streams_of(labeler_id)
+    return read
+
+
+@router.put("/labelers/{labeler_id}/runs", openapi_extra=json_body(LabelerScope))
+async def set_labeler_runs(labeler_id: PrincipalId, _: OperatorCaller, db: DB, request: Request) -> LabelerRead:
+    """Limit a labeler to runs from now on (null: every run); its streams of other runs end now."""
+    body = await parse_body(request, LabelerScope)
+    with db.write() as conn:
+        read = auth.set_runs(conn, labeler_id, body.runs)
+    request.app.state.tokens.clear()  # this process applies the new scope at once (others within the cache time)
+    request.app.state.feed.end_streams_outside(labeler_id, read.runs)
     return read

@@ -12,6 +12,7 @@ Two ways to read it, both resumable from the last id seen (nothing missed, nothi
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections import Counter
 from collections.abc import AsyncIterator
 from typing import Annotated, Any
@@ -20,17 +21,20 @@ import anyio
 from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials
+from sqlalchemy.exc import DBAPIError
 from starlette.types import Receive, Scope, Send
 
 from backend.routes.deps import ANY, DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer, check_scope
 from backend.services import auth, events
 from backend.services.auth import Caller
-from backend.services.fanout import StreamFeed
+from backend.services.errors import first_line
+from backend.services.fanout import StreamFeed, Subscription
 from collie.schemas import MAX_INT, EventPage
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["stream"])
 
 HEARTBEAT_S = 15.0
+log = logging.getLogger("collie.service")
 
 
 @router.get("/events", response_model=EventPage)
@@ -54,7 +58,7 @@ async def events_page(
                 events.last_id(conn, run_id)  # 404 for an unknown run
                 checked = True
         remaining = deadline - loop.time()
-        if page or remaining <= 0:
+        if page or remaining <= 0 or hub.closed:  # closed: the service stops, the client asks again later
             # written straight from the typed page: FastAPI would turn it into dicts, then JSON
             body = EventPage(events=page, last_id=page[-1].id if page else after).model_dump_json()
             return Response(body, media_type="application/json")
@@ -97,8 +101,9 @@ async def stream(
             return auth.active(conn, caller.id)
 
     async def frames() -> AsyncIterator[str]:
-        subscription = await feed.subscribe(run_id, start, caller.id)
+        subscription: Subscription | None = None
         try:
+            subscription = await feed.subscribe(run_id, start, caller.id)
             yield "retry: 1000\n\n"
             while not subscription.ended:
                 if subscription.lagged:
@@ -120,8 +125,11 @@ async def stream(
                     if not await anyio.to_thread.run_sync(still_allowed):  # revoked by another process
                         return
                     yield ": keep-alive\n\n"
+        except DBAPIError as exc:  # the database went away: the stream ends, the client resumes from its last id
+            log.warning("stream of run %d ended: database unreachable: %s", run_id, first_line(exc.orig))
         finally:
-            feed.unsubscribe(subscription)
+            if subscription is not None:
+                feed.unsubscribe(subscription)
 
     headers = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
     return SlotStream(feed.open_by_caller, caller.id, frames(), media_type="text/event-stream", headers=headers)

@@ -18,7 +18,7 @@ from sqlalchemy import Connection, Row, insert, inspect, select, update
 
 from backend.db import Database, make_engine
 from backend.models import Principal, Run
-from backend.services.errors import Conflict, NotFound
+from backend.services.errors import Conflict, Invalid, NotFound
 from collie.schemas import LabelerRead, Role
 
 ROLES: tuple[Role, ...] = ("operator", "trainer", "labeler")
@@ -39,8 +39,20 @@ def hash_token(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
 
 
+MIN_TOKEN = 16  # a generated token has 43 characters
+
+
 def new_token() -> str:
     return secrets.token_urlsafe(32)
+
+
+def weakness(token: str) -> str | None:
+    """Why a token someone chose is guessable (None: it is not): a forgotten placeholder, or short."""
+    if "change-me" in token.lower():
+        return "is a placeholder (it holds 'change-me')"
+    if len(token) < MIN_TOKEN:
+        return f"is shorter than {MIN_TOKEN} characters"
+    return None
 
 
 class TokenCache:
@@ -82,15 +94,15 @@ def lookup(conn: Connection, digest: str) -> Caller | None:
     return Caller(row.id, row.name, row.role, None if row.runs is None else frozenset(row.runs))
 
 
-def builtin_principals(database_url: str) -> set[str]:
-    """The built-in principals a database already has (none for a new database)."""
+def builtin_principals(database_url: str) -> dict[str, bool]:
+    """The built-in principals a database already has (none for a new database): name → revoked."""
     engine = make_engine(database_url)
     try:
         with engine.connect() as conn:
             if not inspect(conn).has_table(Principal.__tablename__):
-                return set()
-            rows = conn.execute(select(Principal.name).where(Principal.name.in_(ROLES)))
-            return {str(name) for name in rows.scalars()}
+                return {}
+            rows = conn.execute(select(Principal.name, Principal.revoked_at).where(Principal.name.in_(ROLES)))
+            return {str(row.name): row.revoked_at is not None for row in rows}
     finally:
         engine.dispose()
 
@@ -123,16 +135,24 @@ def _read(row: Row[Any]) -> LabelerRead:
     )
 
 
-def create_principal(conn: Connection, name: str, role: Role, runs: list[int] | None = None) -> tuple[LabelerRead, str]:
-    if conn.execute(select(Principal.id).where(Principal.name == name)).first():
-        raise Conflict(f"name '{name}' is taken")
-    token = new_token()
+def _scope(conn: Connection, runs: list[int] | None) -> list[int] | None:
+    """A labeler's runs, sorted and checked to exist (None: every run)."""
     scope = None if runs is None else sorted(set(runs))
     if scope:
         known = set(conn.execute(select(Run.id).where(Run.id.in_(scope))).scalars())
         unknown = [str(r) for r in scope if r not in known]
         if unknown:
             raise NotFound(f"no run {', '.join(unknown)}: a labeler's runs must exist")
+    return scope
+
+
+def create_principal(conn: Connection, name: str, role: Role, runs: list[int] | None = None) -> tuple[LabelerRead, str]:
+    holder = conn.execute(select(Principal.revoked_at).where(Principal.name == name)).first()
+    if holder is not None:
+        revoked = " by a revoked principal (revoking is final)" if holder.revoked_at is not None else ""
+        raise Conflict(f"name '{name}' is taken{revoked}; choose another name")
+    token = new_token()
+    scope = _scope(conn, runs)
     conn.execute(
         insert(Principal).values(
             name=name, role=role, token_sha256=hash_token(token), created_at=time.time(), runs=scope
@@ -140,6 +160,19 @@ def create_principal(conn: Connection, name: str, role: Role, runs: list[int] | 
     )
     row = conn.execute(select(Principal).where(Principal.name == name)).one()
     return _read(row), token
+
+
+def set_runs(conn: Connection, principal_id: int, runs: list[int] | None) -> LabelerRead:
+    """Limit a labeler to `runs` from now on (None: every run)."""
+    row = conn.execute(select(Principal).where(Principal.id == principal_id)).first()
+    if row is None:
+        raise NotFound(f"no principal {principal_id}")
+    if row.role != "labeler":
+        raise Invalid(f"only a labeler token can be limited to runs, not a {row.role} token ('{row.name}')")
+    if row.revoked_at is not None:
+        raise Conflict(f"'{row.name}' is revoked: its token is valid for no run, and revoking is final")
+    conn.execute(update(Principal).where(Principal.id == principal_id).values(runs=_scope(conn, runs)))
+    return _read(conn.execute(select(Principal).where(Principal.id == principal_id)).one())
 
 
 def list_principals(conn: Connection) -> list[LabelerRead]:

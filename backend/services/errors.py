@@ -5,6 +5,11 @@ from __future__ import annotations
 from collie.schemas import NotHeld, NotHeldReason
 
 
+def first_line(error: object) -> str:
+    """A driver's error in one log line (psycopg adds hints on more lines)."""
+    return str(error).strip().split("\n")[0]
+
+
 class ServiceError(Exception):
     status = 400
 
@@ -26,7 +31,18 @@ class Invalid(ServiceError):
 
 
 class Unavailable(ServiceError):
+    """Not now: the client may retry (the answer carries Retry-After)."""
+
     status = 503
+
+
+class DatabaseUnreachable(Unavailable):
+    """The database server is down, restarting or refusing us; the cause (the driver's error) goes
+    to the log only, in one line: it names the server's address, no business of a client."""
+
+    def __init__(self, cause: object) -> None:
+        super().__init__("the database is unreachable; retry later")
+        self.cause = first_line(cause)
 
 
 class TabNotHolding(Conflict):

@@ -72,6 +72,7 @@ class EventHub:
         self._latest: dict[int, int] = {}
         self._waiters: dict[int, list[asyncio.Future[None]]] = defaultdict(list)
         self._listeners: list[Callable[[list[tuple[int, int]]], None]] = []
+        self.closed = False  # the service is stopping: waits return at once
 
     def bind(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
@@ -103,9 +104,18 @@ class EventHub:
         for listener in self._listeners:
             listener(items)
 
+    def close(self) -> None:
+        """The service is stopping: every wait returns now, and later ones at once."""
+        self.closed = True
+        for waiters in self._waiters.values():
+            for future in waiters:
+                if not future.done():
+                    future.set_result(None)
+
     async def wait(self, run_id: int, after: int, timeout: float) -> None:
-        """Return when the run may have an event past `after`, or after `timeout` seconds."""
-        if self._latest.get(run_id, 0) > after or timeout <= 0:
+        """Return when the run may have an event past `after`, after `timeout` seconds, or when
+        the hub closes."""
+        if self._latest.get(run_id, 0) > after or timeout <= 0 or self.closed:
             return
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self._waiters[run_id].append(future)

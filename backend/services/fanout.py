@@ -9,20 +9,24 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 from collections import Counter, defaultdict, deque
 
 import anyio
 from sqlalchemy import select
+from sqlalchemy.exc import DBAPIError
 
 from backend.db import Database
 from backend.models import Run
 from backend.services import events
+from backend.services.errors import first_line
 from backend.services.events import EventHub
 from collie.schemas import StreamEvent
 
 MAX_QUEUED = 2000  # frames a subscriber may fall behind before it re-reads the log itself
 
 Frame = tuple[int, str]  # (event id, SSE text)
+log = logging.getLogger("collie.service")
 
 
 def sse_frame(event: StreamEvent) -> str:
@@ -62,6 +66,7 @@ class StreamFeed:
         self._task: asyncio.Task[None] | None = None
         self.open_by_caller: Counter[int] = Counter()
         self._revoked: set[int] = set()  # principals revoked in this process (a stream may be opening)
+        self._closed = False
         hub.listen(self._published)
 
     def start(self) -> None:
@@ -83,7 +88,7 @@ class StreamFeed:
             last = await anyio.to_thread.run_sync(self._last_id, run_id)
             self._cursor.setdefault(run_id, last)
         subscription = Subscription(run_id, after, caller_id)
-        subscription.ended = caller_id in self._revoked  # revoked between its check and now
+        subscription.ended = caller_id in self._revoked or self._closed  # revoked or stopping since its check
         self._subscribers[run_id].add(subscription)
         return subscription
 
@@ -96,6 +101,22 @@ class StreamFeed:
                 if subscription.caller_id == caller_id:
                     subscription.ended = True
                     subscription.signal.set()
+
+    def end_streams_outside(self, caller_id: int, runs: list[int] | None) -> None:
+        """A labeler's scope shrank: its open streams of runs it may no longer see close now."""
+        for run_id, subscribers in self._subscribers.items():
+            for subscription in subscribers:
+                if subscription.caller_id == caller_id and runs is not None and run_id not in runs:
+                    subscription.ended = True
+                    subscription.signal.set()
+
+    def close(self) -> None:
+        """The service is stopping: every open stream ends now (clients resume from their last id)."""
+        self._closed = True
+        for subscribers in self._subscribers.values():
+            for subscription in subscribers:
+                subscription.ended = True
+                subscription.signal.set()
 
     def unsubscribe(self, subscription: Subscription) -> None:
         subscribers = self._subscribers.get(subscription.run_id)
@@ -118,25 +139,43 @@ class StreamFeed:
     # ---------------------------------------------------------------- the one reader
 
     async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
-        polled = loop.time()
+        """Reads on through a database outage: one line when it starts, one when it ends; nothing
+        is lost meanwhile (the poll of the runs' last ids finds what the failed reads missed)."""
+        polled, failing = asyncio.get_running_loop().time(), False
         while True:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), max(0.0, polled + self.poll_s - loop.time()))
-            self._wake.clear()
-            woken, self._woken = self._woken, set()
-            watched = dict(self._cursor)
-            if watched and loop.time() >= polled + self.poll_s:  # which runs did other processes write to?
-                latest = await anyio.to_thread.run_sync(self._last_ids, list(watched))
-                woken |= {run_id for run_id, last in latest.items() if last > watched[run_id]}
-            if loop.time() >= polled + self.poll_s:
-                polled = loop.time()
-            for run_id in woken & set(watched):
-                page = await anyio.to_thread.run_sync(self._read, run_id, watched[run_id])
-                self._dispatch(run_id, page)
-                if len(page) == events.MAX_PAGE:
-                    self._woken.add(run_id)
-                    self._wake.set()
+            try:
+                polled = await self._step(polled)
+            except DBAPIError as exc:
+                if not failing:
+                    cause = first_line(exc.orig)
+                    log.warning("stream reader: database unreachable, retrying every %g s: %s", self.poll_s, cause)
+                failing = True
+                await asyncio.sleep(self.poll_s)
+                continue
+            if failing:
+                log.warning("stream reader: the database answers again")
+                failing = False
+
+    async def _step(self, polled: float) -> float:
+        """Wait for a wakeup or the next poll, hand out what is new; the time of the last poll."""
+        loop = asyncio.get_running_loop()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._wake.wait(), max(0.0, polled + self.poll_s - loop.time()))
+        self._wake.clear()
+        woken, self._woken = self._woken, set()
+        watched = dict(self._cursor)
+        if watched and loop.time() >= polled + self.poll_s:  # which runs did other processes write to?
+            latest = await anyio.to_thread.run_sync(self._last_ids, list(watched))
+            woken |= {run_id for run_id, last in latest.items() if last > watched[run_id]}
+        if loop.time() >= polled + self.poll_s:
+            polled = loop.time()
+        for run_id in woken & set(watched):
+            page = await anyio.to_thread.run_sync(self._read, run_id, watched[run_id])
+            self._dispatch(run_id, page)
+            if len(page) == events.MAX_PAGE:
+                self._woken.add(run_id)
+                self._wake.set()
+        return polled
 
     def _dispatch(self, run_id: int, page: list[StreamEvent]) -> None:
         if run_id not in self._cursor or not page:

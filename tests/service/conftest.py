@@ -3,8 +3,11 @@ real PostgreSQL server (tests/service/postgres.py) in the modules that run on bo
 
 from __future__ import annotations
 
+import json
+import logging
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -33,6 +36,32 @@ def settings_for(db: Path | str, **overrides: object) -> Settings:
         labeler_token=TOKENS["labeler"],
         **overrides,  # type: ignore[arg-type]
     )
+
+
+class Records(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+@pytest.fixture
+def logged() -> Iterator[list[logging.LogRecord]]:
+    """What the service and uvicorn log (uvicorn's loggers do not propagate to the root)."""
+    handler = Records()
+    loggers = [logging.getLogger(name) for name in ("uvicorn.error", "collie.service")]
+    for logger in loggers:
+        logger.addHandler(handler)
+    yield handler.records
+    for logger in loggers:
+        logger.removeHandler(handler)
+
+
+def next_data(lines: Iterator[str]) -> dict[str, Any]:
+    """The next SSE event's data, from a stream's lines."""
+    return json.loads(next(line for line in lines if line.startswith("data: "))[len("data: ") :])
 
 
 @pytest.fixture(scope="session")

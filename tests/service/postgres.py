@@ -44,12 +44,14 @@ class PostgresServer:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self, timeout_s: float = 60.0) -> PostgresServer:
-        initdb = [str(BIN / "initdb"), "-D", str(self.data), "-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync"]
-        subprocess.run([*self.as_user, *initdb], check=True, capture_output=True)
+        """Create the cluster on first use, then run the server (again, after halt())."""
+        if not self.data.exists():
+            initdb = [str(BIN / "initdb"), "-D", str(self.data), "-U", "postgres", "-A", "trust", "-E", "UTF8"]
+            subprocess.run([*self.as_user, *initdb, "--no-sync"], check=True, capture_output=True)
         # fsync off: a test server need not survive a power cut (the service's durability is
         # tested on SQLite); listen on 127.0.0.1 only, the socket directory is our own
         options = ["-p", str(self.port), "-h", "127.0.0.1", "-k", str(self.root), "-F", "-c", "max_connections=200"]
-        log = open(self.root / "postgres.log", "wb")  # noqa: SIM115 (the server writes it until stop)
+        log = open(self.root / "postgres.log", "ab")  # noqa: SIM115 (the server writes it until stop)
         self.proc = subprocess.Popen(
             [*self.as_user, str(BIN / "postgres"), "-D", str(self.data), *options], stdout=log, stderr=log
         )
@@ -75,21 +77,26 @@ class PostgresServer:
             conn.execute(f"CREATE DATABASE {name}")
         return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
 
-    def stop(self) -> None:
+    def halt(self) -> None:
+        """Stop the server as `pg_ctl stop -m fast` does (open connections are cut); the cluster
+        stays, and start() runs it again on the same port: an outage."""
         # signal the postmaster itself: a `runuser` in between need not pass the signal on
         with contextlib.suppress(OSError, ValueError):
             pid = int((self.data / "postmaster.pid").read_text().split()[0])
-            os.kill(pid, signal.SIGINT)  # fast shutdown: open client connections are cut
+            os.kill(pid, signal.SIGINT)  # fast shutdown
             deadline = time.monotonic() + 30
             while time.monotonic() < deadline:
                 os.kill(pid, 0)  # raises once it is gone
                 time.sleep(0.1)
             os.kill(pid, signal.SIGKILL)
         if self.proc is not None and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)  # fast shutdown: open client connections are cut
+            self.proc.send_signal(signal.SIGINT)
             try:
                 self.proc.wait(30)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+
+    def stop(self) -> None:
+        self.halt()
         shutil.rmtree(self.root, ignore_errors=True)

@@ -28,6 +28,7 @@ POLICY: dict[tuple[str, str], str] = {
     ("POST", "/api/labelers"): OPERATOR,
     ("GET", "/api/labelers"): OPERATOR,
     ("DELETE", "/api/labelers/{labeler_id}"): OPERATOR,
+    ("PUT", "/api/labelers/{labeler_id}/runs"): OPERATOR,
     ("POST", "/api/runs"): TRAINER,
     ("GET", "/api/runs"): ANY,
     ("GET", "/api/runs/{run_id}"): ANY,

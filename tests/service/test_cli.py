@@ -19,7 +19,7 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 
 from backend.db import Database
-from backend.migrate import alembic_config, upgrade
+from backend.migrate import alembic_config, head, upgrade
 from backend.models import Base
 from collie.client import CollieClient
 
@@ -89,13 +89,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
 def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -> None:
     """A database from before the newest migration is brought up to date (as `collie serve` would)
     and exported; a file that is no database, or none at all, is a one-line error."""
-    old = Database(f"sqlite:///{tmp_path / 'old.db'}")
-    config = alembic_config(old.url)
-    with old.engine.begin() as conn:
-        config.attributes["connection"] = conn
-        command.upgrade(config, "0008")
-    old.dispose()
-    out = collie("export", "--db", str(tmp_path / "old.db"), "--run", "1", "--effective")
+    out = collie("export", "--db", str(migrated(tmp_path / "old.db", "0008")), "--run", "1", "--effective")
     assert (
         out.returncode == 1 and "no run 1" in out.stderr and "upgraded" in out.stderr and "Traceback" not in out.stderr
     )
@@ -193,3 +187,107 @@ def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     out = collie("serve", "--port", "0", "--db", str(tmp_path / "same.db"), env=env)
     assert out.returncode != 0 and "Traceback" not in out.stderr
     assert "already the token of 'operator'" in out.stderr
+
+
+def migrated(path: Path, revision: str) -> Path:
+    """A SQLite database at schema `revision`."""
+    db = Database(f"sqlite:///{path}")
+    config = alembic_config(db.url)
+    with db.engine.begin() as conn:
+        config.attributes["connection"] = conn
+        command.upgrade(config, revision)
+    db.dispose()
+    return path
+
+
+def test_a_newer_collies_database_is_a_one_line_error(tmp_path: Path) -> None:
+    db = migrated(tmp_path / "future.db", "head")
+    with Database(f"sqlite:///{db}").engine.begin() as conn:
+        conn.exec_driver_sql("UPDATE alembic_version SET version_num = '9999_future'")
+    out = collie("serve", "--port", "0", "--db", str(db))
+    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert f"{db} is at schema revision 9999_future, which this collie does not know" in out.stderr
+    assert "a newer collie made it" in out.stderr
+    out = collie("export", "--db", str(db), "--run", "1")  # the same words: one check for both commands
+    assert out.returncode == 2 and "9999_future, which this collie does not know" in out.stderr
+
+
+def test_serve_says_it_upgraded_the_schema(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    db = migrated(tmp_path / "old.db", "0005")
+    server, _ = start_serve(db, None, env)
+    stop(server)
+    said = server.stderr.read()  # type: ignore[union-attr]
+    assert f"upgraded {db} from schema 0005 to {head()}" in said and "Traceback" not in said
+    server, _ = start_serve(db, None, env)  # up to date: nothing to say
+    stop(server)
+    assert "upgraded" not in server.stderr.read()  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "postgres://collie:s3cret@127.0.0.1:5432/collie",
+        "mysql://collie:s3cret@127.0.0.1/collie",
+        "hello",
+        "hello://collie:s3cret@",
+    ],
+)
+def test_a_database_url_collie_cannot_use_is_a_one_line_error(tmp_path: Path, url: str) -> None:
+    env = {**os.environ, "COLLIE_DATABASE_URL": url}
+    for args in (("serve", "--port", "0"), ("export", "--run", "1")):
+        out = collie(*args, env=env, cwd=tmp_path)
+        assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+        assert "COLLIE_DATABASE_URL" in out.stderr and "postgresql+psycopg://" in out.stderr
+        assert "s3cret" not in out.stderr and url.split(":")[0] in out.stderr
+
+
+def test_export_bounds_the_run_id_and_takes_no_url_for_a_path(tmp_path: Path) -> None:
+    """Run ids are bounded as the API bounds them (PostgreSQL's INTEGER); a database URL given as
+    --db (a SQLite file's path, as for `collie serve`) is refused without echoing its password."""
+    db = str(migrated(tmp_path / "c.db", "head"))
+    out = collie("export", "--db", db, "--run", "99999999999")
+    assert out.returncode == 2 and "Traceback" not in out.stderr and "2147483647" in out.stderr
+    assert collie("export", "--db", db, "--run", "0").returncode == 2
+    url = "postgresql+psycopg://collie:s3cret@127.0.0.1:5432/collie"
+    for args in (("export", "--run", "1"), ("serve", "--port", "0")):
+        out = collie(*args, "--db", url, cwd=tmp_path)
+        assert out.returncode == 2 and "Traceback" not in out.stderr and "argument --db: takes a SQLite" in out.stderr
+        assert "s3cret" not in out.stderr and "COLLIE_DATABASE_URL" in out.stderr
+        assert not (tmp_path / "postgresql+psycopg:").exists()
+
+
+@pytest.mark.parametrize(
+    ("variable", "token", "why"),
+    [
+        ("COLLIE_OPERATOR_TOKEN", "change-me-operator", "placeholder"),
+        ("COLLIE_LABELER_TOKEN", "Zq9", "shorter than 16"),
+        ("COLLIE_TRAINER_TOKEN", "Change-Me-Please-0123456789", "placeholder"),
+    ],
+)
+def test_a_weak_bootstrap_token_is_refused_at_start(tmp_path: Path, variable: str, token: str, why: str) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    out = collie("serve", "--port", "0", "--db", str(tmp_path / "weak.db"), env={**env, variable: token})
+    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert variable in out.stderr and why in out.stderr and token not in out.stderr
+    assert not (tmp_path / "weak.db").exists()  # refused before anything was written
+
+
+def test_a_revoked_built_in_token_is_never_presented_as_valid(tmp_path: Path) -> None:
+    """After an operator revokes the built-in labeler, no start writes its token to the tokens
+    file or calls it kept, whether COLLIE_LABELER_TOKEN still holds it or not."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    db, tokens_file = tmp_path / "rev.db", tmp_path / "tokens.json"
+    server, _ = start_serve(db, tokens_file, env)
+    try:
+        first = json.loads(tokens_file.read_text())
+        with CollieClient(first["api"], first["tokens"]["operator"]) as operator:
+            operator.revoke(next(p.id for p in operator.labelers() if p.name == "labeler"))
+    finally:
+        stop(server)
+    for extra in ({"COLLIE_LABELER_TOKEN": first["tokens"]["labeler"]}, {}):
+        server, lines = start_serve(db, tokens_file, {**env, **extra})
+        stop(server)
+        said = "".join(lines) + server.stderr.read()  # type: ignore[union-attr]
+        assert "labeler token: revoked" in said and "kept" not in said.split("labeler token:")[1].split("\n")[0]
+        assert "labeler" not in json.loads(tokens_file.read_text())["tokens"]

@@ -21,7 +21,7 @@ from .conftest import TOKENS, make_run_spec, make_session
 def body_routes(live: BackgroundServer) -> list[tuple[str, str]]:
     paths = live.app.openapi()["paths"]
     return [
-        (method.upper(), path.format(run_id=1))
+        (method.upper(), path.format(run_id=1, labeler_id=1))
         for path, operations in paths.items()
         for method, operation in operations.items()
         if "requestBody" in operation

@@ -122,3 +122,54 @@ def test_a_labeler_for_a_run_that_does_not_exist_is_refused(operator: CollieClie
         operator.create_labeler("for-nothing", runs=[99999])
     assert refused.value.status == 404 and "no run 99999" in str(refused.value.detail)
     assert "for-nothing" not in [p.name for p in operator.labelers()]
+
+
+def test_an_operator_changes_a_labelers_runs(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient
+) -> None:
+    mine, other = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
+    for run in (mine, other):
+        trainer.post_session(run.id, make_session(0, 2))
+    created = operator.create_labeler("movable", runs=[mine.id])
+    headers = {"Authorization": f"Bearer {created.token}"}
+    with (
+        CollieClient(live.url, created.token) as movable,
+        httpx.stream("GET", f"{live.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held,
+    ):
+        lines = held.iter_lines()
+        assert next(lines).startswith("retry:")
+        assert operator.set_labeler_runs(created.id, [other.id]).runs == [other.id]
+        list(lines)  # its stream of `mine` ends now (else: a read timeout)
+        assert movable.claim(other.id) is not None  # at once: no wait for a token cache
+        with pytest.raises(ApiError) as err:
+            movable.run(mine.id)
+        assert err.value.status == 403
+        assert operator.set_labeler_runs(created.id, None).runs is None  # every run again
+        assert {mine.id, other.id} <= {r.id for r in movable.runs()}
+
+
+def test_a_scope_change_is_refused_where_it_makes_no_sense(operator: CollieClient, labeler: CollieClient) -> None:
+    created = operator.create_labeler("scope-target")
+    as_operator = {"Authorization": f"Bearer {TOKENS['operator']}"}
+    url = f"{operator.api}/api/labelers/{created.id}/runs"
+    refused = httpx.put(url, json={"runs": []}, headers=as_operator)
+    assert refused.status_code == 422 and "valid for no run" in refused.text
+    refused = httpx.post(f"{operator.api}/api/labelers", json={"name": "nobody", "runs": []}, headers=as_operator)
+    assert refused.status_code == 422 and "valid for no run" in refused.text
+    for target, status, words in (
+        (next(p.id for p in operator.labelers() if p.name == "trainer"), 422, "only a labeler"),
+        (99999, 404, "no principal 99999"),
+    ):
+        with pytest.raises(ApiError) as err:
+            operator.set_labeler_runs(target, None)
+        assert err.value.status == status and words in str(err.value.detail)
+    with pytest.raises(ApiError) as err:
+        labeler.set_labeler_runs(created.id, None)
+    assert err.value.status == 403
+    operator.revoke(created.id)
+    with pytest.raises(ApiError) as err:
+        operator.set_labeler_runs(created.id, None)
+    assert err.value.status == 409 and "revoked" in str(err.value.detail)
+    with pytest.raises(ApiError) as err:
+        operator.create_labeler("scope-target")
+    assert err.value.status == 409 and "taken by a revoked principal" in str(err.value.detail)
