@@ -18,11 +18,11 @@ from pathlib import Path
 
 from pydantic import SecretStr
 
-from backend.services.auth import ROLES, builtin_principals, new_token, weakness
+from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.argtypes import port, sqlite_file
-from collie.tokens import read_tokens_file, write_secret
+from collie.tokens import read_tokens_file, weakness, write_secret
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 TOKEN_ENV = "COLLIE_TOKEN"
 HEADER_SAFE = re.compile(r"[!-~]+")  # printable ASCII without spaces: what a bearer header carries
+MIN_TOKEN = 16  # a generated token has 43 characters
 
 
 def add_token_arguments(parser: argparse.ArgumentParser, role: str) -> None:
@@ -64,6 +65,15 @@ def _from_file(path: Path, role: str) -> str:
     if role not in tokens:
         raise ValueError(f"--token-file {path} is a tokens file without a {role} token (it has: {', '.join(tokens)})")
     return checked(tokens[role], f"--token-file {path} ({role})")
+
+
+def weakness(token: str) -> str | None:
+    """Why a token someone chose is guessable (None: it is not): a forgotten placeholder, or short."""
+    if "change-me" in token.lower():
+        return "is a placeholder (it holds 'change-me')"
+    if len(token) < MIN_TOKEN:
+        return f"is shorter than {MIN_TOKEN} characters"
+    return None
 
 
 def write_secret(path: Path, text: str) -> None:

@@ -27,7 +27,7 @@ from collie.argtypes import port
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
-from collie.tokens import TOKEN_ENV, read_tokens_file, write_secret
+from collie.tokens import MIN_TOKEN, TOKEN_ENV, read_tokens_file, weakness, write_secret
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
     from collie.client import CollieClient
@@ -164,6 +164,11 @@ def checked(args: argparse.Namespace) -> Path:
         raise ValueError("--max-restarts must be ≥ 0")
     if args.teacher_rate is not None and args.teacher_rate <= 0:
         raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
+    if not (out / "tokens.json").exists():  # a new stack takes COLLIE_<ROLE>_TOKEN (stack_tokens): as the service would
+        for name in (f"COLLIE_{r.upper()}_TOKEN" for r in ROLES):
+            why = weakness(os.environ.get(name) or "x" * MIN_TOKEN)
+            if why:
+                raise ValueError(f"{name} {why}: unset it (a random one is made) or choose a longer random one")
     return out
 
 

@@ -3,6 +3,7 @@ error, and leaves a start that never gets ready when asked to stop."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import threading
@@ -37,6 +38,15 @@ def test_bad_arguments_are_refused_before_anything_starts(tmp_path: Path, args: 
     proc = up(tmp_path, *args)
     assert proc.returncode == 2 and said in proc.stderr and "Traceback" not in proc.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing was started or written
+
+
+def test_a_weak_token_from_the_environment_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    env = {**os.environ, "COLLIE_OPERATOR_TOKEN": "change-me-operator-please"}
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", "--out", str(tmp_path / "o")]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "collie up: error: COLLIE_OPERATOR_TOKEN is a placeholder (it holds 'change-me')" in proc.stderr
+    assert "please" not in proc.stderr and not (tmp_path / "o").exists()
 
 
 def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:

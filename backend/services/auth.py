@@ -39,20 +39,8 @@ def hash_token(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
 
 
-MIN_TOKEN = 16  # a generated token has 43 characters
-
-
 def new_token() -> str:
     return secrets.token_urlsafe(32)
-
-
-def weakness(token: str) -> str | None:
-    """Why a token someone chose is guessable (None: it is not): a forgotten placeholder, or short."""
-    if "change-me" in token.lower():
-        return "is a placeholder (it holds 'change-me')"
-    if len(token) < MIN_TOKEN:
-        return f"is shorter than {MIN_TOKEN} characters"
-    return None
 
 
 class TokenCache:
