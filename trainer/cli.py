@@ -417,8 +417,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     except SourceRefused as exc:  # e.g. an operator revoked the token mid-run
         print(
-            f"collie train: error: {exc}: resume it with --resume and this run's trainer token, or an "
-            "operator's (a trainer acts only on the runs it created)",
+            f"collie train: error: {exc}: resume it with --resume and an operator's token (a trainer "
+            "token acts only on the runs its own principal created)",
             file=sys.stderr,
         )
         return 2
