@@ -13,6 +13,7 @@ from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB
 
 SIZE = 240  # pixels, square
 CLASS_RGB = {c: to_rgb(colour) for c, colour in PALE.items()}  # as the dashboard's map
+NO_RULE_RGB = (244, 245, 247)  # the background of a run without a rule
 AXIS_RGB = (200, 200, 205)
 SEGMENT_RGB, HEAD_RGB = TO_COME_RGB, PLAYED_RGB  # the 3D view's colours (colours.py)
 START_RGB = (30, 30, 30)
@@ -82,8 +83,11 @@ class Canvas:
 def render_inset(task: Task | None, segment_xy: np.ndarray, earlier_xy: np.ndarray | None) -> np.ndarray:
     """(SIZE, SIZE, 3) uint8 picture of the regions, the earlier path and the segment."""
     canvas = Canvas(*view_box(segment_xy, earlier_xy))
-    palette = np.array([CLASS_RGB[c] for c in range(3)], np.uint8)
-    canvas.image[:] = palette[class_map(task, canvas.cx, canvas.cy, canvas.half, SIZE)]
+    if task is None:  # only an instruction: no class anywhere, so no shade that would suggest one
+        canvas.image[:] = NO_RULE_RGB
+    else:
+        palette = np.array([CLASS_RGB[c] for c in range(3)], np.uint8)
+        canvas.image[:] = palette[class_map(task, canvas.cx, canvas.cy, canvas.half, SIZE)]
     # the axes through the origin, for orientation
     canvas.path(np.array([[canvas.cx - 2 * canvas.half, 0.0], [canvas.cx + 2 * canvas.half, 0.0]]), AXIS_RGB, 0.5)
     canvas.path(np.array([[0.0, canvas.cy - 2 * canvas.half], [0.0, canvas.cy + 2 * canvas.half]]), AXIS_RGB, 0.5)

@@ -20,7 +20,7 @@ from collie.schemas import MAX_HOLD, MAX_TABS
 from collie.tasks import BAD, NEUTRAL, get_task
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
-from labeling_ui.inset import CLASS_RGB, SIZE, render_inset, view_box
+from labeling_ui.inset import CLASS_RGB, NO_RULE_RGB, SIZE, render_inset, view_box
 from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
@@ -124,6 +124,9 @@ def test_inset_is_north_up_and_paints_the_task() -> None:
     top, bottom = image[5, SIZE // 2 + 20], image[-5, SIZE // 2 + 20]  # beside the drawn y axis
     assert tuple(top) == CLASS_RGB[NEUTRAL]  # north of the origin: the (neutral) wedge
     assert tuple(bottom) == CLASS_RGB[BAD]  # south: bad
+    plain = render_inset(None, np.array([[0.0, 1.0], [0.0, 3.0]]), None)  # an instruction alone: no class shaded
+    assert tuple(plain[5, SIZE // 2 + 20]) == tuple(plain[-5, SIZE // 2 + 20]) == NO_RULE_RGB
+    assert NO_RULE_RGB not in CLASS_RGB.values()
     cx, cy, half = view_box(np.array([[10.0, 10.0]]))
     assert half >= 5 and 0 <= cx <= 10 and 0 <= cy <= 10  # holds the origin and the path
 

@@ -69,6 +69,12 @@ def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: Backgr
         page.fill("#labeler-name", "alice-web")
         page.click("#labeler-create")
         page.wait_for_function("document.querySelector('#labeler-message').textContent.includes('taken')")
+        assert page.is_hidden("#labeler-created")  # alice's token box is not this attempt's
+        bad_names = [("José 🚀", "may hold only A–Z"), ("  ", "give the labeler a name"), ("x" * 65, "at most 64")]
+        for name, said in bad_names:
+            page.fill("#labeler-name", name)
+            page.click("#labeler-create")
+            page.wait_for_function(f"document.querySelector('#labeler-message').textContent.includes({said!r})")
         page.fill("#labeler-name", "bob-web")
         assert page.text_content("#labeler-message") == ""  # typing again clears the old error
         page.click("#labeler-create")
@@ -181,3 +187,17 @@ def test_the_charts_have_legends_and_labelled_states_are_large(page: Any, artifa
     assert all(size >= 10 for size, _ in markers)
     assert len({symbol for _, symbol in markers}) == 3  # bad, neutral, good: three shapes
     page.screenshot(path=str(artifacts / "dashboard-quality.png"), full_page=True)
+
+
+def test_the_labeler_table_stays_inside_its_card(page: Any) -> None:
+    page.set_viewport_size({"width": 1400, "height": 900})
+    page.wait_for_selector("#labelers-stats tbody tr button")
+    card = page.locator("#labeling").bounding_box()
+    button = page.locator("#labelers-stats tbody tr button").first.bounding_box()
+    assert card is not None and button is not None
+    visible_right = card["x"] + card["width"]
+    assert button["x"] + button["width"] <= visible_right or page.evaluate(
+        "document.querySelector('#labeling').scrollWidth > document.querySelector('#labeling').clientWidth"
+    )  # inside the card, or reachable by the card's own scroll
+    no_page_scroll = "document.documentElement.scrollWidth <= document.documentElement.clientWidth"
+    assert page.evaluate(no_page_scroll)

@@ -15,6 +15,12 @@ export function shownStatus(run) {
   return run.status === "finished" && run.control === "stop" ? "stopped" : run.status;
 }
 
+// An operator's pause or stop the trainer has not acted on yet (a paused run already says paused).
+export function controlPending(run) {
+  return run.control !== "run" && !["finished", "failed", "stopped"].includes(run.status)
+    && !(run.control === "pause" && run.status === "paused");
+}
+
 export function ago(isoTime, now = Date.now()) {
   if (!isoTime) return "—";
   const s = Math.max(0, (now - Date.parse(isoTime)) / 1000);

@@ -23,6 +23,16 @@ async function copy(input, button) {
   setTimeout(() => { button.textContent = text; }, 1500);
 }
 
+const NAME_CHARS = /^[A-Za-z0-9_.:+-]+$/; // what the service takes (collie/schemas.py Name)
+const MAX_NAME = 64;
+
+function nameProblem(name) {
+  if (!name) return "give the labeler a name";
+  if (name.length > MAX_NAME) return `a name has at most ${MAX_NAME} characters (this one has ${name.length})`;
+  if (!NAME_CHARS.test(name)) return "a name may hold only A–Z a–z 0–9 _ . : + - (no spaces or accents)";
+  return null;
+}
+
 export class LabelerPanel {
   constructor(root, uiUrl) {
     this.root = root;
@@ -64,6 +74,12 @@ export class LabelerPanel {
 
   async create(name) {
     this.message.textContent = "";
+    this.root.querySelector("#labeler-created").hidden = true; // an earlier token is not this attempt's
+    const wrong = nameProblem(name);
+    if (wrong) {
+      this.message.textContent = wrong;
+      return;
+    }
     try {
       const made = await api("labelers", { method: "POST", body: { name, role: "labeler" } });
       const link = labelerLink(this.uiUrl, made.token);

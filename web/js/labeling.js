@@ -103,7 +103,9 @@ export function renderDisagreements(element, count, view, task, names, replayHre
   const s = view.labeling;
   count.textContent = s.n_disagreements ? `(${s.n_disagreements}${s.n_disagreements > s.disagreements.length ? `, newest ${s.disagreements.length} shown` : ""})` : "";
   if (!s.disagreements.length) {
-    element.innerHTML = '<p class="muted">none: every labelled query has agreeing labels</p>';
+    const why = !s.n_labels ? "nothing labelled yet"
+      : task ? "every labelled query has agreeing labels" : "labelers agree on every shared query (no task rule to judge by)";
+    element.innerHTML = `<p class="muted">none: ${why}</p>`;
     return;
   }
   element.innerHTML = `<table><thead><tr><th>query</th><th>session</th><th>labels</th><th>counts as</th><th>oracle</th><th>path</th>${replayHref ? "<th>3D</th>" : ""}</tr></thead><tbody>

@@ -4,7 +4,7 @@
 import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
-import { STATUS_TEXT, coalesce, shownStatus } from "./format.js";
+import { STATUS_TEXT, coalesce, controlPending, shownStatus } from "./format.js";
 import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
 import { QualityForm } from "./quality.js";
@@ -105,9 +105,8 @@ export class RunPage {
   showRun(run) {
     this.run = run;
     const status = this.root.querySelector("#run-status");
-    const pending = run.control !== "run" && run.status !== "finished" && run.status !== "failed";
     status.className = `status ${shownStatus(run)}`;
-    status.textContent = (STATUS_TEXT[shownStatus(run)] ?? run.status) + (pending && run.status !== "paused" ? ` (${run.control} requested)` : "");
+    status.textContent = (STATUS_TEXT[shownStatus(run)] ?? run.status) + (controlPending(run) ? ` (${run.control} requested)` : "");
     document.body.dataset.runStatus = run.status;
     document.body.dataset.runControl = run.control;
     this.root.querySelector("#run-labels").textContent = run.n_labels;

@@ -1,6 +1,6 @@
 // The runs list, live from the service's runs stream (sent again whenever any run changes).
 
-import { STATUS_TEXT, ago, escapeHtml, of, shownStatus } from "./format.js";
+import { STATUS_TEXT, ago, controlPending, escapeHtml, of, shownStatus } from "./format.js";
 
 export function renderRuns(body, runs, selected) {
   if (!runs.length) {
@@ -11,7 +11,7 @@ export function renderRuns(body, runs, selected) {
     <tr data-run-id="${r.id}" class="${r.id === selected ? "selected" : ""}">
       <td>#${r.id}</td>
       <td><span class="status ${shownStatus(r)}">${STATUS_TEXT[shownStatus(r)] ?? escapeHtml(r.status)}</span>${
-        r.control !== "run" && r.status !== "finished" && r.status !== "failed" ? ` <span class="muted">(${r.control})</span>` : ""}</td>
+        controlPending(r) ? ` <span class="muted">(${r.control} requested)</span>` : ""}</td>
       <td>${escapeHtml(r.env)}</td><td>${escapeHtml(r.task)}</td>
       <td>${escapeHtml(r.method)}${r.preset ? ` <span class="muted">${escapeHtml(r.preset)}</span>` : ""}</td>
       <td>${of(r.epoch, r.epochs_total)}</td>
