@@ -46,7 +46,7 @@ if (sessionStorage.getItem(%(tab)s) === null) {  // crypto.randomUUID needs http
 localStorage.removeItem(%(legacy)s);
 localStorage.setItem(%(handoff)s, JSON.stringify({
   token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch"), tab: sessionStorage.getItem(%(tab)s),
-  review: url.searchParams.get("review"), query: url.searchParams.get("query")
+  review: url.searchParams.get("review"), query: url.searchParams.get("query"), width: window.innerWidth
 }));
 """
 
@@ -62,6 +62,7 @@ class TabIdentity:
     tab: str = field(default_factory=new_tab_id)  # the browser's, else one for this connection
     # ?review=RUN&query=ID: replay that query for an operator, label nothing (as given: review.py checks it)
     review: tuple[int, str] | None = None
+    window_width: int | None = None  # the browser window's, in CSS pixels, when the tab opened
 
 
 def run_script(client: viser.ClientHandle, source: str) -> None:
@@ -95,6 +96,7 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
         _run_id(watch),
         tab if isinstance(tab, str) and TAB_ID.fullmatch(tab) else new_tab_id(),
         None if run is None else (_run_id(run) or 0, query if isinstance(query, str) else ""),  # 0: no run
+        width if isinstance(width := found.get("width"), int) and width > 0 else None,
     )
 
 

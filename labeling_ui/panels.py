@@ -43,8 +43,8 @@ LEGEND = (
     "red bad area, yellow good area, as on the dashboard (none in a run with only an instruction). The "
     "blue **N** arrow points north (up in the inset)."
 )
-CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns: controls (right), context (left)
-NARROW_WINDOW_PX = 960  # below this the context column starts minimized
+CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns' widths: controls (right), context (left)
+NARROW_WINDOW_PX = 960  # below this the context column starts minimized: the 3D view would be < 300 px
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
 
@@ -177,17 +177,12 @@ class Panels:
             self.segment = gui.add_markdown("")
         self.context_panel.dock_left()
         self.context_panel.set_width(CONTEXT_PX)
-        self._fitted = False
-        client.camera.on_update(self._fit_window)
 
-    def _fit_window(self, camera: viser.CameraHandle) -> None:
-        """In a narrow window the context column opens minimized (a rail the labeler can open), so
-        the 3D view is more than a strip between the two columns. Once per tab, when the column
-        first shows: never against the labeler's own choice."""
-        if self._fitted or not self.context_panel.visible:
-            return
-        self._fitted = True
-        if camera.image_width + CONTROLS_PX + CONTEXT_PX < NARROW_WINDOW_PX:  # the canvas lies between the columns
+    def fit_window(self, width: int | None) -> None:
+        """In a window narrower than NARROW_WINDOW_PX the context column opens minimized (a rail
+        the labeler can open), so the 3D view is more than a strip between the two columns. Once,
+        as the tab opens: never against the labeler's own choice later."""
+        if width is not None and width < NARROW_WINDOW_PX:
             self.context_panel.minimize()
 
     # ---------------------------------------------------------------- screens

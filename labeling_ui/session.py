@@ -199,6 +199,7 @@ class LabelerSession:
 
     def _work(self) -> None:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
+        self.panels.fit_window(opened.window_width)
         with self.tab as state:
             state.watch_run, state.review = opened.watch, opened.review
             if opened.tab:  # the labels this tab made before a reload: U walks back through them

@@ -296,12 +296,12 @@ def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, b
     run = stack.post_run("point", 2)
     url = stack.ui(run.id).labeler_url(stack.new_labeler("narrow"))
     description = get_task("north", "point").description
-    for width, shown in ((800, False), (VIEWPORT["width"], True)):
+    for width, shown in ((800, False), (800, False), (800, False), (VIEWPORT["width"], True)):  # once flaky: 3 tries
         context = browser.new_context(viewport={"width": width, "height": 600})
         context.set_default_timeout(TIMEOUT_S * 1000)
         page = context.new_page()
         page.goto(url)
         wait_segment(page)
-        time.sleep(1.0)  # the column's place is settled by the browser's first camera report
+        time.sleep(1.0)  # the column minimizes as the tab opens (the window width the browser handed over)
         assert page.get_by_text(description).first.is_visible() is shown, width
         context.close()
