@@ -17,6 +17,7 @@ from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
 from labeling_ui.tab import Segment
+from labeling_ui.waiting import ended_words
 
 log = logging.getLogger(__name__)
 
@@ -84,19 +85,19 @@ class Claims:
 
     def renew(self, link: ServiceLink) -> Segment | None:
         """Keep the claims alive while the labeler watches (a claim renews every lease one holds).
-        Returns the segment on screen if its lease was lost meanwhile (this tab stalled past it): it
-        is dropped, and the caller shows the next."""
+        Returns the segment on screen if its lease was lost meanwhile (this tab stalled past it) or its
+        run ended: it is dropped (with what was preloaded of that run), and the caller shows the next."""
         with self.tab as state:
             shown = state.shown
         if shown is None:
             return None
         try:
             claimed = link.claim(shown.run.id)
-        except Rejected as exc:
-            self.screen.panels.notify("Run closed", str(exc), "orange")
+        except Rejected:  # the run ended (an operator stopped it, or it finished): nothing of it stays on screen
+            self.screen.panels.notify("Run closed", ended_words(link.run(shown.run.id)), "orange")
             with self.tab as state:
                 state.leases(shown.run.id, set())
-            return None
+            return shown
         with self.tab as state:
             lost = state.leases(shown.run.id, set(claimed.held) if claimed is not None else set())
         if shown not in lost:

@@ -59,10 +59,11 @@ class Presenter:
             return True
         claim = self.claims.claim(link, run) if run is not None else None
         if claim is None:
-            run = link.pick_run()
-            if run is None:
-                self.wait_for(link, None, "No run is open on the service yet.")
+            picked = link.pick_run()
+            if picked is None:  # none open: how the run just shown ended, else that none is open yet
+                self.wait_for(link, run, None if run else "No run is open on the service yet.", self.claims.refused)
                 return False
+            run = picked
             claim = self.claims.claim(link, run)
         if claim is None:
             self.wait_for(link, run, None, refused=self.claims.refused)

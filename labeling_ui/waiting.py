@@ -68,17 +68,28 @@ def run_state(run: RunRead) -> str:
     return run.status.replace("_", " ")
 
 
+def ended_words(run: RunRead) -> str:
+    """Why a run takes no label now, in the labeler's words."""
+    return f"run {run.id} is {run_state(run)}: it takes no more labels"
+
+
 def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
     """The waiting screen's status. `held_here`: this tab's own claims (never "elsewhere")."""
     q = run.queue
     others = max(q.leased - held_here, 0)
     lines = [f"Run {run.id} ({run.env}, {run.task}) is *{run_state(run)}* at epoch **{fc.epoch}**."]
     if run.status not in FINISHED and run.control != "stop":
-        if fc.next_feedback is not None:
+        if run.control == "pause":
+            lines.append("The operator paused it: no feedback session comes until it resumes.")
+        elif fc.next_feedback is not None:
             eta = f", in about **{duration(fc.eta_s)}**" if fc.eta_s is not None else " (no epoch rate yet for an ETA)"
             lines.append(f"Next feedback session at epoch **{fc.next_feedback}**{eta}.")
         else:
             lines.append("The trainer posts the next feedback session when its schedule says so.")
+    if q.pending and run.redundancy > 1 and run.status not in FINISHED:  # none of them is this labeler's to label
+        lines.append(
+            f"{q.pending} segment(s) wait for other labelers: each needs labels from {run.redundancy} different people."
+        )
     tail = f"{run.n_labels} labelled"
     if others and run.status not in FINISHED:  # an ended run's leases only wait to run out
         tail = f"{others} being labelled elsewhere (other labelers, or your other tabs), " + tail

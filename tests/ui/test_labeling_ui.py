@@ -305,3 +305,19 @@ def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, b
         time.sleep(1.0)  # the column minimizes as the tab opens (the window width the browser handed over)
         assert page.get_by_text(description).first.is_visible() is shown, width
         context.close()
+
+
+def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(stack: Stack, browser: Browser) -> None:
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("late")))
+    wait_segment(page)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+    stack.operator.stop(run.id)
+    stack.trainer.set_status(run.id, "finished")  # the trainer acts on the stop
+    press(page, "2")
+    wait_text(page, f"run {run.id} is stopped: it takes no more labels")  # not "finished"
+    wait_text(page, f"Run {run.id} (point, north) is stopped")  # the waiting screen, from the first refusal
+    assert segment_id(page) is None  # neither the labelled one nor the preloaded one
+    assert stack.trainer.label_events(run.id) == []
+    page.context.close()

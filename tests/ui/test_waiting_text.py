@@ -46,3 +46,16 @@ def test_stopped_is_not_finished_and_own_claims_are_not_others() -> None:
     )
     ended = stopped.model_copy(update={"queue": QueueCounts(leased=2)})  # leases that only wait to run out
     assert "elsewhere" not in waiting_text(ended, forecast(ended, []), held_here=0)
+
+
+def test_a_paused_run_gives_no_eta_and_redundancy_says_who_the_segments_wait_for() -> None:
+    r = run().model_copy(update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 10, "control": "pause"})
+    text = waiting_text(r, forecast(r, [metrics(0, 0.0), metrics(10, 5.0)]), held_here=0)
+    assert "paused it: no feedback session comes until it resumes" in text and "in about" not in text
+    both = run().model_copy(update={"redundancy": 2, "queue": QueueCounts(pending=6)})
+    assert "6 segment(s) wait for other labelers: each needs labels from 2 different people" in waiting_text(
+        both, forecast(both, []), held_here=0
+    )
+    assert "wait for other labelers" not in waiting_text(
+        run().model_copy(update={"queue": QueueCounts(pending=6)}), forecast(run(), []), held_here=0
+    )
