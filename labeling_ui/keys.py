@@ -4,7 +4,8 @@ skipping never turns the north-up view.
 
 viser's hotkeys ignore every key pressed while an <input> has focus, so a click on the Loop box, the
 Frame box or the Segment list used to silence 1 2 3 until the labeler clicked elsewhere. A script
-hands such a key back to the page; only the sign-in field (a text input) keeps its keys. The Frame
+hands such a key back to the page; only the sign-in field (a text input) keeps its keys, and Enter
+there signs in. The Frame
 box shows the frame and takes no typing (its digits would be labels): the slider and J L move it.
 """
 
@@ -18,7 +19,7 @@ import viser
 
 from collie.labels import Label
 from labeling_ui.browser import run_script
-from labeling_ui.panels import Actions
+from labeling_ui.panels import SIGN_IN, Actions
 
 _HAND_KEYS_BACK = """
 (() => {
@@ -32,6 +33,11 @@ _HAND_KEYS_BACK = """
   }, true);
   window.addEventListener("keydown", (event) => {
     const el = event.target;
+    if (event.key === "Enter" && el instanceof HTMLInputElement && typedInto(el)) {  // the sign-in field
+      const button = [...document.querySelectorAll("button")].find((b) => b.textContent.trim() === %(sign_in)s);
+      if (button) button.click();
+      return;
+    }
     if (!(el instanceof HTMLInputElement) || typedInto(el) || event.ctrlKey || event.metaKey || event.altKey) return;
     const listOpen = el.getAttribute("aria-expanded") === "true";  // an open list keeps its keys
     if (!keys.has(event.key.toLowerCase()) || listOpen) return;
@@ -63,4 +69,4 @@ def bind_keys(client: viser.ClientHandle, actions: Actions) -> None:
         command = client.gui.add_command(label, hotkey=key)  # type: ignore[arg-type]  # viser's hotkey Literal lists every key name
         command.on_trigger(functools.partial(_run, do))
     page_keys = [" " if key == "space" else key.lower() for key, _, _ in bindings]
-    run_script(client, _HAND_KEYS_BACK % {"keys": json.dumps(page_keys)})
+    run_script(client, _HAND_KEYS_BACK % {"keys": json.dumps(page_keys), "sign_in": json.dumps(SIGN_IN)})

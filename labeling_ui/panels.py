@@ -45,6 +45,7 @@ LEGEND = (
 )
 CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns' widths: controls (right), context (left)
 NARROW_WINDOW_PX = 960  # below this the context column starts minimized: the 3D view would be < 300 px
+SIGN_IN = "Sign in"  # the button's words, which Enter in the token field presses (keys.py)
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
 
@@ -111,7 +112,7 @@ class Panels:
 
         with gui.add_folder("Sign in", visible=False) as self.login:
             self.token = gui.add_text("Labeler token", initial_value="", hint="the token your operator gave you")
-            sign_in = gui.add_button("Sign in", icon=viser.Icon.LOGIN)
+            sign_in = gui.add_button(SIGN_IN, icon=viser.Icon.LOGIN)
         sign_in.on_click(lambda _: actions.sign_in(self.token.value.strip()))
 
         with gui.add_folder("Label", visible=False) as self.labeling:
