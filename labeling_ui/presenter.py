@@ -21,7 +21,7 @@ from labeling_ui.screen import TabScreen
 from labeling_ui.service import MyLabel, ServiceLink
 from labeling_ui.stream_waiter import StreamWaiter
 from labeling_ui.tab import Key, Segment
-from labeling_ui.waiting import forecast, waiting_text
+from labeling_ui.waiting import EpochClock, forecast, waiting_text
 from labeling_ui.watch import SkillShow
 
 
@@ -42,6 +42,7 @@ class Presenter:
         self.fps, self.wait_s = fps, wait_s
         self.on_show = on_show
         self.loop = True  # the labeler's loop setting (the skills between segments use their own)
+        self.epochs = EpochClock()
         # the labeler's labels in the shown run, newest first: replaced whole (the panels read it from viser's threads)
         self.mine: tuple[MyLabel, ...] = ()
         self.skills: SkillShow | None = None
@@ -145,7 +146,8 @@ class Presenter:
         else:
             self.waiter.follow(*waiting_on)
         if run is not None:
-            status = waiting_text(run, forecast(run, link.metrics(run.id)), held_here)
+            seen = self.epochs.rate(run, time.monotonic())
+            status = waiting_text(run, forecast(run, link.metrics(run.id), seen), held_here)
             self.load_mine(link, run)
         if refused:
             status = f"⚠️ The service said: {refused}  \n{status or ''}"

@@ -1,6 +1,6 @@
 """What the page says while nothing is claimable: the epoch now, the epoch of the next feedback
 session and when it comes, from the trainer's own schedule (the run's config) and its epoch rate
-(the timestamps of its metrics). Pure: the session fetches, this words it."""
+(the timestamps of its metrics, else the epochs the tab saw go by). The session fetches, this words it."""
 
 from __future__ import annotations
 
@@ -47,8 +47,27 @@ def epoch_rate(metrics: Sequence[MetricsRead]) -> float | None:
     return (last.epoch - first.epoch) / seconds if seconds > 0 and last.epoch > first.epoch else None
 
 
-def forecast(run: RunRead, metrics: Sequence[MetricsRead]) -> Forecast:
-    return Forecast(run.epoch, next_feedback_epoch(run), epoch_rate(metrics))
+def forecast(run: RunRead, metrics: Sequence[MetricsRead], seen_rate: float | None = None) -> Forecast:
+    """`seen_rate`: the rate the tab saw (EpochClock), used until two metrics give one."""
+    return Forecast(run.epoch, next_feedback_epoch(run), epoch_rate(metrics) or seen_rate)
+
+
+class EpochClock:
+    """Epochs per second as this tab sees a run's epoch advance: an ETA before the trainer has
+    posted two metrics (a robot's first evaluation may lie a hundred epochs away)."""
+
+    MIN_S = 5.0  # a shorter look says little
+
+    def __init__(self) -> None:
+        self._first: dict[int, tuple[float, int]] = {}  # run → (when, epoch) first seen
+
+    def rate(self, run: RunRead, now: float) -> float | None:
+        when, epoch = self._first.setdefault(run.id, (now, run.epoch))
+        if run.epoch < epoch:  # a restarted trainer replays from its checkpoint: look again from here
+            self._first[run.id] = (now, run.epoch)
+            return None
+        seconds = now - when
+        return (run.epoch - epoch) / seconds if seconds >= self.MIN_S and run.epoch > epoch else None
 
 
 def duration(seconds: float) -> str:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from datetime import timedelta
 
 from collie.schemas import MetricsRead, QueueCounts
-from labeling_ui.waiting import forecast, next_feedback_epoch, run_state, waiting_text
+from labeling_ui.waiting import EpochClock, forecast, next_feedback_epoch, run_state, waiting_text
 
 from .test_tab_state import NOW, run
 
@@ -59,3 +59,16 @@ def test_a_paused_run_gives_no_eta_and_redundancy_says_who_the_segments_wait_for
     assert "wait for other labelers" not in waiting_text(
         run().model_copy(update={"queue": QueueCounts(pending=6)}), forecast(run(), []), held_here=0
     )
+
+
+def test_an_eta_from_the_epochs_the_tab_saw_before_two_metrics_exist() -> None:
+    clock = EpochClock()
+    r = run().model_copy(update={"config": {"warmup": 240, "feedback_every": 20}, "epoch": 10})
+    assert clock.rate(r, 100.0) is None  # the first look
+    assert clock.rate(r.model_copy(update={"epoch": 12}), 102.0) is None  # too short a look
+    rate = clock.rate(r.model_copy(update={"epoch": 20}), 110.0)
+    assert rate == 1.0
+    fc = forecast(r.model_copy(update={"epoch": 20}), [], rate)
+    assert fc.eta_s == 220.0 and "in about **4 min**" in waiting_text(r.model_copy(update={"epoch": 20}), fc, 0)
+    assert forecast(r, [metrics(0, 0.0), metrics(10, 5.0)], rate).epochs_per_s == 2.0  # metrics win once there
+    assert clock.rate(r.model_copy(update={"epoch": 3}), 120.0) is None  # a restarted trainer: look again
