@@ -21,6 +21,7 @@ from backend.routes import control, health, labelers, labels, queries, runs, str
 from backend.services import auth
 from backend.services.events import EventHub
 from backend.services.fanout import StreamFeed
+from backend.services.trainer_contact import TrainerContact
 from backend.settings import Settings
 from collie.schemas import (
     FeedbackPolicy,
@@ -130,6 +131,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.state.begin_shutdown = begin_shutdown
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
+    app.state.trainer_contact = TrainerContact()
     for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
         app.include_router(module.router, prefix="/api")
 

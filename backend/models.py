@@ -53,6 +53,7 @@ class Run(Base):
     created_by: Mapped[int] = mapped_column(ForeignKey("principals.id"))
     created_at: Mapped[float] = mapped_column(Float)
     updated_at: Mapped[float] = mapped_column(Float)
+    trainer_seen_at: Mapped[float | None] = mapped_column(Float, nullable=True)  # its trainer's last call
 
 
 class Query(Base):

@@ -42,6 +42,7 @@ class RunSummary(Read):
     last_event_id: int
     created_at: datetime
     updated_at: datetime
+    trainer_seen_at: datetime | None = Field(default=None, description="when its own trainer last called")
 
 
 class RunsPage(Read):

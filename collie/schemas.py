@@ -209,6 +209,9 @@ class RunRead(Wire):
     task_definition: TaskDefinition | None = Field(default=None, description="the run's rule as stored")
     instruction: str | None = Field(default=None, description="a run without a rule: the labelers' instruction")
     instructions: str = Field(default="", description="an operator's instructions for the run's labelers")
+    trainer_seen_at: datetime | None = Field(
+        default=None, description="when the run's own trainer last called the service (written every 15 s at most)"
+    )
 
 
 class QualitySettings(Wire):

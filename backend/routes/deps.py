@@ -134,6 +134,8 @@ def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> No
     run_id = int(raw)
     if not caller.may_see(run_id):
         raise HTTPException(403, f"this token is limited to other runs than run {run_id}")
+    if caller.role == "trainer":  # its event poll, status, sessions: the run's trainer is alive
+        request.app.state.trainer_contact.heard(request.app.state.db, run_id, caller.id)
     if caller.role == "trainer" and roles == TRAINER:
         db: Database = request.app.state.db
         with db.read() as conn:

@@ -128,6 +128,7 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
         task_definition=row.task_definition,
         instruction=row.instruction,
         instructions=row.instructions or "",
+        trainer_seen_at=row.trainer_seen_at,
     )
 
 

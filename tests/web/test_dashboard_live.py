@@ -163,6 +163,23 @@ def test_a_link_to_a_run_that_does_not_exist_says_so_above_the_runs(stack: dict[
     page.close()
 
 
+def test_a_run_whose_trainer_falls_silent_says_so(stack: dict[str, Any], page: Any) -> None:
+    mark = page.locator(f"#runs-body tr[data-run-id='{stack['run_id']}'] .heard")
+    mark.wait_for(state="attached")
+    with CollieClient(stack["api"], stack["tokens"]["operator"]) as client:
+        assert client.run(stack["run_id"]).trainer_seen_at is not None  # the live trainer was heard
+    time.sleep(1.5)  # a tick
+    assert mark.text_content() == ""  # a live trainer: nothing to say
+    page.evaluate(  # as if its last call were 6 minutes ago (the next runs page puts the real time back)
+        f"document.querySelector(\"#runs-body tr[data-run-id='{stack['run_id']}'] .heard\").dataset.time"
+        " = new Date(Date.now() - 360e3).toISOString()"
+    )
+    page.wait_for_function(
+        f"document.querySelector(\"#runs-body tr[data-run-id='{stack['run_id']}'] .heard\")"
+        ".textContent === 'no word from its trainer since 6 min ago'"
+    )
+
+
 def test_stop_finishes_the_run(stack: dict[str, Any], page: Any) -> None:
     page.click("#stop")
     assert page.text_content("#stop") == "Really stop?"
