@@ -145,14 +145,14 @@ class Presenter:
             self.waiter.stop_following()
         else:
             self.waiter.follow(*waiting_on)
+        ended = run is not None and (run.status in FINISHED or run.control == "stop")
         if run is not None:
             seen = self.epochs.rate(run, time.monotonic())
             status = waiting_text(run, forecast(run, link.metrics(run.id), seen), held_here)
             self.load_mine(link, run)
-        if refused:
+        if refused and not ended:  # an ended run's state says it in our words ("stopped", not "finished")
             status = f"⚠️ The service said: {refused}  \n{status or ''}"
         skills = self.skills
-        ended = run is not None and (run.status in FINISHED or run.control == "stop")
         keep = skills is not None and run is not None and skills.run_id == run.id
         self.show_waiting(status or "", keep_skills=keep, ended=ended)
 

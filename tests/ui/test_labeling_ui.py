@@ -320,5 +320,6 @@ def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(
     wait_text(page, f"run {run.id} is stopped: it takes no more labels")  # not "finished"
     wait_text(page, f"Run {run.id} (point, north) is stopped")  # the waiting screen, from the first refusal
     assert segment_id(page) is None  # neither the labelled one nor the preloaded one
+    assert "finished" not in page.inner_text("body")
     assert stack.trainer.label_events(run.id) == []
     page.context.close()
