@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spa
     from collie.schemas import RunRead
 
 ROLES = ("operator", "trainer", "labeler")
+DATABASE_ENV = "COLLIE_DATABASE_URL"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -165,10 +166,17 @@ def checked(args: argparse.Namespace) -> Path:
     if args.teacher_rate is not None and args.teacher_rate <= 0:
         raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
     if not (out / "tokens.json").exists():  # a new stack takes COLLIE_<ROLE>_TOKEN (stack_tokens): as the service would
-        for name in (f"COLLIE_{r.upper()}_TOKEN" for r in ROLES):
+        names = [f"COLLIE_{r.upper()}_TOKEN" for r in ROLES]
+        for name in names:
             why = weakness(os.environ.get(name) or "x" * MIN_TOKEN)
             if why:
                 raise ValueError(f"{name} {why}: unset it (a random one is made) or choose a longer random one")
+        missing = [name for name in names if not os.environ.get(name)]
+        if os.environ.get(DATABASE_ENV) and args.db is None and missing:  # new random ones would replace the lab's
+            raise ValueError(
+                f"{DATABASE_ENV} names the lab's database: give its tokens in {', '.join(missing)} (new ones would "
+                "replace the tokens everyone else uses there), or --db FILE for a stack of its own"
+            )
     return out
 
 
@@ -209,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
     # an explicit --db, else the lab's database when COLLIE_DATABASE_URL names one, else OUT's SQLite file
-    db = args.db or (None if os.environ.get("COLLIE_DATABASE_URL") else out / "collie.db")
+    db = args.db or (None if os.environ.get(DATABASE_ENV) else out / "collie.db")
     if db is None:
         print("collie up: database: COLLIE_DATABASE_URL (give --db FILE for a SQLite file instead)", flush=True)
     stack = Supervisor(out, max_restarts=args.max_restarts, inherited=(lock,))
@@ -246,11 +254,17 @@ def stack_tokens(tokens_file: Path) -> dict[str, str]:
     return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or secrets.token_urlsafe(32) for r in ROLES}
 
 
+SECRETS = (TOKEN_ENV, DATABASE_ENV)  # and every COLLIE_<ROLE>_TOKEN: only the service needs them
+
+
+def is_secret(name: str) -> bool:
+    return name in SECRETS or (name.startswith("COLLIE_") and name.endswith("_TOKEN"))
+
+
 def child_env(token: str | None = None) -> dict[str, str]:
-    """Our environment without the stack's secrets, plus the one token this child may use."""
-    env = {
-        k: v for k, v in os.environ.items() if k != TOKEN_ENV and not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))
-    }
+    """Our environment without the stack's secrets (the database URL holds a password), plus the
+    one token this child may use."""
+    env = {k: v for k, v in os.environ.items() if not is_secret(k)}
     return {**env, TOKEN_ENV: token} if token is not None else env
 
 
@@ -262,7 +276,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     tokens_file = out / "tokens.json"
     tokens = stack_tokens(tokens_file)
     write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
-    service_env = {**child_env(), **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}
+    lab = {DATABASE_ENV: os.environ[DATABASE_ENV]} if db is None else {}  # the lab's database, for the service only
+    service_env = {**child_env(), **lab, **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}
     port = {"labeling_ui": args.ui_port}  # after the first start: the bound port
     # We bind the service's socket and hand it over: its URL is known at once, so the trainer starts
     # (and imports torch) while the service imports and migrates; requests queue until it serves,

@@ -43,7 +43,8 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     ]
     # point: the lab's database named by COLLIE_DATABASE_URL (here a SQLite URL), not OUT/collie.db
     db = tmp_path / ("lab.db" if env == "point" else "collie.db")
-    lab = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{db}"} if env == "point" else None
+    lab_tokens = {f"COLLIE_{r}_TOKEN": f"lab-{r.lower()}-" + "t" * 20 for r in ("OPERATOR", "TRAINER", "LABELER")}
+    lab = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{db}", **lab_tokens} if env == "point" else None
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=lab)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert db.exists() and (env != "point" or not (tmp_path / "collie.db").exists())

@@ -49,6 +49,15 @@ def test_a_weak_token_from_the_environment_is_refused_before_anything_starts(tmp
     assert "please" not in proc.stderr and not (tmp_path / "o").exists()
 
 
+def test_the_labs_database_without_the_labs_tokens_is_refused(tmp_path: Path) -> None:
+    env = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{tmp_path / 'lab.db'}", "COLLIE_OPERATOR_TOKEN": "o" * 20}
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", "--out", str(tmp_path / "o")]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "give its tokens in COLLIE_TRAINER_TOKEN, COLLIE_LABELER_TOKEN (new ones would replace" in proc.stderr
+    assert not (tmp_path / "lab.db").exists()
+
+
 def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
     proc = up(tmp_path, "--env", "nope", "--port", "0", "--out", str(tmp_path / "o"))
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
