@@ -25,6 +25,7 @@ from pydantic import BaseModel, TypeAdapter
 
 from collie.dashboard_schemas import QueryReview
 from collie.schemas import (
+    PART_HEADER,
     STREAM_EVENT,
     ClaimRead,
     EffectiveLabel,
@@ -170,12 +171,13 @@ def new_request_id() -> str:
 
 
 class CollieClient:
-    def __init__(self, api: str, token: str, *, timeout_s: float = 30.0) -> None:
+    def __init__(self, api: str, token: str, *, timeout_s: float = 30.0, part: str | None = None) -> None:
+        """`part`: sent as PART_HEADER ("trainer": the service notes the run's trainer is alive)."""
         self.api = api.rstrip("/")
         self.token = token
         self._http = httpx.Client(
             base_url=f"{self.api}/api",
-            headers={"Authorization": f"Bearer {token}"},
+            headers={"Authorization": f"Bearer {token}", **({PART_HEADER: part} if part else {})},
             timeout=httpx.Timeout(timeout_s, connect=5.0),
         )
 

@@ -107,6 +107,9 @@ FrameRows = Annotated[
 ]
 
 
+PART_HEADER = "X-Collie-Part"  # which part of collie calls: "trainer" marks a run's trainer as alive
+
+
 class Wire(BaseModel):
     """Strict: no silent coercion of strings to numbers; unknown fields are an error."""
 

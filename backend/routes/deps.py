@@ -20,7 +20,7 @@ from backend.models import Run
 from backend.services.auth import Caller, TokenCache
 from backend.services.events import EventHub
 from backend.settings import Settings
-from collie.schemas import MAX_INT, Role
+from collie.schemas import MAX_INT, PART_HEADER, Role
 
 bearer = HTTPBearer(auto_error=False, description="a role token: operator, trainer or labeler")
 
@@ -129,13 +129,16 @@ def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> No
     those; on a trainer's own routes (sessions, status, telemetry, …) a trainer acts only on the
     runs it created. An unknown run is left to the route (404)."""
     raw = request.path_params.get("run_id")
-    if raw is None or not str(raw).isdigit() or caller.role == "operator":
+    if raw is None or not str(raw).isdigit():
         return
     run_id = int(raw)
+    if request.headers.get(PART_HEADER) == "trainer" and caller.role in ("trainer", "operator"):
+        # the trainer's event poll, status, sessions (an operator's token may drive it): it is alive
+        request.app.state.trainer_contact.heard(request.app.state.db, run_id, caller)
+    if caller.role == "operator":
+        return
     if not caller.may_see(run_id):
         raise HTTPException(403, f"this token is limited to other runs than run {run_id}")
-    if caller.role == "trainer":  # its event poll, status, sessions: the run's trainer is alive
-        request.app.state.trainer_contact.heard(request.app.state.db, run_id, caller.id)
     if caller.role == "trainer" and roles == TRAINER:
         db: Database = request.app.state.db
         with db.read() as conn:

@@ -80,7 +80,7 @@ class HttpFeedback(FeedbackSource):
         self.timeout_s = timeout_s
         self.wait_chunk_s = wait_chunk_s
         self.max_backoff_s = max_backoff_s
-        self.client = CollieClient(api, token)
+        self.client = CollieClient(api, token, part="trainer")
         self.reporter = HttpReporter(api, token, run_id, timeout_s=report_timeout_s)  # the run's telemetry
         self._after = 0  # last event id applied from the run's log
         self._labels: dict[str, Label | None] = {}  # effective labels, as the log says

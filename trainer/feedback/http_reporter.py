@@ -34,7 +34,7 @@ class HttpReporter(Reporter):
 
     def __init__(self, api: str, token: str, run_id: int, timeout_s: float = 5.0) -> None:
         self.run_id = run_id
-        self.client = CollieClient(api, token, timeout_s=timeout_s)
+        self.client = CollieClient(api, token, timeout_s=timeout_s, part="trainer")
         self.shown: RunStatus | None = None
         self._quiet_until = 0.0
 
