@@ -619,6 +619,8 @@ class Trainer:
         summary = self.finish(status, record)
         if refused is not None:  # the caller says why, now that the run is saved
             raise SourceRefused(f"{refused}; the run is checkpointed at epoch {self.epoch}")
+        if self.feedback.refusal is not None:  # met in the last epoch, after its last control()
+            raise SourceRefused(f"{self.feedback.refusal}; the run finished, but the service was not told")
         return summary
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:

@@ -174,3 +174,15 @@ def test_a_moved_run_folder_resumes_where_it_is_now(tmp_path):
     summary = json.loads((tmp_path / "now" / "summary.json").read_text())
     assert summary["epoch"] == 4 and summary["config"]["out"] == str(tmp_path / "now")
     assert not (tmp_path / "was").exists()
+
+
+def test_a_refusal_met_in_the_last_epoch_is_said_after_the_run_is_saved(tmp_path):
+    """A source that was refused after the last epoch's control() (its revisions call) has no next
+    control() to raise it: the finished run still says so, not exit 0 with the service untold."""
+    from trainer.feedback import SourceRefused
+
+    t = smoke(tmp_path, epochs=2)
+    t.feedback.refusal = SourceRefused("the labeling service refused the trainer's token for run 1 (401)")
+    with pytest.raises(SourceRefused, match="the run finished, but the service was not told"):
+        t.run()
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "finished"

@@ -61,6 +61,7 @@ class FeedbackSource(abc.ABC):
         timeout policy ends the wait). Returns the effective labels that arrived."""
 
     interrupted: str | None = None  # set by interrupt()
+    refusal: SourceRefused | None = None  # the service refused the trainer between epochs (raised at control())
 
     def interrupt(self, reason: str) -> None:
         """Ask a blocking `collect` to raise StopRequested(reason) at its next look (within one wait

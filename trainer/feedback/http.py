@@ -88,7 +88,6 @@ class HttpFeedback(FeedbackSource):
         self._changed: set[str] = set()  # queries whose label moved since the last revisions()
         self._control: Literal["run", "pause", "stop"] = "run"
         self._swept = False  # leftovers of sessions before the first collect retired?
-        self._refused: SourceRefused | None = None  # met between epochs: raised at the next control()
 
     @classmethod
     def create(cls, api: str, token: str, spec: RunCreate, **kwargs: Any) -> HttpFeedback:
@@ -147,7 +146,7 @@ class HttpFeedback(FeedbackSource):
         try:
             self._pump(0.0, patient=False)
         except Unauthorized as exc:  # raised at the epoch's end (control), where a checkpoint resumes exactly
-            self._refused = self._refusal(exc)
+            self.refusal = self._refusal(exc)
             return []
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, revisions wait: %s", exc)
@@ -158,11 +157,11 @@ class HttpFeedback(FeedbackSource):
         try:
             self._pump(0.0, patient=False)
         except Unauthorized as exc:
-            self._refused = self._refusal(exc)
+            self.refusal = self._refusal(exc)
         except (Unreachable, ApiError) as exc:
             log.warning("labeling service unreachable, keeping control=%s: %s", self._control, exc)
-        if self._refused is not None:
-            raise self._refused
+        if self.refusal is not None:
+            raise self.refusal
         if self._control == "pause":
             self._show("paused", None)
         elif self.reporter.shown == "paused":
