@@ -58,7 +58,7 @@ def _from_file(path: Path, role: str) -> str:
     if not text:
         raise ValueError(f"--token-file {path} is empty")
     if mode & 0o077:
-        print(f"collie: warning: --token-file {path} is readable by others (chmod 600 it)", file=sys.stderr)
+        print(f"collie: warning: --token-file {path} is readable by other users (chmod 600 it)", file=sys.stderr)
     if not text.startswith("{"):
         return checked(text, f"--token-file {path}")
     tokens = read_tokens_file(path)
@@ -69,6 +69,8 @@ def _from_file(path: Path, role: str) -> str:
 
 def weakness(token: str) -> str | None:
     """Why a token someone chose is guessable (None: it is not): a forgotten placeholder, or short."""
+    if not HEADER_SAFE.fullmatch(token):  # clients could never send it
+        return "holds spaces or characters a bearer token cannot carry (printable ASCII only)"
     if "change-me" in token.lower():
         return "is a placeholder (it holds 'change-me')"
     if len(token) < MIN_TOKEN:

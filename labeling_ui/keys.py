@@ -27,6 +27,10 @@ _HAND_KEYS_BACK = """
   window.collieKeysHandedBack = true;
   const keys = new Set(%(keys)s);
   const typedInto = (el) => el.classList.contains("mantine-TextInput-input");
+  // only our controls hand keys back: the Frame box, the Segment list, the Loop and Shadows boxes
+  // (never viser's command palette, a dialog, whose search field takes letters)
+  const ours = (el) => !el.closest("[role=dialog]") && (el.type === "checkbox"
+    || el.classList.contains("mantine-NumberInput-input") || el.classList.contains("mantine-Select-input"));
   window.addEventListener("focusin", (event) => {
     const el = event.target;
     if (el instanceof HTMLInputElement && el.classList.contains("mantine-NumberInput-input")) el.blur();
@@ -35,10 +39,12 @@ _HAND_KEYS_BACK = """
     const el = event.target;
     if (event.key === "Enter" && el instanceof HTMLInputElement && typedInto(el)) {  // the sign-in field
       const button = [...document.querySelectorAll("button")].find((b) => b.textContent.trim() === %(sign_in)s);
-      if (button) button.click();
+      // after viser's 50 ms throttle has sent the field's last keystroke: the click must not overtake it
+      if (button) setTimeout(() => button.click(), 120);
       return;
     }
-    if (!(el instanceof HTMLInputElement) || typedInto(el) || event.ctrlKey || event.metaKey || event.altKey) return;
+    if (!(el instanceof HTMLInputElement) || !ours(el)) return;
+    if (event.ctrlKey || event.metaKey || event.altKey || event.shiftKey) return;  // as viser's own hotkeys
     const listOpen = el.getAttribute("aria-expanded") === "true";  // an open list keeps its keys
     if (!keys.has(event.key.toLowerCase()) || listOpen) return;
     event.preventDefault();

@@ -57,10 +57,20 @@ def test_a_tokens_file_gives_the_role_and_a_bad_file_never_echoes_its_text(tmp_p
     open_file.write_text("tok-1\n")
     open_file.chmod(0o644)
     assert resolve_token(parse("--token-file", str(open_file)), "trainer") == "tok-1"
-    assert "readable by others (chmod 600 it)" in capsys.readouterr().err
+    assert "readable by other users (chmod 600 it)" in capsys.readouterr().err
 
 
 def test_a_token_with_a_space_from_the_environment_is_refused_by_name(monkeypatch):
     monkeypatch.setenv("COLLIE_TOKEN", "two words")
     with pytest.raises(ValueError, match=r"^COLLIE_TOKEN does not hold a token"):
         resolve_token(parse(), "trainer")
+
+
+def test_a_bootstrap_token_a_client_could_not_send_is_weak():
+    from collie.tokens import weakness
+
+    assert weakness("a passphrase with spaces in it") == (
+        "holds spaces or characters a bearer token cannot carry (printable ASCII only)"
+    )
+    assert weakness("ünïcödé-" * 3) is not None and weakness("x" * 16) is None
+
