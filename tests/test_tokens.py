@@ -73,4 +73,3 @@ def test_a_bootstrap_token_a_client_could_not_send_is_weak():
         "holds spaces or characters a bearer token cannot carry (printable ASCII only)"
     )
     assert weakness("ünïcödé-" * 3) is not None and weakness("x" * 16) is None
-
