@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from collie.schemas import MAX_HOLD, ClaimRead, QueryRead, RunRead
+from collie.schemas import FINISHED, MAX_HOLD, ClaimRead, QueryRead, RunRead
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.screen import TabScreen
@@ -93,8 +93,9 @@ class Claims:
             return None
         try:
             claimed = link.claim(shown.run.id)
-        except Rejected:  # the run ended (an operator stopped it, or it finished): nothing of it stays on screen
-            self.screen.panels.notify("Run closed", ended_words(link.run(shown.run.id)), "orange")
+        except Rejected as exc:  # the run ended, or this labeler may no longer label it: nothing of it stays
+            words = self.ended(link, shown.run.id)
+            self.screen.panels.notify("Run closed", words or str(exc), "orange")
             with self.tab as state:
                 state.leases(shown.run.id, set())
             return shown
@@ -104,6 +105,19 @@ class Claims:
             return None
         self.screen.panels.notify("Claim lost", f"segment {shown.query.query_id} went to someone else", "orange")
         return shown
+
+    def ended(self, link: ServiceLink, run_id: int) -> str | None:
+        """If `run_id` ended (an operator stopped it, or it finished): its segments leave this tab,
+        preloaded ones too, and the words that say so ("stopped", never "finished" for a stop)."""
+        try:
+            run = link.run(run_id)
+        except Rejected:
+            return None
+        if run.status not in FINISHED and run.control != "stop":
+            return None
+        with self.tab as state:
+            state.leases(run_id, set())
+        return ended_words(run)
 
     def release_all(self, link: ServiceLink | None) -> None:
         """Hand every claim this tab holds back to the pool (a closed tab, a sign-out); claims that

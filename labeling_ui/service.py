@@ -43,6 +43,9 @@ __all__ = ["AuthRefused", "MyLabel", "Progress", "Rejected", "ServiceDown", "Ser
 T = TypeVar("T")
 
 
+OUT_OF_SCOPE = "limited to other runs"  # the service's 403 for a run a labeler's token may not label (routes/deps.py)
+
+
 class AuthRefused(Exception):
     """The token is missing, unknown, revoked, or not allowed to label."""
 
@@ -100,6 +103,8 @@ class ServiceLink:
         except Overloaded as exc:
             raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
         except Unauthorized as exc:
+            if exc.status == 403 and OUT_OF_SCOPE in str(exc.detail):  # a valid token, taken off that run
+                raise Rejected(str(exc.detail)) from exc
             raise AuthRefused(str(exc.detail)) from exc
         except NotHolding as exc:
             refusal = exc.refusal

@@ -22,7 +22,7 @@ import viser
 
 from collie.client import new_request_id
 from collie.labels import Label
-from collie.schemas import FINISHED, RunRead
+from collie.schemas import RunRead
 from labeling_ui.actions import Action, Close, Moved, Relabel, Send, SignIn, SignOut, UiConfig, UndoKey, Wake
 from labeling_ui.browser import read_identity, save_prefs
 from labeling_ui.claims import Claims
@@ -35,7 +35,6 @@ from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
 from labeling_ui.stream_waiter import StreamWaiter
 from labeling_ui.tab import Key, Phase, Refusal, Rules, Step, Submit, TabState, Withdraw
 from labeling_ui.timings import KeyTimings
-from labeling_ui.waiting import ended_words
 
 log = logging.getLogger(__name__)
 
@@ -343,12 +342,7 @@ class LabelerSession:
             ack = self.link.submit(run_id, query_id, value, seconds, request_id, segment.revising, self.config.prefetch)
             self.claims.next_claim = ack.next  # what to preload, claimed with the label (one round trip, one commit)
         except Rejected as exc:
-            reason = str(exc)
-            run_now = self.link.run(segment.run.id)
-            if run_now.status in FINISHED or run_now.control == "stop":  # its preloaded segments go too
-                reason = ended_words(run_now)
-                with self.tab as state:
-                    state.leases(run_now.id, set())
+            reason = self.claims.ended(self.link, segment.run.id) or str(exc)  # an ended run's segments go too
         with self.tab as state:
             if reason is None:
                 state.recorded(submit)

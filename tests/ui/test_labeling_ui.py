@@ -323,3 +323,16 @@ def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(
     assert "finished" not in page.inner_text("body")
     assert stack.trainer.label_events(run.id) == []
     page.context.close()
+
+
+def test_a_labeler_taken_off_the_run_moves_on_and_stays_signed_in(stack: Stack, browser: Browser) -> None:
+    run, other = stack.post_run("point", 3), stack.post_run("point", 3)
+    created = stack.operator.create_labeler("moved", runs=[run.id])
+    app = stack.ui(lease_s=3.0)  # not pinned: the tab picks the runs its token may label
+    page = open_labeler(browser, app.labeler_url(created.token))
+    wait_segment(page)
+    wait_text(page, f"run {run.id} · point")
+    stack.operator.set_labeler_runs(created.id, [other.id])
+    wait_text(page, f"run {other.id} · point", timeout_s=30.0)  # at the next claim renewal (lease_s / 3)
+    assert "refused this token" not in page.inner_text("body")  # still signed in
+    page.context.close()
