@@ -20,6 +20,7 @@ for `collie report`. After the runs, the report of OUT is written to OUT/report/
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import importlib
 import json
@@ -39,6 +40,7 @@ from typing import Any, NoReturn
 from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
+from trainer.metrics import BIN_RULES
 from trainer.run_files import RunFolderError, read_json_object
 from trainer.same_run import comparable, differing_keys, run_config
 
@@ -78,36 +80,49 @@ class Stop:
                 proc.send_signal(signal.SIGTERM)
 
     def run(self, cmd: list[str], **popen: Any) -> int:
-        """`cmd`'s exit code; Interrupted without starting it once the sweep was told to stop."""
-        with self._lock:  # the handler signals every child registered before it, none twice
-            if self.asked.is_set():
-                raise Interrupted("not started: the sweep was interrupted")
-            # spawned by the pool's threads, which live until every run is over (what PDEATHSIG watches)
-            parent_death = functools.partial(end_with_parent, os.getpid())
-            proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death, **popen)
-            self._running.add(proc)
+        """`cmd`'s exit code; Interrupted without starting it once the sweep was told to stop. A
+        Ray cancel (KeyboardInterrupt) landing anywhere in here stops the child as a signal would."""
+        proc: subprocess.Popen | None = None
         try:
+            with self._lock:  # the handler signals every child registered before it, none twice
+                if self.asked.is_set():
+                    raise Interrupted("not started: the sweep was interrupted")
+                # spawned by the pool's threads, which live until every run is over (what PDEATHSIG watches)
+                parent_death = functools.partial(end_with_parent, os.getpid())
+                proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=parent_death, **popen)
+                self._running.add(proc)
             return self._wait(proc)
+        except KeyboardInterrupt:
+            if proc is None:
+                raise Interrupted("not started: the sweep was interrupted") from None
+            return self._stop_and_wait(proc)
         finally:
-            with self._lock:
-                self._running.discard(proc)
+            if proc is not None:
+                with self._lock:
+                    self._running.discard(proc)
 
     def _wait(self, proc: subprocess.Popen) -> int:
         """`proc`'s exit code, polled: Ray's cancellation of a task is a KeyboardInterrupt raised
-        between bytecodes, never inside a blocking wait. On it, `proc` is stopped as a signal to the
-        sweep would stop it, and waited for (StoppedEarly if it outlasts STOP_WAIT_S)."""
-        try:
-            while True:
-                try:
-                    return proc.wait(timeout=POLL_S)
-                except subprocess.TimeoutExpired:
-                    continue
-        except KeyboardInterrupt:
-            self.handle(signal.SIGINT, None)
+        between bytecodes, never inside a blocking wait."""
+        while True:
             try:
-                return proc.wait(timeout=STOP_WAIT_S)
+                return proc.wait(timeout=POLL_S)
             except subprocess.TimeoutExpired:
-                raise StoppedEarly(f"pid {proc.pid} did not end {STOP_WAIT_S:.0f} s after its SIGTERM") from None
+                continue
+
+    def _stop_and_wait(self, proc: subprocess.Popen) -> int:
+        """`proc` stopped as a signal to the sweep would stop it (one SIGTERM), and waited for
+        (StoppedEarly if it outlasts STOP_WAIT_S)."""
+        with self._lock:
+            registered = proc in self._running  # not when the cancel landed between Popen and add
+        self.handle(signal.SIGINT, None)  # signals the registered children, once
+        if not registered:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(signal.SIGTERM)
+        try:
+            return proc.wait(timeout=STOP_WAIT_S)
+        except subprocess.TimeoutExpired:
+            raise StoppedEarly(f"pid {proc.pid} did not end {STOP_WAIT_S:.0f} s after its SIGTERM") from None
 
 
 @dataclass(frozen=True)
@@ -453,6 +468,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--downstream", action="store_true", help="evaluate each finished run's downstream task")
     p.add_argument("--downstream-flags", default="", help="flags for `python -m trainer.downstream`, quoted")
     p.add_argument("--no-report", action="store_true", help="do not write OUT/report/ afterwards")
+    p.add_argument(
+        "--bin-rule",
+        choices=BIN_RULES,
+        default="corner",
+        help="coverage rule of OUT/report/ (collie report --bin-rule; default: the paper's corner rule)",
+    )
     p.add_argument("train_flags", nargs=argparse.REMAINDER, help="after --: flags for every `collie train`")
     tasks, seeds = len(DEFAULT_TASKS.split(",")), p.get_default("seeds")
     p.epilog = (
@@ -631,6 +652,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_report:
         from trainer.report import write_report
 
-        paths = write_report([Path(args.out)], Path(args.out) / "report")
+        paths = write_report([Path(args.out)], Path(args.out) / "report", bin_rule=args.bin_rule)
         print(f"report: {paths['markdown']}")
     return 1 if failed else 0
