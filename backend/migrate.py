@@ -17,7 +17,8 @@ MIGRATIONS = Path(__file__).parent / "migrations"
 
 
 class UnknownRevision(Exception):
-    """The database's schema is a revision this code does not know: a newer collie made it."""
+    """The database's schema cannot be brought up to date: a revision this code does not know (a
+    newer collie made it), or an upgrade that failed."""
 
 
 def alembic_config(url: str) -> Config:
@@ -42,14 +43,14 @@ def bring_up_to_date(engine: Engine) -> str | None:
         return None
     try:
         upgrade(engine)
-    except CommandError:
+    except CommandError as exc:  # a one-line error for `collie serve` and `collie export`, not alembic's traceback
+        where = describe(engine.url.render_as_string(hide_password=False))
         if found is not None and not known(found):
-            where = describe(engine.url.render_as_string(hide_password=False))
             raise UnknownRevision(
                 f"database {where} is at schema revision {found}, which this collie does not know: "
                 "a newer collie made it (upgrade collie)"
             ) from None
-        raise
+        raise UnknownRevision(f"database {where}: upgrading its schema from {found} failed: {exc}") from None
     return found
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from collie.argtypes import port
+from collie.argtypes import port, sqlite_file
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
@@ -54,7 +54,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--teacher-rate", type=float, default=None, help="oracle labels per second (like a person)")
     p.add_argument("--noise-band", type=float, default=0.0, help="oracle R_error noise band")
     p.add_argument(
-        "--db", type=Path, default=None, help="SQLite file (default: COLLIE_DATABASE_URL when set, else OUT/collie.db)"
+        "--db",
+        type=sqlite_file,
+        default=None,
+        help="SQLite file (default: COLLIE_DATABASE_URL when set, else OUT/collie.db)",
     )
     p.add_argument("--out", type=Path, default=None, help="folder for everything (default runs/up-ENV-TASK)")
     p.add_argument("--port", type=port, default=8000, help="service port (0 = any free port; default 8000)")

@@ -40,7 +40,8 @@ LEGEND = (
     f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
     f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
     f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
-    "red bad area, yellow good area, as on the dashboard (none in a run with only an instruction). The "
+    "red bad area, yellow good area (inset: neutral ground green), as on the dashboard; none in a run "
+    "with only an instruction. The "
     "blue **N** arrow points north (up in the inset)."
 )
 CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns' widths: controls (right), context (left)

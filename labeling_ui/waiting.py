@@ -62,6 +62,9 @@ class EpochClock:
         self._first: dict[int, tuple[float, int]] = {}  # run → (when, epoch) first seen
 
     def rate(self, run: RunRead, now: float) -> float | None:
+        if run.control == "pause" or run.status == "paused":  # no epochs go by: look again after it
+            self._first.pop(run.id, None)
+            return None
         when, epoch = self._first.setdefault(run.id, (now, run.epoch))
         if run.epoch < epoch:  # a restarted trainer replays from its checkpoint: look again from here
             self._first[run.id] = (now, run.epoch)

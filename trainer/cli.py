@@ -282,7 +282,8 @@ def finished_at(out: Path) -> int | None:
     """The epochs of a run that finished (summary.json), else None."""
     path = out / "summary.json"
     summary = read_json_object(path) if path.exists() else {}
-    return int(summary["epochs_done"]) if summary.get("status") == "finished" else None
+    done = summary.get("epochs_done")
+    return int(done) if summary.get("status") == "finished" and isinstance(done, int) else None
 
 
 def checkpoint_config(out: Path) -> dict[str, Any]:

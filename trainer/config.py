@@ -353,7 +353,11 @@ PRESET_ENV_VALUES["cpu"].update(ROBOT_CPU)
 def field_notes() -> dict[str, str]:
     """Each Config field's inline comment (what `collie train --help` says of its flag)."""
     note = re.compile(r"^    (\w+): [^#]*#\s*(.+)$")
-    return {m[1]: m[2] for line in inspect.getsource(Config).splitlines() if (m := note.match(line))}
+    try:
+        source = inspect.getsource(Config)
+    except OSError:  # installed without its sources: flags without words, not a failing --help
+        return {}
+    return {m[1]: m[2] for line in source.splitlines() if (m := note.match(line))}
 
 
 def flag(name: str) -> str:

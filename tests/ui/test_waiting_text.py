@@ -72,3 +72,6 @@ def test_an_eta_from_the_epochs_the_tab_saw_before_two_metrics_exist() -> None:
     assert fc.eta_s == 220.0 and "in about **4 min**" in waiting_text(r.model_copy(update={"epoch": 20}), fc, 0)
     assert forecast(r, [metrics(0, 0.0), metrics(10, 5.0)], rate).epochs_per_s == 2.0  # metrics win once there
     assert clock.rate(r.model_copy(update={"epoch": 3}), 120.0) is None  # a restarted trainer: look again
+    assert clock.rate(r.model_copy(update={"epoch": 5, "control": "pause"}), 130.0) is None
+    assert clock.rate(r.model_copy(update={"epoch": 5}), 1000.0) is None  # after a resume: a new first look
+    assert clock.rate(r.model_copy(update={"epoch": 15}), 1005.0) == 2.0  # not the pause's long gap
