@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         with db.read() as conn:
             text = export.render(export.rows(conn, args.run, args.effective), args.format, args.effective)
     except ServiceError as exc:
-        print(f"collie export: {exc.detail}", file=sys.stderr)
+        print(f"collie export: error: {exc.detail}", file=sys.stderr)
         return 1
     finally:
         db.dispose()

@@ -1,5 +1,8 @@
-"""The `collie` command. Each subcommand lives in its own module, which exposes
-`add_arguments(parser)` and `run(args) -> int`; imports are lazy so `collie serve` never loads torch."""
+"""collie: human-in-the-loop guided skill discovery. Start with `collie up` (the whole loop on this
+machine); `collie <command> --help` says more about each command."""
+
+# Each subcommand lives in its own module, which exposes `add_arguments(parser)` and
+# `run(args) -> int`; imports are lazy so `collie serve` never loads torch.
 
 from __future__ import annotations
 

@@ -38,13 +38,13 @@ DATABASE_ENV = "COLLIE_DATABASE_URL"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point")
+    p.add_argument("--env", default="point", help="point (default), ant, half_cheetah, quadruped, humanoid or car")
     p.add_argument("--task", default=None, help="a built-in task (default north), or one a --task-file registers")
     p.add_argument("--task-file", type=Path, default=None, help="a task rule from a TOML/JSON/Python file")
     p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words")
-    p.add_argument("--method", default="collie")
-    p.add_argument("--preset", default="cpu")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--method", default="collie", help="collie (default), metra, oracle, or a baseline (collie train)")
+    p.add_argument("--preset", default="cpu", help="cpu (default: this machine), paper (a GPU) or smoke (seconds)")
+    p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
     p.add_argument(
         "--teacher",
         choices=("none", "oracle"),
@@ -135,7 +135,8 @@ def task_flags(args: argparse.Namespace) -> list[str]:
     if args.task_file is not None:
         from collie.tasks.task_file import load_task_file
 
-        load_task_file(args.task_file, args.task, args.env, args.seed)  # a bad file fails here, before anything starts
+        # a bad file fails here, before anything starts; the run is named by its task, as collie train names it
+        args.file_task = load_task_file(args.task_file, args.task, args.env, args.seed).name
         return [*flags, "--task-file", str(args.task_file.resolve())]
     return flags or ["--task", "north"]
 
@@ -143,7 +144,7 @@ def task_flags(args: argparse.Namespace) -> list[str]:
 def run_name(args: argparse.Namespace) -> str:
     if args.instruction is not None:
         return "instruction"
-    return args.task or (args.task_file.stem if args.task_file is not None else "north")
+    return args.task or getattr(args, "file_task", None) or "north"
 
 
 DASHED_VALUE_OPTIONS = ("--train-args",)  # its value is flags: `--train-args "--compile"` (collie/cli.py)
@@ -410,7 +411,9 @@ def listening_socket(port: int) -> socket.socket:
         sock.bind(("127.0.0.1", port))
     except OSError as exc:
         sock.close()
-        raise RuntimeError(f"cannot listen on 127.0.0.1:{port} for the service: {exc.strerror}") from None
+        raise RuntimeError(
+            f"cannot listen on 127.0.0.1:{port} for the service: {exc.strerror} (--port 0 takes any free port)"
+        ) from None
     sock.listen(128)
     return sock
 

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import threading
 from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco loads: offscreen, no X display (as collie up sets it)
 
 from collie.argtypes import http_url, port
 from collie.mjmodels import MODEL_NAMES

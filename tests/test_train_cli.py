@@ -259,6 +259,9 @@ def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Pat
     assert shown == {**make_config("cpu", "ant", lr=3e-4, out=str(out)).to_dict(), "fast_ops": None}
     assert not out.exists()
     refused(train("--out", str(out), "--resume", "--print-config"), "--print-config shows what flags make")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\ndescription = "x"\n[[regions]]\nkind = "moat"\n')
+    refused(train("--task-file", str(bad), "--print-config"), f"task file {bad}")  # as a run would refuse it
 
 
 def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None:

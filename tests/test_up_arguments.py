@@ -112,3 +112,18 @@ def test_the_other_commands_refuse_bad_ports_and_urls_at_once(tmp_path: Path, ar
         [sys.executable, "-m", "collie.cli", *args], capture_output=True, text=True, timeout=60, cwd=tmp_path
     )
     assert proc.returncode == 2 and said in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_a_task_file_run_is_named_by_its_task_not_the_file(tmp_path: Path) -> None:
+    import argparse
+
+    from collie.up import add_arguments, checked
+
+    spec = tmp_path / "my_task.toml"
+    spec.write_text(
+        'name = "charger"\ndescription = "reach the charger"\n'
+        '[[regions]]\nkind = "disc"\ndesirability = "good"\ncentre = [5.0, 5.0]\nradius = 2.0\n'
+    )
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert checked(parser.parse_args(["--task-file", str(spec)])) == Path("runs/up-point-charger")  # as collie train

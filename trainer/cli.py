@@ -7,6 +7,7 @@ import argparse
 import dataclasses
 import json
 import os
+import re
 import signal
 import sys
 import time
@@ -32,7 +33,7 @@ MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "see
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.set_defaults(given=frozenset())  # the run's flags given on this command line (_Given)
-    p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, …")
+    p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, quadruped, humanoid or car")
     p.add_argument(
         "--task",
         default=None,
@@ -81,6 +82,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         if f.name in MAIN_ARGS or f.name in ("extra", "preset"):
             continue
         option, note = flag(f.name), notes.get(f.name)
+        values = re.findall(r"'([^']*)'|\"([^\"]*)\"", str(f.type)) if "Literal" in str(f.type) else []
+        if values:
+            note = f"{note or ''} (one of: {', '.join(a or b for a, b in values)})".lstrip()
         if f.type in ("bool", bool, "bool | None"):  # None: the option's own default (e.g. fast_ops)
             # a bare flag means true (`--compile`); `--compile false` still works
             group.add_argument(
@@ -346,6 +350,9 @@ def run(args: argparse.Namespace) -> int:
         if args.print_config:
             if args.resume:
                 raise ValueError("--print-config shows what flags make; a run's own config is OUT/config.json")
+            rule = choose_rule(cfg)  # a bad task or task file is refused here as the run would refuse it
+            if rule.definition is not None:
+                cfg.task = rule.definition.name
             print(json.dumps(cfg.to_dict(), indent=2))
             return 0
         made = check_out(Path(cfg.out), args.resume)

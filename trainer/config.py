@@ -50,7 +50,7 @@ class Config:
     fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
     # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05;
     # None: on where they measured faster (networks.fast_ops_pay), fixed when the trainer starts
-    fast_ops: bool | None = None
+    fast_ops: bool | None = None  # tanh as 2σ(2x) − 1 and a multiply-sum one-output layer; unset: where measured faster
     acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)
     hidden: int = 1024  # width of every MLP layer (φ, π, Q)
@@ -80,14 +80,14 @@ class Config:
     replay_capacity: int = 1_000_000  # transitions
     # COLLIE feedback schedule and guidance (Table 6)
     warmup: int = 2000  # epochs before the first feedback session
-    feedback_every: int = 1000  # K
-    queries_per_session: int = 5  # M
-    total_queries: int = 40  # N_total (segments)
+    feedback_every: int = 1000  # K: epochs between feedback sessions
+    queries_per_session: int = 5  # M: segments asked per feedback session
+    total_queries: int = 40  # N_total: segments asked in the whole run (the label budget)
     segment_length: int = 20  # H
     k_beta: float = 5.0  # k_β: how fast guidance fades in after the first labels (smoothing β, Section 4.5)
-    candidates: int = 50  # N_c
+    candidates: int = 50  # N_c: candidate segments the queries are picked from
     knn_k: int = 5  # k of the k-NN particle entropy that picks queries (Algorithm 2)
-    query_strategy: Literal["entropy", "uniform", "uncertainty", "latent"] = "entropy"
+    query_strategy: Literal["entropy", "uniform", "uncertainty", "latent"] = "entropy"  # how queries are picked
     w_at: Literal["next", "current"] = "next"  # evaluate w at s′ (reference, issue) or s (paper's notation)
     noise_band: float = 0.0  # oracle teacher's R_error
     # baselines and ablations (Section 5.1, Appendix E–F; trainer/methods.py)
