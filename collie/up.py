@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from collie.argtypes import port, sqlite_file
+from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
@@ -454,6 +455,9 @@ class ProgressLine:
     def show(self, r: RunRead) -> None:
         epochs = f"{r.epoch}/{r.epochs_total}" if r.epochs_total else str(r.epoch)
         line = f"{r.status}: epoch {epochs} · labels {r.n_labels}/{r.n_total if r.n_total is not None else '-'}"
+        upcoming = next_feedback_epoch(r) if r.status == "training" else None
+        if upcoming is not None:  # when people will have something to label
+            line += f" · next feedback session at epoch {upcoming}"
         if line != self._last:
             self._last = line
             sys.stderr.write(f"\r{line:<72}" if self._inline else line + "\n")

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from collie.feedback_schedule import next_feedback_epoch
 from collie.schemas import FINISHED, MetricsRead, RunRead
 
 
@@ -21,21 +22,6 @@ class Forecast:
         if self.next_feedback is None or not self.epochs_per_s:
             return None
         return max(0.0, (self.next_feedback - self.epoch) / self.epochs_per_s)
-
-
-def next_feedback_epoch(run: RunRead) -> int | None:
-    """The first epoch after now at which the trainer asks for labels (trainer/loop.py's
-    is_feedback_epoch: from `warmup`, every `feedback_every` epochs, while the budget lasts)."""
-    config = run.config
-    every, warmup = config.get("feedback_every"), config.get("warmup", 0)
-    if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
-        return None
-    if run.n_total is not None and run.n_labels >= run.n_total:
-        return None
-    after = run.epoch + 1
-    if after <= warmup:
-        return warmup
-    return warmup + -(-(after - warmup) // every) * every
 
 
 def epoch_rate(metrics: Sequence[MetricsRead]) -> float | None:

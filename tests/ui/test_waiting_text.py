@@ -6,8 +6,9 @@ from __future__ import annotations
 
 from datetime import timedelta
 
+from collie.feedback_schedule import next_feedback_epoch
 from collie.schemas import MetricsRead, QueueCounts
-from labeling_ui.waiting import EpochClock, forecast, next_feedback_epoch, run_state, waiting_text
+from labeling_ui.waiting import EpochClock, forecast, run_state, waiting_text
 
 from .test_tab_state import NOW, run
 
@@ -75,3 +76,15 @@ def test_an_eta_from_the_epochs_the_tab_saw_before_two_metrics_exist() -> None:
     assert clock.rate(r.model_copy(update={"epoch": 5, "control": "pause"}), 130.0) is None
     assert clock.rate(r.model_copy(update={"epoch": 5}), 1000.0) is None  # after a resume: a new first look
     assert clock.rate(r.model_copy(update={"epoch": 15}), 1005.0) == 2.0  # not the pause's long gap
+
+
+def test_collie_ups_progress_line_says_when_the_next_session_comes(capsys) -> None:
+    from collie.up import ProgressLine
+
+    r = run().model_copy(update={"config": {"warmup": 240, "feedback_every": 20}, "epoch": 137, "status": "training"})
+    line = ProgressLine()
+    line.show(r)
+    said = capsys.readouterr().err.strip()
+    assert said.startswith("training: epoch 137") and said.endswith("· next feedback session at epoch 240")
+    line.show(r.model_copy(update={"status": "waiting_for_labels"}))  # it asks now: no "next"
+    assert "next feedback session" not in capsys.readouterr().err

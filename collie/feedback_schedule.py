@@ -1,0 +1,21 @@
+"""When a run's trainer asks for labels next, from the schedule in the run's config: what the
+labeling UI's waiting screen and `collie up`'s progress line tell people."""
+
+from __future__ import annotations
+
+from collie.schemas import RunRead
+
+
+def next_feedback_epoch(run: RunRead) -> int | None:
+    """The first epoch after now at which the trainer asks for labels (trainer/loop.py's
+    is_feedback_epoch: from `warmup`, every `feedback_every` epochs, while the budget lasts)."""
+    config = run.config
+    every, warmup = config.get("feedback_every"), config.get("warmup", 0)
+    if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
+        return None
+    if run.n_total is not None and run.n_labels >= run.n_total:
+        return None
+    after = run.epoch + 1
+    if after <= warmup:
+        return warmup
+    return warmup + -(-(after - warmup) // every) * every
