@@ -34,8 +34,8 @@ setup: $(STAMP)
 
 # The main job: service + trainer + labeling UI on the embedded SQLite; you label in the browser.
 demo: $(STAMP)
+	@echo "results go to runs/demo/trainer/ (skills_latest.png, metrics.jsonl); Ctrl-C stops the stack, the same command resumes it"
 	$(VENV)/bin/collie up --env point --task north --method collie --preset cpu --out runs/demo
-	@echo "plots: runs/demo/trainer/skills_latest.png · metrics: runs/demo/trainer/metrics.jsonl"
 
 # The same loop, unattended: the scripted oracle labels through the same API.
 demo-oracle: $(STAMP)
