@@ -145,7 +145,10 @@ def run(args: argparse.Namespace) -> int:
         elif args.no_generate_tokens:
             continue
         else:
-            shown = f"(kept from the last start; to replace it, set COLLIE_{role.upper()}_TOKEN)"
+            shown = (  # the database keeps only its hash: it cannot be shown again
+                f"(kept from the last start, which printed it; to replace it, set COLLIE_{role.upper()}_TOKEN; "
+                "--tokens-json FILE writes tokens to a file)"
+            )
         print(f"  {role} token: {shown}", flush=True)
     try:
         if not server.should_exit:  # stopped while the banner printed: nothing to serve
