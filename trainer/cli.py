@@ -255,22 +255,25 @@ def check_out(out: Path, resume: bool) -> list[Path]:
     one --resume cannot continue, or one we cannot write; then makes it (creating it is the one
     test of writing there that root, for whom access() says yes everywhere, cannot pass by fiat).
     Returns the folders it created, deepest first (removed again if the start fails)."""
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} is a file, not a folder")
-    if resume and not (out / "checkpoint.pt").is_file():
-        raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
-    source = rescored_from(out) if resume else None
-    if source:
-        raise ValueError(f"--resume: {out} is {source} judged by another task (collie rescore): resume {source}")
-    if not resume and any((out / name).exists() for name in RUN_FILES):
-        raise ValueError(
-            f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
-        )
-    nearest = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())  # the folder or its creator
-    if not nearest.is_dir():
-        raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
-    if not os.access(nearest, os.W_OK | os.X_OK):
-        raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+    try:
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out} is a file, not a folder")
+        if resume and not (out / "checkpoint.pt").is_file():
+            raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
+        source = rescored_from(out) if resume else None
+        if source:
+            raise ValueError(f"--resume: {out} is {source} judged by another task (collie rescore): resume {source}")
+        if not resume and any((out / name).exists() for name in RUN_FILES):
+            raise ValueError(
+                f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
+            )
+        nearest = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())  # the folder or its creator
+        if not nearest.is_dir():
+            raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
+        if not os.access(nearest, os.W_OK | os.X_OK):
+            raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+    except PermissionError as exc:  # a folder on the way this user may not enter: stat() itself is refused
+        raise ValueError(f"--out {out}: permission denied on the way to it ({exc.filename})") from None
     made = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
