@@ -66,6 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C where the command keeps no handler of its own: a line, not a traceback
         print(f"collie {args.command}: interrupted", file=sys.stderr)
         return 130
+    except PermissionError as exc:  # a file or folder this user may not open or enter: which, not a traceback
+        print(f"collie {args.command}: error: {(exc.strerror or str(exc)).lower()}: {exc.filename}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
