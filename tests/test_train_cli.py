@@ -87,13 +87,12 @@ def test_out_that_is_or_lies_under_a_file_is_refused(tmp_path: Path, where: str)
     ],  # stat() refused: no traceback
 )
 def test_out_in_a_folder_this_user_may_not_write_or_enter_is_refused(mode: int, said: str) -> None:
-    import trainer.cli  # noqa: F401  (loaded before the child drops to nobody, who may not read them)
-    import trainer.envs  # noqa: F401
     from collie.cli import main
 
     with closed_folder(mode) as closed:
         run = closed / "run"
-        code, err = as_nobody(lambda: main(["train", "--env", "point", "--preset", "smoke", "--out", str(run)]))
+        train_here = ["train", "--env", "point", "--preset", "smoke", "--out", str(run)]
+        code, err = as_nobody(lambda: main(train_here), preload=("trainer.cli", "trainer.envs"))
         assert code == 2 and said.format(run=run, closed=closed) in err and "Traceback" not in err, err
         assert not run.exists()
 

@@ -132,10 +132,11 @@ def test_a_task_file_run_is_named_by_its_task_not_the_file(tmp_path: Path) -> No
 
 @pytest.mark.parametrize("mode", [0o555, 0o000])  # may not write there; may not even look inside
 def test_out_in_a_folder_this_user_may_not_write_or_enter_is_one_line(mode: int) -> None:
-    import collie.up  # noqa: F401  (loaded before the child drops to nobody, who may not read it)
     from collie.cli import main
 
     with closed_folder(mode) as closed:
-        code, err = as_nobody(lambda: main(["up", "--no-label-ui", "--out", str(closed / "run")]))
+        code, err = as_nobody(
+            lambda: main(["up", "--no-label-ui", "--out", str(closed / "run")]), preload=("collie.up",)
+        )
         assert code == 2 and "collie up: error:" in err and "Traceback" not in err, err
         assert f"{closed / 'run'}" in err and "ermission denied" in err, err

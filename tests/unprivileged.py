@@ -3,6 +3,7 @@ under test runs in a forked child that drops to nobody first; it answers by exit
 
 from __future__ import annotations
 
+import importlib
 import os
 import shutil
 import sys
@@ -29,8 +30,11 @@ def closed_folder(mode: int) -> Iterator[Path]:
         shutil.rmtree(shared)
 
 
-def as_nobody(fn: Callable[[], int]) -> tuple[int, str]:
-    """fn's return code and what it wrote to stderr, run as nobody where we are root; 99 if it raised."""
+def as_nobody(fn: Callable[[], int], preload: tuple[str, ...] = ()) -> tuple[int, str]:
+    """fn's return code and what it wrote to stderr, run as nobody where we are root; 99 if it raised.
+    `preload` names the modules fn imports: nobody may not read root's Python (here under /root)."""
+    for name in preload:
+        importlib.import_module(name)
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:
