@@ -17,7 +17,7 @@ from sqlalchemy.exc import DBAPIError, IntegrityError, InterfaceError, Operation
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
-from backend.services.errors import DatabaseUnreachable, ServiceError, TabNotHolding, Unavailable
+from backend.services.errors import DatabaseUnreachable, RunOutOfScope, ServiceError, TabNotHolding, Unavailable
 
 MAX_ECHO = 200
 RETRY_AFTER = {"Retry-After": "5"}
@@ -88,7 +88,7 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
-        if isinstance(exc, TabNotHolding):  # typed: the reason is a value (collie.schemas.NotHeld)
+        if isinstance(exc, TabNotHolding | RunOutOfScope):  # typed: the reason is a value (NotHeld, OutOfScope)
             return SafeJSONResponse(exc.body.model_dump(mode="json"), status_code=exc.status)
         if isinstance(exc, DatabaseUnreachable):
             outages.note(exc.cause)

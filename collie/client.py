@@ -46,6 +46,7 @@ from collie.schemas import (
     MetricsRead,
     MyLabel,
     NotHeld,
+    OutOfScope,
     QualitySettings,
     QueryRead,
     QuerySummary,
@@ -94,6 +95,14 @@ class NotHolding(Conflict):
     """409 on a label from a tab that does not hold the query: `refusal.reason` says why."""
 
     def __init__(self, status: int, refusal: NotHeld) -> None:
+        super().__init__(status, refusal.detail)
+        self.refusal = refusal
+
+
+class NotInScope(Unauthorized):
+    """403 for a run outside a valid token's scope: `refusal.reason` says why; other runs may be fine."""
+
+    def __init__(self, status: int, refusal: OutOfScope) -> None:
         super().__init__(status, refusal.detail)
         self.refusal = refusal
 
@@ -200,6 +209,8 @@ class CollieClient:
                 error, detail = None, response.text
             if response.status_code == 409 and isinstance(error, dict) and "reason" in error:
                 raise NotHolding(409, NotHeld.model_validate(error))
+            if response.status_code == 403 and isinstance(error, dict) and "reason" in error:
+                raise NotInScope(403, OutOfScope.model_validate(error))
             raise api_error(response.status_code, detail)
         return response
 

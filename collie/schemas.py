@@ -63,6 +63,7 @@ TabId = Annotated[str, Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_
 # (in another tab or client), someone else labelled it, the trainer withdrew it, or its claim
 # ended (released, or expired and taken back).
 NotHeldReason = Literal["other_tab", "other_labeler", "labelled_by_you", "labelled", "retired", "not_claimed"]
+OutOfScopeReason = Literal["other_runs", "other_trainer"]  # a token limited to other runs; another trainer's run
 
 
 def _no_nul(text: str) -> str:
@@ -797,6 +798,15 @@ class StartupMark(Wire):
     pid: int
     what: str
     epoch: int | None = None
+
+
+class OutOfScope(Wire):
+    """403 for a run outside a valid token's scope (a labeler limited to other runs, a trainer on
+    another trainer's run): unlike a wrong or revoked token, the caller may go on with other runs."""
+
+    detail: str
+    reason: OutOfScopeReason
+    run_id: int
 
 
 class NotHeld(Wire):

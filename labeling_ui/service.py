@@ -16,6 +16,7 @@ from collie.client import (
     Backoff,
     CollieClient,
     NotHolding,
+    NotInScope,
     Overloaded,
     Unauthorized,
     Unreachable,
@@ -41,9 +42,6 @@ from collie.schemas import (
 __all__ = ["AuthRefused", "MyLabel", "Progress", "Rejected", "ServiceDown", "ServiceLink", "is_open"]
 
 T = TypeVar("T")
-
-
-OUT_OF_SCOPE = "limited to other runs"  # the service's 403 for a run a labeler's token may not label (routes/deps.py)
 
 
 class AuthRefused(Exception):
@@ -102,9 +100,9 @@ class ServiceLink:
             raise ServiceDown(f"the labeling service at {self.api} does not answer") from exc
         except Overloaded as exc:
             raise ServiceDown(f"the labeling service failed ({exc.status}): {exc.detail}") from exc
+        except NotInScope as exc:  # a valid token, taken off that run: the tab moves on
+            raise Rejected(exc.refusal.detail) from exc
         except Unauthorized as exc:
-            if exc.status == 403 and OUT_OF_SCOPE in str(exc.detail):  # a valid token, taken off that run
-                raise Rejected(str(exc.detail)) from exc
             raise AuthRefused(str(exc.detail)) from exc
         except NotHolding as exc:
             refusal = exc.refusal

@@ -18,6 +18,7 @@ from sqlalchemy import select
 from backend.db import Database
 from backend.models import Run
 from backend.services.auth import Caller, TokenCache
+from backend.services.errors import RunOutOfScope
 from backend.services.events import EventHub
 from backend.settings import Settings
 from collie.schemas import MAX_INT, PART_HEADER, Role
@@ -132,19 +133,26 @@ def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> No
     if raw is None or not str(raw).isdigit():
         return
     run_id = int(raw)
-    if request.headers.get(PART_HEADER) == "trainer" and caller.role in ("trainer", "operator"):
-        # the trainer's event poll, status, sessions (an operator's token may drive it): it is alive
-        request.app.state.trainer_contact.heard(request.app.state.db, run_id, caller)
     if caller.role == "operator":
         return
     if not caller.may_see(run_id):
-        raise HTTPException(403, f"this token is limited to other runs than run {run_id}")
+        raise RunOutOfScope(run_id, "other_runs", f"this token is limited to other runs than run {run_id}")
     if caller.role == "trainer" and roles == TRAINER:
         db: Database = request.app.state.db
         with db.read() as conn:
             creator = conn.execute(select(Run.created_by).where(Run.id == run_id)).scalar()
         if creator is not None and creator != caller.id:
-            raise HTTPException(403, f"run {run_id} was created by another trainer")
+            raise RunOutOfScope(run_id, "other_trainer", f"run {run_id} was created by another trainer")
+
+
+def note_trainer_contact(request: Request, caller: Caller) -> None:
+    """A call from a run's trainer process (its event poll, status, sessions; an operator's token
+    may drive it) says the trainer is alive: runs.trainer_seen_at, for the dashboard."""
+    raw = request.path_params.get("run_id")
+    if raw is None or not str(raw).isdigit() or request.headers.get(PART_HEADER) != "trainer":
+        return
+    if caller.role in ("trainer", "operator"):
+        request.app.state.trainer_contact.heard(request.app.state.db, int(raw), caller)
 
 
 def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
@@ -158,6 +166,7 @@ def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
         if caller.role != "operator" and caller.role not in roles:
             raise HTTPException(403, f"a {caller.role} token may not do this")
         check_scope(request, caller, roles)
+        note_trainer_contact(request, caller)
         return caller
 
     return dependency

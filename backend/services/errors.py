@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collie.schemas import NotHeld, NotHeldReason
+from collie.schemas import NotHeld, NotHeldReason, OutOfScope, OutOfScopeReason
 
 
 def first_line(error: object) -> str:
@@ -20,6 +20,18 @@ class ServiceError(Exception):
 
 class NotFound(ServiceError):
     status = 404
+
+
+class Forbidden(ServiceError):
+    status = 403
+
+
+class RunOutOfScope(Forbidden):
+    """A valid token on a run outside its scope; the answer is an OutOfScope body."""
+
+    def __init__(self, run_id: int, reason: OutOfScopeReason, detail: str) -> None:
+        super().__init__(detail)
+        self.body = OutOfScope(detail=detail, reason=reason, run_id=run_id)
 
 
 class Conflict(ServiceError):

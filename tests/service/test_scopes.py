@@ -11,7 +11,7 @@ import pytest
 
 from backend.main import create_app
 from backend.server import BackgroundServer
-from collie.client import ApiError, CollieClient
+from collie.client import ApiError, CollieClient, NotInScope
 from collie.schemas import MetricsIn, RolloutsIn, RunRead
 
 from .conftest import TOKENS, make_run_spec, make_session, settings_for
@@ -46,9 +46,10 @@ def test_a_trainer_acts_only_on_its_own_runs(
         lambda: list(intruder.labelled(run.id)),
         lambda: intruder.export(run.id),
     ):
-        with pytest.raises(ApiError) as err:
+        with pytest.raises(NotInScope) as err:
             call()
         assert err.value.status == 403 and "another trainer" in str(err.value.detail)
+        assert (err.value.refusal.reason, err.value.refusal.run_id) == ("other_trainer", run.id)
     after = trainer.run(run.id)
     assert (after.status, after.queue, after.last_event_id) == (before.status, before.queue, before.last_event_id)
     assert intruder.run(run.id).id == run.id  # reading stays open to every role
@@ -74,12 +75,16 @@ def test_a_labeler_limited_to_runs(live: BackgroundServer, trainer: CollieClient
             lambda: scoped.queries(other.id),
             lambda: scoped.events(other.id),
         ):
-            with pytest.raises(ApiError) as err:
+            with pytest.raises(NotInScope) as err:
                 call()
             assert err.value.status == 403 and "limited" in str(err.value.detail)
+            assert (err.value.refusal.reason, err.value.refusal.run_id) == ("other_runs", other.id)
         assert [r.id for r in scoped.runs()] == [mine.id]
     headers = {"Authorization": f"Bearer {token}"}
-    assert httpx.get(f"{live.url}/api/runs/{other.id}/stream", headers=headers).status_code == 403
+    streamed = httpx.get(f"{live.url}/api/runs/{other.id}/stream", headers=headers)
+    assert streamed.status_code == 403 and streamed.json()["reason"] == "other_runs"
+    wrong_role = httpx.post(f"{live.url}/api/runs", headers=headers, json={})
+    assert wrong_role.status_code == 403 and "reason" not in wrong_role.json()  # a role's refusal is no scope's
     page = httpx.get(f"{live.url}/api/dashboard/runs", headers=headers).json()
     assert [r["id"] for r in page["runs"]] == [mine.id]
     body = {"name": "scoped-trainer", "role": "trainer", "runs": [mine.id]}
