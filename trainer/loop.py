@@ -538,7 +538,7 @@ class Trainer:
 
     def wait_while_paused(self, bar: Any) -> bool:
         """Honour the operator: returns False when the run must stop."""
-        wish = self.feedback.control()
+        wish = self.feedback.control(self.epoch)
         if wish == "pause":
             self.reporter.status(StatusReport("paused", self.epoch))
             bar.set_description("paused")
@@ -548,7 +548,7 @@ class Trainer:
                     if self.feedback.interrupted is not None:
                         raise StopRequested(self.feedback.interrupted)
                     time.sleep(0.5)
-                    wish = self.feedback.control()
+                    wish = self.feedback.control(self.epoch)
             finally:
                 self._waiting = False
             if wish != "stop":

@@ -157,6 +157,22 @@ def test_pause_holds_collect_until_resume(live: BackgroundServer, feedback: Http
         assert feedback.control() == "run" and operator.run(feedback.run_id).status == "training"
 
 
+def test_a_pause_is_shown_once_at_the_trainers_epoch(live: BackgroundServer, feedback: HttpFeedback) -> None:
+    def statuses() -> list[tuple[str, int | None]]:
+        page = feedback.client.events(feedback.run_id)
+        return [(e.data.status, e.data.epoch) for e in page.events if isinstance(e, StatusEvent)]
+
+    feedback.reporter.status(StatusReport("training", 3))  # the run's last report; the trainer is at 7 now
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        operator.pause(feedback.run_id)
+        assert feedback.control(7) == "pause"
+        feedback.reporter.status(StatusReport("paused", 7))  # as the training loop says it too
+        operator.resume(feedback.run_id)
+        assert feedback.control(7) == "run"
+    assert statuses()[-2:] == [("paused", 7), ("training", 7)]  # not a "paused" at 3 first (a dashboard's
+    assert [s for s, _ in statuses()].count("paused") == 1  # epoch would move while the run is paused)
+
+
 def test_restarted_trainer_replays_its_sessions_and_asks_nothing_twice(
     live: BackgroundServer, feedback: HttpFeedback
 ) -> None:

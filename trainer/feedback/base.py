@@ -73,8 +73,8 @@ class FeedbackSource(abc.ABC):
         """Labels changed since the last call (undo, relabel, late arrivals). Non-blocking."""
         return []
 
-    def control(self) -> Literal["run", "pause", "stop"]:
-        """Operator's wish for the run, polled once per epoch."""
+    def control(self, epoch: int | None = None) -> Literal["run", "pause", "stop"]:
+        """Operator's wish for the run, polled once per epoch (`epoch`: the trainer's, for a status it shows)."""
         return "run"
 
     def state_dict(self) -> dict[str, Any]:

@@ -153,7 +153,7 @@ class HttpFeedback(FeedbackSource):
             return []
         return self._hand_over([q for q in self._changed if q in self._given])
 
-    def control(self) -> Literal["run", "pause", "stop"]:
+    def control(self, epoch: int | None = None) -> Literal["run", "pause", "stop"]:
         try:
             self._pump(0.0, patient=False)
         except Unauthorized as exc:
@@ -162,10 +162,10 @@ class HttpFeedback(FeedbackSource):
             log.warning("labeling service unreachable, keeping control=%s: %s", self._control, exc)
         if self.refusal is not None:
             raise self.refusal
-        if self._control == "pause":
-            self._show("paused", None)
+        if self._control == "pause":  # with the epoch: a status without one is stamped with the run's last
+            self._show("paused", epoch)
         elif self.reporter.shown == "paused":
-            self._show("training", None)
+            self._show("training", epoch)
         return self._control
 
     def history(self) -> list[tuple[Segment, int]]:
