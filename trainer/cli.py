@@ -22,7 +22,7 @@ from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, field_notes, flag, make_config, people_schedule
 from trainer.methods import METHODS
-from trainer.run_files import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
@@ -232,7 +232,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         )
         source = HttpFeedback.create(args.api, token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
-    memo.write_text(json.dumps({"api": args.api, "run_id": source.run_id}))
+    write_json(memo, {"api": args.api, "run_id": source.run_id})
     return source, rule
 
 

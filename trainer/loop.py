@@ -52,6 +52,7 @@ from trainer.query import select_queries
 from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
+from trainer.run_files import write_json
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport
@@ -564,8 +565,8 @@ class Trainer:
             self.resume()
         else:
             (self.out / "metrics.jsonl").write_text("")
-        (self.out / "config.json").write_text(json.dumps(self.cfg.to_dict(), indent=2))
-        (self.out / TASK_JSON).write_text(json.dumps(self.rule.to_json(), indent=2))
+        write_json(self.out / "config.json", self.cfg.to_dict())
+        write_json(self.out / TASK_JSON, self.rule.to_json())
         self.rebuild_from_source()
         if not self.method.asks_labels or len(self.labelled) >= self.cfg.total_queries:
             startup.done()  # no feedback session will come: no first segment to time
@@ -671,9 +672,7 @@ class Trainer:
             "wall_s": round(self.wall_s(), 2),
             "config": self.cfg.to_dict(),
         }
-        partial = self.out / "summary.json.partial"  # renamed whole: a kill mid-write leaves the old one
-        partial.write_text(json.dumps(summary, indent=2))
-        partial.replace(self.out / "summary.json")
+        write_json(self.out / "summary.json", summary)
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
         if status != "interrupted":  # an interrupted run is not over for the service

@@ -15,7 +15,6 @@ evaluation is rescored; metrics.jsonl's history is not copied.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 from pathlib import Path
@@ -29,7 +28,7 @@ from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
 from trainer.report import load_run
-from trainer.run_files import RunFolderError, read_arrays, read_json_object
+from trainer.run_files import RunFolderError, read_arrays, read_json_object, write_json
 from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
@@ -101,16 +100,16 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     shutil.copyfile(saved, out / "eval_latest.npz")
     if (source / CHECKPOINT).exists():
         shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
-    (out / "config.json").write_text(json.dumps(cfg, indent=2))
+    write_json(out / "config.json", cfg)
     if (source / "downstream.json").exists():
         done = read_json_object(source / "downstream.json")
         kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
         if kept_results:
-            (out / "downstream.json").write_text(json.dumps(kept_results, indent=2))
-    (out / TASK_JSON).write_text(json.dumps(choose_rule(config).to_json(), indent=2))
+            write_json(out / "downstream.json", kept_results)
+    write_json(out / TASK_JSON, choose_rule(config).to_json())
     kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
     rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
-    (out / "summary.json").write_text(json.dumps(rescored, indent=2))
+    write_json(out / "summary.json", rescored)
     return out
 
 

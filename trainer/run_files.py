@@ -1,5 +1,6 @@
 """Reading a run folder's files (summary.json, config.json, task.json, eval_latest.npz, …) so that a
-missing or damaged one is an error naming the file, for every command that reads run folders."""
+missing or damaged one is an error naming the file, for every command that reads run folders; and
+writing its JSON files whole (a kill mid-write leaves the old file, never half of a new one)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,13 @@ def read_json_object(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise RunFolderError(f"{path}: not a JSON object")
     return data
+
+
+def write_json(path: Path, data: Any) -> None:
+    """`data` as indented JSON at `path`, renamed into place whole."""
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(data, indent=2))
+    partial.replace(path)
 
 
 def read_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:

@@ -41,7 +41,7 @@ from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
-from trainer.run_files import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
@@ -309,7 +309,7 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
         raise Interrupted("not started: the sweep was interrupted")
     if to_train(spec):
         out.mkdir(parents=True, exist_ok=True)
-        (out / "sweep_run.json").write_text(json.dumps(asdict(spec), indent=2))
+        write_json(out / "sweep_run.json", asdict(spec))
         _call(train_command(spec), out.with_suffix(".log"), stop)
         if not is_finished(out):  # stopped by SIGINT / SIGTERM: a final checkpoint, not a final policy
             summary = out / "summary.json"

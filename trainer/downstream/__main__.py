@@ -24,6 +24,7 @@ from trainer.downstream.goal import GoalOptions
 from trainer.downstream.ppo import PpoConfig, evaluate, greedy, train_ppo
 from trainer.downstream.zero_shot import zero_shot
 from trainer.pretrained import TrainedSkills, load_skills
+from trainer.run_files import write_json
 from trainer.task_choice import judged_by
 
 PPO_PRESETS: dict[str, dict[str, Any]] = {
@@ -84,7 +85,7 @@ def run_downstream(
     path = run_dir / "downstream.json"
     stored = json.loads(path.read_text()) if path.exists() else {}
     stored[kind] = result
-    path.write_text(json.dumps(stored, indent=2))
+    write_json(path, stored)
     return {kind: result}
 
 

@@ -1,0 +1,34 @@
+"""A run folder's JSON files are written whole: a failure while writing leaves the old file as it
+was (resume and report read it), and what is read back is what was written."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from trainer.run_files import RunFolderError, read_json_object, write_json
+
+
+def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "summary.json"
+    write_json(path, {"status": "finished", "epochs_done": 3})
+
+    def disk_full(self: Path, text: str) -> int:  # half the text lands, then the disk is full
+        with open(self, "w") as f:
+            f.write(text[: len(text) // 2])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        write_json(path, {"status": "finished", "epochs_done": 4})
+    monkeypatch.undo()
+    assert read_json_object(path) == {"status": "finished", "epochs_done": 3}
+
+
+def test_a_file_cut_short_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"epochs": 3})[:5])
+    with pytest.raises(RunFolderError, match=r"config\.json: not JSON"):
+        read_json_object(path)
