@@ -251,7 +251,7 @@ def test_a_closed_terminal_stops_the_stack_like_ctrl_c(tmp_path):
     proc, parts = started_stack(tmp_path)
     try:
         proc.send_signal(signal.SIGHUP)
-        assert proc.wait(timeout=60) == 130
+        assert proc.wait(timeout=120) == 130
         assert not [name for name, pid in parts.items() if alive(pid)]
     finally:
         if proc.poll() is None:

@@ -264,7 +264,7 @@ def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_othe
             time.sleep(0.1)
         proc.send_signal(signal.SIGINT)  # to the sweep alone, as a terminal's Ctrl-C now reaches it
         proc.send_signal(signal.SIGINT)  # twice: the trainer still gets one SIGTERM, and checkpoints
-        _, err = proc.communicate(timeout=120)
+        _, err = proc.communicate(timeout=240)
     finally:
         if proc.poll() is None:
             proc.kill()

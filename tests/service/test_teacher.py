@@ -69,7 +69,7 @@ def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:
             with conn, conn.makefile("rb") as request:
                 assert request.read(4) == b"GET "  # its first request is sent: it waits for the answer
                 proc.send_signal(signal.SIGINT)
-                _, err = proc.communicate(timeout=20)
+                _, err = proc.communicate(timeout=60)
         finally:
             proc.kill()
     assert proc.returncode == 130 and "collie teacher: interrupted" in err and "Traceback" not in err, err
