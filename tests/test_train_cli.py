@@ -6,18 +6,17 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import queue
 import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import torch
+from paced_marks import PacedMarks
 from unprivileged import as_nobody, closed_folder
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
@@ -335,29 +334,15 @@ def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, tmp_pa
 
 
 def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path) -> None:
-    # The startup log is a FIFO: each mark blocks in open() until this test reads it, so the trainer
-    # cannot get past its next mark ("trainer built") before the signal lands, however fast it runs.
-    marks = tmp_path / "startup.fifo"
-    os.mkfifo(marks)
-    env = {**os.environ, "COLLIE_STARTUP_LOG": str(marks)}
-    proc = subprocess.Popen(
-        [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"], stderr=subprocess.PIPE, text=True, env=env
-    )
-    seen: queue.Queue[str] = queue.Queue()
-
-    def read_marks_until_imports() -> None:
-        while True:
-            with open(marks) as f:  # one mark per writer's open
-                line = f.read()
-            seen.put(line)
-            if '"imports"' in line:  # torch loaded; the envs come next: read no further mark
-                return
-
-    threading.Thread(target=read_marks_until_imports, daemon=True).start()
-    deadline = time.monotonic() + 120
-    while '"imports"' not in seen.get(timeout=max(0.0, deadline - time.monotonic())):
-        assert proc.poll() is None, proc.communicate()[1][-3000:]
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark ("trainer built")
+    cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
+    marks.signal_at(proc, lambda m: m["what"] == "imports", signal.SIGTERM, hold=True)  # torch loaded; envs next
+    try:
+        _, err = proc.communicate(timeout=180)
+    finally:
+        proc.kill()
+        marks.release()
+    assert marks.sent.is_set(), err[-3000:]
     assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
     assert not (tmp_path / "run" / "summary.json").exists()  # it ended before training, not after

@@ -2,16 +2,15 @@
 resume rebuilds exactly, and SIGTERM writing a final checkpoint that `--resume` continues exactly."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from paced_marks import PacedMarks
 
 from trainer.config import make_config
 from trainer.loop import Trainer
@@ -91,16 +90,18 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
 
     cmd = [sys.executable, "-m", "collie.cli", "train", "--preset", "smoke", "--out", str(stopped), "--no-progress"]
     cmd += [f"--{k.replace('_', '-')}={v}" for k, v in common.items()]
-    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": str(ROOT)}, stderr=subprocess.PIPE, text=True)
-    metrics = stopped / "metrics.jsonl"
-    deadline = time.monotonic() + 300
-    while not (metrics.exists() and len(metrics.read_text().splitlines()) >= 2):  # epoch 0 and epoch 4
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=120) == 0, proc.stderr.read() if proc.stderr else ""
+    marks = PacedMarks(tmp_path)  # the signal lands before the trainer's mark after epoch 4's evaluation
+    env = {**marks.env, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    marks.signal_at(proc, lambda m: m["what"] == "evaluate" and m.get("epoch") == 4, signal.SIGTERM, hold=False)
+    try:
+        _, err = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+        marks.release()
+    assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
     summary = json.loads((stopped / "summary.json").read_text())
-    assert summary["status"] == "interrupted" and 4 <= summary["epochs_done"] < 40
+    assert summary["status"] == "interrupted" and summary["epochs_done"] in (4, 5)
     assert torch.load(stopped / "checkpoint.pt", weights_only=False)["epoch"] == summary["epochs_done"]
 
     b = Trainer(make_config("smoke", "point", out=str(stopped), **common), progress=False)

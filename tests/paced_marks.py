@@ -1,0 +1,48 @@
+"""Signals that land at a chosen point of a child's run, however loaded the machine: the child's
+startup log (COLLIE_STARTUP_LOG, collie/startup.py) is a FIFO, so each mark it writes blocks in
+open() until this side reads it. The signal goes out right after the chosen mark is read and
+before the next open() is answered: the child cannot be past its next mark when it lands."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import subprocess
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+
+class PacedMarks:
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / "startup.fifo"
+        os.mkfifo(self.path)
+        self.env = {**os.environ, "COLLIE_STARTUP_LOG": str(self.path)}
+        self.seen: list[dict[str, Any]] = []
+        self.sent = threading.Event()
+
+    def signal_at(
+        self, proc: subprocess.Popen[str], at: Callable[[dict[str, Any]], bool], sig: int, *, hold: bool
+    ) -> None:
+        """Send `sig` to `proc` once a mark satisfies `at`; with `hold`, read no mark after it (the
+        child then stays at its next mark until the signal ends it), else read on to the end."""
+
+        def pace() -> None:
+            while proc.poll() is None:
+                with open(self.path) as f:  # one writer's open: one mark
+                    marks = [json.loads(line) for line in f.read().splitlines()]
+                self.seen += marks
+                if not self.sent.is_set() and any(at(m) for m in marks):
+                    proc.send_signal(sig)
+                    self.sent.set()
+                    if hold:
+                        return
+
+        threading.Thread(target=pace, daemon=True).start()
+
+    def release(self) -> None:
+        """Answer a read still waiting in open() (the child is gone): the reading thread ends."""
+        with contextlib.suppress(OSError):
+            os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
