@@ -18,6 +18,19 @@ def port(value: str) -> int:
     return number
 
 
+def ipv4_host(value: str) -> str:
+    """An address to listen on: an IPv4 address of this machine, or 0.0.0.0 for every one."""
+    import ipaddress
+
+    try:
+        ipaddress.IPv4Address(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not an IPv4 address: 127.0.0.1 (this machine only) or 0.0.0.0 (every interface)"
+        ) from None
+    return value
+
+
 def http_url(value: str) -> str:
     """An http:// or https:// URL with a host (the service's address)."""
     parts = urlsplit(value)

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from collie.argtypes import port, sqlite_file
+from collie.argtypes import ipv4_host, port, sqlite_file
 from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
@@ -62,6 +62,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, default=None, help="folder for everything (default runs/up-ENV-TASK)")
     p.add_argument("--port", type=port, default=8000, help="service port (0 = any free port; default 8000)")
+    p.add_argument(
+        "--host",
+        type=ipv4_host,
+        default="127.0.0.1",
+        help="address the service and labeling UI listen on (default 127.0.0.1: this machine only; "
+        "0.0.0.0: people on other machines label and watch too, by links naming this machine's address)",
+    )
     p.add_argument("--info-json", type=Path, default=None, help="write URLs, run id and tokens here")
     p.add_argument("--exit-when-done", action="store_true", help="exit 0 when the run finishes")
     p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
@@ -168,6 +175,11 @@ def checked(args: argparse.Namespace) -> Path:
         raise ValueError(f"--info-json {args.info_json} is a folder; give a file path")
     if args.max_restarts < 0:
         raise ValueError("--max-restarts must be ≥ 0")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind((args.host, 0))
+        except OSError as exc:
+            raise ValueError(f"--host {args.host} is not an address of this machine ({exc.strerror})") from None
     if args.teacher_rate is not None and args.teacher_rate <= 0:
         raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
     if not (out / "tokens.json").exists():  # a new stack takes COLLIE_<ROLE>_TOKEN (stack_tokens): as the service would
@@ -287,9 +299,10 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     # We bind the service's socket and hand it over: its URL is known at once, so the trainer starts
     # (and imports torch) while the service imports and migrates; requests queue until it serves,
     # and a restarted service keeps the port.
-    sock = listening_socket(args.port)
+    sock = listening_socket(args.host, args.port)
     stack.closing(sock)
-    api = f"http://127.0.0.1:{sock.getsockname()[1]}"
+    api = f"http://{local_address(args.host)}:{sock.getsockname()[1]}"  # the parts' own way in
+    shown = public_address(args.host)  # what the links name: where other machines reach us
     serve = ["serve", "--fd", str(sock.fileno()), *(["--db", str(db)] if db else []), "--tokens-json", str(tokens_file)]
     service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
     trainer_out = out / "trainer"
@@ -361,29 +374,52 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         ui_info.unlink(missing_ok=True)
 
         def ui_args() -> list[str]:
-            where = ["--port", str(port["labeling_ui"]), "--info-json", str(ui_info), "--warm", args.env]
+            where = ["--host", args.host, "--port", str(port["labeling_ui"]), "--info-json", str(ui_info)]
+            where += ["--warm", args.env]
             return ["label-ui", "--api", api, "--run", str(run_id), *where]
 
         ui = stack.start("labeling_ui", ui_args, child_env())
         ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log")
         mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
-        labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])
-    dashboard = f"{api}/?token={quote(tokens['operator'])}"
+        labeler_url = f"http://{shown}:{port['labeling_ui']}/?token={quote(tokens['labeler'])}"
+    site = f"http://{shown}:{sock.getsockname()[1]}"
+    dashboard = f"{site}/?token={quote(tokens['operator'])}"
     if labeler_url:  # the dashboard's "watch skills in 3D" link opens the labeling UI in watch mode
         dashboard += "&ui=" + quote(labeler_url.split("?")[0], safe="")
-    urls = {"api": api, "labeling_ui": labeler_url, "dashboard": dashboard}
+    urls = {"api": site, "labeling_ui": labeler_url, "dashboard": dashboard}
     write_info(args.info_json, urls, run_id, tokens)
     print(f"collie up: run {run_id} · {what_runs(args, trainer_out / 'config.json' if resume else None)}")
-    print(f"  service   {api}   (API docs {api}/docs)")
+    print(f"  service   {site}   (API docs {site}/docs)")
     if labeler_url:  # links with tokens go to the terminal of the person who started the stack, not to logs
         print(f"  label     {labeler_url}")
     print(f"  dashboard {dashboard}")
     print(f"  tokens    in {tokens_file} (readable by you only)")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")
+    if args.host != "127.0.0.1":
+        print(f"  reachable from other machines on {args.host}: these links carry tokens over plain HTTP "
+              "(a trusted network, or a TLS proxy in front)")  # fmt: skip
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
     stack.log(f"stack up: run {run_id}, service {api}")
     return watch(api, tokens["operator"], run_id, stack, args.exit_when_done, stopping)
+
+
+def local_address(host: str) -> str:
+    """How this machine's parts reach a socket bound to `host` (every interface: the loopback)."""
+    return "127.0.0.1" if host == "0.0.0.0" else host
+
+
+def public_address(host: str) -> str:
+    """The address links name for a socket bound to `host`: for every interface, the one this
+    machine's default route leaves from (what others on its network reach); else `host` itself."""
+    if host != "0.0.0.0":
+        return host
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))  # a UDP connect sends nothing: it only picks the interface
+            return str(probe.getsockname()[0])
+        except OSError:  # no route at all: this machine's name
+            return socket.gethostname()
 
 
 def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
@@ -404,16 +440,16 @@ def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
     return f"{runs['env']} {runs['task']} {runs['method']} ({runs['preset']})"
 
 
-def listening_socket(port: int) -> socket.socket:
-    """127.0.0.1:port (0: any free port), bound and listening; an error naming a port in use."""
+def listening_socket(host: str, port: int) -> socket.socket:
+    """host:port (0: any free port), bound and listening; an error naming a port in use."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
-        sock.bind(("127.0.0.1", port))
+        sock.bind((host, port))
     except OSError as exc:
         sock.close()
         raise RuntimeError(
-            f"cannot listen on 127.0.0.1:{port} for the service: {exc.strerror} (--port 0 takes any free port)"
+            f"cannot listen on {host}:{port} for the service: {exc.strerror} (--port 0 takes any free port)"
         ) from None
     sock.listen(128)
     return sock

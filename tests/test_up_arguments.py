@@ -25,6 +25,8 @@ def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.Completed
     [
         (["--port", "-1"], "argument --port: -1 is not a port"),
         (["--ui-port", "99999"], "argument --ui-port: 99999 is not a port"),
+        (["--host", "example.org"], "argument --host: 'example.org' is not an IPv4 address"),
+        (["--host", "203.0.113.250"], "--host 203.0.113.250 is not an address of this machine (Cannot assign"),
         (["--out", "afile"], "--out afile is a file"),
         (["--info-json", "."], "--info-json . is a folder"),
         (["--train-args=--out elsewhere --epochs 2"], "--train-args may not set --out"),
