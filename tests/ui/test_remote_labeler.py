@@ -1,6 +1,6 @@
 """`collie up --host 0.0.0.0`: people on other machines label and watch. The service and the
 labeling UI listen on every interface, the links name this machine's address on its network
-(not 127.0.0.1, which would be the labeler's own machine), and they answer there."""
+(not 127.0.0.1, which would be the labeler's own machine), and a labeler's browser labels there."""
 
 from __future__ import annotations
 
@@ -14,11 +14,15 @@ from urllib.parse import urlsplit
 
 import httpx
 import pytest
+from playwright.sync_api import Browser
 
+from collie.client import CollieClient
 from collie.up import public_address
 
+from .page import TIMEOUT_S, open_labeler, wait_segment
 
-def test_a_stack_on_every_interface_hands_out_links_that_answer_there(tmp_path: Path) -> None:
+
+def test_a_labeler_on_the_network_labels_through_the_printed_link(tmp_path: Path, browser: Browser) -> None:
     shown = public_address("0.0.0.0")
     assert not shown.startswith("127."), "this machine has no network to test on"
     cmd = [sys.executable, "-m", "collie.cli", "up", "--host", "0.0.0.0", "--port", "0", "--ui-port", "0"]
@@ -34,8 +38,16 @@ def test_a_stack_on_every_interface_hands_out_links_that_answer_there(tmp_path: 
         meta = json.loads((tmp_path / "info.json").read_text())
         for name in ("api", "labeling_ui", "dashboard"):
             assert urlsplit(meta[name]).hostname == shown, meta[name]
-        page = httpx.get(meta["labeling_ui"], timeout=30)  # the labeler's link, from the network's side
-        assert page.status_code == 200 and "<html" in page.text.lower()
+        page = open_labeler(browser, meta["labeling_ui"])  # the labeler's link, from the network's side
+        wait_segment(page)
+        with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+            deadline = time.monotonic() + TIMEOUT_S
+            while not client.label_events(meta["run_id"]):  # a key too soon after the segment appeared waits
+                assert time.monotonic() < deadline, page.inner_text("body")[-2000:]
+                page.keyboard.press("2")
+                time.sleep(0.5)
+            assert client.label_events(meta["run_id"])[0].value == 1  # key 2: neutral (north never calls a state good)
+        page.context.close()
         dashboard = httpx.get(meta["dashboard"], timeout=30)
         assert dashboard.status_code == 200 and "<html" in dashboard.text.lower()
         token = {"Authorization": f"Bearer {meta['tokens']['operator']}"}
