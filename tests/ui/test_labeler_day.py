@@ -14,7 +14,7 @@ from playwright.sync_api import Browser, Page
 from collie.client import CollieClient
 from collie.schemas import MetricsIn
 
-from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, segment_id, wait_segment, wait_text
+from .page import TIMEOUT_S, VIEWPORT, canvas_until, segment_id, wait_segment, wait_text
 from .stack import TOKENS, Stack
 from .test_labeling_ui import wait_until
 from .test_watch import evaluation
@@ -207,8 +207,8 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     wait_text(page, "Nothing to label right now")
     wait_text(page, "at epoch 3")
     wait_text(page, "While you wait: the latest evaluation")
-    time.sleep(1.0)
-    assert canvas_pixels(page, artifacts / "waiting-skills.png").std() > 10.0  # not a blank screen
+    pixels = canvas_until(page, artifacts / "waiting-skills.png", lambda p: p.std() > 10.0)
+    assert pixels.std() > 10.0  # not a blank screen
     assert "being labelled elsewhere" not in page.inner_text("body")
     stack.operator.stop(run.id)
     stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab

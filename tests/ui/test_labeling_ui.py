@@ -12,7 +12,7 @@ from playwright.sync_api import Browser
 
 from collie.tasks import get_task
 
-from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, open_labeler, segment_id, wait_segment, wait_text
+from .page import TIMEOUT_S, VIEWPORT, canvas_until, open_labeler, segment_id, wait_segment, wait_text
 from .stack import Stack
 
 pytestmark = pytest.mark.slow
@@ -67,13 +67,17 @@ def test_replay_canvas_is_not_blank(stack: Stack, browser: Browser, artifacts: P
     run = stack.post_run(env, 1, seed=3)
     page = open_labeler(browser, stack.ui(run.id).labeler_url(stack.new_labeler(f"canvas-{env}")))
     wait_segment(page)
-    time.sleep(1.0)  # a few replay frames
-    pixels = canvas_pixels(page, artifacts / f"replay-{env}.png")
+
+    def centre(pixels: np.ndarray) -> np.ndarray:  # where the followed robot sits
+        h, w, _ = pixels.shape
+        return pixels[h // 2 - 40 : h // 2 + 40, w // 2 - 40 : w // 2 + 40]
+
+    pixels = canvas_until(
+        page, artifacts / f"replay-{env}.png", lambda p: p.std() > 10.0 and centre(p).std() > 10.0
+    )  # a few replay frames
     assert pixels.std() > 10.0, f"the {env} replay canvas looks blank (std {pixels.std():.1f})"
-    # the robot is drawn: the canvas centre (where the followed robot sits) is not floor-white/grey
-    h, w, _ = pixels.shape
-    centre = pixels[h // 2 - 40 : h // 2 + 40, w // 2 - 40 : w // 2 + 40]
-    assert centre.std() > 10.0
+    # the robot is drawn: the canvas centre is not floor-white/grey
+    assert centre(pixels).std() > 10.0
     page.context.close()
 
 
