@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import viser
-from playwright.sync_api import Browser
+from playwright.sync_api import Browser, expect
 
 from collie.tasks import get_task
 
@@ -307,8 +307,16 @@ def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, b
         page = context.new_page()
         page.goto(url)
         wait_segment(page)
-        time.sleep(1.0)  # the column minimizes as the tab opens (the window width the browser handed over)
-        assert page.get_by_text(description).first.is_visible() is shown, width
+        # the column minimizes as the tab opens (the window width the browser handed over); the task's
+        # text is sent before the progress line, so once that is on screen the text is on the page
+        # unless its column is minimized (which leaves it out of the page)
+        wait_text(page, "This session")
+        text = page.get_by_text(description).first
+        if shown:
+            text.wait_for(state="attached")
+            expect(text, f"width {width}").to_be_visible(timeout=TIMEOUT_S * 1000)
+        else:
+            expect(text, f"width {width}").to_be_hidden(timeout=TIMEOUT_S * 1000)
         context.close()
 
 
