@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,8 +48,19 @@ def wait_text(page: Page, text: str, timeout_s: float = TIMEOUT_S) -> None:
     page.get_by_text(text).first.wait_for(timeout=timeout_s * 1000)
 
 
-def canvas_pixels(page: Page, save_as: Path) -> np.ndarray:
-    """The 3D canvas as an (H, W, 3) array, also saved as a screenshot artifact."""
+def canvas_until(
+    page: Page, save_as: Path, ok: Callable[[np.ndarray], bool], timeout_s: float = TIMEOUT_S
+) -> np.ndarray:
+    """The 3D canvas as an (H, W, 3) array, re-taken until `ok(pixels)` holds or `timeout_s` runs
+    out: the last one taken, for the test to assert on. Software WebGL on a busy machine may draw the
+    scene seconds after the page shows it. The last canvas is saved as `save_as`, the page beside it."""
+    canvas = page.locator("canvas").first
+    deadline = time.monotonic() + timeout_s
+    while True:
+        png = canvas.screenshot(path=str(save_as))
+        pixels = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float64)
+        if ok(pixels) or time.monotonic() >= deadline:
+            break
+        time.sleep(0.5)
     page.screenshot(path=str(save_as.with_name(save_as.stem + "-page.png")))
-    png = page.locator("canvas").first.screenshot(path=str(save_as))
-    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float64)
+    return pixels

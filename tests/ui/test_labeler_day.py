@@ -14,18 +14,12 @@ from playwright.sync_api import Browser, Page
 from collie.client import CollieClient
 from collie.schemas import MetricsIn
 
-from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, segment_id, wait_segment, wait_text
+from .page import TIMEOUT_S, VIEWPORT, canvas_until, segment_id, wait_segment, wait_text
 from .stack import TOKENS, Stack
-from .test_labeling_ui import wait_until
+from .test_labeling_ui import NO_DWELL, press, wait_until
 from .test_watch import evaluation
 
 pytestmark = pytest.mark.slow
-DWELL_S = 0.1
-
-
-def press(page: Page, key: str) -> None:
-    time.sleep(DWELL_S + 0.05)
-    page.keyboard.press(key)
 
 
 def tab(context: object, url: str) -> Page:
@@ -91,7 +85,7 @@ def test_a_change_of_identity_in_one_tab_is_loud(stack: Stack, browser: Browser)
 
 def test_a_stale_tab_never_labels_what_it_no_longer_holds(stack: Stack, browser: Browser) -> None:
     run = stack.post_run("point", 6, seed=11)
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
     token = stack.new_labeler("erin")
     context = profile(browser)
     front = tab(context, app.labeler_url(token))
@@ -120,7 +114,7 @@ def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Bro
     run = stack.post_run("point", 2, seed=2)
     # 20 frames at 1 fps: 19 s before it counts as seen. The service's player runs on its own clock,
     # and under load the browser may show the segment's id seconds after its first frame was sent.
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, fps=1.0)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, fps=1.0)
     context = profile(browser)
     page = tab(context, app.labeler_url(stack.new_labeler("fay")))
     first = wait_segment(page)
@@ -140,7 +134,7 @@ def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Bro
 
 def test_undo_after_a_reload_withdraws_this_tabs_label_not_another_tabs(stack: Stack, browser: Browser) -> None:
     run = stack.post_run("point", 6, seed=5)
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0, release_grace_s=30.0)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0, release_grace_s=30.0)
     context = profile(browser)
     url = app.labeler_url(stack.new_labeler("two-tabs-undo"))
     first, second = tab(context, url), tab(context, url)
@@ -160,7 +154,7 @@ def test_undo_after_a_reload_withdraws_this_tabs_label_not_another_tabs(stack: S
 
 def test_my_labels_survive_a_reload_and_can_be_relabelled(stack: Stack, browser: Browser, artifacts: Path) -> None:
     run = stack.post_run("point", 5, seed=4)
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0, release_grace_s=30.0)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0, release_grace_s=30.0)
     context = profile(browser)
     page = tab(context, app.labeler_url(stack.new_labeler("gil")))
     labelled, shown = [], None
@@ -207,8 +201,8 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     wait_text(page, "Nothing to label right now")
     wait_text(page, "at epoch 3")
     wait_text(page, "While you wait: the latest evaluation")
-    time.sleep(1.0)
-    assert canvas_pixels(page, artifacts / "waiting-skills.png").std() > 10.0  # not a blank screen
+    pixels = canvas_until(page, artifacts / "waiting-skills.png", lambda p: p.std() > 10.0)
+    assert pixels.std() > 10.0  # not a blank screen
     assert "being labelled elsewhere" not in page.inner_text("body")
     stack.operator.stop(run.id)
     stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab
@@ -223,7 +217,7 @@ def test_instructions_rule_and_a_class_the_task_cannot_give(stack: Stack, browse
     run = stack.post_run("point", 2)  # north: nothing is ever good
     html = '<img src=x onerror="window.pwned=1">'  # an operator's text is shown, never run
     stack.operator.set_instructions(run.id, f"Judge only the last second of each segment. {html}")
-    app = stack.ui(run.id, min_dwell_s=DWELL_S, min_played=0.0)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
     context = profile(browser)
     page = tab(context, app.labeler_url(stack.new_labeler("ivy")))
     first = wait_segment(page)

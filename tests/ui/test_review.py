@@ -13,7 +13,7 @@ from playwright.sync_api import Browser, Page
 
 from collie.client import CollieClient
 
-from .page import TIMEOUT_S, VIEWPORT, canvas_pixels, open_labeler, wait_text
+from .page import TIMEOUT_S, VIEWPORT, canvas_until, open_labeler, wait_text
 from .stack import TOKENS, Stack
 
 pytestmark = pytest.mark.slow
@@ -53,7 +53,7 @@ def test_a_disagreement_replays_in_3d_and_labels_nothing(stack: Stack, browser: 
         time.sleep(0.2)
         seen.add(frame_shown(page))
     assert len(seen) >= 3, f"the replay did not advance: frames {sorted(seen)}"
-    assert canvas_pixels(page, artifacts / "review-0-0.png").std() > 10.0
+    assert canvas_until(page, artifacts / "review-0-0.png", lambda p: p.std() > 10.0).std() > 10.0
     assert not page.get_by_role("button", name="1 · Bad").is_visible()
     for key in ("1", "3", "x", "u"):
         page.keyboard.press(key)

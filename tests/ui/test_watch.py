@@ -14,7 +14,7 @@ from collie.schemas import RolloutsIn
 from trainer.feedback.http_reporter import rollouts_of
 from trainer.telemetry import RolloutsReport
 
-from .page import canvas_pixels, open_labeler, wait_text
+from .page import canvas_until, open_labeler, wait_text
 from .stack import TOKENS, Stack, rollout_queries
 
 pytestmark = pytest.mark.slow
@@ -34,7 +34,7 @@ def test_watch_replays_every_skill_and_claims_nothing(stack: Stack, browser: Bro
     wait_text(page, "No evaluation to replay yet")
     stack.trainer.post_rollouts(run.id, evaluation(25, 3))  # appears without a reload
     wait_text(page, "skill 1 / 3")
-    pixels = canvas_pixels(page, artifacts / "watch-skill-1.png")
+    pixels = canvas_until(page, artifacts / "watch-skill-1.png", lambda p: p.std() > 10.0)
     assert pixels.std() > 10.0
     page.get_by_role("button", name="next ▶").click()
     wait_text(page, "skill 2 / 3")
