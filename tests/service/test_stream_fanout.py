@@ -41,8 +41,9 @@ class Reader(threading.Thread):
 
     def run(self) -> None:
         headers = {"Authorization": f"Bearer {self.token}"}
+        timeout = httpx.Timeout(30, read=120)  # a stream may stay silent a while: no heartbeat in some tests
         try:
-            with httpx.stream("GET", f"{self.url}?after={self.after}", headers=headers, timeout=30) as response:
+            with httpx.stream("GET", f"{self.url}?after={self.after}", headers=headers, timeout=timeout) as response:
                 self.status = response.status_code
                 self.opened.set()
                 for line in response.iter_lines():
