@@ -179,16 +179,16 @@ def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsy
 
 def test_a_ray_address_where_no_head_answers_is_a_one_line_error_within_seconds(tmp_path):
     import socket
-    import time
 
     with socket.socket() as probe:  # a port nothing listens on: bound, then closed
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     cmd = [sys.executable, "-m", "collie.cli", "sweep", "--ray", f"127.0.0.1:{port}", "--tasks", "north"]
     cmd += ["--methods", "metra", "--seeds", "1", "--preset", "smoke", "--out", str(tmp_path), "--no-report"]
-    start = time.monotonic()
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)  # ray.init alone retries forever
-    assert done.returncode == 2 and time.monotonic() - start < 30
+    # ray.init alone retries forever: the timeout fails that; the probe's refusal is immediate, and
+    # the rest of the time is the interpreter and its imports (no wall-clock bound on those)
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
     assert f"collie sweep: error: --ray 127.0.0.1:{port}: no Ray head answers at that address" in done.stderr
 
 

@@ -6,10 +6,14 @@ import csv
 import io
 import json
 import threading
+import time
 from collections.abc import Callable
 
 import pytest
+from sqlalchemy import update
 
+from backend.models import Query
+from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.schemas import MetricsIn, Rollout, RolloutsIn, RunRead
 
@@ -118,14 +122,24 @@ def test_submit_is_idempotent_by_client_request_id(labeler: CollieClient, run: R
 
 
 def test_lease_expiry_returns_the_query_to_the_pool(
-    labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
+    live: BackgroundServer, labeler: CollieClient, new_labeler: Callable[[str], CollieClient], run: RunRead
 ) -> None:
     other = new_labeler("expiry-other")
-    first = labeler.claim(run.id, lease_s=0.3)
+    before = time.time()
+    first = labeler.claim(run.id, lease_s=600)
     assert first is not None
+    assert first.lease_expires_at.timestamp() >= before + 599  # the lease asked for, not the default
     taken = {other.claim(run.id).query.query_id}
     assert first.query.query_id not in taken
-    threading.Event().wait(0.4)  # the first labeler walks away; their lease runs out
+    # the first labeler walks away; their lease runs out (moved into the past rather than waited for,
+    # so a slow request cannot outlast a short lease before the check above)
+    expire = (
+        update(Query)
+        .where(Query.run_id == run.id, Query.query_id == first.query.query_id)
+        .values(lease_expires_at=time.time() - 1)
+    )
+    with live.app.state.db.write() as conn:
+        assert conn.execute(expire).rowcount == 1
     third = new_labeler("expiry-third")
     got = third.claim(run.id)
     assert got is not None and got.query.query_id == first.query.query_id

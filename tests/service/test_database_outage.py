@@ -11,8 +11,10 @@ import logging
 import time
 
 import httpx
+import pytest
 
 from backend.main import create_app
+from backend.routes import stream as stream_route
 from backend.server import BackgroundServer
 from collie.client import CollieClient
 
@@ -20,7 +22,11 @@ from .conftest import TOKENS, make_run_spec, next_data, settings_for
 from .postgres import PostgresServer
 
 
-def test_an_outage_is_503_json_and_the_service_recovers(logged: list[logging.LogRecord]) -> None:
+def test_an_outage_is_503_json_and_the_service_recovers(
+    logged: list[logging.LogRecord], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A heartbeat checks the caller in the database: one inside the outage would end the held stream.
+    monkeypatch.setattr(stream_route, "HEARTBEAT_S", 3600.0)
     pg = PostgresServer().start()  # its own server: the session's one stays up for the others
     try:
         app = create_app(settings_for(pg.new_database(), token_cache_s=0.0, stream_poll_s=0.1))
@@ -33,11 +39,15 @@ def test_an_outage_is_503_json_and_the_service_recovers(logged: list[logging.Log
             auth = {"Authorization": f"Bearer {TOKENS['trainer']}"}
             run = trainer.create_run(make_run_spec())
             trainer.set_status(run.id, "training", epoch=0)
-            held = stack.enter_context(http.stream("GET", f"/api/runs/{run.id}/stream", headers=auth, timeout=10))
+            # silent through the outage (no heartbeat): a read may wait as long as the outage lasts
+            held = stack.enter_context(http.stream("GET", f"/api/runs/{run.id}/stream", headers=auth, timeout=60))
             frames = held.iter_lines()
             assert next_data(frames)["data"]["epoch"] == 0  # its backlog: now it waits on the one reader
             pg.halt()
-            time.sleep(0.5)  # the stream reader polls (every 0.1 s) into the outage
+            deadline = time.monotonic() + 30  # the stream reader polls (every 0.1 s) into the outage
+            while not any(r.getMessage().startswith("stream reader: database unreachable") for r in list(logged)):
+                assert time.monotonic() < deadline, "the stream reader did not notice the outage"
+                time.sleep(0.05)
 
             health = http.get("/api/health")
             assert health.status_code == 503 and "database is unreachable" in health.json()["detail"]
@@ -52,7 +62,7 @@ def test_an_outage_is_503_json_and_the_service_recovers(logged: list[logging.Log
             assert any("unreachable" in line for line in lines) and all("\n" not in line for line in lines)
 
             pg.start()
-            deadline = time.monotonic() + 10
+            deadline = time.monotonic() + 60
             while http.get("/api/health").status_code != 200:
                 assert time.monotonic() < deadline, "the service did not see the database come back"
                 time.sleep(0.1)

@@ -5,6 +5,7 @@ HttpFeedback re-times the session it is waiting on; a database made at revision 
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 import httpx
@@ -145,16 +146,33 @@ def test_a_shorter_policy_releases_a_waiting_collect(live: BackgroundServer, ope
 
 
 def test_clearing_the_policy_waits_for_every_label_again(live: BackgroundServer, operator: CollieClient) -> None:
-    """A 1 s timeout, cleared at once by an operator: collect waits for the labels that arrive
-    after ~2 s instead of returning at 1 s."""
+    """A 1 s timeout from the spec, cleared by an operator before the session is collected: collect
+    waits for the labels that arrive well after 1 s instead of returning at 1 s. (The clear is made
+    before collect so it cannot land after the 1 s; a policy that changes during the wait:
+    test_a_shorter_policy_releases_a_waiting_collect.)"""
     spec = make_run_spec().model_copy(update={"feedback_timeout_s": 1.0})
     source = HttpFeedback.create(live.url, TOKENS["trainer"], spec, wait_chunk_s=30.0)
     try:
-        threading.Timer(0.2, operator.set_feedback_policy, args=(source.run_id, None)).start()
-        labeler = threading.Timer(2.0, lambda: label_in_background(live.url, source.run_id, 2).join())
+        assert source.timeout_s == 1.0  # from the spec, until collect reads the log
+        operator.set_feedback_policy(source.run_id, None)
+
+        def label_after_the_timeout() -> None:
+            try:
+                deadline = time.monotonic() + 60
+                while operator.run(source.run_id).status != "waiting_for_labels":  # shown once its clock started
+                    if time.monotonic() > deadline:
+                        return
+                    time.sleep(0.05)
+                time.sleep(1.5)  # past the spec's 1 s: under it, collect would have returned without labels
+                label_in_background(live.url, source.run_id, 2).join()
+            finally:
+                if operator.run(source.run_id).n_labels < 2:  # collect would wait for ever: it raises instead
+                    source.interrupt("the labeler gave up")
+
+        labeler = threading.Thread(target=label_after_the_timeout, daemon=True)
         labeler.start()
         got = source.collect(0, 0, segments(0, 2))
-        labeler.join()
+        labeler.join(60)
         # every label, though they came after the spec's 1 s: the cleared policy waited for them
         assert {e.query_id: e.label for e in got} == {f"s0-q{j}": rule(f"s0-q{j}") for j in range(2)}
         assert source.timeout_s is None

@@ -15,6 +15,7 @@ import pytest
 from sqlalchemy import event
 
 from backend.main import create_app
+from backend.routes import stream as stream_route
 from backend.server import BackgroundServer
 from collie.client import CollieClient
 
@@ -40,8 +41,9 @@ class Reader(threading.Thread):
 
     def run(self) -> None:
         headers = {"Authorization": f"Bearer {self.token}"}
+        timeout = httpx.Timeout(30, read=120)  # a stream may stay silent a while: no heartbeat in some tests
         try:
-            with httpx.stream("GET", f"{self.url}?after={self.after}", headers=headers, timeout=30) as response:
+            with httpx.stream("GET", f"{self.url}?after={self.after}", headers=headers, timeout=timeout) as response:
                 self.status = response.status_code
                 self.opened.set()
                 for line in response.iter_lines():
@@ -60,26 +62,32 @@ def wait_for(condition: Any, timeout_s: float = 20.0) -> bool:
     return bool(condition())
 
 
-def test_idle_streams_share_one_reader(live: BackgroundServer, trainer: CollieClient, labeler: CollieClient) -> None:
+def test_idle_streams_share_one_reader(
+    live: BackgroundServer, trainer: CollieClient, labeler: CollieClient, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(stream_route, "HEARTBEAT_S", 3600.0)  # no keep-alive (and its read) in the window
     run = trainer.create_run(make_run_spec())
     trainer.post_session(run.id, make_session(0, 2))
     after = trainer.events(run.id).last_id
     url = f"{live.url}/api/runs/{run.id}/stream"
-    readers = [Reader(url, TOKENS["operator"], after) for _ in range(20)]
-    for reader in readers:
-        reader.start()
-        assert reader.opened.wait(20) and reader.status == 200
-    time.sleep(0.5)  # every stream has read its (empty) backlog
-    statements: list[str] = []
+    seen: list[str] = []
 
     def count(_conn: Any, _cursor: Any, statement: str, *_: Any) -> None:
         if statement.lstrip().upper().startswith("SELECT"):
-            statements.append(statement)
+            seen.append(statement)
 
     engine = live.app.state.db.engine
     event.listen(engine, "before_cursor_execute", count)
     try:
+        readers = [Reader(url, TOKENS["operator"], after) for _ in range(20)]
+        for reader in readers:
+            reader.start()
+            assert reader.opened.wait(60) and reader.status == 200
+        # every stream has read its (empty) backlog from the log: one read of stream_events each
+        assert wait_for(lambda: sum("FROM stream_events" in s for s in list(seen)) >= 20, timeout_s=60), seen
+        idle_from = len(seen)
         time.sleep(3.0)  # idle: each stream polling the log every second would read 60 times
+        statements = seen[idle_from:]
     finally:
         event.remove(engine, "before_cursor_execute", count)
     assert len(statements) <= 6, statements  # the one reader's poll, about once a second
@@ -90,6 +98,9 @@ def test_idle_streams_share_one_reader(live: BackgroundServer, trainer: CollieCl
     for reader in readers:
         assert reader.ids == list(range(after + 1, label_id + 1))  # nothing missed or doubled
         reader.stop = True
+    trainer.set_status(run.id, "training", epoch=1)  # an event, so the readers wake and hang up (no heartbeat)
+    for reader in readers:
+        reader.join(30)
 
 
 def streams(server: BackgroundServer, run_id: int, token: str, n: int) -> Iterator[Reader]:

@@ -83,15 +83,22 @@ def test_until_done_waits_for_new_sessions_and_stops_when_finished(
     worker = threading.Thread(target=loop.run, kwargs={"until_done": True}, daemon=True)
     worker.start()
     trainer.post_session(run.id, make_session(0, 3))
-    deadline = time.monotonic() + 10
-    while trainer.run(run.id).n_labels < 3 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    assert labelled_within(trainer, run.id, 3), "the first session was not labelled"
     trainer.post_session(run.id, make_session(1, 2))
-    while trainer.run(run.id).n_labels < 5 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    assert labelled_within(trainer, run.id, 5), "the session posted later was not labelled"
     trainer.set_status(run.id, "finished")
-    worker.join(5)
+    worker.join(30)
     assert not worker.is_alive() and loop.labelled == 5
+
+
+def labelled_within(client: CollieClient, run_id: int, n: int, timeout_s: float = 60.0) -> bool:
+    """Whether the run reaches n labels within timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while client.run(run_id).n_labels < n:
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
 
 
 def test_feedback_source_collects_from_the_teacher_with_a_rate(live: BackgroundServer, labeler: CollieClient) -> None:
@@ -104,6 +111,6 @@ def test_feedback_source_collects_from_the_teacher_with_a_rate(live: BackgroundS
     assert time.monotonic() - started >= 5 / 20  # six labels at 20 per second
     assert {e.query_id: e.label for e in got} == expected(labeler, source.run_id)
     source.reporter.status(StatusReport("finished", 1))
-    worker.join(5)
+    worker.join(30)
     assert not worker.is_alive()
     source.close()
