@@ -21,6 +21,7 @@ from pydantic import SecretStr
 from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
+from collie.addresses import link_host
 from collie.argtypes import port, sqlite_file
 from collie.tokens import read_tokens_file, weakness, write_secret
 
@@ -97,7 +98,7 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
     except OSError as exc:
         raise SystemExit(f"collie serve: error: --fd {fd} is not an open socket: {exc}") from None
     host, port = sock.getsockname()[:2]
-    return sock, f"http://{f'[{host}]' if ':' in host else host}:{port}"
+    return sock, f"http://{link_host(host)}:{port}"
 
 
 def run(args: argparse.Namespace) -> int:

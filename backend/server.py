@@ -11,6 +11,8 @@ from collections.abc import Callable
 import uvicorn
 from fastapi import FastAPI
 
+from collie.addresses import link_host
+
 
 def bind(host: str, port: int) -> tuple[socket.socket, str]:
     """A listening socket and its URL (port 0 → a free port)."""
@@ -20,8 +22,7 @@ def bind(host: str, port: int) -> tuple[socket.socket, str]:
     sock.bind((host, port))
     sock.listen(128)  # listening before the banner says so: early clients queue until uvicorn serves
     bound_host, bound_port = sock.getsockname()[:2]
-    shown = f"[{bound_host}]" if family == socket.AF_INET6 else bound_host
-    return sock, f"http://{shown}:{bound_port}"
+    return sock, f"http://{link_host(bound_host)}:{bound_port}"
 
 
 class Server(uvicorn.Server):

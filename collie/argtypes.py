@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -19,9 +20,7 @@ def port(value: str) -> int:
 
 
 def ipv4_host(value: str) -> str:
-    """An address to listen on: an IPv4 address of this machine, or 0.0.0.0 for every one."""
-    import ipaddress
-
+    """An IPv4 address to listen on (whether it is this machine's is for the binding to say)."""
     try:
         ipaddress.IPv4Address(value)
     except ValueError:

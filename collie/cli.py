@@ -39,6 +39,13 @@ def joined_values(argv: list[str], options: tuple[str, ...]) -> list[str]:
     return out
 
 
+def refusal_line(exc: PermissionError) -> str:
+    """What was refused, naming the paths it has (a port or a process has none)."""
+    where = " → ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+    said = (exc.strerror or str(exc)).lower()
+    return f"{said}: {where}" if where else said
+
+
 def main(argv: list[str] | None = None) -> int:
     from collie.startup import mark
 
@@ -66,8 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C where the command keeps no handler of its own: a line, not a traceback
         print(f"collie {args.command}: interrupted", file=sys.stderr)
         return 130
-    except PermissionError as exc:  # a file or folder this user may not open or enter: which, not a traceback
-        print(f"collie {args.command}: error: {(exc.strerror or str(exc)).lower()}: {exc.filename}", file=sys.stderr)
+    except PermissionError as exc:  # a file, folder or port this user may not use: which, not a traceback
+        print(f"collie {args.command}: error: {refusal_line(exc)}", file=sys.stderr)
         return 2
 
 

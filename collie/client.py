@@ -2,8 +2,9 @@
 
 Used by the trainer's HTTP feedback source, the oracle teacher, the labeling UI and the tests. Every
 method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (status and detail),
-typed by what a caller does about them: Unauthorized (401/403: a token problem), Conflict (409: the
-state does not allow it; NotHolding when a tab's label was refused, with the typed reason), and
+typed by what a caller does about them: Unauthorized (401/403: a token problem; NotInScope when a
+valid token's run is outside its scope, with the typed reason), Conflict (409: the state does not
+allow it; NotHolding when a tab's label was refused, with the typed reason), and
 Unavailable — Unreachable (no answer) or Overloaded (5xx, 429) — the one kind worth retrying, with
 `retrying` and its Backoff: the one retry policy of every client (submissions are idempotent by
 client_request_id, so a retry never labels twice).
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import httpx
-from pydantic import BaseModel, TypeAdapter
+from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from collie.dashboard_schemas import QueryReview
 from collie.schemas import (
@@ -119,6 +120,26 @@ class Overloaded(ApiError, Unavailable):
     """5xx or 429: the service answered that it cannot do it now."""
 
 
+def answered_error(response: httpx.Response) -> ApiError:
+    """The typed error for an error answer; a body with a typed reason (NotHeld, OutOfScope) gives
+    its own error, unless it is not one this client knows (a newer service): then the plain one."""
+    error: Any
+    try:
+        error = response.json()
+        detail = error.get("detail") if isinstance(error, dict) else error
+    except ValueError:
+        error, detail = None, response.text
+    if isinstance(error, dict) and "reason" in error:
+        try:
+            if response.status_code == 409:
+                return NotHolding(409, NotHeld.model_validate(error))
+            if response.status_code == 403:
+                return NotInScope(403, OutOfScope.model_validate(error))
+        except ValidationError:
+            pass
+    return api_error(response.status_code, detail)
+
+
 def api_error(status: int, detail: Any) -> ApiError:
     """The typed error for an error status."""
     if status in (401, 403):
@@ -201,17 +222,7 @@ class CollieClient:
         except httpx.TransportError as exc:
             raise Unreachable(f"{method} {path}: {exc!r}") from exc
         if response.status_code >= 400:
-            error: Any
-            try:
-                error = response.json()
-                detail = error.get("detail") if isinstance(error, dict) else error
-            except ValueError:
-                error, detail = None, response.text
-            if response.status_code == 409 and isinstance(error, dict) and "reason" in error:
-                raise NotHolding(409, NotHeld.model_validate(error))
-            if response.status_code == 403 and isinstance(error, dict) and "reason" in error:
-                raise NotInScope(403, OutOfScope.model_validate(error))
-            raise api_error(response.status_code, detail)
+            raise answered_error(response)
         return response
 
     def _get(self, model: type[M], path: str, **params: Any) -> M:
@@ -479,7 +490,7 @@ class EventStream:
         with self.client._http.stream("GET", f"/runs/{self.run_id}/stream", headers=headers, timeout=timeout) as r:
             if r.status_code >= 400:
                 r.read()
-                raise api_error(r.status_code, r.text)
+                raise answered_error(r)
             data: list[str] = []
             for line in r.iter_lines():
                 if self._closed:

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
+from collie.addresses import is_loopback, link_host, local_address, network_address
 from collie.argtypes import ipv4_host, port, sqlite_file
 from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
@@ -302,7 +303,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     sock = listening_socket(args.host, args.port)
     stack.closing(sock)
     api = f"http://{local_address(args.host)}:{sock.getsockname()[1]}"  # the parts' own way in
-    shown = public_address(args.host)  # what the links name: where other machines reach us
+    shown = link_host(args.host)  # what the links name: where other machines reach us
     serve = ["serve", "--fd", str(sock.fileno()), *(["--db", str(db)] if db else []), "--tokens-json", str(tokens_file)]
     service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
     trainer_out = out / "trainer"
@@ -396,30 +397,17 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     print(f"  dashboard {dashboard}")
     print(f"  tokens    in {tokens_file} (readable by you only)")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")
-    if args.host != "127.0.0.1":
-        print(f"  reachable from other machines on {args.host}: these links carry tokens over plain HTTP "
-              "(a trusted network, or a TLS proxy in front)")  # fmt: skip
+    if not is_loopback(args.host):
+        print(f"  reachable from other machines on {args.host}; these links carry tokens over plain HTTP "
+              "(a trusted network, or a TLS proxy in front). The dashboard link is the operator's: keep it.\n"
+              "  The label link is one labeler's; give each colleague their own (dashboard → Labelers):"
+              " their labels then count as theirs, and each may open up to 4 tabs.")  # fmt: skip
+        if args.host in ("0.0.0.0", "") and network_address() is None:
+            print(f"collie up: warning: this machine has no network address; the links name {shown}, which "
+                  "other machines may not resolve (give --host this machine's address)", file=sys.stderr)  # fmt: skip
     print("  Ctrl-C stops everything; the same command resumes.", flush=True)
     stack.log(f"stack up: run {run_id}, service {api}")
     return watch(api, tokens["operator"], run_id, stack, args.exit_when_done, stopping)
-
-
-def local_address(host: str) -> str:
-    """How this machine's parts reach a socket bound to `host` (every interface: the loopback)."""
-    return "127.0.0.1" if host == "0.0.0.0" else host
-
-
-def public_address(host: str) -> str:
-    """The address links name for a socket bound to `host`: for every interface, the one this
-    machine's default route leaves from (what others on its network reach); else `host` itself."""
-    if host != "0.0.0.0":
-        return host
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.connect(("192.0.2.1", 9))  # a UDP connect sends nothing: it only picks the interface
-            return str(probe.getsockname()[0])
-        except OSError:  # no route at all: this machine's name
-            return socket.gethostname()
 
 
 def what_runs(args: argparse.Namespace, stored: Path | None) -> str:

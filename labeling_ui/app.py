@@ -11,6 +11,7 @@ from urllib.parse import quote
 
 import viser
 
+from collie.addresses import link_host
 from collie.mjmodels import MODEL_NAMES
 from collie.startup import mark
 from labeling_ui.models import warm_models
@@ -52,8 +53,7 @@ class LabelingApp:
 
     @property
     def url(self) -> str:
-        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
-        return f"http://{host}:{self.port}/"
+        return f"http://{link_host(self.host)}:{self.port}/"
 
     def labeler_url(self, token: str) -> str:
         """The link to hand a labeler: it signs them in with their token."""

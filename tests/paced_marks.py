@@ -6,13 +6,14 @@ before the next open() is answered: the child cannot be past its next mark when 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import subprocess
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+
+from collie.schemas import StartupMark
 
 
 class PacedMarks:
@@ -20,11 +21,12 @@ class PacedMarks:
         self.path = folder / "startup.fifo"
         os.mkfifo(self.path)
         self.env = {**os.environ, "COLLIE_STARTUP_LOG": str(self.path)}
-        self.seen: list[dict[str, Any]] = []
+        self.seen: list[StartupMark] = []
         self.sent = threading.Event()
+        self._reader: threading.Thread | None = None
 
     def signal_at(
-        self, proc: subprocess.Popen[str], at: Callable[[dict[str, Any]], bool], sig: int, *, hold: bool
+        self, proc: subprocess.Popen[str], at: Callable[[StartupMark], bool], sig: int, *, hold: bool
     ) -> None:
         """Send `sig` to `proc` once a mark satisfies `at`; with `hold`, read no mark after it (the
         child then stays at its next mark until the signal ends it), else read on to the end."""
@@ -32,7 +34,7 @@ class PacedMarks:
         def pace() -> None:
             while proc.poll() is None:
                 with open(self.path) as f:  # one writer's open: one mark
-                    marks = [json.loads(line) for line in f.read().splitlines()]
+                    marks = [StartupMark.model_validate_json(line) for line in f.read().splitlines()]
                 self.seen += marks
                 if not self.sent.is_set() and any(at(m) for m in marks):
                     proc.send_signal(sig)
@@ -40,9 +42,14 @@ class PacedMarks:
                     if hold:
                         return
 
-        threading.Thread(target=pace, daemon=True).start()
+        self._reader = threading.Thread(target=pace, daemon=True)
+        self._reader.start()
 
     def release(self) -> None:
-        """Answer a read still waiting in open() (the child is gone): the reading thread ends."""
-        with contextlib.suppress(OSError):
-            os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
+        """Once the child is gone: answer the reading thread's open(), however late it gets there
+        (a writer's open fails while no reader waits), until the thread has ended."""
+        deadline = time.monotonic() + 30
+        while self._reader is not None and self._reader.is_alive() and time.monotonic() < deadline:
+            with contextlib.suppress(OSError):
+                os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
+            self._reader.join(0.1)

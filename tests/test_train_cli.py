@@ -82,7 +82,7 @@ def test_out_that_is_or_lies_under_a_file_is_refused(tmp_path: Path, where: str)
     ("mode", "said"),
     [
         (0o555, "--out {run}: cannot write in {closed} (permission denied)"),
-        (0o000, "--out {run}: permission denied on the way to it ({run}"),
+        (0o000, "--out {run}: cannot enter {closed} (permission denied)"),
     ],  # stat() refused: no traceback
 )
 def test_out_in_a_folder_this_user_may_not_write_or_enter_is_refused(mode: int, said: str) -> None:
@@ -337,7 +337,7 @@ def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path)
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark ("trainer built")
     cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
-    marks.signal_at(proc, lambda m: m["what"] == "imports", signal.SIGTERM, hold=True)  # torch loaded; envs next
+    marks.signal_at(proc, lambda m: m.what == "imports", signal.SIGTERM, hold=True)  # torch loaded; envs next
     try:
         _, err = proc.communicate(timeout=180)
     finally:

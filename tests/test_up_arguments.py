@@ -142,3 +142,12 @@ def test_out_in_a_folder_this_user_may_not_write_or_enter_is_one_line(mode: int)
         )
         assert code == 2 and "collie up: error:" in err and "Traceback" not in err, err
         assert f"{closed / 'run'}" in err and "ermission denied" in err, err
+
+
+def test_a_refusal_names_the_paths_it_has_and_no_none() -> None:
+    from collie.cli import refusal_line
+
+    assert refusal_line(PermissionError(13, "Permission denied")) == "permission denied"  # binding port 80
+    assert refusal_line(PermissionError(13, "Permission denied", "/a")) == "permission denied: /a"
+    assert refusal_line(PermissionError(13, "Permission denied", "/a", None, "/b")) == "permission denied: /a → /b"
+    assert refusal_line(PermissionError("not allowed")) == "not allowed"

@@ -43,6 +43,7 @@ def as_nobody(fn: Callable[[], int], preload: tuple[str, ...] = ()) -> tuple[int
         try:
             sys.stderr = os.fdopen(write, "w")
             if os.geteuid() == 0:
+                os.setgroups([])  # root's supplementary groups (often root's own) go too
                 os.setgid(NOBODY)
                 os.setuid(NOBODY)
             code = fn()

@@ -15,11 +15,10 @@ copied, so an archived run cannot be resumed or given a downstream task; run tho
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 from pathlib import Path
 
-from trainer.run_files import RunFolderError, read_json_object
+from trainer.run_files import RunFolderError, copy_whole, read_json_object
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
@@ -70,9 +69,9 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
     except RunFolderError as exc:  # the message names the file
         raise ArchiveError(str(exc)) from None
     out.mkdir(parents=True, exist_ok=True)
-    for name in REQUIRED + OPTIONAL:
+    for name in sorted(REQUIRED + OPTIONAL, key=lambda n: n == "summary.json"):  # last: it says "a run is here"
         if (source / name).exists():
-            shutil.copyfile(source / name, out / name)
+            copy_whole(source / name, out / name)
     return out
 
 

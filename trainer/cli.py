@@ -255,6 +255,10 @@ def check_out(out: Path, resume: bool) -> list[Path]:
     one --resume cannot continue, or one we cannot write; then makes it (creating it is the one
     test of writing there that root, for whom access() says yes everywhere, cannot pass by fiat).
     Returns the folders it created, deepest first (removed again if the start fails)."""
+    way = [*reversed(out.absolute().parents), out.absolute()]  # from / down
+    closed = next((p for p in way if os.path.isdir(p) and not os.access(p, os.X_OK)), None)
+    if closed is not None:  # nothing below it can even be looked at
+        raise ValueError(f"--out {out}: cannot enter {closed} (permission denied)")
     try:
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} is a file, not a folder")
@@ -272,8 +276,8 @@ def check_out(out: Path, resume: bool) -> list[Path]:
             raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
         if not os.access(nearest, os.W_OK | os.X_OK):
             raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
-    except PermissionError as exc:  # a folder on the way this user may not enter: stat() itself is refused
-        raise ValueError(f"--out {out}: permission denied on the way to it ({exc.filename})") from None
+    except PermissionError as exc:  # e.g. a file inside that this user may not read
+        raise ValueError(f"--out {out}: permission denied ({exc.filename})") from None
     made = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)

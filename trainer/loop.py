@@ -52,7 +52,7 @@ from trainer.query import select_queries
 from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
-from trainer.run_files import write_json
+from trainer.run_files import write_json, write_whole
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport
@@ -348,9 +348,10 @@ class Trainer:
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         self.plot(traj, record, w)
-        np.savez_compressed(
-            self.out / "eval_latest.npz", epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill
-        )  # the final skills' paths, for `collie report` figures
+        write_whole(  # the final skills' paths, for `collie report` figures
+            self.out / "eval_latest.npz",
+            lambda f: np.savez_compressed(f, epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill),
+        )
         self.reporter.metrics(MetricsReport(self.epoch, record))
         every = slice(None, None, ROLLOUT_STRIDE)
         rollouts = RolloutsReport(
@@ -519,7 +520,8 @@ class Trainer:
                     raise ResumeError(f"{metrics} line {i + 1} is not valid JSON ({exc.msg})") from None
                 if record["epoch"] <= self.epoch:
                     keep.append(ln)
-            metrics.write_text("".join(ln + "\n" for ln in keep))
+            text = "".join(ln + "\n" for ln in keep).encode()
+            write_whole(metrics, lambda f: f.write(text))  # a kill here leaves the history whole
 
     # ---- the loop ------------------------------------------------------------------------
     def collect_epoch(self) -> None:

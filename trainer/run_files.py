@@ -5,10 +5,12 @@ writing its JSON files whole (a kill mid-write leaves the old file, never half o
 from __future__ import annotations
 
 import json
+import shutil
 import zipfile
 import zlib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -36,6 +38,20 @@ def write_json(path: Path, data: Any) -> None:
     partial = path.with_name(path.name + ".partial")
     partial.write_text(json.dumps(data, indent=2))
     partial.replace(path)
+
+
+def write_whole(path: Path, write: Callable[[BinaryIO], object]) -> None:
+    """What `write` writes to a file, at `path`, renamed into place whole."""
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "wb") as f:
+        write(f)
+    partial.replace(path)
+
+
+def copy_whole(source: Path, target: Path) -> None:
+    """`source` copied to `target`, renamed into place whole."""
+    with open(source, "rb") as f:
+        write_whole(target, lambda out: shutil.copyfileobj(f, out))
 
 
 def read_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:

@@ -24,7 +24,18 @@ from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy.exc import DBAPIError
 from starlette.types import Receive, Scope, Send
 
-from backend.routes.deps import ANY, DB, AnyCaller, Hub, RunId, SettingsDep, authenticate, bearer, check_scope
+from backend.routes.deps import (
+    ANY,
+    DB,
+    AnyCaller,
+    Hub,
+    RunId,
+    SettingsDep,
+    authenticate,
+    bearer,
+    check_scope,
+    note_trainer_contact,
+)
 from backend.services import auth, events
 from backend.services.auth import Caller
 from backend.services.errors import first_line
@@ -72,6 +83,7 @@ async def _stream_caller(
 ) -> Caller:
     caller = authenticate(request, credentials.credentials if credentials else access_token)
     check_scope(request, caller, ANY)  # every role may read, within its scope
+    note_trainer_contact(request, caller)  # as every other route does (the trainer long-polls /events today)
     return caller
 
 

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import BinaryIO
 
+import numpy as np
 import pytest
 
-from trainer.run_files import RunFolderError, read_json_object, write_json
+from trainer.run_files import RunFolderError, copy_whole, read_arrays, read_json_object, write_json, write_whole
 
 
 def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -32,3 +34,18 @@ def test_a_file_cut_short_is_named(tmp_path: Path) -> None:
     path.write_text(json.dumps({"epochs": 3})[:5])
     with pytest.raises(RunFolderError, match=r"config\.json: not JSON"):
         read_json_object(path)
+
+
+def test_a_binary_write_cut_short_leaves_the_old_file_whole(tmp_path: Path) -> None:
+    path = tmp_path / "eval_latest.npz"
+    write_whole(path, lambda f: np.savez_compressed(f, epoch=3))
+
+    def disk_full(f: BinaryIO) -> None:
+        f.write(b"PK\x03\x04 half an archive")
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left"):
+        write_whole(path, disk_full)
+    assert int(read_arrays(path, ("epoch",))["epoch"]) == 3
+    copy_whole(path, tmp_path / "archived.npz")
+    assert int(read_arrays(tmp_path / "archived.npz", ("epoch",))["epoch"]) == 3

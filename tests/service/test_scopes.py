@@ -80,6 +80,9 @@ def test_a_labeler_limited_to_runs(live: BackgroundServer, trainer: CollieClient
             assert err.value.status == 403 and "limited" in str(err.value.detail)
             assert (err.value.refusal.reason, err.value.refusal.run_id) == ("other_runs", other.id)
         assert [r.id for r in scoped.runs()] == [mine.id]
+        with pytest.raises(NotInScope) as err:  # the stream's refusal is as typed as any route's
+            next(iter(scoped.stream(other.id)))
+        assert (err.value.refusal.reason, err.value.refusal.run_id) == ("other_runs", other.id)
     headers = {"Authorization": f"Bearer {token}"}
     streamed = httpx.get(f"{live.url}/api/runs/{other.id}/stream", headers=headers)
     assert streamed.status_code == 403 and streamed.json()["reason"] == "other_runs"

@@ -16,15 +16,18 @@ import httpx
 import pytest
 from playwright.sync_api import Browser
 
+from collie.addresses import network_address
 from collie.client import CollieClient
-from collie.up import public_address
 
 from .page import TIMEOUT_S, open_labeler, wait_segment
 
+pytestmark = pytest.mark.slow  # a whole stack and a browser: started first under make test's two workers
+
 
 def test_a_labeler_on_the_network_labels_through_the_printed_link(tmp_path: Path, browser: Browser) -> None:
-    shown = public_address("0.0.0.0")
-    assert not shown.startswith("127."), "this machine has no network to test on"
+    shown = network_address()
+    if shown is None:  # the links would name this machine's hostname, which resolves to itself
+        pytest.skip("this machine has no network address to reach the stack at")
     cmd = [sys.executable, "-m", "collie.cli", "up", "--host", "0.0.0.0", "--port", "0", "--ui-port", "0"]
     cmd += ["--preset", "smoke", "--out", str(tmp_path), "--info-json", str(tmp_path / "info.json")]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -56,6 +59,11 @@ def test_a_labeler_on_the_network_labels_through_the_printed_link(tmp_path: Path
         assert httpx.get(f"http://127.0.0.1:{ui_port}/", timeout=30).status_code == 200  # and from here
     finally:
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
+        try:
+            out, err = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
     assert proc.returncode in (0, 130), err[-3000:]
     assert "reachable from other machines on 0.0.0.0" in out and f"label     http://{shown}:" in out
+    assert "give each colleague their own (dashboard → Labelers)" in out
