@@ -1,12 +1,24 @@
 """Every test runs in a scratch working directory: MuJoCo appends its warnings to MUJOCO_LOG.TXT in
-the cwd (of this process and of every service or UI a test starts), never in the checkout."""
+the cwd (of this process and of every service or UI a test starts), never in the checkout. The
+processes tests start take Ctrl-C and hang-ups, however the suite itself was started."""
 
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Iterator
 
 import pytest
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # A suite started in the background by a script (`make test &`: SIGINT ignored) or under nohup
+    # (SIGHUP ignored) would hand those dispositions to every process it starts, and the tests that
+    # Ctrl-C or hang up a child would fail. A handler that does nothing keeps them ignored here and,
+    # as every handler is, is reset to the default in a child at exec.
+    for sig in (signal.SIGINT, signal.SIGHUP):
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            signal.signal(sig, lambda _signum, _frame: None)
 
 
 @pytest.fixture(autouse=True, scope="session")
