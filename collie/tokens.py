@@ -10,12 +10,22 @@ import argparse
 import json
 import os
 import re
+import secrets
 import sys
 from pathlib import Path
 
 TOKEN_ENV = "COLLIE_TOKEN"
 HEADER_SAFE = re.compile(r"[!-~]+")  # printable ASCII without spaces: what a bearer header carries
 MIN_TOKEN = 16  # a generated token has 43 characters
+
+
+def random_token() -> str:
+    """A new secret token (256 random bits, URL-safe), never starting with '-': pasted after
+    `--token`, argparse would take it for an option (1 in 64 of token_urlsafe's would)."""
+    while True:
+        token = secrets.token_urlsafe(32)
+        if not token.startswith("-"):
+            return token
 
 
 def add_token_arguments(parser: argparse.ArgumentParser, role: str) -> None:

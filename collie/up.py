@@ -13,7 +13,6 @@ import contextlib
 import json
 import os
 import re
-import secrets
 import signal
 import socket
 import subprocess
@@ -29,7 +28,7 @@ from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
-from collie.tokens import MIN_TOKEN, TOKEN_ENV, read_tokens_file, weakness, write_secret
+from collie.tokens import MIN_TOKEN, TOKEN_ENV, random_token, read_tokens_file, weakness, write_secret
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
     from collie.client import CollieClient
@@ -269,7 +268,7 @@ def stack_tokens(tokens_file: Path) -> dict[str, str]:
             return read_tokens_file(tokens_file)
         except ValueError as exc:  # reported as the stack's error, with the logs' folder
             raise RuntimeError(f"{exc}; move it away to start with new tokens") from None
-    return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or secrets.token_urlsafe(32) for r in ROLES}
+    return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or random_token() for r in ROLES}
 
 
 SECRETS = (TOKEN_ENV, DATABASE_ENV)  # and every COLLIE_<ROLE>_TOKEN: only the service needs them

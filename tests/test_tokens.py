@@ -73,3 +73,11 @@ def test_a_bootstrap_token_a_client_could_not_send_is_weak():
         "holds spaces or characters a bearer token cannot carry (printable ASCII only)"
     )
     assert weakness("ünïcödé-" * 3) is not None and weakness("x" * 16) is None
+
+
+def test_a_new_token_never_starts_with_a_dash() -> None:
+    from collie.tokens import random_token
+
+    tokens = {random_token() for _ in range(5000)}  # token_urlsafe alone: one in 64 would
+    assert len(tokens) == 5000 and not any(t.startswith("-") for t in tokens)
+    assert all(len(t) == 43 for t in tokens)

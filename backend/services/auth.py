@@ -8,7 +8,6 @@ with the same bootstrap token included — brings a revoked principal back."""
 from __future__ import annotations
 
 import hashlib
-import secrets
 import threading
 import time
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from backend.db import Database, make_engine
 from backend.models import Principal, Run
 from backend.services.errors import Conflict, Invalid, NotFound
 from collie.schemas import LabelerRead, Role
+from collie.tokens import random_token
 
 ROLES: tuple[Role, ...] = ("operator", "trainer", "labeler")
 
@@ -40,7 +40,7 @@ def hash_token(token: str) -> str:
 
 
 def new_token() -> str:
-    return secrets.token_urlsafe(32)
+    return random_token()
 
 
 class TokenCache:
