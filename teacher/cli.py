@@ -14,6 +14,9 @@ from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
 
+DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -x…` is its value (collie/cli.py)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, type=http_url, help="service URL, e.g. http://127.0.0.1:8000")
     add_token_arguments(parser, "labeler")

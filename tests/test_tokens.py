@@ -1,10 +1,12 @@
-"""How clients take their token (collie/tokens.py): --token=-abc parses, --token-file and
+"""How clients take their token (collie/tokens.py): --token=-abc and --token -abc parse, --token-file and
 COLLIE_TOKEN keep it out of argv, and files holding secrets are 0600 from the start."""
 
 import argparse
 import json
 import os
 import stat
+import subprocess
+import sys
 
 import pytest
 
@@ -81,3 +83,16 @@ def test_a_new_token_never_starts_with_a_dash() -> None:
     tokens = {random_token() for _ in range(5000)}  # token_urlsafe alone: one in 64 would
     assert len(tokens) == 5000 and not any(t.startswith("-") for t in tokens)
     assert all(len(t) == 43 for t in tokens)
+
+
+@pytest.mark.parametrize(
+    ("command", "said"),
+    [
+        (["teacher", "--run", "1", "--api", "http://127.0.0.1:9"], "Connection refused"),  # it called the service
+        (["train", "--preset", "smoke", "--epochs", "0", "--api", "http://127.0.0.1:9"], "--epochs must be ≥ 1"),
+    ],
+)
+def test_a_token_starting_with_a_dash_is_taken_as_the_value_of_token(command: list[str], said: str) -> None:
+    argv = [sys.executable, "-m", "collie.cli", *command, "--token", "-" + "t" * 30]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and said in proc.stderr and "expected one argument" not in proc.stderr, proc.stderr

@@ -31,6 +31,9 @@ if TYPE_CHECKING:
 MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
 
 
+DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -x…` is its value (collie/cli.py)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.set_defaults(given=frozenset())  # the run's flags given on this command line (_Given)
     p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, quadruped, humanoid or car")
