@@ -13,7 +13,6 @@ from collie.client import ApiError, CollieClient, Unreachable
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
-
 DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -x…` is its value (collie/cli.py)
 
 
