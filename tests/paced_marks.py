@@ -1,7 +1,9 @@
 """Signals that land at a chosen point of a child's run, however loaded the machine: the child's
 startup log (COLLIE_STARTUP_LOG, collie/startup.py) is a FIFO, so each mark it writes blocks in
 open() until this side reads it. The signal goes out right after the chosen mark is read and
-before the next open() is answered: the child cannot be past its next mark when it lands."""
+before the next open() is answered, so the child's Python handler runs before its next mark
+returns. (Reading goes on after the signal: the kernel may hand it to another of the child's
+threads, and then only the main thread's return from that open() runs the handler.)"""
 
 from __future__ import annotations
 
@@ -25,11 +27,8 @@ class PacedMarks:
         self.sent = threading.Event()
         self._reader: threading.Thread | None = None
 
-    def signal_at(
-        self, proc: subprocess.Popen[str], at: Callable[[StartupMark], bool], sig: int, *, hold: bool
-    ) -> None:
-        """Send `sig` to `proc` once a mark satisfies `at`; with `hold`, read no mark after it (the
-        child then stays at its next mark until the signal ends it), else read on to the end."""
+    def signal_at(self, proc: subprocess.Popen[str], at: Callable[[StartupMark], bool], sig: int) -> None:
+        """Send `sig` to `proc` once a mark satisfies `at`, then read on until `proc` ends."""
 
         def pace() -> None:
             while proc.poll() is None:
@@ -39,8 +38,6 @@ class PacedMarks:
                 if not self.sent.is_set() and any(at(m) for m in marks):
                     proc.send_signal(sig)
                     self.sent.set()
-                    if hold:
-                        return
 
         self._reader = threading.Thread(target=pace, daemon=True)
         self._reader.start()

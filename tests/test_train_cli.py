@@ -337,7 +337,7 @@ def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path)
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark ("trainer built")
     cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
-    marks.signal_at(proc, lambda m: m.what == "imports", signal.SIGTERM, hold=True)  # torch loaded; envs next
+    marks.signal_at(proc, lambda m: m.what == "imports", signal.SIGTERM)  # torch loaded; envs next
     try:
         _, err = proc.communicate(timeout=180)
     finally:

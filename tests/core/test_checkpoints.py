@@ -93,7 +93,7 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's mark after epoch 4's evaluation
     env = {**marks.env, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
-    marks.signal_at(proc, lambda m: m.what == "evaluate" and m.epoch == 4, signal.SIGTERM, hold=False)
+    marks.signal_at(proc, lambda m: m.what == "evaluate" and m.epoch == 4, signal.SIGTERM)
     try:
         _, err = proc.communicate(timeout=300)
     finally:
