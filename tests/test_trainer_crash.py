@@ -29,13 +29,22 @@ def cli(*args: str, log: Path) -> subprocess.Popen:
     )
 
 
-def wait_until(pred, timeout_s: float = 180.0) -> None:
+def wait_until(pred, timeout_s: float = 180.0, alive: subprocess.Popen | None = None, log: Path | None = None) -> None:
+    """`pred()` within timeout_s; with `alive`, fail at once (its log's end) when that process ends first."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if pred():
             return
+        if alive is not None and alive.poll() is not None:
+            said = log.read_text()[-3000:] if log is not None and log.exists() else ""
+            raise AssertionError(f"it exited with {alive.returncode} first:\n{said}")
         time.sleep(0.2)
     raise TimeoutError("condition not reached")
+
+
+def train_args(out: Path, api: str, *more: str) -> list[str]:
+    """`collie train` of a smoke run labelled through the service at `api`."""
+    return ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--no-progress", *more]
 
 
 @contextlib.contextmanager
@@ -72,23 +81,10 @@ def test_a_trainer_stopped_while_waiting_for_labels_resumes_in_that_wait(tmp_pat
     one, written in the wait: either way the session is asked again at its own epoch, never later."""
     with running_service(tmp_path) as api:
         out = tmp_path / "trainer"
-        train = [
-            "train",
-            "--preset",
-            "smoke",
-            "--out",
-            str(out),
-            "--api",
-            api,
-            "--token",
-            TOKENS["trainer"],
-            "--no-progress",
-            "--checkpoint-every",
-            "1",
-        ]
+        train = train_args(out, api, "--token", TOKENS["trainer"], "--checkpoint-every", "1")
         trainer = cli(*train, log=tmp_path / "trainer.log")
         memo = out / "service_run.json"
-        wait_until(memo.exists)
+        wait_until(memo.exists, alive=trainer, log=tmp_path / "trainer.log")
         run_id = json.loads(memo.read_text())["run_id"]
         with CollieClient(api, TOKENS["operator"]) as client:
             wait_until(lambda: client.run(run_id).status == "waiting_for_labels")
@@ -127,10 +123,10 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
     given before the kill applied, the budget not spent twice."""
     with running_service(tmp_path) as api:
         out = tmp_path / "trainer"
-        train = ["train", "--preset", "smoke", "--out", str(out), "--api", api, "--no-progress"]
+        train = train_args(out, api)
         trainer = cli(*train, "--checkpoint-every", "100", log=tmp_path / "trainer.log")
         memo = out / "service_run.json"
-        wait_until(memo.exists)
+        wait_until(memo.exists, alive=trainer, log=tmp_path / "trainer.log")
         run_id = json.loads(memo.read_text())["run_id"]
         with CollieClient(api, TOKENS["labeler"]) as labeler:
 
@@ -174,22 +170,11 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
     traceback) and a checkpoint in the wait, and an operator's token resumes the run to its end."""
     with running_service(tmp_path) as api:
         out, log = tmp_path / "trainer", tmp_path / "trainer.log"
-        train = [
-            "train",
-            "--preset",
-            "smoke",
-            "--out",
-            str(out),
-            "--api",
-            api,
-            "--no-progress",
-            "--checkpoint-every",
-            "1",
-        ]
+        train = train_args(out, api, "--checkpoint-every", "1")
         with CollieClient(api, TOKENS["operator"]) as operator:
             lab_trainer = operator.create_labeler("lab-trainer", role="trainer")
             trainer = cli(*train, "--token", lab_trainer.token, log=log)
-            wait_until((out / "service_run.json").exists)
+            wait_until((out / "service_run.json").exists, alive=trainer, log=log)
             run_id = json.loads((out / "service_run.json").read_text())["run_id"]
             wait_until(lambda: operator.run(run_id).status == "waiting_for_labels")
             stopped_at = operator.run(run_id).epoch
