@@ -382,7 +382,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log")
         mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
-        labeler_url = f"http://{shown}:{port['labeling_ui']}/?token={quote(tokens['labeler'])}"
+        labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])  # its URL names `shown` too
     site = f"http://{shown}:{sock.getsockname()[1]}"
     dashboard = f"{site}/?token={quote(tokens['operator'])}"
     if labeler_url:  # the dashboard's "watch skills in 3D" link opens the labeling UI in watch mode
