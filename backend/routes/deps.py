@@ -125,14 +125,19 @@ def authenticate(request: Request, token: str | None) -> Caller:
     return caller
 
 
+def path_run_id(request: Request) -> int | None:
+    """The run in the path, if any (a malformed one is left to the route's validation)."""
+    raw = request.path_params.get("run_id")
+    return int(raw) if raw is not None and str(raw).isdigit() else None
+
+
 def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> None:
     """The run in the path must be in the caller's scope: a labeler limited to runs sees only
     those; on a trainer's own routes (sessions, status, telemetry, …) a trainer acts only on the
     runs it created. An unknown run is left to the route (404)."""
-    raw = request.path_params.get("run_id")
-    if raw is None or not str(raw).isdigit():
+    run_id = path_run_id(request)
+    if run_id is None:
         return
-    run_id = int(raw)
     if caller.role == "operator":
         return
     if not caller.may_see(run_id):
@@ -148,11 +153,9 @@ def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> No
 def note_trainer_contact(request: Request, caller: Caller) -> None:
     """A call from a run's trainer process (its event poll, status, sessions; an operator's token
     may drive it) says the trainer is alive: runs.trainer_seen_at, for the dashboard."""
-    raw = request.path_params.get("run_id")
-    if raw is None or not str(raw).isdigit() or request.headers.get(PART_HEADER) != "trainer":
-        return
-    if caller.role in ("trainer", "operator"):
-        request.app.state.trainer_contact.heard(request.app.state.db, int(raw), caller)
+    run_id = path_run_id(request)
+    if run_id is not None and request.headers.get(PART_HEADER) == "trainer" and caller.role in ("trainer", "operator"):
+        request.app.state.trainer_contact.heard(request.app.state.db, run_id, caller)
 
 
 def allow(*roles: Role) -> Callable[..., Awaitable[Caller]]:
