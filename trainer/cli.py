@@ -10,6 +10,7 @@ import os
 import re
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -340,7 +341,11 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
+_TERM_ASKED = threading.Event()  # kept: Python ignores a KeyboardInterrupt raised inside a finalizer (GC)
+
+
 def _as_ctrl_c(_signum: int, _frame: object) -> None:
+    _TERM_ASKED.set()
     raise KeyboardInterrupt  # `collie train: interrupted`, exit 130, as Ctrl-C says it
 
 
@@ -426,6 +431,8 @@ def run(args: argparse.Namespace) -> int:
         remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
+    if _TERM_ASKED.is_set():  # the start's SIGTERM landed where its KeyboardInterrupt was swallowed
+        raise KeyboardInterrupt
     from trainer.feedback import SourceRefused
 
     try:
