@@ -341,19 +341,20 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
-_TERM_ASKED = threading.Event()  # kept: Python ignores a KeyboardInterrupt raised inside a finalizer (GC)
+# Noted, not raised: a KeyboardInterrupt raised where the signal lands may be inside a finalizer
+# (GC), where Python prints it as "Exception ignored" and goes on; the start ends before training.
+_TERM_ASKED = threading.Event()
 
 
 def _as_ctrl_c(_signum: int, _frame: object) -> None:
     _TERM_ASKED.set()
-    raise KeyboardInterrupt  # `collie train: interrupted`, exit 130, as Ctrl-C says it
 
 
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
-    # SIGTERM while the run starts (imports, envs) ends it as Ctrl-C does, with a line, not by the
-    # signal; the training loop puts its own handler over this one (a final checkpoint)
+    # SIGTERM while the run starts (imports, envs) ends it before training as Ctrl-C does, with a
+    # line, not by the signal; the training loop puts its own handler over this one (a final checkpoint)
     signal.signal(signal.SIGTERM, _as_ctrl_c)
 
     made: list[Path] = []
@@ -431,7 +432,7 @@ def run(args: argparse.Namespace) -> int:
         remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
-    if _TERM_ASKED.is_set():  # the start's SIGTERM landed where its KeyboardInterrupt was swallowed
+    if _TERM_ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
     from trainer.feedback import SourceRefused
 
