@@ -138,5 +138,10 @@ class TaskDefinition(Spec):
             seen[region.name] = i
         return self
 
+    @property
+    def can_be_good(self) -> bool:
+        """Whether the rule calls any state good (as Task.can_be_good: a region or the background is)."""
+        return 2 in {self.background, *(r.desirability for r in self.regions)}
+
     def to_json(self) -> dict[str, Any]:
         return self.model_dump(mode="json", exclude_none=True)

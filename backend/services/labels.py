@@ -32,7 +32,7 @@ from sqlalchemy import Connection, and_, bindparam, delete, exists, insert, sele
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
 from backend.services import consensus, events, leases, runs
 from backend.services.auth import Caller
-from backend.services.errors import Conflict, NotFound, TabNotHolding
+from backend.services.errors import Conflict, Invalid, NotFound, TabNotHolding
 from collie.schemas import (
     FINISHED,
     EffectiveLabel,
@@ -46,6 +46,8 @@ from collie.schemas import (
     UndoRequest,
     VotesDiscarded,
 )
+from collie.task_schemas import TaskDefinition
+from collie.tasks.classes import GOOD
 
 _EVENT_COLUMNS = (
     LabelEvent.id,
@@ -86,6 +88,8 @@ _LOOKUP = (
         *_QUERY_STATE,
         Run.status.label("run_status"),
         Run.redundancy,
+        Run.task,
+        Run.task_definition,
         LabelVote.event_id.label("my_vote_event_id"),
         _REQUEST_SEEN.label("seen_event_id"),
     )
@@ -237,11 +241,22 @@ def _lookup_or_repeat(
     return q
 
 
+def _check_good(run_id: int, q: Any) -> None:
+    """A good label on a run whose rule never calls a state good is refused (as the labeling UI
+    refuses the key). A run without a rule (an instruction) takes every class."""
+    if q.task_definition is not None and not TaskDefinition.model_validate(q.task_definition).can_be_good:
+        raise Invalid(
+            f"run {run_id}'s task '{q.task}' never calls a state good: label the segment 0 (bad) or 1 (neutral)"
+        )
+
+
 def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> LabelAck:
     kind, value = ("skip", None) if body.value == "skip" else ("label", int(body.value))
     q = _lookup_or_repeat(conn, run_id, caller, body.query_id, body.client_request_id, (body.query_id, kind, value))
     if isinstance(q, LabelAck):
         return q
+    if value == GOOD:
+        _check_good(run_id, q)
     now = time.time()
     live = q.status == "leased" and q.lease_expires_at > now
     holder = live and q.lease_owner_id == caller.id

@@ -130,7 +130,8 @@ def new_labeler(live: BackgroundServer, operator: CollieClient) -> Iterator[Call
         client.close()
 
 
-def make_run_spec(dims: EnvDims = DIMS, task: str = "north") -> RunCreate:
+def make_run_spec(dims: EnvDims = DIMS, task: str = "range_north") -> RunCreate:
+    """A run whose rule takes all three classes (North never calls a state good: the service refuses a 2)."""
     return RunCreate(env="point", task=task, method="collie", config={"preset": "smoke"}, dims=dims, n_total=10)
 
 

@@ -33,6 +33,7 @@ POLICY: dict[tuple[str, str], str] = {
     ("GET", "/api/runs"): ANY,
     ("GET", "/api/runs/{run_id}"): ANY,
     ("PUT", "/api/runs/{run_id}/status"): TRAINER,
+    ("POST", "/api/runs/{run_id}/extend"): TRAINER,
     ("POST", "/api/runs/{run_id}/pause"): OPERATOR,
     ("POST", "/api/runs/{run_id}/resume"): OPERATOR,
     ("POST", "/api/runs/{run_id}/stop"): OPERATOR,

@@ -51,11 +51,11 @@ def test_pixel_segment_round_trips_through_the_service(live: object, trainer: Co
     trainer.post_session(run.id, SessionPost(session=0, epoch=1, queries=[wire]))
     with CollieClient(live.url, TOKENS["labeler"]) as labeler:  # type: ignore[attr-defined]
         labeler.claim(run.id)
-        labeler.submit(run.id, "0-0", 2)
+        labeler.submit(run.id, "0-0", 0)
     source = HttpFeedback(live.url, TOKENS["trainer"], run.id)  # type: ignore[attr-defined]
     ((restored, label),) = source.history()
     source.close()
-    assert label == 2 and np.array_equal(restored.obs, segment.obs) and restored.obs.dtype == np.uint8
+    assert label == 0 and np.array_equal(restored.obs, segment.obs) and restored.obs.dtype == np.uint8
     assert np.allclose(restored.qpos, segment.qpos)
 
 

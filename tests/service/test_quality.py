@@ -129,7 +129,8 @@ def test_the_trainer_receives_one_label_per_query_with_redundancy(live: Backgrou
 
 
 def north_session(session: int, ys: list[float]):  # type: ignore[no-untyped-def]
-    """Segments whose task-rule label is known: x = 0.5 at height y (north: neutral above y = |x|)."""
+    """Segments whose task-rule label is known: x = 0.5 at height y (north: neutral above y = |x|;
+    range_north: bad beyond 20 of (0, 5), else good above y = |x|, neutral below)."""
     post = make_session(session, len(ys))
     for q, y in zip(post.queries, ys, strict=True):
         q.xy = [[0.5, y + 0.01 * i] for i in range(DIMS.horizon)]
@@ -162,7 +163,7 @@ def test_gold_segments_are_served_scored_and_kept_from_the_trainer(
     b.submit(run.id, "1-1", 1)
     second = b.claim(run.id)  # 1 < 0.5 · 3: gold again, now 0-1 (the rule: bad)
     assert second.query.xy == trainer.query(run.id, "0-1").xy
-    b.submit(run.id, second.query.query_id, 2)  # wrong
+    b.submit(run.id, second.query.query_id, 1)  # wrong
     # the trainer's side sees none of it
     events = trainer.events(run.id, after=stream_before).events
     assert [(e.kind, e.data.query_id) for e in events if isinstance(e, LabelChangedEvent)] == [
@@ -237,9 +238,9 @@ def test_a_discard_leaves_the_labelers_gold_answers(
 def test_agreement_and_disagreements_on_the_dashboard(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:
-    spec = make_run_spec(task="north").model_copy(update={"redundancy": 2})
+    spec = make_run_spec(task="range_north").model_copy(update={"redundancy": 2})
     run = trainer.create_run(spec)
-    trainer.post_session(run.id, north_session(0, [1.0, 1.0, -3.0]))  # oracle: neutral, neutral, bad
+    trainer.post_session(run.id, north_session(0, [-3.0, -3.0, -30.0]))  # range_north: neutral, neutral, bad
     a, b = new_labeler("agree-a"), new_labeler("agree-b")
     plan = {"agree-a": {"0-0": 1, "0-1": 1, "0-2": 0}, "agree-b": {"0-0": 1, "0-1": 2, "0-2": 0}}
     for who, client in (("agree-a", a), ("agree-b", b)):
@@ -340,7 +341,7 @@ def test_a_released_gold_segment_is_done_as_a_skipped_one(trainer: CollieClient,
     trainer.post_session(run.id, north_session(1, [1.0]))
     me = new_labeler("gold-rel-b")
     gold = me.claim(run.id).query.query_id
-    me.submit(run.id, gold, 2)
+    me.submit(run.id, gold, 1)
     me.undo(run.id, gold)
     assert me.release(run.id, gold).status == "retired"
     assert me.claim(run.id).query.query_id == "1-0"  # no gold copy of 0-0 again

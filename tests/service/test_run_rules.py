@@ -18,7 +18,7 @@ from collie.client import CollieClient
 from collie.task_schemas import TaskDefinition
 from collie.tasks import get_task, task_for_run, to_definition
 
-from .conftest import DIMS, TOKENS, make_run_spec, settings_for
+from .conftest import DIMS, TOKENS, make_run_spec, make_session, settings_for
 
 POLYGON = {
     "name": "pit",
@@ -84,3 +84,32 @@ def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path:
         old = c.run(1)
     assert old.task_definition is None and old.instruction is None
     assert task_for_run(old).to_dict() == get_task("hole", "point").to_dict()  # type: ignore[union-attr]
+
+
+def test_a_good_label_is_refused_where_the_rule_never_calls_a_state_good(
+    live: BackgroundServer, trainer: CollieClient
+) -> None:
+    """North has no good state (the labeling UI refuses the key); a run whose rule has one, or a run
+    with an instruction and no rule, takes all three classes."""
+    north = trainer.create_run(make_run_spec(task="north"))
+    ranged = trainer.create_run(make_run_spec(task="range_north"))
+    words = trainer.create_run(make_run_spec(task="instruction").model_copy(update={"instruction": "stay west"}))
+    for run in (north, ranged, words):
+        trainer.post_session(run.id, make_session(0, 2))
+    headers = {"Authorization": f"Bearer {TOKENS['labeler']}"}
+    with CollieClient(live.url, TOKENS["labeler"]) as labeler:
+        labeler.claim(north.id)
+        answer = httpx.post(
+            f"{live.url}/api/runs/{north.id}/labels",
+            json={"query_id": "0-0", "value": 2, "client_request_id": "good-on-north"},
+            headers=headers,
+        )
+        assert answer.status_code == 422, answer.text
+        assert answer.json()["detail"] == (
+            f"run {north.id}'s task 'north' never calls a state good: label the segment 0 (bad) or 1 (neutral)"
+        )
+        assert labeler.submit(north.id, "0-0", 0).query_status == "labelled"  # the claim stands: nothing half-written
+        assert [e.value for e in trainer.label_events(north.id)] == [0]
+        for run in (ranged, words):
+            labeler.claim(run.id)
+            assert labeler.submit(run.id, "0-0", 2).label == 2

@@ -29,7 +29,7 @@ def expected(client: CollieClient, run_id: int) -> dict[str, int]:
 
 
 def test_cli_labels_every_query_by_the_rule(live: BackgroundServer, trainer: CollieClient) -> None:
-    run = trainer.create_run(make_run_spec())
+    run = trainer.create_run(make_run_spec(task="north"))
     session = make_session(0, 6)
     for i, q in enumerate(session.queries):  # spread the paths over the plane: all three labels occur
         q.xy = (np.asarray(q.xy) * 0.1 + [[(-1) ** i * 3.0, 5.0 - 2 * i]]).tolist()
@@ -45,7 +45,7 @@ def test_cli_labels_every_query_by_the_rule(live: BackgroundServer, trainer: Col
 
 
 def test_a_token_the_service_refuses_to_label_with_is_one_line(live: BackgroundServer, trainer: CollieClient) -> None:
-    run = trainer.create_run(make_run_spec())
+    run = trainer.create_run(make_run_spec(task="north"))
     trainer.post_session(run.id, make_session(0, 2))
     command = [sys.executable, "-m", "collie.cli", "teacher", "--api", live.url, "--run", str(run.id)]
     out = subprocess.run([*command, "--token", TOKENS["trainer"]], capture_output=True, text=True, timeout=60)
@@ -78,7 +78,7 @@ def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:
 def test_until_done_waits_for_new_sessions_and_stops_when_finished(
     live: BackgroundServer, trainer: CollieClient, labeler: CollieClient
 ) -> None:
-    run = trainer.create_run(make_run_spec())
+    run = trainer.create_run(make_run_spec(task="north"))
     loop = TeacherLoop(labeler, run.id, oracle_for(labeler, run.id, 0.0, 0), idle_wait_s=1.0)
     worker = threading.Thread(target=loop.run, kwargs={"until_done": True}, daemon=True)
     worker.start()
@@ -102,7 +102,7 @@ def labelled_within(client: CollieClient, run_id: int, n: int, timeout_s: float 
 
 
 def test_feedback_source_collects_from_the_teacher_with_a_rate(live: BackgroundServer, labeler: CollieClient) -> None:
-    source = HttpFeedback.create(live.url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=2.0)
+    source = HttpFeedback.create(live.url, TOKENS["trainer"], make_run_spec(task="north"), wait_chunk_s=2.0)
     loop = TeacherLoop(labeler, source.run_id, oracle_for(labeler, source.run_id, 0.0, 0), rate=20.0, idle_wait_s=1.0)
     worker = threading.Thread(target=loop.run, kwargs={"until_done": True}, daemon=True)
     worker.start()

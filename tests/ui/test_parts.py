@@ -175,8 +175,8 @@ def test_service_link_sorts_errors(stack: Stack) -> None:
     assert link.pick_run() is not None
     claim = link.claim(run.id)
     assert claim is not None
-    link.submit(run.id, claim.query.query_id, 2, 1.5, "req-1")
-    link.submit(run.id, claim.query.query_id, 2, 1.5, "req-1")  # a retry: no second event
+    link.submit(run.id, claim.query.query_id, 1, 1.5, "req-1")
+    link.submit(run.id, claim.query.query_id, 1, 1.5, "req-1")  # a retry: no second event
     progress = link.progress(run.id, 0)
     assert (progress.session_done, progress.session_size, progress.total_done) == (1, 2, 1)
     assert len(stack.trainer.label_events(run.id)) == 1

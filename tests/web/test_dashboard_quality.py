@@ -23,11 +23,11 @@ UI = "http://labeling.example:8080/"
 
 @pytest.fixture(scope="module")
 def run(live: BackgroundServer, trainer: CollieClient, operator: CollieClient) -> RunRead:
-    """A north run with redundancy 2, labelled by two labelers who disagree on 0-1 (and the oracle
+    """A range_north run with redundancy 2, labelled by two labelers who disagree on 0-1 (and the oracle
     on 0-2), with a revision; metrics and rollouts for the charts."""
-    created = trainer.create_run(make_run_spec(task="north").model_copy(update={"redundancy": 2}))
+    created = trainer.create_run(make_run_spec(task="range_north").model_copy(update={"redundancy": 2}))
     post = make_session(0, 3)
-    for q, y in zip(post.queries, [1.0, 1.0, -3.0], strict=True):  # oracle: neutral, neutral, bad
+    for q, y in zip(post.queries, [-3.0, -3.0, -30.0], strict=True):  # oracle: neutral, neutral, bad
         q.xy = [[0.5, y + 0.05 * i] for i in range(DIMS.horizon)]
     trainer.post_session(created.id, post)
     plan = {"web-a": {"0-0": 1, "0-1": 1, "0-2": 2}, "web-b": {"0-0": 1, "0-1": 0, "0-2": 2}}
