@@ -58,6 +58,7 @@ from collie.schemas import (
     RolloutsIn,
     RolloutsRead,
     RunCreate,
+    RunExtend,
     RunInstructions,
     RunRead,
     RunStatus,
@@ -285,6 +286,11 @@ class CollieClient:
     ) -> RunRead:
         body = StatusUpdate(status=status, epoch=epoch, message=message)
         return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/status", body).content)
+
+    def extend(self, run_id: int, epochs_total: int) -> RunRead:
+        """More epochs for the run; a finished run reopens (409 for one stopped by an operator or failed)."""
+        body = RunExtend(epochs_total=epochs_total)
+        return RunRead.model_validate_json(self._send("POST", f"/runs/{run_id}/extend", body).content)
 
     def pause(self, run_id: int) -> RunRead:
         return self._post(RunRead, f"/runs/{run_id}/pause")

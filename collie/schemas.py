@@ -249,6 +249,12 @@ class StatusUpdate(Wire):
     message: str | None = Field(default=None, max_length=1000)
 
 
+class RunExtend(Wire):
+    """More epochs for a run (its trainer resumed with a larger --epochs): a finished run reopens."""
+
+    epochs_total: int = Field(ge=1, le=MAX_INT)
+
+
 # ---------------------------------------------------------------- queries
 
 

@@ -11,11 +11,14 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
 from collie.client import CollieClient
 from collie.schemas import QueriesEvent, StatusEvent
+from collie.tasks import get_task
+from collie.teacher import OracleTeacher
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -40,6 +43,9 @@ def wait_until(pred, timeout_s: float = 180.0, alive: subprocess.Popen | None = 
             raise AssertionError(f"it exited with {alive.returncode} first:\n{said}")
         time.sleep(0.2)
     raise TimeoutError("condition not reached")
+
+
+NORTH_ORACLE = OracleTeacher(get_task("north", "point"))  # the rule of `collie train`'s default task
 
 
 def train_args(out: Path, api: str, *more: str) -> list[str]:
@@ -130,15 +136,18 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
         run_id = json.loads(memo.read_text())["run_id"]
         with CollieClient(api, TOKENS["labeler"]) as labeler:
 
-            def label_one_of(session: int) -> str:
+            def label_one_of(session: int) -> tuple[str, int]:
+                """Labels a segment of `session` against the oracle's answer (north: bad ↔ neutral),
+                so that the teacher's labels after the restart cannot pass for this one."""
                 wait_until(lambda: any(q.session == session for q in labeler.queries(run_id, status="pending")))
                 claim = labeler.claim(run_id)
                 assert claim is not None and claim.query.session == session
-                labeler.submit(run_id, claim.query.query_id, 2)
-                return claim.query.query_id
+                value = 1 - int(NORTH_ORACLE.label(np.asarray(claim.query.xy)))
+                labeler.submit(run_id, claim.query.query_id, value)  # type: ignore[arg-type]
+                return claim.query.query_id, value
 
             label_one_of(0), label_one_of(0)
-            given = label_one_of(1)  # session 1: one label of two, then the crash
+            given, value = label_one_of(1)  # session 1: one label of two, then the crash
             trainer.send_signal(signal.SIGKILL)
             trainer.wait()
             assert not (out / "checkpoint.pt").exists()
@@ -162,7 +171,7 @@ def test_kill_9_after_an_answered_session_then_restart_asks_nothing_twice(tmp_pa
         applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
         total = ckpt["config"]["total_queries"]
         assert applied == in_db and len(applied) == total == len(asked)  # every query asked was used
-        assert applied[given] == 2
+        assert applied[given] == value
 
 
 def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
@@ -191,3 +200,41 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
             assert resumed.wait(timeout=300) == 0, log.read_text()[-3000:]
             teacher.wait(timeout=60)
             assert operator.run(run_id).status == "finished"
+
+
+def test_more_epochs_reopen_a_finished_run_and_a_stopped_one_stays_stopped(tmp_path):
+    """`--resume --epochs` past the end of a run the service holds as finished: the run reopens for the
+    epochs added (its sessions are posted, not refused with 409) and finishes at the new end. A run an
+    operator stopped in a feedback wait stays stopped when resumed: no session, no traceback."""
+    with running_service(tmp_path) as api:
+        out, log = tmp_path / "trainer", tmp_path / "trainer.log"
+        train = train_args(out, api, "--feedback-timeout", "1", "--total-queries", "12")  # nobody labels
+        first = cli(*train, "--epochs", "6", log=log)
+        assert first.wait(timeout=300) == 0, log.read_text()[-3000:]
+        run_id = json.loads((out / "service_run.json").read_text())["run_id"]
+        with CollieClient(api, TOKENS["operator"]) as operator:
+            before = operator.run(run_id)
+            assert (before.status, before.epoch, before.epochs_total) == ("finished", 6, 6)
+            asked_before = len(operator.queries(run_id))
+            extended = cli(*train, "--resume", "--epochs", "10", log=log)
+            assert extended.wait(timeout=300) == 0, log.read_text()[-3000:]
+            after = operator.run(run_id)
+            assert (after.status, after.epoch, after.epochs_total) == ("finished", 10, 10)
+            assert len(operator.queries(run_id)) > asked_before  # the added epochs' sessions went out
+            statuses = [e.data for e in operator.events(run_id).events if isinstance(e, StatusEvent)]
+            assert any(s.status == "training" and s.message == "extended to 10 epochs" for s in statuses)
+            assert "Traceback" not in log.read_text() and "not delivered" not in log.read_text()
+
+            stopped_out, stopped_log = tmp_path / "stopped", tmp_path / "stopped.log"
+            waits = train_args(stopped_out, api, "--checkpoint-every", "1")  # labels never come: it waits
+            trainer = cli(*waits, log=stopped_log)
+            wait_until((stopped_out / "service_run.json").exists, alive=trainer, log=stopped_log)
+            stopped_id = json.loads((stopped_out / "service_run.json").read_text())["run_id"]
+            wait_until(lambda: operator.run(stopped_id).status == "waiting_for_labels")
+            operator.stop(stopped_id)
+            assert trainer.wait(timeout=120) == 0, stopped_log.read_text()[-3000:]
+            resumed = cli(*waits, "--resume", "--epochs", "12", log=stopped_log)
+            assert resumed.wait(timeout=120) == 0, stopped_log.read_text()[-3000:]
+            run = operator.run(stopped_id)
+            assert (run.status, run.control, run.epochs_total) == ("finished", "stop", 8)  # not extended
+            assert "Traceback" not in stopped_log.read_text()

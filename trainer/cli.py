@@ -213,6 +213,8 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
         held = source.client.run(source.run_id)
+        if held.control != "stop" and held.status != "failed" and cfg.epochs > (held.epochs_total or 0):
+            source.client.extend(source.run_id, cfg.epochs)  # more --epochs: a finished run reopens for them
         rule = from_stored(held.task_definition, held.instruction)
         if rule.task is None and rule.instruction is None:
             raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Request
 
 from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller, json_body, parse_body
 from backend.services import runs
-from collie.schemas import MAX_INT, RunCreate, RunRead, RunStatus, StatusUpdate
+from collie.schemas import MAX_INT, RunCreate, RunExtend, RunRead, RunStatus, StatusUpdate
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -43,3 +43,10 @@ async def set_status(run_id: RunId, request: Request, _: TrainerCaller, db: DB) 
     body = await parse_body(request, StatusUpdate)
     with db.write() as conn:
         return runs.set_status(conn, run_id, body)
+
+
+@router.post("/{run_id}/extend", openapi_extra=json_body(RunExtend))
+async def extend(run_id: RunId, request: Request, _: TrainerCaller, db: DB) -> RunRead:
+    body = await parse_body(request, RunExtend)
+    with db.write() as conn:
+        return runs.extend(conn, run_id, body)

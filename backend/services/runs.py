@@ -22,6 +22,7 @@ from collie.schemas import (
     QualitySettings,
     QueueCounts,
     RunCreate,
+    RunExtend,
     RunInstructions,
     RunRead,
     StatusChanged,
@@ -169,6 +170,29 @@ def set_status(conn: Connection, run_id: int, change: StatusUpdate) -> RunRead:
         events.append(
             conn, run_id, StatusChanged(status=change.status, epoch=epoch, message=change.message or None), now
         )
+    return get(conn, run_id)
+
+
+def extend(conn: Connection, run_id: int, body: RunExtend) -> RunRead:
+    """More epochs for a run: a run that finished short of them reopens (its trainer resumed with a
+    larger --epochs). A run an operator stopped, or one that failed, stays ended."""
+    current = row(conn, run_id)
+    if current.control == "stop":
+        raise Conflict(f"run {run_id} was stopped by an operator: it is not extended")
+    if current.status == "failed":
+        raise Conflict(f"run {run_id} failed: it is not extended")
+    if current.epochs_total is not None and body.epochs_total < current.epochs_total:
+        raise Conflict(f"run {run_id} has {current.epochs_total} epochs: extending means more, not {body.epochs_total}")
+    reopens = current.status == "finished" and body.epochs_total > (current.epoch or 0)
+    if body.epochs_total != current.epochs_total or reopens:
+        now = time.time()
+        status = "training" if reopens else current.status
+        conn.execute(
+            update(Run).where(Run.id == run_id).values(epochs_total=body.epochs_total, status=status, updated_at=now)
+        )
+        if reopens:
+            message = f"extended to {body.epochs_total} epochs"
+            events.append(conn, run_id, StatusChanged(status=status, epoch=current.epoch, message=message), now)
     return get(conn, run_id)
 
 

@@ -101,6 +101,8 @@ class HttpFeedback(FeedbackSource):
     # ---------------------------------------------------------------- the interface
 
     def collect(self, session: int, epoch: int, segments: list[Segment]) -> list[LabelEvent]:
+        if self._control == "stop":  # e.g. resumed in the wait an operator stopped: the run takes no session
+            raise StopRequested(f"run {self.run_id} was stopped by an operator")
         if not self._swept:
             self._retire_leftovers(before_session=session)
             self._swept = True
