@@ -194,7 +194,22 @@ def checked(args: argparse.Namespace) -> Path:
                 f"{DATABASE_ENV} names the lab's database: give its tokens in {', '.join(missing)} (new ones would "
                 "replace the tokens everyone else uses there), or --db FILE for a stack of its own"
             )
+        if args.db is not None and is_sqlite_database(args.db) and missing:  # likewise: a database of another stack
+            raise ValueError(
+                f"--db {args.db} holds a database already, but {out} has no tokens.json: give its tokens "
+                f"in {', '.join(missing)} (new ones would replace the tokens of every link handed out for it), "
+                "the --out it was started with, or a new --db"
+            )
     return out
+
+
+def is_sqlite_database(path: Path) -> bool:
+    """`path` is a SQLite database file (its header says so; an empty file is not one yet)."""
+    try:
+        with path.open("rb") as f:
+            return f.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
 
 
 def made(folder: Path, what: str) -> None:
@@ -358,6 +373,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     # short requests: one sent to our socket before a service that then died is never answered
     with CollieClient(api, tokens["operator"], timeout_s=WATCH_TIMEOUT_S) as client:
         wait_healthy(client, service, logs / "service.log", stopping)
+        if resume:
+            held_by_database(client, json.loads(memo.read_text())["run_id"], memo, db)
     mark("waited: service healthy")
     if resume:
         run_id = json.loads(memo.read_text())["run_id"]
@@ -460,6 +477,23 @@ def wait_healthy(
                 ) from None
             time.sleep(0.2)
     raise TimeoutError("the service did not become healthy")
+
+
+def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | None) -> None:
+    """The run OUT/trainer belongs to is in the database, else RuntimeError saying so: a trainer
+    resumed on a database without it would only ever be refused (404) and restarted."""
+    from collie.client import ApiError
+
+    try:
+        client.run(run_id)
+    except ApiError as exc:
+        if exc.status != 404:
+            raise RuntimeError(f"the service answered {exc} when asked for run {run_id}") from None
+        where = db if db is not None else DATABASE_ENV
+        raise RuntimeError(
+            f"{memo} belongs to run {run_id}, which the database ({where}) does not hold (was it deleted or "
+            "replaced?): give the --db that holds it, or another --out for a new run"
+        ) from None
 
 
 def write_info(path: Path | None, urls: dict, run_id: int, tokens: dict) -> None:

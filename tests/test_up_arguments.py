@@ -4,6 +4,7 @@ error, and leaves a start that never gets ready when asked to stop."""
 from __future__ import annotations
 
 import os
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -59,6 +60,16 @@ def test_the_labs_database_without_the_labs_tokens_is_refused(tmp_path: Path) ->
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "give its tokens in COLLIE_TRAINER_TOKEN, COLLIE_LABELER_TOKEN (new ones would replace" in proc.stderr
     assert not (tmp_path / "lab.db").exists()
+
+
+def test_another_stacks_database_without_its_tokens_is_refused(tmp_path: Path) -> None:
+    """New random tokens would replace those of every link handed out for that database."""
+    with sqlite3.connect(tmp_path / "old.db") as conn:
+        conn.execute("CREATE TABLE principals (id INTEGER)")
+    proc = up(tmp_path, "--db", "old.db", "--port", "0", "--out", "new")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "--db old.db holds a database already, but new has no tokens.json: give its tokens in" in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.db"]  # nothing was started or written
 
 
 def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:

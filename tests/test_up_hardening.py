@@ -167,6 +167,18 @@ def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
     assert f"cannot listen on 127.0.0.1:{port}" in proc.stderr
 
 
+def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(tmp_path):
+    out = tmp_path / "o"
+    first = subprocess.run([*up_command(out), "--no-label-ui"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-3000:]
+    (out / "collie.db").unlink()
+    again = subprocess.run([*up_command(out), "--no-label-ui"], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 1 and "Traceback" not in again.stderr
+    memo, db = out / "trainer" / "service_run.json", out / "collie.db"
+    assert f"{memo} belongs to run 1, which the database ({db}) does not hold" in again.stderr
+    assert "restarting" not in again.stderr
+
+
 def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
     proc = subprocess.Popen(
         up_command(tmp_path, "--teacher-rate", "1", "--max-restarts", "1"),
