@@ -13,9 +13,9 @@ def next_feedback_epoch(run: RunRead) -> int | None:
     every, warmup = config.get("feedback_every"), config.get("warmup", 0)
     if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
         return None
-    if run.n_total is not None and run.n_labels >= run.n_total:
+    asked = run.queue.pending + run.queue.leased + run.queue.labelled  # the budget counts what was asked
+    if run.n_total is not None and max(run.n_labels, asked) >= run.n_total:
         return None
     after = run.epoch + 1
-    if after <= warmup:
-        return warmup
-    return warmup + -(-(after - warmup) // every) * every
+    upcoming = warmup if after <= warmup else warmup + -(-(after - warmup) // every) * every
+    return None if run.epochs_total is not None and upcoming > run.epochs_total else upcoming

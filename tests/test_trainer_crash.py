@@ -238,3 +238,17 @@ def test_more_epochs_reopen_a_finished_run_and_a_stopped_one_stays_stopped(tmp_p
             run = operator.run(stopped_id)
             assert (run.status, run.control, run.epochs_total) == ("finished", "stop", 8)  # not extended
             assert "Traceback" not in stopped_log.read_text()
+
+
+def test_sessions_nobody_answers_in_time_still_spend_the_budget(tmp_path):
+    """N_total counts the segments asked: with --feedback-timeout and nobody labelling, the smoke
+    run asks its 6 (3 sessions of 2) and no more, though its schedule has room for 6 sessions."""
+    with running_service(tmp_path) as api:
+        out, log = tmp_path / "trainer", tmp_path / "trainer.log"
+        trainer = cli(*train_args(out, api, "--feedback-timeout", "0.5", "--epochs", "12"), log=log)
+        assert trainer.wait(timeout=300) == 0, log.read_text()[-3000:]
+        run_id = json.loads((out / "service_run.json").read_text())["run_id"]
+        with CollieClient(api, TOKENS["operator"]) as operator:
+            asked = operator.queries(run_id)
+            assert (len(asked), operator.run(run_id).n_total) == (6, 6)
+            assert sorted({q.session for q in asked}) == [0, 1, 2]

@@ -207,13 +207,19 @@ class Trainer:
             self.method.asks_labels
             and self.epoch >= c.warmup
             and (self.epoch - c.warmup) % c.feedback_every == 0
-            and len(self.labelled) < c.total_queries
+            and self.queries_asked < c.total_queries
             and self.replay.count > 0
         )
 
+    @property
+    def queries_asked(self) -> int:
+        """Segments asked so far, labelled or not: N_total counts what was asked, so a session whose
+        labels are late (past --feedback-timeout) is not asked again (its labels still count)."""
+        return len(self.asked)
+
     def make_segments(self) -> list[Segment]:
         c, r = self.cfg, self.replay
-        m = min(c.queries_per_session, c.total_queries - len(self.labelled))
+        m = min(c.queries_per_session, c.total_queries - self.queries_asked)
         slots, starts = r.sample_windows(c.candidates, c.segment_length, self.rng)
         span = starts[:, None] + np.arange(c.segment_length)
         windows = r.obs[slots[:, None], span]
@@ -570,7 +576,7 @@ class Trainer:
         write_json(self.out / "config.json", self.cfg.to_dict())
         write_json(self.out / TASK_JSON, self.rule.to_json())
         self.rebuild_from_source()
-        if not self.method.asks_labels or len(self.labelled) >= self.cfg.total_queries:
+        if not self.method.asks_labels or self.queries_asked >= self.cfg.total_queries:
             startup.done()  # no feedback session will come: no first segment to time
         self._writer = self._tensorboard()
         self.reporter.status(StatusReport("training", self.epoch))
