@@ -19,6 +19,17 @@ def port(value: str) -> int:
     return number
 
 
+def file_descriptor(value: str) -> int:
+    """An open file's number, as a parent process hands one down: 0 or more."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a file descriptor") from None
+    if number < 0:
+        raise argparse.ArgumentTypeError(f"{number} is not a file descriptor: 0 or more")
+    return number
+
+
 def ipv4_host(value: str) -> str:
     """An IPv4 address to listen on (whether it is this machine's is for the binding to say)."""
     try:
