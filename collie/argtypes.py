@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import math
+from collections.abc import Callable
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -75,3 +77,41 @@ def sqlite_file(value: str) -> Path:
             "COLLIE_DATABASE_URL=postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
         )
     return Path(value)
+
+
+def float_in(low: float, high: float = math.inf, *, low_open: bool = True) -> Callable[[str], float]:
+    """A finite number above `low` (or at it: low_open=False) and at most `high`: a rate, a length
+    of time. A value out of range would only fail later, each time it is used."""
+
+    def parse(value: str) -> float:
+        try:
+            number = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not a number") from None
+        above = number > low if low_open else number >= low
+        if not (math.isfinite(number) and above and number <= high):  # NaN fails every comparison
+            bound = f"{'>' if low_open else '≥'} {low:g}" + (f" and ≤ {high:g}" if math.isfinite(high) else "")
+            raise argparse.ArgumentTypeError(f"{value} must be {bound}")
+        return number
+
+    return parse
+
+
+def int_in(low: int, high: int, why: str = "") -> Callable[[str], int]:
+    """A whole number from `low` to `high`; `why`: what sets the bound, said when it is passed.
+    (Unbounded, a huge one fails later as an overflow or an allocation, far from its flag.)"""
+
+    def parse(value: str) -> int:
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not a whole number") from None
+        if not low <= number <= high:
+            raise argparse.ArgumentTypeError(f"{number} is not in {low} to {high}{f' ({why})' if why else ''}")
+        return number
+
+    return parse
+
+
+# numpy's and torch's generators take seeds of 0 to 2^32 − 1 alike (numpy's legacy one no more)
+seed = int_in(0, 2**32 - 1, "a random generator's seed")
