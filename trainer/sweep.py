@@ -353,8 +353,22 @@ def connect_ray(address: str) -> Any:
             socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
         except OSError as exc:
             raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
-    ray.init(address=address)
+    try:
+        ray.init(address=address)
+    except ValueError as exc:  # an address Ray cannot parse, should one pass ray_address_problem
+        raise RuntimeError(f"--ray {address}: {exc}") from None
     return ray
+
+
+def ray_address_problem(address: str) -> str | None:
+    """Why `address` is no Ray address (`ray.init` raises a bare ValueError for one), None if it is:
+    auto (the cluster this machine belongs to), HOST:PORT of a head, or ray://HOST:PORT (Ray client)."""
+    if address == "auto":
+        return None
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if host.strip("[]") and port.isdigit() and 0 < int(port) <= 65535:
+        return None
+    return f"--ray {address!r} is not a Ray address: auto, HOST:PORT of the head, or ray://HOST:PORT"
 
 
 def _run_on_ray(specs: list[RunSpec], ray: Any, stop: Stop) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
@@ -557,6 +571,8 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
         return f"--variant {args.variant!r}: letters, digits and _ only"
     if Path(args.out).exists() and not Path(args.out).is_dir():
         return f"--out {args.out} is a file, not a folder"
+    if args.ray is not None and (wrong_ray := ray_address_problem(args.ray)):
+        return wrong_ray
     try:
         shlex.split(args.downstream_flags)
     except ValueError as exc:  # an unclosed quote

@@ -160,6 +160,7 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--task-file", "{file}"], "--task-file {file}: task file {file}: expected a .toml, .json or .py file, got"),
         (["--task-file", "{file}.toml"], "--task-file {file}.toml: task file {file}.toml: no such file"),
         (["--methods", "lsd", "--", "--task-file", "{file}"], "--task-file goes before --: `collie sweep --task-file"),
+        (["--ray", "notanaddr"], "--ray 'notanaddr' is not a Ray address: auto, HOST:PORT of the head, or ray://"),
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
