@@ -97,17 +97,20 @@ def float_in(low: float, high: float = math.inf, *, low_open: bool = True) -> Ca
     return parse
 
 
-def int_in(low: int, high: int, why: str = "") -> Callable[[str], int]:
-    """A whole number from `low` to `high`; `why`: what sets the bound, said when it is passed.
-    (Unbounded, a huge one fails later as an overflow or an allocation, far from its flag.)"""
+def int_in(low: int | None, high: int, why: str = "") -> Callable[[str], int]:
+    """A whole number up to `high` (and from `low`, None: a check of its own says what is too low);
+    `why`: what sets the bound. Unbounded, a huge one fails far from its flag (an overflow, an
+    allocation, the service's validation)."""
 
     def parse(value: str) -> int:
         try:
             number = int(value)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{value!r} is not a whole number") from None
-        if not low <= number <= high:
-            raise argparse.ArgumentTypeError(f"{number} is not in {low} to {high}{f' ({why})' if why else ''}")
+        if number > high:
+            raise argparse.ArgumentTypeError(f"{number} is more than {high}{f' ({why})' if why else ''}")
+        if low is not None and number < low:
+            raise argparse.ArgumentTypeError(f"{number} is less than {low}{f' ({why})' if why else ''}")
         return number
 
     return parse

@@ -64,7 +64,7 @@ def test_a_token_the_service_refuses_to_label_with_is_one_line(live: BackgroundS
         (["--rate", "0"], "argument --rate: 0 must be > 0"),  # as `collie up --teacher-rate 0`
         (["--rate", "-1"], "argument --rate: -1 must be > 0"),
         (["--wait", "-1"], "argument --wait: -1 must be ≥ 0"),
-        (["--seed", "99999999999999999999"], "argument --seed: 99999999999999999999 is not in 0 to 4294967295"),
+        (["--seed", "99999999999999999999"], "argument --seed: 99999999999999999999 is more than 4294967295"),
     ],
 )
 def test_values_the_teacher_cannot_use_are_refused_by_argparse(
