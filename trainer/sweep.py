@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
+from collie.pass_through import owned_flags
 from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
@@ -427,6 +428,36 @@ class _TrainParser(argparse.ArgumentParser):
         raise _Refusal(message or "a flag that ends `collie train` at once (--help?) is no run's flag")
 
 
+# `collie train` options the sweep sets for each run (train_argv), and what to give the sweep instead
+SWEEP_OWNS = {
+    "--env": "give collie sweep --env",
+    "--task": "give --tasks",
+    "--method": "give --methods",
+    "--preset": "give collie sweep --preset",
+    "--seed": "give --first-seed / --seeds",
+    "--out": "give collie sweep --out, the root of the run folders",
+    "--threads": "one per run, --jobs runs at a time",
+    "--resume": "a rerun of the sweep resumes",
+}
+
+
+def owned_problem(flags: list[str]) -> str | None:
+    """The train flags after -- that set what the sweep sets for each run (as `collie up
+    --train-args` refuses its own), naming what to give the sweep instead."""
+    from trainer import cli as train_cli
+
+    parser = _TrainParser(prog="collie train")
+    train_cli.add_arguments(parser)
+    known = [option for action in parser._actions for option in action.option_strings]
+    owned = owned_flags(flags, SWEEP_OWNS, known)
+    if not owned:
+        return None
+    names = [f.split("=")[0] for f in owned]  # an abbreviation (`--ou`) stands for its one option
+    options = dict.fromkeys(n if n in SWEEP_OWNS else next(o for o in known if o.startswith(n)) for n in names)
+    instead = "; ".join(f"{option}: {SWEEP_OWNS[option]}" for option in options)
+    return f"flags after -- may not set {', '.join(owned)}: collie sweep sets them for each run ({instead})"
+
+
 def train_flags_problem(specs: list[RunSpec]) -> str | None:
     """What `collie train` would refuse in the runs' commands (a bad flag after --, a value out of
     range), found by parsing each method's and task's command once, before any run starts."""
@@ -556,6 +587,9 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
         return (
             "--task-file goes before --: `collie sweep --task-file FILE` runs the file's task (its runs alone get it)"
         )
+    owned = owned_problem([f for f in args.train_flags if f != "--"])
+    if owned:
+        return owned
     for task in (t for t in tasks if t not in from_files):  # one with no geometry for the env (north on car)
         try:
             get_task(task, args.env, layout_seed=args.first_seed)
