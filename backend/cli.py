@@ -9,6 +9,7 @@ is printed either way (and written to the tokens file as "api")."""
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import signal
@@ -22,7 +23,7 @@ from backend.services.auth import ROLES, builtin_principals, new_token
 from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.addresses import link_host
-from collie.argtypes import port, sqlite_file
+from collie.argtypes import file_descriptor, port, sqlite_file
 from collie.tokens import read_tokens_file, weakness, write_secret
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
@@ -35,7 +36,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--db", type=sqlite_file, help="SQLite file (default: COLLIE_DATABASE_URL, e.g. PostgreSQL, else ./collie.db)"
     )
     parser.add_argument(
-        "--fd", type=int, default=None, help="serve on this inherited listening socket (instead of --host/--port)"
+        "--fd",
+        type=file_descriptor,
+        default=None,
+        help="serve on this inherited listening socket (instead of --host/--port)",
     )
     parser.add_argument("--tokens-json", type=Path, help="write {api, tokens: {operator, trainer, labeler}} here")
     parser.add_argument(
@@ -101,19 +105,36 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
     return sock, f"http://{link_host(host)}:{port}"
 
 
+def listening(host: str, port: int) -> tuple[socket.socket, str]:
+    """`bind`'s socket and URL, or a one-line error naming host:port and why (in use, not an address
+    of this machine, a name that does not resolve)."""
+    from backend.server import bind
+
+    try:
+        return bind(host, port)
+    except OSError as exc:  # socket.gaierror included
+        where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+        hint = " (--port 0 takes any free port)" if exc.errno == errno.EADDRINUSE else ""
+        print(f"collie serve: error: cannot listen on {where}: {exc.strerror or exc}{hint}", file=sys.stderr)
+        raise SystemExit(2) from None  # a usage error, as argparse's
+
+
 def run(args: argparse.Namespace) -> int:
     from sqlalchemy.exc import DBAPIError
 
     from backend.db import UnusableDatabaseUrl, describe
     from backend.main import create_app
     from backend.migrate import UnknownRevision
-    from backend.server import bind, uvicorn_server
+    from backend.server import uvicorn_server
     from collie.startup import mark
 
     mark("imports")  # FastAPI, SQLAlchemy, the routes
 
     if args.db is not None and args.db.is_dir():
         raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
+    # Bound before the database is opened: a start that cannot listen must not create the database
+    # and its tokens, which it would never print (the next start finds them "kept": a lockout).
+    sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)
     try:
         settings, tokens, generated, revoked = settings_from(args)
         app = create_app(settings)
@@ -123,7 +144,6 @@ def run(args: argparse.Namespace) -> int:
         where = describe(Settings().database_url) if args.db is None else args.db
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
-    sock, url = inherited(args.fd) if args.fd is not None else bind(args.host, args.port)
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
         write_secret(args.tokens_json, json.dumps({"api": url, "tokens": tokens}, indent=1))
     server = uvicorn_server(app, args.log_level)

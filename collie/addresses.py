@@ -47,3 +47,16 @@ def link_host(host: str) -> str:
     if host not in EVERY_INTERFACE:
         return f"[{host}]" if ":" in host else host
     return network_address() or socket.gethostname()
+
+
+def not_listenable(host: str) -> str | None:
+    """Why this machine cannot listen on `host` (not one of its addresses: the reason the system
+    gives), None if it can. Asked before anything starts: a server told to bind it fails later, or
+    (viser) retries it forever, silent."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind((host, 0))
+        except OSError as exc:  # socket.gaierror included
+            return exc.strerror or str(exc)
+    return None

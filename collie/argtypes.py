@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import math
+from collections.abc import Callable
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -16,6 +18,17 @@ def port(value: str) -> int:
         raise argparse.ArgumentTypeError(f"{value!r} is not a port number") from None
     if not 0 <= number <= 65535:
         raise argparse.ArgumentTypeError(f"{number} is not a port: 0 (any free one) to 65535")
+    return number
+
+
+def file_descriptor(value: str) -> int:
+    """An open file's number, as a parent process hands one down: 0 or more."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a file descriptor") from None
+    if number < 0:
+        raise argparse.ArgumentTypeError(f"{number} is not a file descriptor: 0 or more")
     return number
 
 
@@ -64,3 +77,44 @@ def sqlite_file(value: str) -> Path:
             "COLLIE_DATABASE_URL=postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
         )
     return Path(value)
+
+
+def float_in(low: float, high: float = math.inf, *, low_open: bool = True) -> Callable[[str], float]:
+    """A finite number above `low` (or at it: low_open=False) and at most `high`: a rate, a length
+    of time. A value out of range would only fail later, each time it is used."""
+
+    def parse(value: str) -> float:
+        try:
+            number = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not a number") from None
+        above = number > low if low_open else number >= low
+        if not (math.isfinite(number) and above and number <= high):  # NaN fails every comparison
+            bound = f"{'>' if low_open else '≥'} {low:g}" + (f" and ≤ {high:g}" if math.isfinite(high) else "")
+            raise argparse.ArgumentTypeError(f"{value} must be {bound}")
+        return number
+
+    return parse
+
+
+def int_in(low: int | None, high: int, why: str = "") -> Callable[[str], int]:
+    """A whole number up to `high` (and from `low`, None: a check of its own says what is too low);
+    `why`: what sets the bound. Unbounded, a huge one fails far from its flag (an overflow, an
+    allocation, the service's validation)."""
+
+    def parse(value: str) -> int:
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{value!r} is not a whole number") from None
+        if number > high:
+            raise argparse.ArgumentTypeError(f"{number} is more than {high}{f' ({why})' if why else ''}")
+        if low is not None and number < low:
+            raise argparse.ArgumentTypeError(f"{number} is less than {low}{f' ({why})' if why else ''}")
+        return number
+
+    return parse
+
+
+# numpy's and torch's generators take seeds of 0 to 2^32 − 1 alike (numpy's legacy one no more)
+seed = int_in(0, 2**32 - 1, "a random generator's seed")

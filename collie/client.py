@@ -80,9 +80,23 @@ class ApiError(Exception):
     """The service answered with an error status."""
 
     def __init__(self, status: int, detail: Any) -> None:
-        super().__init__(f"{status}: {detail}")
+        super().__init__(f"{status}: {readable(detail)}")
         self.status = status
         self.detail = detail
+
+
+def readable(detail: Any) -> Any:
+    """A 422's detail — FastAPI's list of pydantic errors, a dict each — as one line naming each
+    field and what is wrong ("run_id: Input should be greater than or equal to 1"); any other
+    detail as it is."""
+    if not (isinstance(detail, list) and detail and all(isinstance(e, dict) and "msg" in e for e in detail)):
+        return detail
+    said = []
+    for error in detail:
+        loc = [str(part) for part in error.get("loc", ())]
+        where = ".".join(loc[1:] if loc[:1] in (["body"], ["query"], ["path"], ["header"]) else loc)
+        said.append(f"{where}: {error['msg']}" if where else str(error["msg"]))
+    return "; ".join(said)
 
 
 class Unauthorized(ApiError):

@@ -78,6 +78,7 @@ Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
 Matrix = list[list[FiniteFloat]]
 MAX_FEEDBACK_TIMEOUT_S = 7 * 86_400
+MAX_LEASE_S = 3600.0  # the longest claim a labeler may ask for (POST /claim's lease_s)
 # how long the trainer waits for a session's labels before it continues with what arrived
 FeedbackTimeout = Annotated[float, Field(gt=0, le=MAX_FEEDBACK_TIMEOUT_S, allow_inf_nan=False)]
 MAX_REDUNDANCY = 10

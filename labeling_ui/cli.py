@@ -11,29 +11,64 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco loads: offscreen, no X display (as collie up sets it)
 
-from collie.argtypes import http_url, port
+from collie.addresses import not_listenable
+from collie.argtypes import float_in, http_url, ipv4_host, port, record_id
 from collie.mjmodels import MODEL_NAMES
+from collie.schemas import MAX_LEASE_S
 from collie.startup import mark
 from collie.tokens import resolve_token
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
 
+MAX_FPS = 1000  # far above any screen's: more only skips frames
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, type=http_url, help="the labeling service, e.g. http://127.0.0.1:8000")
     parser.add_argument("--port", type=port, default=8090, help="port to serve on (0: any free port)")
-    parser.add_argument("--host", default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
-    parser.add_argument("--run", type=int, default=None, help="label only this run (default: newest with work)")
+    parser.add_argument("--host", type=ipv4_host, default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
+    parser.add_argument("--run", type=record_id, default=None, help="label only this run (default: newest with work)")
     parser.add_argument("--token", default=None, help="print a labeler URL that signs in with this token")
     parser.add_argument("--token-file", type=Path, default=None, help="the same, with the token read from this file")
-    parser.add_argument("--lease-s", type=float, default=60.0, help="claim length, renewed while a tab is open")
-    parser.add_argument("--fps", type=float, default=20.0, help="segment frames per second at 1x")
+    parser.add_argument(
+        "--lease-s",
+        type=float_in(0, MAX_LEASE_S),  # the service refuses a longer (or no) claim: every claim would fail
+        default=60.0,
+        help=f"claim length, renewed while a tab is open (at most {MAX_LEASE_S:g} s)",
+    )
+    parser.add_argument(
+        "--fps", type=float_in(0, MAX_FPS), default=20.0, help=f"segment frames per second at 1x (at most {MAX_FPS})"
+    )
     parser.add_argument(
         "--warm",
         default=",".join(MODEL_NAMES),
         help="envs whose models compile as the UI starts, comma-separated (the others on first use)",
     )
     parser.add_argument("--info-json", type=Path, default=None, help="write the URL and port here once serving")
+
+
+def info_folder(path: Path) -> None:
+    """--info-json's folder, made as `collie up` and `collie serve --tokens-json` make theirs; a
+    folder given as the file, or one that cannot be made, is refused before the UI starts."""
+    if path.is_dir():
+        raise SystemExit(f"collie label-ui: error: --info-json {path} is a folder; give a file path")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SystemExit(
+            f"collie label-ui: error: cannot create the folder of --info-json {path.parent}: {exc.strerror or exc}"
+        ) from None
+
+
+def write_whole(path: Path, text: str) -> None:
+    """`text` into `path` in one rename (a reader never sees half of it), through PATH.partial
+    beside it (not PATH with its suffix swapped: `/tmp` would have become `/tmp.tmp`)."""
+    partial = path.with_name(path.name + ".partial")
+    try:
+        partial.write_text(text)
+        partial.replace(path)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,6 +82,11 @@ def run(args: argparse.Namespace) -> int:
         token = resolve_token(args, "labeler", from_env=False)
     except ValueError as exc:
         raise SystemExit(f"collie label-ui: error: {exc}") from None
+    why = not_listenable(args.host)  # viser would retry it forever, silent
+    if why is not None:
+        raise SystemExit(f"collie label-ui: error: --host {args.host} is not an address of this machine ({why})")
+    if args.info_json is not None:
+        info_folder(args.info_json)
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
     mark("serving")  # viser's server is up; models compile in the background
     if args.port and app.port != args.port:  # viser moves on from a port in use: say so, not only the URL
@@ -55,9 +95,12 @@ def run(args: argparse.Namespace) -> int:
     if token:  # asked for by the person who started it: their terminal, not a log
         print(f"labeler URL: {app.labeler_url(token)}", flush=True)
     if args.info_json is not None:  # how `collie up` learns the port when it asked for any free one
-        tmp = args.info_json.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"url": app.url, "port": app.port}))
-        tmp.replace(args.info_json)
+        try:
+            write_whole(args.info_json, json.dumps({"url": app.url, "port": app.port}))
+        except OSError as exc:
+            app.stop()
+            said = f"cannot write --info-json {args.info_json}: {exc.strerror or exc}"
+            raise SystemExit(f"collie label-ui: error: {said}") from None
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # either way, tabs hand their claims back first
         signal.signal(sig, lambda *_: stop.set())

@@ -8,7 +8,7 @@ import signal
 import sys
 import time
 
-from collie.argtypes import http_url
+from collie.argtypes import float_in, http_url, record_id, seed
 from collie.client import ApiError, CollieClient, Unreachable
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
@@ -19,15 +19,19 @@ DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -xâ€
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, type=http_url, help="service URL, e.g. http://127.0.0.1:8000")
     add_token_arguments(parser, "labeler")
-    parser.add_argument("--run", type=int, required=True, help="run id")
+    parser.add_argument("--run", type=record_id, required=True, help="run id")
     parser.add_argument("--noise-band", type=float, default=0.0, help="R_error: random labels this close to a boundary")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
-    parser.add_argument("--rate", type=float, default=None, help="at most this many labels per second")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the noise")
+    # > 0, as `collie up --teacher-rate`: a rate of 0 or less would never label
+    parser.add_argument("--rate", type=float_in(0), default=None, help="at most this many labels per second (> 0)")
     parser.add_argument(
         "--until-done", action="store_true", help="keep waiting for new queries until the run is finished or stopped"
     )
     parser.add_argument(
-        "--wait", type=float, default=0.0, help="seconds to wait for the service and the run to appear (compose)"
+        "--wait",
+        type=float_in(0, low_open=False),
+        default=0.0,
+        help="seconds to wait for the service and the run to appear (compose)",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every label")
 

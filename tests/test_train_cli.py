@@ -189,6 +189,13 @@ def test_the_service_refusal_is_one_line(tmp_path: Path, service: str, extra: tu
     refused(proc, "labeling service", service, *words)
 
 
+def test_epochs_beyond_what_the_service_stores_are_refused_before_it_is_asked(tmp_path: Path) -> None:
+    """Was pydantic's multi-line "1 validation error for RunCreate"; the bound is argparse's."""
+    proc = train("--epochs", "99999999999999999999", "--out", str(tmp_path / "run"), "--api", "http://127.0.0.1:9")
+    refused(proc, "--epochs", "more than 2147483647")
+    assert not (tmp_path / "run").exists()
+
+
 def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> None:
     refused(
         train("--env", "car", "--out", str(tmp_path / "run")), "task 'north' is not defined for env 'car'", "hazard"
@@ -196,7 +203,16 @@ def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> Non
 
 
 @pytest.mark.parametrize(
-    ("flag", "value"), [("--seed", "-1"), ("--run-id", "abc"), ("--episode-steps", "0"), ("--threads", "-2")]
+    ("flag", "value"),
+    [
+        ("--seed", "-1"),
+        ("--run-id", "abc"),
+        ("--episode-steps", "0"),
+        ("--threads", "-2"),
+        ("--seed", "99999999999999999999"),  # was: "Overflow when unpacking long long"
+        ("--hidden", "100000000"),  # was: an allocation traceback
+        ("--batch-size", "99999999999999999999"),
+    ],
 )
 def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> None:
     refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), flag, value)

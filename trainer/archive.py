@@ -116,11 +116,28 @@ def jobs_in(given: Path, out_root: Path) -> list[tuple[Path, Path | None]]:
     return [(f, f.relative_to(given)) for f in finished if out_root.resolve() not in f.resolve().parents]
 
 
+def into_itself(given: Path, out_root: Path) -> str | None:
+    """Why archiving `given` into `out_root` would copy nothing or copy a run into itself: --out is
+    the folder given (every run below it would be left out as already archived), or lies inside a
+    run folder given. None otherwise (an archive inside a root given is left out of it)."""
+    if out_root.resolve() == given.resolve():
+        return f"--out {out_root} is the folder given to archive; give another folder"
+    if (given / "summary.json").exists() and given.resolve() in out_root.resolve().parents:
+        return f"--out {out_root} is inside the run folder {given}; give a folder outside it"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     out_root = Path(args.out)
+    if out_root.exists() and not out_root.is_dir():
+        print(f"collie archive: error: --out {out_root} is a file, not a folder", file=sys.stderr)
+        return 2
     jobs: list[tuple[Path, Path | None]] = []
     try:  # every folder given is checked before anything is copied
         for given in map(Path, args.runs):
+            why = into_itself(given, out_root)
+            if why is not None:
+                raise ArchiveError(why)
             jobs += jobs_in(given, out_root)
     except ArchiveError as exc:
         print(f"collie archive: error: {exc}", file=sys.stderr)

@@ -12,10 +12,11 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from collie.argtypes import http_url
+from collie.argtypes import http_url, int_in, record_id, seed
 from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import task_names
@@ -55,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--method", default="collie", action=_Given, help=f"one of: {', '.join(METHODS)}")
     p.add_argument("--preset", default="cpu", action=_Given, help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--seed", type=int, default=0, action=_Given)
+    p.add_argument("--seed", type=seed, default=0, action=_Given)
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -63,7 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--api", default=None, type=http_url, help="labeling service URL: labels come over HTTP instead of the oracle"
     )
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
-    p.add_argument("--run-id", type=int, default=None, help="existing run id on the service (default: create one)")
+    p.add_argument(
+        "--run-id", type=record_id, default=None, help="existing run id on the service (default: create one)"
+    )
     p.add_argument(
         "--feedback-timeout",
         type=float,
@@ -103,8 +106,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                 help=note,
             )
         else:
-            kind = {"int": int, "float": float}.get(str(f.type), str)
+            kinds: dict[str, Callable[[str], Any]] = {"int": int_type(f.name), "float": float}
+            kind = kinds.get(str(f.type), str)
             group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given, help=note)
+
+
+MAX_HIDDEN = 65_536  # units per layer: a wider one's weights (hidden² each) fill no machine's memory
+
+
+def int_type(name: str) -> Callable[[str], int]:
+    """An int hyperparameter's argparse type: bounded above (the Config's checks say what is too
+    low), --epochs by what the labeling service stores, --hidden by memory, the others by what a
+    32-bit integer holds (a larger one overflows in numpy or torch, as a traceback)."""
+    from collie.schemas import MAX_INT
+
+    if name == "hidden":
+        return int_in(None, MAX_HIDDEN, "units per layer; a layer's weights grow with its square")
+    if name == "epochs":
+        return int_in(None, MAX_INT, "the most a run's epochs on the labeling service may be")
+    return int_in(None, MAX_INT)
 
 
 class _Given(argparse.Action):

@@ -490,6 +490,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie report: error: {exc}", file=sys.stderr)
                 return 2
     out = Path(args.out) if args.out else roots[0] / "report"
+    if out.exists() and not out.is_dir():
+        print(f"collie report: error: --out {out} is a file, not a folder", file=sys.stderr)
+        return 2
     paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
     print((out / "report.md").read_text())
     print(f"written: {', '.join(str(p) for p in paths.values())}")

@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
+from collie.pass_through import owned_flags
 from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
@@ -353,8 +354,22 @@ def connect_ray(address: str) -> Any:
             socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
         except OSError as exc:
             raise RuntimeError(f"--ray {address}: no Ray head answers at that address ({exc})") from None
-    ray.init(address=address)
+    try:
+        ray.init(address=address)
+    except ValueError as exc:  # an address Ray cannot parse, should one pass ray_address_problem
+        raise RuntimeError(f"--ray {address}: {exc}") from None
     return ray
+
+
+def ray_address_problem(address: str) -> str | None:
+    """Why `address` is no Ray address (`ray.init` raises a bare ValueError for one), None if it is:
+    auto (the cluster this machine belongs to), HOST:PORT of a head, or ray://HOST:PORT (Ray client)."""
+    if address == "auto":
+        return None
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if host.strip("[]") and port.isdigit() and 0 < int(port) <= 65535:
+        return None
+    return f"--ray {address!r} is not a Ray address: auto, HOST:PORT of the head, or ray://HOST:PORT"
 
 
 def _run_on_ray(specs: list[RunSpec], ray: Any, stop: Stop) -> Iterator[tuple[RunSpec, dict[str, Any] | Exception]]:
@@ -411,6 +426,36 @@ class _TrainParser(argparse.ArgumentParser):
 
     def exit(self, status: int = 0, message: str | None = None) -> NoReturn:  # e.g. -- --help
         raise _Refusal(message or "a flag that ends `collie train` at once (--help?) is no run's flag")
+
+
+# `collie train` options the sweep sets for each run (train_argv), and what to give the sweep instead
+SWEEP_OWNS = {
+    "--env": "give collie sweep --env",
+    "--task": "give --tasks",
+    "--method": "give --methods",
+    "--preset": "give collie sweep --preset",
+    "--seed": "give --first-seed / --seeds",
+    "--out": "give collie sweep --out, the root of the run folders",
+    "--threads": "one per run, --jobs runs at a time",
+    "--resume": "a rerun of the sweep resumes",
+}
+
+
+def owned_problem(flags: list[str]) -> str | None:
+    """The train flags after -- that set what the sweep sets for each run (as `collie up
+    --train-args` refuses its own), naming what to give the sweep instead."""
+    from trainer import cli as train_cli
+
+    parser = _TrainParser(prog="collie train")
+    train_cli.add_arguments(parser)
+    known = [option for action in parser._actions for option in action.option_strings]
+    owned = owned_flags(flags, SWEEP_OWNS, known)
+    if not owned:
+        return None
+    names = [f.split("=")[0] for f in owned]  # an abbreviation (`--ou`) stands for its one option
+    options = dict.fromkeys(n if n in SWEEP_OWNS else next(o for o in known if o.startswith(n)) for n in names)
+    instead = "; ".join(f"{option}: {SWEEP_OWNS[option]}" for option in options)
+    return f"flags after -- may not set {', '.join(owned)}: collie sweep sets them for each run ({instead})"
 
 
 def train_flags_problem(specs: list[RunSpec]) -> str | None:
@@ -542,6 +587,9 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
         return (
             "--task-file goes before --: `collie sweep --task-file FILE` runs the file's task (its runs alone get it)"
         )
+    owned = owned_problem([f for f in args.train_flags if f != "--"])
+    if owned:
+        return owned
     for task in (t for t in tasks if t not in from_files):  # one with no geometry for the env (north on car)
         try:
             get_task(task, args.env, layout_seed=args.first_seed)
@@ -557,6 +605,8 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
         return f"--variant {args.variant!r}: letters, digits and _ only"
     if Path(args.out).exists() and not Path(args.out).is_dir():
         return f"--out {args.out} is a file, not a folder"
+    if args.ray is not None and (wrong_ray := ray_address_problem(args.ray)):
+        return wrong_ray
     try:
         shlex.split(args.downstream_flags)
     except ValueError as exc:  # an unclosed quote

@@ -97,6 +97,27 @@ def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unf
     assert "holds no run folder" in capsys.readouterr().err
 
 
+def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_error(tmp_path, capsys):
+    sweep = tmp_path / "runs"
+    run = sweep / "ant-north-metra-s0"
+    run.mkdir(parents=True)
+    (run / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": "ant"}}))
+    (run / "eval_latest.npz").write_bytes(b"saved")
+    (tmp_path / "a-file").write_text("kept")
+    refused = [
+        (sweep, tmp_path / "a-file", f"--out {tmp_path / 'a-file'} is a file, not a folder"),
+        (sweep, sweep, f"--out {sweep} is the folder given to archive; give another folder"),  # was: rc 0, nothing
+        (run, run, f"--out {run} is the folder given to archive"),
+        (run, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # was: a copy inside itself
+    ]
+    for given, out, said in refused:
+        assert main(["archive", str(given), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"collie archive: error: {said}") and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in run.iterdir()) == ["eval_latest.npz", "summary.json"]
+    assert (tmp_path / "a-file").read_text() == "kept"
+
+
 @pytest.mark.parametrize(("text", "why"), [("{not json", "not JSON"), ("[1]", "not a JSON object")])
 def test_an_unreadable_summary_is_named_and_left_out_and_given_alone_is_a_one_line_error(tmp_path, capsys, text, why):
     sweep = tmp_path / "runs"

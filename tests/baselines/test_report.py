@@ -111,6 +111,11 @@ def test_collie_report_cli(tmp_path, capsys):
     assert report.run(args(tmp_path / "empty")) == 2
     assert f"no run folder (none has summary.json) under {tmp_path / 'empty'}" in capsys.readouterr().err
     assert not (tmp_path / "empty" / "report").exists()
+    (tmp_path / "a-file").write_text("kept")
+    taken = argparse.Namespace(**{**vars(args(tmp_path)), "out": str(tmp_path / "a-file")})
+    assert report.run(taken) == 2  # not FileExistsError's traceback
+    assert f"collie report: error: --out {tmp_path / 'a-file'} is a file, not a folder" in capsys.readouterr().err
+    assert (tmp_path / "a-file").read_text() == "kept"
 
 
 def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):

@@ -160,6 +160,16 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--task-file", "{file}"], "--task-file {file}: task file {file}: expected a .toml, .json or .py file, got"),
         (["--task-file", "{file}.toml"], "--task-file {file}.toml: task file {file}.toml: no such file"),
         (["--methods", "lsd", "--", "--task-file", "{file}"], "--task-file goes before --: `collie sweep --task-file"),
+        (  # was: the run written to /tmp/x, then "FAILED …: stopped before its last epoch (status None)"
+            ["--methods", "lsd", "--", "--epochs", "1", "--out=/tmp/x"],
+            "flags after -- may not set --out=/tmp/x: collie sweep sets them for each run (--out: give collie sweep",
+        ),
+        (  # was: seed 3 run in a folder named -s0; an abbreviation argparse would expand is one too
+            ["--methods", "lsd", "--", "--seed=3", "--ou", "/tmp/x"],
+            "flags after -- may not set --seed=3, --ou: collie sweep sets them for each run (--seed: give --first-seed",
+        ),
+        (["--methods", "lsd", "--", "--threads", "2"], "flags after -- may not set --threads: "),
+        (["--ray", "notanaddr"], "--ray 'notanaddr' is not a Ray address: auto, HOST:PORT of the head, or ray://"),
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):

@@ -178,6 +178,32 @@ def test_a_restarted_service_keeps_its_tokens(tmp_path: Path) -> None:
         stop(server)
 
 
+def test_a_start_that_cannot_listen_is_a_one_line_error_that_makes_no_database(tmp_path: Path) -> None:
+    """A port in use, an address not this machine's, a bad --fd: refused before the database and its
+    tokens are made (they would never be printed, and the next start would keep them: a lockout)."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db, tokens_file = tmp_path / "c.db", tmp_path / "tokens.json"
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        refused = [
+            (["--port", str(port)], f"cannot listen on 127.0.0.1:{port}: Address already in use (--port 0 takes"),
+            (["--host", "999.9.9.9"], "cannot listen on 999.9.9.9:8000: "),
+            (["--fd", "-1"], "argument --fd: -1 is not a file descriptor"),
+        ]
+        for flags, said in refused:
+            out = collie("serve", "--db", str(db), *flags, env=env)
+            assert out.returncode == 2 and said in out.stderr and "Traceback" not in out.stderr, out.stderr
+            assert out.stderr.strip().splitlines()[-1].startswith("collie serve: error: ")
+            assert not db.exists()
+    server, _ = start_serve(db, tokens_file, env)  # the next start makes (and writes) every token
+    try:
+        assert sorted(json.loads(tokens_file.read_text())["tokens"]) == ["labeler", "operator", "trainer"]
+    finally:
+        stop(server)
+
+
 def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     env = {
         **os.environ,

@@ -10,9 +10,10 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from backend.server import BackgroundServer
-from collie.client import CollieClient
+from collie.client import ApiError, CollieClient
 from collie.tasks import get_task
 from collie.teacher import OracleTeacher
 from teacher import TeacherLoop, oracle_for, segment_label
@@ -54,6 +55,33 @@ def test_a_token_the_service_refuses_to_label_with_is_one_line(live: BackgroundS
         out.stderr.startswith("collie teacher: error: the labeling service answered 403")
         and "(after 0 labels)" in out.stderr
     )
+
+
+@pytest.mark.parametrize(
+    ("flags", "said"),
+    [
+        (["--run", "0"], "argument --run: 0 is not an id: 1 to"),  # was the service's raw 422 error list
+        (["--rate", "0"], "argument --rate: 0 must be > 0"),  # as `collie up --teacher-rate 0`
+        (["--rate", "-1"], "argument --rate: -1 must be > 0"),
+        (["--wait", "-1"], "argument --wait: -1 must be ≥ 0"),
+        (["--seed", "99999999999999999999"], "argument --seed: 99999999999999999999 is more than 4294967295"),
+    ],
+)
+def test_values_the_teacher_cannot_use_are_refused_by_argparse(
+    capsys: pytest.CaptureFixture[str], flags: list[str], said: str
+) -> None:
+    from collie.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["teacher", "--api", "http://127.0.0.1:9", "--run", "1", "--token", TOKENS["labeler"], *flags])
+    assert exit_.value.code == 2 and f"collie teacher: error: {said}" in capsys.readouterr().err
+
+
+def test_a_validation_error_reads_as_one_line_naming_the_field(live: BackgroundServer, labeler: CollieClient) -> None:
+    with pytest.raises(ApiError) as refused:
+        labeler.run(0)
+    assert str(refused.value) == "422: run_id: Input should be greater than or equal to 1"
+    assert isinstance(refused.value.detail, list)  # the service's own detail, kept for callers that read it
 
 
 def test_ctrl_c_while_waiting_for_the_run_is_one_line() -> None:

@@ -194,7 +194,7 @@ def test_a_tab_too_many_keeps_the_services_reason(stack: Stack) -> None:
 
 
 def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path: Path) -> None:
-    info = tmp_path / "ui.json"
+    info = tmp_path / "new" / "ui.json"  # its folder is made, as `collie up` makes its --info-json's
     cmd = [sys.executable, "-m", "labeling_ui.cli"]
     args = ["--api", stack.api, "--port", "0", "--info-json", str(info), "--token", "tok&en"]
     proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, text=True)
@@ -210,6 +210,44 @@ def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0
     assert f"labeler URL: {served['url']}?token=tok%26en" in out
+    assert [p.name for p in info.parent.iterdir()] == ["ui.json"]  # written whole: no partial file left
+
+
+@pytest.mark.parametrize(
+    ("flags", "said"),
+    [
+        (["--fps", "0"], "argument --fps: 0 must be > 0 and ≤ 1000"),
+        (["--fps", "-3"], "argument --fps: -3 must be > 0"),
+        (["--lease-s", "-1"], "argument --lease-s: -1 must be > 0 and ≤ 3600"),  # the service's bounds
+        (["--run", "0"], "argument --run: 0 is not an id"),
+        (["--host", "999.9.9.9"], "argument --host: '999.9.9.9' is not an IPv4 address"),
+        (["--host", "192.0.2.1"], "--host 192.0.2.1 is not an address of this machine ("),  # TEST-NET-1: no one's
+        (["--info-json", "{tmp}"], "--info-json {tmp} is a folder; give a file path"),
+        (["--info-json", "{tmp}/file/ui.json"], "cannot create the folder of --info-json {tmp}/file: "),
+    ],
+)
+def test_what_the_ui_cannot_serve_with_is_refused_in_one_line_before_it_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], said: str
+) -> None:
+    from collie.cli import main
+
+    (tmp_path / "file").write_text("")
+    flags = [f.format(tmp=tmp_path) for f in flags]
+    ended: list[BaseException] = []
+
+    def command() -> None:  # in a thread: a UI that starts after all (or hangs binding) fails the test, not hangs it
+        try:
+            main(["label-ui", "--api", "http://127.0.0.1:9", "--port", "0", "--warm", "point", *flags])
+        except BaseException as exc:  # argparse's exit, or the command's own line
+            ended.append(exc)
+
+    thread = threading.Thread(target=command, daemon=True)
+    thread.start()
+    thread.join(30)
+    assert ended and isinstance(ended[0], SystemExit), ended or "not refused: still running after 30 s"
+    code = ended[0].code
+    assert code != 0 and said.format(tmp=tmp_path) in capsys.readouterr().err + str(code)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing written
 
 
 def test_a_port_in_use_is_said_with_the_port_served_instead(stack: Stack, tmp_path: Path) -> None:
