@@ -29,6 +29,7 @@ from pydantic import (
     model_validator,
 )
 
+from collie.env_names import EnvName
 from collie.labels import Label
 from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
 
@@ -154,7 +155,7 @@ class EnvDims(Wire):
 
 
 class RunCreate(Wire):
-    env: Name
+    env: EnvName
     task: Name
     method: Name
     config: dict[str, Any] = Field(default_factory=dict)

@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
+import collie.env_names
 from trainer.envs import ENV_NAMES, StepBatch, VectorEnv, load_model, make_env, model_path, raw_step_rate
 from trainer.envs.ant import quat_pitch
 
@@ -20,6 +21,7 @@ PIXEL_ENVS = {"quadruped", "humanoid"}
 
 def test_env_names() -> None:
     assert set(ENV_NAMES) == set(DIMS) | PIXEL_ENVS
+    assert ENV_NAMES == collie.env_names.ENV_NAMES  # the names the service takes runs of, and the UI replays
 
 
 @pytest.mark.parametrize("name", DIMS)

@@ -14,7 +14,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from collie.argtypes import http_url, int_in, record_id, seed
 from collie.processes import LockHeld, hold_lock
@@ -28,6 +28,7 @@ from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
+    from collie.env_names import EnvName
     from trainer.feedback.http import HttpFeedback
 
 MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
@@ -245,7 +246,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length, skill_dim=cfg.skill_dim)
         env.close()
         spec = RunCreate(
-            env=cfg.env,
+            env=cast("EnvName", cfg.env),  # one of the registry's, which are ENV_NAMES (tests/test_envs.py)
             task=cfg.task,
             method=cfg.method,
             config=cfg.to_dict(),

@@ -12,7 +12,7 @@ from sqlalchemy import Connection, case, func, insert, select, update
 from backend.models import Query, Run
 from backend.services import events
 from backend.services.auth import Caller
-from backend.services.errors import Conflict, NotFound
+from backend.services.errors import Conflict, Invalid, NotFound
 from collie.schemas import (
     FINISHED,
     Control,
@@ -35,7 +35,8 @@ _CONTROL_OF_ACTION: dict[str, Control] = {"pause": "pause", "resume": "run", "st
 
 def stored_definition(spec: RunCreate) -> dict[str, Any] | None:
     """The rule the run keeps: the one posted, else the built-in task of that name (package code,
-    not a user's file); None for an instruction-only run or a name no built-in has."""
+    not a user's file); None for an instruction-only run. A name no built-in has for the env is
+    refused (422): a run without a rule or an instruction gives labelers nothing to judge by."""
     if spec.task_definition is not None:
         return spec.task_definition.to_json()
     if spec.instruction is not None:
@@ -44,8 +45,8 @@ def stored_definition(spec: RunCreate) -> dict[str, Any] | None:
     try:
         task = get_task(spec.task, spec.env, layout_seed=seed if isinstance(seed, int) else None)
         return to_definition(task, source="builtin").to_json()
-    except ValueError:  # an unknown name: the run has no rule the clients can judge by
-        return None
+    except ValueError as exc:
+        raise Invalid(f"{exc}: post the run's task_definition, or an instruction") from None
 
 
 def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:

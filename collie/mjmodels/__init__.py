@@ -15,12 +15,13 @@ from typing import Any
 
 import mujoco
 
+from collie.env_names import ENV_NAMES
 from collie.mjmodels.floor import add_floor_material, paint_floor
 from collie.mjmodels.quiet import quiet_compile
 from collie.tasks import HAZARD_RADIUS, hazard_layout
 
 HERE = Path(__file__).parent
-MODEL_NAMES: tuple[str, ...] = ("point", "ant", "half_cheetah", "quadruped", "humanoid", "car")
+MODEL_NAMES: tuple[str, ...] = ENV_NAMES
 GYMNASIUM_FILES = {"ant": "ant.xml", "half_cheetah": "half_cheetah.xml"}
 PIXEL_CAMERA = "pixels"  # the tracking camera the pixel envs observe through
 # (behind, above) the centre of mass, metres, of each pixel env's camera

@@ -32,8 +32,21 @@ def test_a_builtin_name_stores_its_definition(trainer: CollieClient, labeler: Co
     assert run.task_definition == to_definition(get_task("range", "point"), source="builtin")
     seen = labeler.run(run.id)  # every client reads the same stored copy
     assert seen.task_definition == run.task_definition and seen.instruction is None
-    unknown = trainer.create_run(make_run_spec(task="no_such_task"))
-    assert unknown.task_definition is None and unknown.instruction is None
+
+
+def test_a_run_of_no_known_env_or_task_is_refused(live: BackgroundServer) -> None:
+    """Its labelers could not replay it or would have nothing to judge it by."""
+    body = make_run_spec().model_dump(mode="json")
+    headers = {"Authorization": f"Bearer {TOKENS['trainer']}"}
+    before = httpx.get(f"{live.url}/api/runs", headers=headers).json()
+    for change, said in (
+        ({"env": "moon"}, "Input should be 'point', 'ant', 'half_cheetah', 'quadruped', 'humanoid' or 'car'"),
+        ({"task": "no_such_task"}, "unknown task 'no_such_task'; valid tasks: north,"),
+        ({"task": "not_flip"}, "task 'not_flip' is not defined for env 'point'"),
+    ):
+        answer = httpx.post(f"{live.url}/api/runs", json={**body, **change}, headers=headers)
+        assert answer.status_code == 422 and said in answer.text, answer.text
+    assert httpx.get(f"{live.url}/api/runs", headers=headers).json() == before  # nothing half-made
 
 
 def test_a_posted_definition_or_an_instruction_is_kept_as_posted(trainer: CollieClient) -> None:

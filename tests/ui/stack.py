@@ -91,7 +91,7 @@ class Stack:
         redundancy: int | None = None,
     ) -> RunRead:
         """A run waiting for labels with one session of n_queries segments, rolled out in `env`
-        (or in `rollout_env`, to make a run whose model the UI cannot build); `redundancy`: labels
+        (or in `rollout_env`, to make a run whose model cannot pose its segments); `redundancy`: labels
         per query, where the service has that run setting (RunCreate.redundancy)."""
         rollout_env = rollout_env or env
         extra: dict[str, object] = {}

@@ -223,7 +223,7 @@ def test_waiting_screen_then_new_queries_appear(stack: Stack, browser: Browser, 
 
 
 def test_unbuildable_model_can_be_skipped(stack: Stack, browser: Browser, artifacts: Path) -> None:
-    broken = stack.post_run("no_such_robot", 2, rollout_env="point")
+    broken = stack.post_run("ant", 2, rollout_env="point")  # point's states: Ant's model cannot pose them
     page = open_labeler(
         browser, stack.ui(broken.id, min_dwell_s=NO_DWELL, min_played=0.0).labeler_url(stack.new_labeler("skipper"))
     )
