@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from collie.addresses import is_loopback, link_host, local_address, network_address
-from collie.argtypes import ipv4_host, port, sqlite_file
+from collie.addresses import is_loopback, link_host, local_address, network_address, not_listenable
+from collie.argtypes import ipv4_host, port, seed, sqlite_file
 from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
 from collie.startup import LOG_ENV, mark
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words")
     p.add_argument("--method", default="collie", help="collie (default), metra, oracle, or a baseline (collie train)")
     p.add_argument("--preset", default="cpu", help="cpu (default: this machine), paper (a GPU) or smoke (seconds)")
-    p.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
     p.add_argument(
         "--teacher",
         choices=("none", "oracle"),
@@ -175,11 +175,9 @@ def checked(args: argparse.Namespace) -> Path:
         raise ValueError(f"--info-json {args.info_json} is a folder; give a file path")
     if args.max_restarts < 0:
         raise ValueError("--max-restarts must be ≥ 0")
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        try:
-            probe.bind((args.host, 0))
-        except OSError as exc:
-            raise ValueError(f"--host {args.host} is not an address of this machine ({exc.strerror})") from None
+    cannot = not_listenable(args.host)
+    if cannot is not None:
+        raise ValueError(f"--host {args.host} is not an address of this machine ({cannot})")
     if args.teacher_rate is not None and args.teacher_rate <= 0:
         raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
     if not (out / "tokens.json").exists():  # a new stack takes COLLIE_<ROLE>_TOKEN (stack_tokens): as the service would
@@ -429,7 +427,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
 def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
     """env, task, method and preset of the run: a resumed run's own (with a warning for the flags
     given that differ: the trainer keeps the run's), else those asked for."""
-    asked = {"env": args.env, "task": run_name(args), "method": args.method, "preset": args.preset}
+    asked = {"env": args.env, "task": run_name(args), "method": args.method, "preset": args.preset, "seed": args.seed}
     try:
         config = json.loads(stored.read_text()) if stored is not None else {}
     except (OSError, ValueError):
@@ -437,7 +435,7 @@ def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
     if args.instruction is not None or args.task is None:  # only a task given by name is compared
         config.pop("task", None)
     runs = {k: str(config.get(k, v)) for k, v in asked.items()}
-    differ = [f"--{k} {asked[k]}" for k in asked if runs[k] != asked[k]]
+    differ = [f"--{k} {asked[k]}" for k in asked if runs[k] != str(asked[k])]
     if differ:
         print(f"collie up: warning: resuming a {runs['env']} {runs['task']} {runs['method']} run; "
               f"{', '.join(differ)} ignored (another --out starts a new run)", file=sys.stderr)  # fmt: skip

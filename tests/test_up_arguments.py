@@ -3,6 +3,8 @@ error, and leaves a start that never gets ready when asked to stop."""
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import sqlite3
 import subprocess
@@ -13,7 +15,7 @@ from pathlib import Path
 import pytest
 from unprivileged import as_nobody, closed_folder
 
-from collie.up import Stopped, last_error, wait_for
+from collie.up import Stopped, last_error, wait_for, what_runs
 
 
 def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
@@ -162,3 +164,17 @@ def test_a_refusal_names_the_paths_it_has_and_no_none() -> None:
     assert refusal_line(PermissionError(13, "Permission denied", "/a")) == "permission denied: /a"
     assert refusal_line(PermissionError(13, "Permission denied", "/a", None, "/b")) == "permission denied: /a → /b"
     assert refusal_line(PermissionError("not allowed")) == "not allowed"
+
+
+def test_flags_a_resumed_run_ignores_are_named_seed_included(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    stored = tmp_path / "config.json"
+    stored.write_text(json.dumps({"env": "point", "task": "north", "method": "collie", "preset": "cpu", "seed": 0}))
+    args = argparse.Namespace(env="point", task="north", method="collie", preset="cpu", seed=5, instruction=None)
+    assert what_runs(args, stored) == "point north collie (cpu)"
+    said = capsys.readouterr().err
+    assert "resuming a point north collie run; --seed 5 ignored (another --out starts a new run)" in said
+    args.seed = 0
+    what_runs(args, stored)
+    assert capsys.readouterr().err == ""  # nothing differs: nothing said
