@@ -155,6 +155,8 @@ def run_name(args: argparse.Namespace) -> str:
     return args.task or getattr(args, "file_task", None) or "north"
 
 
+STACK_LOCK = "up.lock"  # in OUT, held by the stack and its parts: it marks a stack's folder too (collie archive)
+STACK_RUN = "trainer"  # OUT's run folder, the trainer's --out
 DASHED_VALUE_OPTIONS = ("--train-args",)  # its value is flags: `--train-args "--compile"` (collie/cli.py)
 
 # `collie train` flags that `collie up` sets itself: given in --train-args they would contradict it
@@ -223,7 +225,7 @@ def locked(out: Path) -> int:
     the descriptor), so a second `collie up` on the same OUT — or on what a killed one left running
     — is refused; ValueError naming the processes in the way."""
     try:
-        return hold_lock(out / "up.lock")
+        return hold_lock(out / STACK_LOCK)
     except LockHeld:
         try:
             before = json.loads((out / "children.json").read_text())
@@ -318,7 +320,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     shown = link_host(args.host)  # what the links name: where other machines reach us
     serve = ["serve", "--fd", str(sock.fileno()), *(["--db", str(db)] if db else []), "--tokens-json", str(tokens_file)]
     service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
-    trainer_out = out / "trainer"
+    trainer_out = out / STACK_RUN
     memo = trainer_out / "service_run.json"
     resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
     if not resume:

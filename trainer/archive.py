@@ -3,7 +3,7 @@
 A robot run folder holds ≈ 90 MB (replay, checkpoint) and is gone when its machine is; its results
 are a few files of kilobytes. This copies those — summary.json, config.json, task.json,
 sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_latest.npz) — into
-DIR/<the run folder's name>, a folder `collie report` reads like the run itself (tables, skill
+DIR/<the run folder's name> (a `collie up` stack's, OUT/trainer: its stack's), a folder `collie report` reads like the run itself (tables, skill
 figures, diagnostics). A ROOT (a folder holding run folders, as `collie sweep --out` writes) has
 each finished run below it archived at the same relative path under DIR; the unfinished ones, and
 those whose summary.json cannot be read, are named and left out. A run whose name the archive
@@ -18,6 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from collie.up import STACK_LOCK, STACK_RUN
 from trainer.run_files import RunFolderError, copy_whole, read_json_object
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
@@ -60,7 +61,7 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
         summary = read_json_object(source / "summary.json")
         if not is_finished(source):
             raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
-        out = out_root / (relative or source.resolve().name)
+        out = out_root / (relative or archive_name(source))
         if out.resolve() == source.resolve():
             raise ArchiveError(f"{source} is already in {out_root}")
         differs = another_run(out, source) if (out / "summary.json").exists() else None
@@ -98,12 +99,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def archive_name(source: Path) -> str:
+    """A run's name in the archive: its folder's, but a `collie up` stack's run (OUT/trainer, the
+    same name in every stack) goes by its stack's folder."""
+    folder = source.resolve()
+    if folder.name == STACK_RUN and (folder.parent / STACK_LOCK).exists():
+        return folder.parent.name
+    return folder.name
+
+
 def jobs_in(given: Path, out_root: Path) -> list[tuple[Path, Path | None]]:
-    """(run folder, its path under the archive or None for its name) for `given`: a run folder or a
-    root holding them (its unfinished and unreadable ones named on stdout); ArchiveError if it is
-    neither."""
+    """(run folder, its path under the archive or None for its name) for `given`: a run folder, a
+    `collie up` stack's folder (its run), or a root holding run folders (its unfinished and
+    unreadable ones named on stdout); ArchiveError if it is none of them."""
     if not given.is_dir():
         raise ArchiveError(f"{given} is not a folder")
+    if (given / STACK_LOCK).exists() and (given / STACK_RUN).is_dir():
+        given = given / STACK_RUN
     if (given / "summary.json").exists():
         return [(given, None)]
     finished, unfinished, unreadable = runs_below(given)

@@ -158,3 +158,25 @@ def test_a_run_that_clashes_with_the_archive_is_named_with_what_differs_and_the_
     assert f"collie archive: 1 of 2 runs not archived: {sweep / 'point-north-metra-s0'}" in err
     assert (kept / "point-north-metra-s1" / "eval_latest.npz").read_bytes() == b"saved"  # archived all the same
     assert not (held / "eval_latest.npz").exists()  # the clash left as it was
+
+
+def test_collie_up_runs_go_by_their_stacks_names(tmp_path, capsys):
+    """Every stack's run folder is OUT/trainer: archived by its stack's folder name, two stacks' runs
+    sit side by side (given as the run folder or as the stack's folder), not one refused as a clash."""
+    kept = tmp_path / "results"
+    for stack, env in (("up-point-north", "point"), ("up-ant-north", "ant")):
+        run = tmp_path / stack / "trainer"
+        run.mkdir(parents=True)
+        (tmp_path / stack / "up.lock").write_text("")
+        (run / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": env, "seed": 0}}))
+        (run / "eval_latest.npz").write_bytes(b"saved")
+    assert main(["archive", str(tmp_path / "up-point-north" / "trainer"), "--out", str(kept)]) == 0
+    assert main(["archive", str(tmp_path / "up-ant-north"), "--out", str(kept)]) == 0
+    assert sorted(p.name for p in kept.iterdir()) == ["up-ant-north", "up-point-north"]
+    assert json.loads((kept / "up-ant-north" / "summary.json").read_text())["config"]["env"] == "ant"
+    plain = tmp_path / "sweep" / "trainer"  # a folder named trainer outside a stack keeps its name
+    plain.mkdir(parents=True)
+    (plain / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": "point"}}))
+    (plain / "eval_latest.npz").write_bytes(b"saved")
+    assert main(["archive", str(plain), "--out", str(kept)]) == 0
+    assert (kept / "trainer" / "summary.json").exists()
