@@ -3,13 +3,14 @@
 A robot run folder holds ≈ 90 MB (replay, checkpoint) and is gone when its machine is; its results
 are a few files of kilobytes. This copies those — summary.json, config.json, task.json,
 sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_latest.npz) — into
-DIR/<the run folder's name> (a `collie up` stack's, OUT/trainer: its stack's), a folder
-`collie report` reads like the run itself (tables, skill figures, diagnostics). A ROOT (a folder holding run folders, as `collie sweep --out` writes) has
-each finished run below it archived at the same relative path under DIR; the unfinished ones, and
-those whose summary.json cannot be read, are named and left out. A run whose name the archive
-already holds for another configuration is refused naming what differs (where and how each ran
-aside: trainer.same_run.NOT_THE_RUN); the others are archived, and the exit code is 2. No checkpoint or replay is
-copied, so an archived run cannot be resumed or given a downstream task; run those before archiving.
+DIR/<the run folder's name> (a `collie up` stack's, OUT/trainer: its stack's), a folder `collie
+report` reads like the run itself (tables, skill figures, diagnostics). A ROOT (a folder holding run
+folders, as `collie sweep --out` writes) has each finished run below it archived at the same
+relative path under DIR; the unfinished ones, and those whose summary.json cannot be read, are named
+and left out. A run whose name the archive already holds for another configuration is refused naming
+what differs (where and how each ran aside: trainer.same_run.NOT_THE_RUN); the others are archived,
+and the exit code is 2. No checkpoint or replay is copied, so an archived run cannot be resumed or
+given a downstream task; run those before archiving.
 """
 
 from __future__ import annotations
