@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     wanted = argv[0] if argv and not argv[0].startswith("-") else None
     for name, (module_name, help_text) in SUBCOMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        # train: no abbreviated flags, so what `up --train-args` and `sweep -- …` may not set is matched exactly
+        p = sub.add_parser(name, help=help_text, description=help_text, allow_abbrev=name != "train")
         if name == wanted:  # only import the module we run
             try:
                 module = importlib.import_module(module_name)

@@ -13,7 +13,8 @@ def next_feedback_epoch(run: RunRead) -> int | None:
     every, warmup = config.get("feedback_every"), config.get("warmup", 0)
     if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
         return None
-    asked = run.queue.pending + run.queue.leased + run.queue.labelled  # the budget counts what was asked
+    q = run.queue  # the budget counts what was asked, retired ones too (the trainer asked them)
+    asked = q.pending + q.leased + q.labelled + q.retired
     if run.n_total is not None and max(run.n_labels, asked) >= run.n_total:
         return None
     after = run.epoch + 1

@@ -26,6 +26,7 @@ from collie.addresses import is_loopback, link_host, local_address, network_addr
 from collie.argtypes import ipv4_host, port, seed, sqlite_file
 from collie.feedback_schedule import next_feedback_epoch
 from collie.processes import LockHeld, hold_lock
+from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tokens import MIN_TOKEN, TOKEN_ENV, random_token, read_tokens_file, weakness, write_secret
@@ -155,8 +156,6 @@ def run_name(args: argparse.Namespace) -> str:
     return args.task or getattr(args, "file_task", None) or "north"
 
 
-STACK_LOCK = "up.lock"  # in OUT, held by the stack and its parts: it marks a stack's folder too (collie archive)
-STACK_RUN = "trainer"  # OUT's run folder, the trainer's --out
 DASHED_VALUE_OPTIONS = ("--train-args",)  # its value is flags: `--train-args "--compile"` (collie/cli.py)
 
 # `collie train` flags that `collie up` sets itself: given in --train-args they would contradict it
@@ -373,11 +372,12 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     # short requests: one sent to our socket before a service that then died is never answered
     with CollieClient(api, tokens["operator"], timeout_s=WATCH_TIMEOUT_S) as client:
         wait_healthy(client, service, logs / "service.log", stopping)
-        if resume:
-            held_by_database(client, json.loads(memo.read_text())["run_id"], memo, db)
+        resumed = json.loads(memo.read_text())["run_id"] if resume else None
+        if resumed is not None:
+            held_by_database(client, resumed, memo, db)
     mark("waited: service healthy")
-    if resume:
-        run_id = json.loads(memo.read_text())["run_id"]
+    if resumed is not None:
+        run_id = resumed
     else:
         run_id = wait_for(memo, trainer, "the trainer", stopping=stopping, log=logs / "trainer.log")["run_id"]
     mark("waited: run created")
@@ -482,10 +482,12 @@ def wait_healthy(
 def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | None) -> None:
     """The run OUT/trainer belongs to is in the database, else RuntimeError saying so: a trainer
     resumed on a database without it would only ever be refused (404) and restarted."""
-    from collie.client import ApiError
+    from collie.client import ApiError, Unavailable
 
     try:
         client.run(run_id)
+    except Unavailable as exc:  # it died or stopped answering just after it was healthy
+        raise RuntimeError(f"the service did not answer when asked for run {run_id}: {exc}") from None
     except ApiError as exc:
         if exc.status != 404:
             raise RuntimeError(f"the service answered {exc} when asked for run {run_id}") from None

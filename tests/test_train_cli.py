@@ -362,3 +362,11 @@ def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path)
     assert marks.sent.is_set(), err[-3000:]
     assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
     assert not (tmp_path / "run" / "summary.json").exists()  # it ended before training, not after
+
+
+def test_an_abbreviated_flag_is_not_taken_for_the_flag(tmp_path: Path) -> None:
+    """`--ou X` would be `--out X` to argparse by default: then `collie up --train-args` and `collie
+    sweep -- …`, which refuse the flags they set themselves, would have to know every prefix."""
+    proc = train("--epochs", "1", "--ou", str(tmp_path / "run"), timeout=60)
+    assert proc.returncode == 2 and "unrecognized arguments: --ou" in proc.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "run").exists()

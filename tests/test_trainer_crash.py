@@ -252,3 +252,21 @@ def test_sessions_nobody_answers_in_time_still_spend_the_budget(tmp_path):
             asked = operator.queries(run_id)
             assert (len(asked), operator.run(run_id).n_total) == (6, 6)
             assert sorted({q.session for q in asked}) == [0, 1, 2]
+
+
+def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(tmp_path):
+    with running_service(tmp_path) as api:
+        log = tmp_path / "trainer.log"
+        first = cli(*train_args(tmp_path / "point", api, "--epochs", "2", "--feedback-timeout", "0.5"), log=log)
+        assert first.wait(timeout=300) == 0, log.read_text()[-3000:]
+        run_id = json.loads((tmp_path / "point" / "service_run.json").read_text())["run_id"]
+        other = cli(*train_args(tmp_path / "ant", api, "--env", "ant", "--run-id", str(run_id)), log=log)
+        assert other.wait(timeout=300) == 2
+        said = log.read_text()
+        assert (
+            f"collie train: error: run {run_id} on the service is not this trainer's: --env ant here, point there"
+            in said
+        )
+        assert "Traceback" not in said
+        with CollieClient(api, TOKENS["operator"]) as operator:
+            assert operator.run(run_id).status == "finished"  # left as it was

@@ -19,7 +19,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from collie.up import STACK_LOCK, STACK_RUN
+from collie.stack_folder import STACK_LOCK, STACK_RUN
 from trainer.run_files import RunFolderError, copy_whole, read_json_object
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished

@@ -29,6 +29,7 @@ from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_sto
 
 if TYPE_CHECKING:
     from collie.env_names import EnvName
+    from collie.schemas import RunRead
     from trainer.feedback.http import HttpFeedback
 
 MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
@@ -112,7 +113,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given, help=note)
 
 
-MAX_HIDDEN = 65_536  # units per layer: a wider one's weights (hidden² each) fill no machine's memory
+MAX_HIDDEN = 65_536  # units per layer: one layer this wide already holds 17 GB of weights (hidden² float32)
 
 
 def int_type(name: str) -> Callable[[str], int]:
@@ -234,8 +235,12 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
         held = source.client.run(source.run_id)
-        if held.control != "stop" and held.status != "failed" and cfg.epochs > (held.epochs_total or 0):
-            source.client.extend(source.run_id, cfg.epochs)  # more --epochs: a finished run reopens for them
+        unlike = unlike_the_run(held, cfg)
+        if unlike:  # its sessions would not fit the run (the service refuses other dims) nor its labels mean the same
+            raise ValueError(
+                f"run {source.run_id} on the service is not this trainer's: {'; '.join(unlike)} (give the run's "
+                "flags, or no --run-id for a new run)"
+            )
         rule = from_stored(held.task_definition, held.instruction)
         if rule.task is None and rule.instruction is None:
             raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")
@@ -261,6 +266,17 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     memo.parent.mkdir(parents=True, exist_ok=True)
     write_json(memo, {"api": args.api, "run_id": source.run_id})
     return source, rule
+
+
+def unlike_the_run(held: RunRead, cfg: Config) -> list[str]:
+    """Where this trainer's config differs from the service's run in what its sessions carry."""
+    pairs = {
+        "--env": (held.env, cfg.env),
+        "--method": (held.method, cfg.method),
+        "--segment-length": (held.dims.horizon, cfg.segment_length),
+        "--skill-dim": (held.dims.skill_dim, cfg.skill_dim),
+    }
+    return [f"{flag} {mine} here, {theirs} there" for flag, (theirs, mine) in pairs.items() if theirs != mine]
 
 
 RUN_OUTPUTS = (  # what the end-of-run line lists, where written
@@ -457,9 +473,16 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if _TERM_ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
+    from collie.client import ApiError
     from trainer.feedback import SourceRefused
 
     try:
+        if feedback is not None and args.resume:  # once the run can train: a reopened run always has its trainer
+            try:
+                feedback.extend_to(cfg.epochs)
+            except ApiError as exc:
+                print(f"collie train: error: the labeling service at {args.api} answered {exc}", file=sys.stderr)
+                return 2
         summary = trainer.run(resume=args.resume)
     except ResumeError as exc:  # a damaged or missing file of the run folder, named
         print(f"collie train: error: {exc}", file=sys.stderr)

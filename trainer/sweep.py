@@ -419,7 +419,10 @@ class _Refusal(Exception):
 
 
 class _TrainParser(argparse.ArgumentParser):
-    """`collie train`'s parser, raising instead of exiting."""
+    """`collie train`'s parser, raising instead of exiting; no abbreviated flags, as collie/cli.py builds it."""
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog=prog, allow_abbrev=False)
 
     def error(self, message: str) -> NoReturn:
         raise _Refusal(message)

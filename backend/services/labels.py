@@ -47,6 +47,7 @@ from collie.schemas import (
     VotesDiscarded,
 )
 from collie.task_schemas import TaskDefinition
+from collie.tasks import task_for_run
 from collie.tasks.classes import GOOD
 
 _EVENT_COLUMNS = (
@@ -90,6 +91,7 @@ _LOOKUP = (
         Run.redundancy,
         Run.task,
         Run.task_definition,
+        Run.instruction,
         LabelVote.event_id.label("my_vote_event_id"),
         _REQUEST_SEEN.label("seen_event_id"),
     )
@@ -241,10 +243,25 @@ def _lookup_or_repeat(
     return q
 
 
-def _check_good(run_id: int, q: Any) -> None:
+def _takes_good(conn: Connection, run_id: int, q: Any) -> bool:
+    """Whether the run's rule calls any state good; a run without a rule (an instruction) takes
+    every class. A run stored before rules travelled is judged by its built-in task's name, as the
+    labeling UI judges it (collie.tasks.task_for_run); one of no known task takes every class."""
+    if q.task_definition is not None:
+        return TaskDefinition.model_validate(q.task_definition).can_be_good
+    if q.instruction is not None:
+        return True
+    try:
+        task = task_for_run(runs.get(conn, run_id))
+    except ValueError:
+        return True
+    return task is None or task.can_be_good
+
+
+def _check_good(conn: Connection, run_id: int, q: Any) -> None:
     """A good label on a run whose rule never calls a state good is refused (as the labeling UI
-    refuses the key). A run without a rule (an instruction) takes every class."""
-    if q.task_definition is not None and not TaskDefinition.model_validate(q.task_definition).can_be_good:
+    refuses the key)."""
+    if not _takes_good(conn, run_id, q):
         raise Invalid(
             f"run {run_id}'s task '{q.task}' never calls a state good: label the segment 0 (bad) or 1 (neutral)"
         )
@@ -256,7 +273,7 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
     if isinstance(q, LabelAck):
         return q
     if value == GOOD:
-        _check_good(run_id, q)
+        _check_good(conn, run_id, q)
     now = time.time()
     live = q.status == "leased" and q.lease_expires_at > now
     holder = live and q.lease_owner_id == caller.id

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import httpx
+import pytest
 from alembic import command
 from sqlalchemy import text
 
@@ -14,7 +15,8 @@ from backend.db import Database
 from backend.main import create_app
 from backend.migrate import alembic_config, upgrade
 from backend.server import BackgroundServer
-from collie.client import CollieClient
+from collie.client import ApiError, CollieClient
+from collie.schemas import StatusEvent
 from collie.task_schemas import TaskDefinition
 from collie.tasks import get_task, task_for_run, to_definition
 
@@ -93,8 +95,16 @@ def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path:
         )
     upgrade(db.engine)
     db.dispose()
-    with BackgroundServer(create_app(settings_for(path))) as server, CollieClient(server.url, TOKENS["labeler"]) as c:
+    with (
+        BackgroundServer(create_app(settings_for(path))) as server,
+        CollieClient(server.url, TOKENS["labeler"]) as c,
+        CollieClient(server.url, TOKENS["operator"]) as operator,
+    ):
         old = c.run(1)
+        operator.post_session(1, make_session(0, 1))
+        c.claim(1)
+        with pytest.raises(ApiError, match="run 1's task 'hole' never calls a state good"):  # judged by its name
+            c.submit(1, "0-0", 2)
     assert old.task_definition is None and old.instruction is None
     assert task_for_run(old).to_dict() == get_task("hole", "point").to_dict()  # type: ignore[union-attr]
 
@@ -126,3 +136,31 @@ def test_a_good_label_is_refused_where_the_rule_never_calls_a_state_good(
         for run in (ranged, words):
             labeler.claim(run.id)
             assert labeler.submit(run.id, "0-0", 2).label == 2
+
+
+def test_a_run_is_extended_only_while_it_may_train_again(trainer: CollieClient, operator: CollieClient) -> None:
+    """A finished run reopens for more epochs; a running one only takes the new total; fewer epochs,
+    a run an operator stopped and a failed run are refused (409)."""
+    finished = trainer.create_run(make_run_spec().model_copy(update={"epochs_total": 6}))
+    trainer.set_status(finished.id, "finished", epoch=6)
+    reopened = trainer.extend(finished.id, 10)
+    assert (reopened.status, reopened.epoch, reopened.epochs_total) == ("training", 6, 10)
+    status = [e.data for e in trainer.events(finished.id).events if isinstance(e, StatusEvent)][-1]
+    assert (status.status, status.message) == ("training", "extended to 10 epochs")
+    running = trainer.create_run(make_run_spec().model_copy(update={"epochs_total": 6}))
+    trainer.set_status(running.id, "training", epoch=3)
+    last = trainer.events(running.id).last_id
+    assert (trainer.extend(running.id, 8).status, trainer.run(running.id).epochs_total) == ("training", 8)
+    assert trainer.events(running.id, after=last).events == []  # nothing to tell the stream
+    with pytest.raises(ApiError, match="extending means more, not 7"):
+        trainer.extend(running.id, 7)
+    stopped = trainer.create_run(make_run_spec().model_copy(update={"epochs_total": 6}))
+    operator.stop(stopped.id)
+    trainer.set_status(stopped.id, "finished", epoch=2, message="stopped by an operator")
+    with pytest.raises(ApiError, match="was stopped by an operator: it is not extended"):
+        trainer.extend(stopped.id, 10)
+    failed = trainer.create_run(make_run_spec().model_copy(update={"epochs_total": 6}))
+    trainer.set_status(failed.id, "failed", epoch=2)
+    with pytest.raises(ApiError, match="failed: it is not extended"):
+        trainer.extend(failed.id, 10)
+    assert [trainer.run(r.id).status for r in (stopped, failed)] == ["finished", "failed"]

@@ -24,9 +24,9 @@ def test_next_feedback_epoch_follows_the_trainers_schedule() -> None:
     assert next_feedback_epoch(r.model_copy(update={"epoch": 12})) == 15
     assert next_feedback_epoch(r.model_copy(update={"config": {}})) is None
     assert next_feedback_epoch(r.model_copy(update={"n_total": 4, "n_labels": 4})) is None  # budget spent
-    asked = QueueCounts(pending=3, leased=1, labelled=0, retired=2)  # asked, not labelled yet: spent too
+    asked = QueueCounts(pending=2, leased=1, labelled=0, retired=1)  # asked, not labelled (yet, or ever): spent too
     assert next_feedback_epoch(r.model_copy(update={"n_total": 4, "queue": asked})) is None
-    assert next_feedback_epoch(r.model_copy(update={"n_total": 5, "queue": asked})) == 10  # retired ones are not
+    assert next_feedback_epoch(r.model_copy(update={"n_total": 5, "queue": asked})) == 10
     assert next_feedback_epoch(r.model_copy(update={"epoch": 12, "epochs_total": 14})) is None  # past the run's end
     assert next_feedback_epoch(r.model_copy(update={"epoch": 12, "epochs_total": 15})) == 15
 

@@ -98,6 +98,13 @@ class HttpFeedback(FeedbackSource):
             run = client.create_run(spec)
         return cls(api, token, run.id, **kwargs)
 
+    def extend_to(self, epochs: int) -> None:
+        """More epochs than the service's run has (a resumed trainer given a larger --epochs): a
+        finished run reopens for them. One an operator stopped, or one that failed, stays ended."""
+        held = self._retry(lambda: self.client.run(self.run_id))
+        if held.control != "stop" and held.status != "failed" and epochs > (held.epochs_total or 0):
+            self._retry(lambda: self.client.extend(self.run_id, epochs))
+
     # ---------------------------------------------------------------- the interface
 
     def collect(self, session: int, epoch: int, segments: list[Segment]) -> list[LabelEvent]:
