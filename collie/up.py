@@ -25,6 +25,7 @@ from urllib.parse import quote
 from collie.addresses import is_loopback, link_host, local_address, network_address, not_listenable
 from collie.argtypes import ipv4_host, port, seed, sqlite_file
 from collie.feedback_schedule import next_feedback_epoch
+from collie.pass_through import owned_flags
 from collie.processes import LockHeld, hold_lock
 from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
@@ -166,7 +167,7 @@ UP_OWNS = ("--out", "--api", "--run-id", "--resume", "--env", "--task", "--task-
 def checked(args: argparse.Namespace) -> Path:
     """OUT, once the arguments are known to make sense together (ValueError naming what does not)."""
     args.task_flags = task_flags(args)
-    owned = [f for f in args.train_args.split() if f.split("=")[0] in UP_OWNS]
+    owned = owned_flags(args.train_args.split(), UP_OWNS)
     if owned:
         raise ValueError(f"--train-args may not set {', '.join(owned)}: give it to collie up itself (or not at all)")
     out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")

@@ -447,16 +447,10 @@ SWEEP_OWNS = {
 def owned_problem(flags: list[str]) -> str | None:
     """The train flags after -- that set what the sweep sets for each run (as `collie up
     --train-args` refuses its own), naming what to give the sweep instead."""
-    from trainer import cli as train_cli
-
-    parser = _TrainParser(prog="collie train")
-    train_cli.add_arguments(parser)
-    known = [option for action in parser._actions for option in action.option_strings]
-    owned = owned_flags(flags, SWEEP_OWNS, known)
+    owned = owned_flags(flags, SWEEP_OWNS)
     if not owned:
         return None
-    names = [f.split("=")[0] for f in owned]  # an abbreviation (`--ou`) stands for its one option
-    options = dict.fromkeys(n if n in SWEEP_OWNS else next(o for o in known if o.startswith(n)) for n in names)
+    options = dict.fromkeys(f.split("=")[0] for f in owned)
     instead = "; ".join(f"{option}: {SWEEP_OWNS[option]}" for option in options)
     return f"flags after -- may not set {', '.join(owned)}: collie sweep sets them for each run ({instead})"
 

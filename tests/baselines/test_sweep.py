@@ -164,9 +164,13 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
             ["--methods", "lsd", "--", "--epochs", "1", "--out=/tmp/x"],
             "flags after -- may not set --out=/tmp/x: collie sweep sets them for each run (--out: give collie sweep",
         ),
-        (  # was: seed 3 run in a folder named -s0; an abbreviation argparse would expand is one too
-            ["--methods", "lsd", "--", "--seed=3", "--ou", "/tmp/x"],
-            "flags after -- may not set --seed=3, --ou: collie sweep sets them for each run (--seed: give --first-seed",
+        (  # was: seed 3 run in a folder named -s0
+            ["--methods", "lsd", "--", "--seed=3", "--out", "/tmp/x"],
+            "flags after -- may not set --seed=3, --out: collie sweep sets them for each run (--seed: give",
+        ),
+        (  # an abbreviation is no flag of collie train's (argparse would have taken it for --out)
+            ["--methods", "lsd", "--", "--ou", "/tmp/x"],
+            "collie train would refuse lsd on north (--ou /tmp/x): unrecognized arguments: --ou",
         ),
         (["--methods", "lsd", "--", "--threads", "2"], "flags after -- may not set --threads: "),
         (["--ray", "notanaddr"], "--ray 'notanaddr' is not a Ray address: auto, HOST:PORT of the head, or ray://"),
