@@ -33,7 +33,10 @@ def file_descriptor(value: str) -> int:
 
 
 def ipv4_host(value: str) -> str:
-    """An IPv4 address to listen on (whether it is this machine's is for the binding to say)."""
+    """An IPv4 address to listen on (whether it is this machine's is for the binding to say);
+    `localhost` is 127.0.0.1, what a person typing it means."""
+    if value == "localhost":
+        return "127.0.0.1"
     try:
         ipaddress.IPv4Address(value)
     except ValueError:

@@ -3,9 +3,13 @@ interface this machine's network address (never a loopback one, which is the lab
 
 from __future__ import annotations
 
+import argparse
 import socket
 
+import pytest
+
 from collie.addresses import is_loopback, link_host, local_address, network_address
+from collie.argtypes import ipv4_host
 
 
 def test_loopback_addresses_are_this_machine_only() -> None:
@@ -20,3 +24,10 @@ def test_a_bound_address_is_named_as_it_is_and_every_interface_by_the_network_ad
     found = network_address()
     assert found is None or not is_loopback(found)
     assert link_host("0.0.0.0") == (found or socket.gethostname())
+
+
+def test_a_host_to_listen_on_is_an_ipv4_address_or_localhost() -> None:
+    assert ipv4_host("0.0.0.0") == "0.0.0.0" and ipv4_host("localhost") == "127.0.0.1"
+    for name in ("example.org", "::1", "999.9.9.9"):
+        with pytest.raises(argparse.ArgumentTypeError, match="is not an IPv4 address"):
+            ipv4_host(name)
