@@ -126,9 +126,12 @@ def authenticate(request: Request, token: str | None) -> Caller:
 
 
 def path_run_id(request: Request) -> int | None:
-    """The run in the path, if any (a malformed one is left to the route's validation)."""
-    raw = request.path_params.get("run_id")
-    return int(raw) if raw is not None and str(raw).isdigit() else None
+    """The run in the path, if any (a malformed one is left to the route's validation: "²" is a
+    digit to str.isdigit but no int, and a number past MAX_INT no database column holds)."""
+    raw = str(request.path_params.get("run_id", ""))
+    if not (raw.isascii() and raw.isdigit()) or int(raw) > MAX_INT:
+        return None
+    return int(raw)
 
 
 def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> None:

@@ -62,6 +62,18 @@ def test_unknown_ids(labeler: CollieClient, run: RunRead) -> None:
         assert err.value.status == 404 and "no " in str(err.value.detail)
 
 
+@pytest.mark.parametrize("raw", ["%C2%B2", "%D9%A3", "99999999999999999999", "-1"])
+@pytest.mark.parametrize("role", ["operator", "trainer", "labeler"])
+def test_a_run_id_that_is_no_id_is_a_422(live: BackgroundServer, raw: str, role: str) -> None:
+    """Run ids "²" and "٣" are digits to str.isdigit but no int; a number past MAX_INT fits no column. Was:
+    500 from the scope check, which reads the path's run id before the route validates it."""
+    headers = {"Authorization": f"Bearer {TOKENS[role]}"}
+    for method, path in (("GET", "queries"), ("POST", "claim"), ("GET", "events")):
+        answer = httpx.request(method, f"{live.url}/api/runs/{raw}/{path}", headers=headers, timeout=30)
+        refused_role = role == "trainer" and path == "claim"  # a trainer may not claim: 403 before the path is read
+        assert answer.status_code == (403 if refused_role else 422), (method, path, answer.status_code, answer.text)
+
+
 def test_label_for_another_runs_query(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
     other = trainer.create_run(make_run_spec())
     trainer.post_session(other.id, make_session(7, 1))
