@@ -34,7 +34,7 @@ class BodyLimit:
         suffix = scope["path"].rsplit("/", 1)[-1]
         limit = self.by_suffix.get(suffix, self.default_bytes)
         declared = dict(scope["headers"]).get(b"content-length")
-        if declared is not None and (not declared.isdigit() or int(declared) > limit):
+        if declared is not None and (not (declared.isascii() and declared.isdigit()) or int(declared) > limit):
             await _reject(send, limit)
             return
         seen = 0

@@ -101,7 +101,7 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
 
 
 def _run_id(raw: object) -> int | None:
-    return int(raw) if isinstance(raw, str) and raw.isdigit() else None
+    return int(raw) if isinstance(raw, str) and raw.isascii() and raw.isdigit() else None  # "²" is a digit to isdigit
 
 
 def remember_token(client: viser.ClientHandle, token: str | None) -> None:

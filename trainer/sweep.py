@@ -349,7 +349,9 @@ def connect_ray(address: str) -> Any:
         return ray
     head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
     host, _, port = head.rpartition(":")
-    if host and port.isdigit():  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
+    if (
+        host and port.isascii() and port.isdigit()
+    ):  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
         try:
             socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
         except OSError as exc:
@@ -367,7 +369,7 @@ def ray_address_problem(address: str) -> str | None:
     if address == "auto":
         return None
     host, _, port = address.removeprefix("ray://").rpartition(":")
-    if host.strip("[]") and port.isdigit() and 0 < int(port) <= 65535:
+    if host.strip("[]") and port.isascii() and port.isdigit() and 0 < int(port) <= 65535:  # "²": no int
         return None
     return f"--ray {address!r} is not a Ray address: auto, HOST:PORT of the head, or ray://HOST:PORT"
 

@@ -77,10 +77,10 @@ async def read_body(request: Request) -> bytearray:
     """The body in one buffer, sized up front from Content-Length (BodyLimit has checked it): no
     list of chunks joined into a second copy."""
     declared = request.headers.get("content-length", "")
-    buffer = bytearray(int(declared)) if declared.isdigit() else bytearray()
+    buffer = bytearray(int(declared)) if declared.isascii() and declared.isdigit() else bytearray()
     view, filled = memoryview(buffer), 0
     async for chunk in request.stream():
-        if declared.isdigit() and filled + len(chunk) <= len(buffer):
+        if declared.isascii() and declared.isdigit() and filled + len(chunk) <= len(buffer):
             view[filled : filled + len(chunk)] = chunk
         else:
             view.release()

@@ -47,7 +47,7 @@ async def post_session(
 ) -> SessionPosted:
     """A feedback session's segments in one call; ids already stored are kept as they were."""
     declared = request.headers.get("content-length", "")
-    if declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
+    if declared.isascii() and declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
         body = await parse_body(request, SessionPost)
     else:  # a big one: validated in the worker process, stored from a thread (SQLite frees the GIL)
         body = await request.app.state.session_parser.parse(request)

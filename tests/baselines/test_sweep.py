@@ -174,6 +174,7 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         ),
         (["--methods", "lsd", "--", "--threads", "2"], "flags after -- may not set --threads: "),
         (["--ray", "notanaddr"], "--ray 'notanaddr' is not a Ray address: auto, HOST:PORT of the head, or ray://"),
+        (["--ray", "head:²"], "--ray 'head:²' is not a Ray address"),  # a digit to str.isdigit, no int: was a traceback
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
