@@ -17,6 +17,7 @@ from collie.mjmodels import MODEL_NAMES
 from collie.schemas import MAX_LEASE_S
 from collie.startup import mark
 from collie.tokens import resolve_token
+from collie.whole_files import write_whole
 from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
 
@@ -60,17 +61,6 @@ def info_folder(path: Path) -> None:
         ) from None
 
 
-def write_whole(path: Path, text: str) -> None:
-    """`text` into `path` in one rename (a reader never sees half of it), through PATH.partial
-    beside it (not PATH with its suffix swapped: `/tmp` would have become `/tmp.tmp`)."""
-    partial = path.with_name(path.name + ".partial")
-    try:
-        partial.write_text(text)
-        partial.replace(path)
-    finally:
-        partial.unlink(missing_ok=True)
-
-
 def run(args: argparse.Namespace) -> int:
     config = UiConfig(api=args.api, run_id=args.run, lease_s=args.lease_s, fps=args.fps)
     mark("imports")  # viser, mujoco, the UI's modules
@@ -96,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"labeler URL: {app.labeler_url(token)}", flush=True)
     if args.info_json is not None:  # how `collie up` learns the port when it asked for any free one
         try:
-            write_whole(args.info_json, json.dumps({"url": app.url, "port": app.port}))
+            info = json.dumps({"url": app.url, "port": app.port}).encode()
+            write_whole(args.info_json, lambda f: f.write(info))
         except OSError as exc:
             app.stop()
             said = f"cannot write --info-json {args.info_json}: {exc.strerror or exc}"

@@ -33,6 +33,7 @@ import torch
 
 from collie import startup
 from collie.labels import Label
+from collie.whole_files import write_whole
 from trainer.acting import acting_path
 from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
@@ -52,7 +53,7 @@ from trainer.query import select_queries
 from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
-from trainer.run_files import write_json, write_whole
+from trainer.run_files import write_json
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport

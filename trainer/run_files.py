@@ -8,11 +8,12 @@ import json
 import shutil
 import zipfile
 import zlib
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
+
+from collie.whole_files import write_whole
 
 
 class RunFolderError(ValueError):
@@ -37,14 +38,6 @@ def write_json(path: Path, data: Any) -> None:
     """`data` as indented JSON at `path`, renamed into place whole."""
     partial = path.with_name(path.name + ".partial")
     partial.write_text(json.dumps(data, indent=2))
-    partial.replace(path)
-
-
-def write_whole(path: Path, write: Callable[[BinaryIO], object]) -> None:
-    """What `write` writes to a file, at `path`, renamed into place whole."""
-    partial = path.with_name(path.name + ".partial")
-    with open(partial, "wb") as f:
-        write(f)
     partial.replace(path)
 
 

@@ -10,7 +10,8 @@ from typing import BinaryIO
 import numpy as np
 import pytest
 
-from trainer.run_files import RunFolderError, copy_whole, read_arrays, read_json_object, write_json, write_whole
+from collie.whole_files import write_whole
+from trainer.run_files import RunFolderError, copy_whole, read_arrays, read_json_object, write_json
 
 
 def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -47,5 +48,6 @@ def test_a_binary_write_cut_short_leaves_the_old_file_whole(tmp_path: Path) -> N
     with pytest.raises(OSError, match="No space left"):
         write_whole(path, disk_full)
     assert int(read_arrays(path, ("epoch",))["epoch"]) == 3
+    assert not path.with_name(path.name + ".partial").exists()  # nothing half-written left beside it
     copy_whole(path, tmp_path / "archived.npz")
     assert int(read_arrays(tmp_path / "archived.npz", ("epoch",))["epoch"]) == 3

@@ -1,0 +1,22 @@
+"""Files written whole: into NAME.partial beside the file, then renamed over it in one step, so a
+reader (or a process killed mid-write) never finds half of one. Shared by the trainer's run
+folders and the labeling UI's --info-json."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+
+def write_whole(path: Path, write: Callable[[BinaryIO], object]) -> None:
+    """What `write` writes to a file, at `path`, renamed into place whole; a failed write leaves
+    the old file as it was and no .partial behind. PATH.partial, not PATH with its suffix swapped:
+    `/tmp` would have become `/tmp.tmp`."""
+    partial = path.with_name(path.name + ".partial")
+    try:
+        with open(partial, "wb") as f:
+            write(f)
+        partial.replace(path)
+    finally:
+        partial.unlink(missing_ok=True)
