@@ -17,6 +17,14 @@ class BodyTooLarge(HTTPException):
         super().__init__(413, _detail(limit))
 
 
+def declared_length(value: str | bytes | None) -> int | None:
+    """A Content-Length header's number; None when absent or not ASCII digits ("²" is a digit to
+    str.isdigit, but no int)."""
+    if value is None or not (value.isascii() and value.isdigit()):
+        return None
+    return int(value)
+
+
 def _detail(limit: int) -> str:
     return f"request body larger than {limit} bytes"
 
@@ -33,8 +41,9 @@ class BodyLimit:
             return
         suffix = scope["path"].rsplit("/", 1)[-1]
         limit = self.by_suffix.get(suffix, self.default_bytes)
-        declared = dict(scope["headers"]).get(b"content-length")
-        if declared is not None and (not (declared.isascii() and declared.isdigit()) or int(declared) > limit):
+        raw = dict(scope["headers"]).get(b"content-length")
+        declared = declared_length(raw)
+        if raw is not None and (declared is None or declared > limit):
             await _reject(send, limit)
             return
         seen = 0

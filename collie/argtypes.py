@@ -21,17 +21,6 @@ def port(value: str) -> int:
     return number
 
 
-def file_descriptor(value: str) -> int:
-    """An open file's number, as a parent process hands one down: 0 or more."""
-    try:
-        number = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{value!r} is not a file descriptor") from None
-    if number < 0:
-        raise argparse.ArgumentTypeError(f"{number} is not a file descriptor: 0 or more")
-    return number
-
-
 def ipv4_host(value: str) -> str:
     """An IPv4 address to listen on (whether it is this machine's is for the binding to say);
     `localhost` is 127.0.0.1, what a person typing it means."""
@@ -121,3 +110,5 @@ def int_in(low: int | None, high: int, why: str = "") -> Callable[[str], int]:
 
 # numpy's and torch's generators take seeds of 0 to 2^32 − 1 alike (numpy's legacy one no more)
 seed = int_in(0, 2**32 - 1, "a random generator's seed")
+# an open file a parent process hands down: 0 or more (a descriptor is a C int)
+file_descriptor = int_in(0, 2**31 - 1, "a file descriptor")

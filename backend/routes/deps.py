@@ -16,6 +16,7 @@ from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
 
 from backend.db import Database
+from backend.limits import declared_length
 from backend.models import Run
 from backend.services.auth import Caller, TokenCache
 from backend.services.errors import RunOutOfScope
@@ -76,11 +77,11 @@ def _validate(model: type[M], raw: bytes | bytearray) -> M:
 async def read_body(request: Request) -> bytearray:
     """The body in one buffer, sized up front from Content-Length (BodyLimit has checked it): no
     list of chunks joined into a second copy."""
-    declared = request.headers.get("content-length", "")
-    buffer = bytearray(int(declared)) if declared.isascii() and declared.isdigit() else bytearray()
+    declared = declared_length(request.headers.get("content-length"))
+    buffer = bytearray(declared or 0)
     view, filled = memoryview(buffer), 0
     async for chunk in request.stream():
-        if declared.isascii() and declared.isdigit() and filled + len(chunk) <= len(buffer):
+        if declared is not None and filled + len(chunk) <= len(buffer):
             view[filled : filled + len(chunk)] = chunk
         else:
             view.release()

@@ -8,6 +8,7 @@ import anyio
 from fastapi import APIRouter, Query, Request, Response
 
 from backend.db import Database
+from backend.limits import declared_length
 from backend.routes.deps import (
     DB,
     OFF_LOOP_BYTES,
@@ -46,8 +47,8 @@ async def post_session(
     run_id: RunId, request: Request, _: TrainerCaller, db: DB, settings: SettingsDep
 ) -> SessionPosted:
     """A feedback session's segments in one call; ids already stored are kept as they were."""
-    declared = request.headers.get("content-length", "")
-    if declared.isascii() and declared.isdigit() and int(declared) <= OFF_LOOP_BYTES:
+    declared = declared_length(request.headers.get("content-length"))
+    if declared is not None and declared <= OFF_LOOP_BYTES:
         body = await parse_body(request, SessionPost)
     else:  # a big one: validated in the worker process, stored from a thread (SQLite frees the GIL)
         body = await request.app.state.session_parser.parse(request)

@@ -190,7 +190,7 @@ def test_a_start_that_cannot_listen_is_a_one_line_error_that_makes_no_database(t
         refused = [
             (["--port", str(port)], f"cannot listen on 127.0.0.1:{port}: Address already in use (--port 0 takes"),
             (["--host", "999.9.9.9"], "cannot listen on 999.9.9.9:8000: "),
-            (["--fd", "-1"], "argument --fd: -1 is not a file descriptor"),
+            (["--fd", "-1"], "argument --fd: -1 is less than 0 (a file descriptor)"),
         ]
         for flags, said in refused:
             out = collie("serve", "--db", str(db), *flags, env=env)
