@@ -349,9 +349,7 @@ def connect_ray(address: str) -> Any:
         return ray
     head = address.removeprefix("ray://")  # a Ray client address names the head's host and port too
     host, _, port = head.rpartition(":")
-    if (
-        host and port.isascii() and port.isdigit()
-    ):  # not "auto": ray.init retries a silent address forever, deaf to Ctrl-C
+    if host:  # not "auto" (ray_address_problem passed it): ray.init retries a silent address forever, deaf to Ctrl-C
         try:
             socket.create_connection((host.strip("[]"), int(port)), timeout=HEAD_TIMEOUT_S).close()
         except OSError as exc:
