@@ -30,6 +30,7 @@ from collie.processes import LockHeld, hold_lock
 from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
+from collie.tasks import default_task
 from collie.tokens import MIN_TOKEN, TOKEN_ENV, random_token, read_tokens_file, weakness, write_secret
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
@@ -42,7 +43,11 @@ DATABASE_ENV = "COLLIE_DATABASE_URL"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="point", help="point (default), ant, half_cheetah, quadruped, humanoid or car")
-    p.add_argument("--task", default=None, help="a built-in task (default north), or one a --task-file registers")
+    p.add_argument(
+        "--task",
+        default=None,
+        help="a built-in task (default north; right on half_cheetah, hazard on car), or one a --task-file registers",
+    )
     p.add_argument("--task-file", type=Path, default=None, help="a task rule from a TOML/JSON/Python file")
     p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words")
     p.add_argument("--method", default="collie", help="collie (default), metra, oracle, or a baseline (collie train)")
@@ -148,13 +153,13 @@ def task_flags(args: argparse.Namespace) -> list[str]:
         # a bad file fails here, before anything starts; the run is named by its task, as collie train names it
         args.file_task = load_task_file(args.task_file, args.task, args.env, args.seed).name
         return [*flags, "--task-file", str(args.task_file.resolve())]
-    return flags or ["--task", "north"]
+    return flags or ["--task", default_task(args.env)]
 
 
 def run_name(args: argparse.Namespace) -> str:
     if args.instruction is not None:
         return "instruction"
-    return args.task or getattr(args, "file_task", None) or "north"
+    return args.task or getattr(args, "file_task", None) or default_task(args.env)
 
 
 DASHED_VALUE_OPTIONS = ("--train-args",)  # its value is flags: `--train-args "--compile"` (collie/cli.py)

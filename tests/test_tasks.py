@@ -11,7 +11,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from collie.tasks import BAD, GOOD, NEUTRAL, TASK_NAMES, Disc, Task, get_task, task_names
+from collie.env_names import ENV_NAMES
+from collie.tasks import BAD, GOOD, NEUTRAL, TASK_NAMES, Disc, Task, default_task, get_task, task_names
 from collie.tasks import registry as task_registry
 
 EPS = 1e-6
@@ -142,6 +143,19 @@ def test_not_flip_needs_a_body_that_can_tip_over() -> None:
     with pytest.raises(ValueError, match="not defined for env 'point'") as err:
         get_task("not_flip", "point")  # its pitch is undefined: every state would be neutral
     assert "half_cheetah" in str(err.value) and "not_flip" not in task_registry.tasks_for("point")
+
+
+def test_half_cheetah_has_only_the_tasks_of_a_body_on_a_line() -> None:
+    """Its y is always 0: the paper defines Right and Not-Flip for it, and a wedge or disc in x-y would
+    judge a line through the plane (North: every x but 0 bad)."""
+    assert task_registry.tasks_for("half_cheetah") == ("right", "not_flip")
+    with pytest.raises(ValueError, match="task 'north' is not defined for env 'half_cheetah'") as err:
+        get_task("north", "half_cheetah")
+    assert "half_cheetah's tasks: right, not_flip" in str(err.value)
+    assert [default_task(env) for env in ("point", "ant", "half_cheetah", "humanoid", "car")] == [
+        "north", "north", "right", "north", "hazard"
+    ]  # fmt: skip
+    assert all(default_task(env) in task_registry.tasks_for(env) for env in ENV_NAMES)
 
 
 def test_unknown_task_lists_valid_names() -> None:

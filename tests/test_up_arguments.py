@@ -145,6 +145,17 @@ def test_a_task_file_run_is_named_by_its_task_not_the_file(tmp_path: Path) -> No
     assert checked(parser.parse_args(["--task-file", str(spec)])) == Path("runs/up-point-charger")  # as collie train
 
 
+def test_a_stack_without_a_task_runs_its_envs_own() -> None:
+    import argparse
+
+    from collie.up import add_arguments, checked, task_flags
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--env", "half_cheetah"])
+    assert checked(args) == Path("runs/up-half_cheetah-right") and task_flags(args) == ["--task", "right"]
+
+
 @pytest.mark.parametrize("mode", [0o555, 0o000])  # may not write there; may not even look inside
 def test_out_in_a_folder_this_user_may_not_write_or_enter_is_one_line(mode: int) -> None:
     from collie.cli import main

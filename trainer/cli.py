@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, cast
 from collie.argtypes import http_url, int_in, record_id, seed
 from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
-from collie.tasks import task_names
+from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, field_notes, flag, make_config, people_schedule
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--task",
         default=None,
         action=_Given,
-        help=f"one of: {', '.join(task_names())} (default north; docs/tasks.md)",
+        help=f"one of: {', '.join(task_names())} (default north; right on half_cheetah, hazard on car; docs/tasks.md)",
     )
     p.add_argument(
         "--task-file",
@@ -180,7 +180,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
         overrides["task"] = INSTRUCTION_TASK
     elif args.task_file is not None and args.task is None:
         overrides["task"] = ""  # the file names its task
-    name = overrides["task"] or (Path(args.task_file).stem if args.task_file else "north")
+    name = overrides["task"] or (Path(args.task_file).stem if args.task_file else default_task(args.env))
     overrides["out"] = args.out or f"runs/{args.env}-{name}-{args.method}-s{args.seed}"
     if getattr(args, "people_schedule", False) and all(overrides[k] is None for k in SCHEDULE_KEYS):
         overrides.update(people_schedule(args.preset, args.env))

@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from collie.tasks import default_task
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
 from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
@@ -37,7 +38,7 @@ REFERENCE_LOG_STD_MIN = math.log(1e-6)  # garage's Gaussian modules: min_std 1e-
 class Config:
     # what to run
     env: str = "point"
-    task: str = "north"
+    task: str = "north"  # make_config gives each env its own (collie.tasks.default_task)
     task_file: str = ""  # a task rule from a file (docs/tasks.md); its task's name becomes `task`
     instruction: str = ""  # no rule: people label by this intent (task "instruction"); docs/tasks.md
     method: str = "collie"  # a name in trainer.methods.METHODS
@@ -370,7 +371,7 @@ def make_config(preset: str = "cpu", env: str = "point", **overrides: Any) -> Co
     overrides (None values ignored)."""
     if preset not in PRESET_VALUES:
         raise ValueError(f"unknown preset {preset!r}; valid: {', '.join(PRESETS)}")
-    values: dict[str, Any] = {"preset": preset, "env": env}
+    values: dict[str, Any] = {"preset": preset, "env": env, "task": default_task(env)}
     values.update(PRESET_VALUES[preset])
     values.update(ENV_DEFAULTS.get(env, {}))
     values.update(PRESET_ENV_VALUES[preset].get(env, {}))

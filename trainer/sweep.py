@@ -412,6 +412,7 @@ def _outcome(ray: Any, ref: Any, spec: RunSpec) -> tuple[RunSpec, dict[str, Any]
 UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
 DASHED_VALUE_OPTIONS = ("--downstream-flags",)  # its value is flags: `--downstream-flags "--kind zero_shot"`
 DEFAULT_TASKS = "north,range,hole_north"
+ENV_TASKS = {"half_cheetah": "right,not_flip", "car": "hazard"}  # the paper's, where North is not defined
 
 
 class _Refusal(Exception):
@@ -479,7 +480,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--tasks",
         default=None,
-        help=f"comma-separated, of: {', '.join(task_names())} or a --task-file's task (default: {DEFAULT_TASKS}) "
+        help=f"comma-separated, of: {', '.join(task_names())} or a --task-file's task (default: {DEFAULT_TASKS}; "
+        f"{'; '.join(f'{env}: {tasks}' for env, tasks in ENV_TASKS.items())}) "
         "— with --task-file and no --tasks, the files' tasks alone",
     )
     p.add_argument(
@@ -555,12 +557,12 @@ def file_tasks(files: list[str], env: str, layout_seed: int) -> tuple[dict[str, 
     return found, None
 
 
-def chosen_tasks(given: str | None, from_files: dict[str, str]) -> tuple[list[str], str | None]:
-    """The sweep's tasks: --tasks (default DEFAULT_TASKS, or none beside task files) and then each
-    file's task not named there; or the problem naming --tasks' empty entry."""
+def chosen_tasks(given: str | None, from_files: dict[str, str], env: str) -> tuple[list[str], str | None]:
+    """The sweep's tasks: --tasks (default DEFAULT_TASKS or the env's ENV_TASKS, none beside task files), then
+    each file's task not named there; or the problem naming --tasks' empty entry."""
     if given is None and from_files:
         return list(from_files), None
-    tasks, empty = names("--tasks", given or DEFAULT_TASKS)
+    tasks, empty = names("--tasks", given or ENV_TASKS.get(env, DEFAULT_TASKS))
     return list(dict.fromkeys([*tasks, *from_files])), empty
 
 
@@ -629,7 +631,7 @@ def run(args: argparse.Namespace) -> int:
     from_files, wrong_file = file_tasks(args.task_file, args.env, args.first_seed)
     (methods, empty_method), (tasks, empty_task) = (
         names("--methods", args.methods),
-        chosen_tasks(args.tasks, from_files),
+        chosen_tasks(args.tasks, from_files, args.env),
     )
     methods, tasks = list(dict.fromkeys(methods)), list(dict.fromkeys(tasks))  # a name twice: one run folder
     wrong = empty_method or empty_task or wrong_file or problem(args, methods, tasks, from_files)

@@ -6,12 +6,12 @@ See docs/tasks.md for the rules, boundary conventions and how to add a task.
 """
 
 from collie.tasks.builtin import BUILTIN_TASKS as TASK_NAMES
-from collie.tasks.builtin import ENV_GEOMETRY, Geometry
+from collie.tasks.builtin import ENV_GEOMETRY, Geometry, default_task
 from collie.tasks.classes import BAD, CLASS_NAMES, CLASSES, GOOD, NEUTRAL
 from collie.tasks.definition import NotDeclarative, from_definition, task_for_run, to_definition
 from collie.tasks.hazard import HAZARD_RADIUS, hazard_layout
 from collie.tasks.regions import Disc, HalfPlane, OutsideDisc, PitchBeyond, Polygon, Region, WedgeNorth, wrap_angle
-from collie.tasks.registry import get_task, has_layout, register_task, task_names
+from collie.tasks.registry import get_task, has_layout, register_task, task_names, tasks_for
 from collie.tasks.task import Distance, Rule, Task
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "Rule",
     "Task",
     "WedgeNorth",
+    "default_task",
     "from_definition",
     "get_task",
     "has_layout",
@@ -42,6 +43,7 @@ __all__ = [
     "register_task",
     "task_for_run",
     "task_names",
+    "tasks_for",
     "to_definition",
     "wrap_angle",
 ]

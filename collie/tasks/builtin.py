@@ -44,19 +44,35 @@ DMC_GEOMETRY = Geometry(
 ENV_GEOMETRY: dict[str, Geometry] = {
     "point": ANT_GEOMETRY,
     "ant": ANT_GEOMETRY,
-    "half_cheetah": ANT_GEOMETRY,  # only Right and Not-Flip are defined for it; x-y has y = 0
+    "half_cheetah": ANT_GEOMETRY,  # its x only: the plane's tasks are refused (LINE_ENVS)
     "quadruped": DMC_GEOMETRY,
     "humanoid": DMC_GEOMETRY,
 }
 
 
 PITCHLESS_ENVS = ("point",)  # no body orientation: its pitch is undefined (nan), so Not-Flip would judge nothing
+# A body that runs along x (its y is always 0): the paper defines only Right and Not-Flip for it; a
+# wedge, disc or hole in x-y would judge a line through the plane, which no labeler could follow.
+LINE_ENVS = ("half_cheetah",)
+ENV_DEFAULT_TASK = {"half_cheetah": "right", "car": "hazard"}  # the paper's first task for each; else North
 
 
 def geometry(env: str) -> Geometry:
     if env not in ENV_GEOMETRY:
         raise EnvNotSupported(list(ENV_GEOMETRY))
     return ENV_GEOMETRY[env]
+
+
+def plane_geometry(env: str) -> Geometry:
+    """The geometry of a task drawn in the x-y plane, which a body moving along a line does not have."""
+    if env in LINE_ENVS:
+        raise EnvNotSupported([e for e in ENV_GEOMETRY if e not in LINE_ENVS])
+    return geometry(env)
+
+
+def default_task(env: str) -> str:
+    """The task a run of `env` gets when none is named."""
+    return ENV_DEFAULT_TASK.get(env, "north")
 
 
 def _holes(centres: tuple[tuple[float, float], ...], radius: float) -> tuple[Disc, ...]:
@@ -69,7 +85,7 @@ def _fmt(centres: tuple[tuple[float, float], ...]) -> str:
 
 @register_task("north")
 def north(env: str) -> Task:
-    geometry(env)
+    plane_geometry(env)
     return Task(
         "north",
         "Stay in the northern wedge: y ≥ |x| (north of both diagonals through the origin).",
@@ -92,7 +108,7 @@ def right(env: str) -> Task:
 
 @register_task("range")
 def range_(env: str) -> Task:
-    g = geometry(env)
+    g = plane_geometry(env)
     c, r = g.range_centre, g.range_radius
     return Task(
         "range",
@@ -104,7 +120,7 @@ def range_(env: str) -> Task:
 
 @register_task("hole")
 def hole(env: str) -> Task:
-    g = geometry(env)
+    g = plane_geometry(env)
     return Task(
         "hole",
         f"Keep out of the four holes of radius {g.hole_radius:g} at {_fmt(g.hole_centres)}.",
@@ -128,7 +144,7 @@ def not_flip(env: str) -> Task:
 
 @register_task("range_north")
 def range_north(env: str) -> Task:
-    g = geometry(env)
+    g = plane_geometry(env)
     c, r = g.range_centre, g.range_radius
     return Task(
         "range_north",
@@ -144,7 +160,7 @@ def range_north(env: str) -> Task:
 
 @register_task("hole_north")
 def hole_north(env: str) -> Task:
-    g = geometry(env)
+    g = plane_geometry(env)
     return Task(
         "hole_north",
         f"Keep out of the holes of radius {g.hole_north_radius:g} at {_fmt(g.hole_north_centres)};"

@@ -224,7 +224,11 @@ def test_help_shows_the_full_grid_and_a_train_flag_before_the_separator_gets_a_h
         main(["sweep", "--help"])
     assert exit_.value.code == 0
     shown = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
-    assert "(default: point)" in shown and "(default: north,range,hole_north)" in shown and "(default: cpu)" in shown
+    assert (
+        "(default: point)" in shown
+        and "(default: north,range,hole_north; half_cheetah: right,not_flip; car: hazard)" in shown
+        and "(default: cpu)" in shown
+    )
     assert "A bare `collie sweep` runs the full grid" in shown and "63 runs" in shown
     with pytest.raises(SystemExit) as exit_:
         main(["sweep", "--epochs", "2"])
@@ -334,13 +338,20 @@ def test_task_files_are_checked_before_any_run_starts(tmp_path, capsys, monkeypa
     assert launched == [] and not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize(
+    ("env", "tasks"), [("point", "north,range,hole_north"), ("half_cheetah", "right,not_flip"), ("car", "hazard")]
+)
+def test_a_sweep_without_tasks_runs_the_envs_own(env, tasks):
+    assert sweep.chosen_tasks(None, {}, env) == (tasks.split(","), None)
+
+
 def test_a_task_file_joins_the_tasks_given_and_only_its_runs_read_it(tmp_path):
     (tmp_path / "charger.toml").write_text(CHARGER)
     parser = argparse.ArgumentParser()
     sweep.add_arguments(parser)
     args = parser.parse_args(["--tasks", "north", "--task-file", str(tmp_path / "charger.toml")])
     found, wrong = sweep.file_tasks(args.task_file, "point", 0)
-    tasks, _ = sweep.chosen_tasks(args.tasks, found)
+    tasks, _ = sweep.chosen_tasks(args.tasks, found, "point")
     assert wrong is None and tasks == ["north", "charger"]
     specs = grid(tmp_path, "point", tasks, ["metra"], [0], found)
     assert "--task-file" not in sweep.train_argv(specs[0])

@@ -67,6 +67,16 @@ def test_collie_train_brings_the_first_session_forward_only_for_people(argv: str
     assert (c.epochs, c.warmup, c.feedback_every) == schedule
 
 
+@pytest.mark.parametrize(("env", "task"), [("point", "north"), ("half_cheetah", "right"), ("car", "hazard")])
+def test_collie_train_without_a_task_runs_its_envs_own(env: str, task: str) -> None:
+    """North has no meaning on HalfCheetah's line or the car's floor: each gets the paper's first task."""
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    c = config_from_args(p.parse_args(["--env", env]))
+    assert c.task == task and c.out == f"runs/{env}-{task}-collie-s0"
+    assert make_config("cpu", env).task == task
+
+
 def small_ant(out: Path, epochs: int) -> Trainer:
     """The cpu Ant preset's shape (schedule proportions, M, N_total, obs statistics), shrunk."""
     cfg = make_config(
