@@ -580,7 +580,8 @@ class Trainer:
         if not self.method.asks_labels or self.queries_asked >= self.cfg.total_queries:
             startup.done()  # no feedback session will come: no first segment to time
         self._writer = self._tensorboard()
-        self.reporter.status(StatusReport("training", self.epoch))
+        if self.feedback.control(self.epoch) == "run":  # a run paused or stopped meanwhile is not announced as training
+            self.reporter.status(StatusReport("training", self.epoch))
         startup.mark("run files, tensorboard")
         if self.epoch == 0:
             self.evaluate()  # epoch-0 baseline of every metric
