@@ -6,8 +6,10 @@ import argparse
 import json
 import os
 import signal
+import sys
 import threading
 from pathlib import Path
+from typing import NoReturn
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco loads: offscreen, no X display (as collie up sets it)
 
@@ -48,17 +50,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--info-json", type=Path, default=None, help="write the URL and port here once serving")
 
 
+def refuse(why: str) -> NoReturn:
+    """A usage error, as argparse reports its own: one line on stderr, exit status 2."""
+    print(f"collie label-ui: error: {why}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def info_folder(path: Path) -> None:
     """--info-json's folder, made as `collie up` and `collie serve --tokens-json` make theirs; a
     folder given as the file, or one that cannot be made, is refused before the UI starts."""
     if path.is_dir():
-        raise SystemExit(f"collie label-ui: error: --info-json {path} is a folder; give a file path")
+        refuse(f"--info-json {path} is a folder; give a file path")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise SystemExit(
-            f"collie label-ui: error: cannot create the folder of --info-json {path.parent}: {exc.strerror or exc}"
-        ) from None
+        refuse(f"cannot create the folder of --info-json {path.parent}: {exc.strerror or exc}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,14 +73,14 @@ def run(args: argparse.Namespace) -> int:
     warm = tuple(e for e in args.warm.split(",") if e)
     unknown = [e for e in warm if e not in MODEL_NAMES]
     if unknown:
-        raise SystemExit(f"collie label-ui: error: --warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}")
+        refuse(f"--warm: unknown env {unknown[0]!r}; valid: {', '.join(MODEL_NAMES)}")
     try:
         token = resolve_token(args, "labeler", from_env=False)
     except ValueError as exc:
-        raise SystemExit(f"collie label-ui: error: {exc}") from None
+        refuse(str(exc))
     why = not_listenable(args.host)  # viser would retry it forever, silent
     if why is not None:
-        raise SystemExit(f"collie label-ui: error: --host {args.host} is not an address of this machine ({why})")
+        refuse(f"--host {args.host} is not an address of this machine ({why})")
     if args.info_json is not None:
         info_folder(args.info_json)
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
@@ -91,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             app.stop()
             said = f"cannot write --info-json {args.info_json}: {exc.strerror or exc}"
-            raise SystemExit(f"collie label-ui: error: {said}") from None
+            refuse(said)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # either way, tabs hand their claims back first
         signal.signal(sig, lambda *_: stop.set())
