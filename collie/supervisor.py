@@ -39,6 +39,9 @@ class Child:
     env: dict[str, str]
     # called on exit 0: is its work over (trainer, teacher: not restarted)? None: it never is (service)
     done_when_ok: Callable[[], bool] | None
+    # an exit 0 before its work is over that is no failure: started again after this many seconds
+    # (the teacher, when the trainer reopens a finished run); None: it counts as a death
+    again_after_s: float | None = None
     pass_fds: tuple[int, ...] = ()  # inherited by each start (the service's listening socket)
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
@@ -72,8 +75,9 @@ class Supervisor:
         env: dict[str, str],
         done_when_ok: Callable[[], bool] | None = None,
         pass_fds: tuple[int, ...] = (),
+        again_after_s: float | None = None,
     ) -> subprocess.Popen:
-        child = Child(name, args, env, done_when_ok, pass_fds)
+        child = Child(name, args, env, done_when_ok, again_after_s, pass_fds)
         self.children[name] = child
         return self._spawn(child)
 
@@ -121,6 +125,10 @@ class Supervisor:
             if code == 0 and child.done_when_ok is not None and child.done_when_ok():
                 child.finished = True
                 self.log(f"{child.name} finished (exit 0)")
+                continue
+            if code == 0 and child.again_after_s is not None:
+                self.log(f"{child.name} ended (exit 0) before its work; starting it again in {child.again_after_s:g} s")
+                child.restart_at = now + child.again_after_s
                 continue
             if now - child.started_at >= self.stable_s:
                 child.failures = 0

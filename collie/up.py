@@ -390,7 +390,10 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
         teach += ["--seed", str(args.seed), *(["--rate", str(args.teacher_rate)] if args.teacher_rate else [])]
-        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), done_when_ok=lambda: True)
+        # Its work is over with the trainer's: one that found the run finished before the trainer
+        # reopened it for more epochs (a resumed --epochs) is started again.
+        teacher_done = lambda: stack.finished("trainer")  # noqa: E731
+        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), teacher_done, again_after_s=TEACHER_AGAIN_S)
     labeler_url = None
     if not args.no_label_ui:
         ui_info = out / "labeling_ui.json"
@@ -535,6 +538,7 @@ class ProgressLine:
 
 
 WATCH_TIMEOUT_S = 2.0  # the progress line's request; a restart of a dead part waits at most this long
+TEACHER_AGAIN_S = 2.0  # a teacher that ended while the trainer runs starts again after this
 
 
 def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: bool, stopping: dict) -> int:

@@ -62,6 +62,19 @@ def cmdlines() -> list[bytes]:
     return lines
 
 
+def test_a_finished_stack_resumed_with_more_epochs_has_them_labelled_by_its_teacher(tmp_path):
+    """The teacher starts while the run is still finished, before the trainer reopens it: it must
+    start again and label the added epochs' session (it used to end at once, and the run waited)."""
+    up = up_command(tmp_path, "--no-label-ui")
+    first = subprocess.run([*up, "--train-args", "--epochs 4"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert json.loads((tmp_path / "trainer" / "summary.json").read_text())["n_labels"] == 4  # sessions at 2, 4
+    more = subprocess.run([*up, "--train-args", "--epochs 8"], capture_output=True, text=True, timeout=300)
+    assert more.returncode == 0, more.stderr[-2000:]
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert (summary["status"], summary["epochs_done"], summary["n_labels"]) == ("finished", 8, 6)  # and at 6
+
+
 def test_tokens_starting_with_a_dash_stay_out_of_argv_logs_and_open_files(tmp_path):
     tokens = {"operator": "-op" + "o" * 40, "trainer": "-tr" + "t" * 40, "labeler": "--lb" + "l" * 40}
     (tmp_path / "tokens.json").write_text(json.dumps({"tokens": tokens}))  # a saved stack, reused as is
