@@ -63,10 +63,11 @@ async def list_runs(
     version `after`, else after wait_s (lease counts change without a version)."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + wait_s
+    hub = request.app.state.hub  # closed when the service stops: the page is answered then, not cancelled
     while True:
         with db.read() as conn:
             version = dashboard.latest_event_id(conn)
-        if version != after or loop.time() >= deadline or await request.is_disconnected():
+        if version != after or loop.time() >= deadline or hub.closed or await request.is_disconnected():
             break
         await asyncio.sleep(min(POLL_S, max(0.0, deadline - loop.time())))
 

@@ -1,5 +1,5 @@
 """A graceful stop while clients wait: the trainer's long poll (`/events?wait_s=30`, it always holds
-one) answers its empty page at once and an SSE stream ends, so the service stops promptly and
+one) and the dashboard's (`/dashboard/runs?wait_s=…`) answer at once and an SSE stream ends, so the service stops promptly and
 cleanly — not after the graceful timeout, with the waiting requests cancelled and a traceback."""
 
 from __future__ import annotations
@@ -35,18 +35,30 @@ def test_a_stop_ends_long_polls_and_streams_at_once(tmp_path: Path, logged: list
             httpx.get(f"{server.url}/api/runs/{run.id}/events?after={after}&wait_s=30", headers=auth, timeout=60)
         )
     )
+    version = httpx.get(f"{server.url}/api/dashboard/runs", headers=auth).json()["version"]
+    pages: list[httpx.Response] = []
+    dashboard = threading.Thread(  # it reads the log's version every POLL_S: no hub to be parked in
+        target=lambda: pages.append(
+            httpx.get(f"{server.url}/api/dashboard/runs?after={version}&wait_s=30", headers=auth, timeout=60)
+        )
+    )
     with httpx.Client(base_url=server.url, timeout=60) as http, contextlib.ExitStack() as stack:
         held = stack.enter_context(http.stream("GET", f"/api/runs/{run.id}/stream", headers=auth))
         lines = held.iter_lines()
         assert next_data(lines)["data"]["epoch"] == 0  # the stream waits for news now
         poll.start()
+        dashboard.start()
         wait_until_parked(server, run.id, poll)  # the long poll waits too
+        time.sleep(0.5)  # and the dashboard's has looked twice
+        assert dashboard.is_alive()
         server.stop()
         assert not server._thread.is_alive()  # stopped (stop() gives up after 10 s)
         assert [line for line in lines if line] == []  # the stream ended cleanly (no broken chunked body)
     poll.join(30)
     assert answers and answers[0].status_code == 200, answers
     assert answers[0].json() == {"events": [], "last_id": after}
+    dashboard.join(30)
+    assert pages and pages[0].status_code == 200 and pages[0].json()["version"] == version, pages
     # Nothing was cancelled: a request still open after uvicorn's 2 s graceful timeout is cancelled
     # with "Cancel N running task(s), timeout graceful shutdown exceeded" on uvicorn.error (an ERROR,
     # captured by `logged`), so this, not a wall-clock bound, tells a prompt stop from a late one.
