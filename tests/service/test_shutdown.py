@@ -1,6 +1,7 @@
 """A graceful stop while clients wait: the trainer's long poll (`/events?wait_s=30`, it always holds
-one) and the dashboard's (`/dashboard/runs?wait_s=…`) answer at once and an SSE stream ends, so the service stops promptly and
-cleanly — not after the graceful timeout, with the waiting requests cancelled and a traceback."""
+one) and the dashboard's (`/dashboard/runs?wait_s=…`) answer at once and an SSE stream ends, so the
+service stops promptly and cleanly — not after the graceful timeout, with the waiting requests
+cancelled and a traceback."""
 
 from __future__ import annotations
 
