@@ -8,7 +8,9 @@ Panels only draw and forward clicks; what a click does is the session's business
 from __future__ import annotations
 
 import html
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime
 from typing import TYPE_CHECKING, Protocol
@@ -350,6 +352,29 @@ class Panels:
     def notify(self, title: str, body: str, color: str = "blue") -> None:
         # color: one of viser's Mantine colour names, which callers pass as plain strings
         self.client.add_notification(title, body, auto_close_seconds=4.0, color=color)  # type: ignore[call-overload]  # see above
+
+    @contextmanager
+    def notice_if_slow(self, title: str, body: str, after_s: float) -> Iterator[None]:
+        """A notice with a spinner while the block runs, if it runs longer than `after_s`: a key is
+        answered in milliseconds, so a slow answer would otherwise look like a key not taken."""
+        lock, shown, done = threading.Lock(), [], [False]
+
+        def show() -> None:
+            with lock:
+                if not done[0]:
+                    shown.append(self.client.add_notification(title, body, loading=True, with_close_button=False))
+
+        timer = threading.Timer(after_s, show)
+        timer.daemon = True
+        timer.start()
+        try:
+            yield
+        finally:
+            timer.cancel()
+            with lock:
+                done[0] = True
+            for handle in shown:
+                handle.remove()
 
 
 def _clock(when: datetime) -> str:

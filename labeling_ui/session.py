@@ -39,6 +39,8 @@ from labeling_ui.timings import KeyTimings
 log = logging.getLogger(__name__)
 
 POLL_S = 0.25  # the worker's tick while idle (skills auto-advance, stream wake-ups)
+SLOW_ANSWER_S = 0.5  # a label unanswered this long gets a notice (answers take milliseconds)
+SLOW_ANSWER_NOTICE = "The labeling service has not answered yet; your label is kept and sent again until it is taken."
 
 
 class LabelerSession:
@@ -339,7 +341,10 @@ class LabelerSession:
         try:  # the service refuses it, saying why, unless this tab holds the segment (no lease check first)
             run_id, query_id = segment.key
             value, seconds, request_id = submit.value, submit.seconds, submit.request_id
-            ack = self.link.submit(run_id, query_id, value, seconds, request_id, segment.revising, self.config.prefetch)
+            with self.panels.notice_if_slow("Sending your label…", SLOW_ANSWER_NOTICE, SLOW_ANSWER_S):
+                ack = self.link.submit(
+                    run_id, query_id, value, seconds, request_id, segment.revising, self.config.prefetch
+                )
             self.claims.next_claim = ack.next  # what to preload, claimed with the label (one round trip, one commit)
         except Rejected as exc:
             reason = self.claims.ended(self.link, segment.run.id) or str(exc)  # an ended run's segments go too

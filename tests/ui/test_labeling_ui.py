@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from pathlib import Path
 
@@ -247,6 +248,28 @@ def test_unreachable_service_is_reported(stack: Stack, browser: Browser) -> None
     wait_text(page, "unreachable")
     wait_text(page, "at http://127.0.0.1:9 does not answer")  # names the address it tried
     assert segment_id(page) is None and all(s.scene.env is None for s in app.sessions.values())
+    page.context.close()
+
+
+def test_a_label_the_service_is_slow_to_take_is_said_to_be_on_its_way(stack: Stack, browser: Browser) -> None:
+    """A key is answered in milliseconds; when the service is slow (its database busy) the labeler
+    sees the label is on its way, not a key that seems ignored, and then the next segment."""
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("slow")))
+    first = wait_segment(page)
+    busy = sqlite3.connect(stack.service.app.state.db.url.removeprefix("sqlite:///"), isolation_level=None)
+    busy.execute("BEGIN EXCLUSIVE")  # every write waits (the service's busy timeout is 5 s)
+    try:
+        press(page, "2")
+        wait_text(page, "Sending your label", timeout_s=4)
+        assert segment_id(page) == first
+    finally:
+        busy.execute("COMMIT")
+        busy.close()
+    wait_segment(page, first)
+    expect(page.get_by_text("Sending your label")).to_have_count(0)
+    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {first: 1}
     page.context.close()
 
 
