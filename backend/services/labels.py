@@ -88,6 +88,7 @@ _LOOKUP = (
     select(
         *_QUERY_STATE,
         Run.status.label("run_status"),
+        Run.control.label("run_control"),
         Run.redundancy,
         Run.task,
         Run.task_definition,
@@ -239,7 +240,7 @@ def _lookup_or_repeat(
         runs.row(conn, run_id)
         raise NotFound(f"no query '{query_id}' in run {run_id}")
     if q.run_status in FINISHED:
-        raise Conflict(f"run {run_id} is {q.run_status}")
+        raise Conflict(runs.ended(run_id, q.run_status, q.run_control))
     return q
 
 
@@ -398,7 +399,7 @@ def discard_votes(conn: Connection, run_id: int, labeler_id: int, operator: Call
     operator who discarded (`discard-by-<principal id>-…`), for the audit."""
     run = runs.row(conn, run_id)
     if run.status in FINISHED:
-        raise Conflict(f"run {run_id} is {run.status}: its labels stay as they are")
+        raise Conflict(f"{runs.ended(run_id, run.status, run.control)}: its labels stay as they are")
     who = conn.execute(select(Principal.id, Principal.name, Principal.role).where(Principal.id == labeler_id)).first()
     if who is None:
         raise NotFound(f"no principal {labeler_id}")

@@ -25,7 +25,7 @@ from sqlalchemy import Connection, Update, bindparam, exists, select, update
 from sqlalchemy.orm import aliased
 
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
-from backend.services import gold
+from backend.services import gold, runs
 from backend.services.auth import Caller
 from backend.services.errors import Conflict, NotFound
 from collie.schemas import FINISHED, MAX_HOLD, MAX_TABS, QueryStatus
@@ -143,7 +143,7 @@ def claim(
     if state is None:
         raise NotFound(f"no run {run_id}")
     if state.status in FINISHED or state.control == "stop":
-        raise Conflict(f"run {run_id} takes no more labels ({state.status}, control {state.control})")
+        raise Conflict(f"{runs.ended(run_id, state.status, state.control)}: it takes no more labels")
     if not room and not held:  # a tab too many: say so, where an empty answer would read as "no work"
         raise Conflict(
             f"your other tabs hold {len(renewed)} segments of run {run_id}, as many as {MAX_TABS} tabs may; "

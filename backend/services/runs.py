@@ -134,6 +134,12 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
     )
 
 
+def ended(run_id: int, status: str, control: str) -> str:
+    """How an ended run is named in a refusal: one an operator stopped is said to be stopped (its
+    status is "finished", as the trainer reports it), never finished."""
+    return f"run {run_id} was stopped by an operator" if control == "stop" else f"run {run_id} is {status}"
+
+
 def row(conn: Connection, run_id: int) -> Any:
     found = conn.execute(select(Run).where(Run.id == run_id)).first()
     if found is None:
@@ -163,7 +169,7 @@ def list_runs(
 def set_status(conn: Connection, run_id: int, change: StatusUpdate) -> RunRead:
     current = row(conn, run_id)
     if current.status in FINISHED and change.status != current.status:
-        raise Conflict(f"run {run_id} is {current.status}")
+        raise Conflict(ended(run_id, current.status, current.control))
     epoch = current.epoch if change.epoch is None else change.epoch
     if (change.status, epoch) != (current.status, current.epoch) or change.message:
         now = time.time()
@@ -201,7 +207,7 @@ def set_control(conn: Connection, run_id: int, action: str) -> RunRead:
     """pause / resume / stop. Stopping is final; the trainer acknowledges by reporting its status."""
     current = row(conn, run_id)
     if current.status in FINISHED:
-        raise Conflict(f"run {run_id} is {current.status}")
+        raise Conflict(ended(run_id, current.status, current.control))
     wanted = _CONTROL_OF_ACTION[action]
     if current.control == "stop" and wanted != "stop":
         raise Conflict(f"run {run_id} is being stopped")
@@ -225,7 +231,7 @@ def set_feedback_policy(conn: Connection, run_id: int, policy: FeedbackPolicy) -
     the "policy" event and re-times the session it is waiting on from the session's start."""
     current = row(conn, run_id)
     if current.status in FINISHED:
-        raise Conflict(f"run {run_id} is {current.status}")
+        raise Conflict(ended(run_id, current.status, current.control))
     if current.control == "stop":
         raise Conflict(f"run {run_id} is being stopped")
     now = time.time()
@@ -239,7 +245,7 @@ def set_feedback_policy(conn: Connection, run_id: int, policy: FeedbackPolicy) -
 def set_quality(conn: Connection, run_id: int, settings: QualitySettings) -> RunRead:
     current = row(conn, run_id)
     if current.status in FINISHED:
-        raise Conflict(f"run {run_id} is {current.status}")
+        raise Conflict(ended(run_id, current.status, current.control))
     given = settings.model_dump(exclude_none=True)  # a field left out keeps the run's value
     conn.execute(update(Run).where(Run.id == run_id).values(**given, updated_at=time.time()))
     return get(conn, run_id)

@@ -265,6 +265,30 @@ def test_finished_run_refuses_new_work(trainer: CollieClient, labeler: CollieCli
     assert err.value.status == 409
 
 
+def test_a_run_an_operator_stopped_is_said_stopped_in_every_refusal(
+    operator: CollieClient, trainer: CollieClient, labeler: CollieClient, run: RunRead
+) -> None:
+    """Its status is "finished" (as the trainer reports a stop), but no refusal calls it finished:
+    a labeler's undo, label or claim, the trainer's next session, an operator's control."""
+    claim = labeler.claim(run.id)
+    labeler.submit(run.id, claim.query.query_id, 1)
+    held = labeler.claim(run.id)
+    operator.stop(run.id)
+    with pytest.raises(ApiError, match=f"run {run.id} was stopped by an operator: it takes no more labels"):
+        labeler.claim(run.id)
+    trainer.set_status(run.id, "finished", message="stopped by an operator")
+    for refused in (
+        lambda: labeler.undo(run.id, claim.query.query_id),
+        lambda: labeler.submit(run.id, held.query.query_id, 1),
+        lambda: trainer.post_session(run.id, make_session(1, 1)),
+        lambda: operator.pause(run.id),
+        lambda: trainer.set_status(run.id, "training"),
+    ):
+        with pytest.raises(ApiError) as err:
+            refused()
+        assert (err.value.status, err.value.detail) == (409, f"run {run.id} was stopped by an operator")
+
+
 def test_labelled_history_pages(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
     for value in (0, 1, 2):
         claim = labeler.claim(run.id)
