@@ -89,6 +89,9 @@ def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
     if run.status not in FINISHED and run.control != "stop":
         if run.control == "pause":
             lines.append("The operator paused it: no feedback session comes until it resumes.")
+        elif run.status == "waiting_for_labels":  # no epoch goes by until this session is labelled
+            later = f" (at epoch **{fc.next_feedback}**)" if fc.next_feedback is not None else ""
+            lines.append(f"The trainer waits for this session's last labels; the next session{later} comes after it.")
         elif fc.next_feedback is not None:
             eta = f", in about **{duration(fc.eta_s)}**" if fc.eta_s is not None else " (no epoch rate yet for an ETA)"
             lines.append(f"Next feedback session at epoch **{fc.next_feedback}**{eta}.")

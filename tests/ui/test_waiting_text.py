@@ -32,7 +32,7 @@ def test_next_feedback_epoch_follows_the_trainers_schedule() -> None:
 
 
 def test_eta_from_the_epoch_rate() -> None:
-    r = run().model_copy(update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 10})
+    r = run().model_copy(update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 10, "status": "training"})
     fc = forecast(r, [metrics(0, 0.0), metrics(10, 5.0)])  # 2 epochs / s
     assert (fc.next_feedback, fc.epochs_per_s, fc.eta_s) == (20, 2.0, 5.0)
     text = waiting_text(r, fc, held_here=0)
@@ -54,6 +54,17 @@ def test_stopped_is_not_finished_and_own_claims_are_not_others() -> None:
     assert "elsewhere" not in waiting_text(ended, forecast(ended, []), held_here=0)
 
 
+def test_a_run_waiting_for_another_tabs_labels_gives_no_eta() -> None:
+    """The trainer stands still until the session's last segment (held elsewhere) is labelled."""
+    r = run().model_copy(
+        update={"config": {"warmup": 40, "feedback_every": 25}, "epoch": 40, "status": "waiting_for_labels"}
+    )
+    r = r.model_copy(update={"queue": QueueCounts(leased=1, labelled=1)})
+    text = waiting_text(r, forecast(r, [metrics(0, 0.0), metrics(40, 20.0)]), held_here=0)
+    assert "waits for this session's last labels; the next session (at epoch **65**) comes after it" in text
+    assert "in about" not in text and "1 being labelled elsewhere" in text
+
+
 def test_a_paused_run_gives_no_eta_and_redundancy_says_who_the_segments_wait_for() -> None:
     r = run().model_copy(update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 10, "control": "pause"})
     text = waiting_text(r, forecast(r, [metrics(0, 0.0), metrics(10, 5.0)]), held_here=0)
@@ -69,7 +80,7 @@ def test_a_paused_run_gives_no_eta_and_redundancy_says_who_the_segments_wait_for
 
 def test_an_eta_from_the_epochs_the_tab_saw_before_two_metrics_exist() -> None:
     clock = EpochClock()
-    r = run().model_copy(update={"config": {"warmup": 240, "feedback_every": 20}, "epoch": 10})
+    r = run().model_copy(update={"config": {"warmup": 240, "feedback_every": 20}, "epoch": 10, "status": "training"})
     assert clock.rate(r, 100.0) is None  # the first look
     assert clock.rate(r.model_copy(update={"epoch": 12}), 102.0) is None  # too short a look
     rate = clock.rate(r.model_copy(update={"epoch": 20}), 110.0)
