@@ -327,9 +327,9 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     service = stack.start("service", lambda: serve, service_env, pass_fds=(sock.fileno(),))
     trainer_out = out / STACK_RUN
     memo = trainer_out / "service_run.json"
-    resume = (trainer_out / "checkpoint.pt").exists() and memo.exists()
-    if not resume:
-        memo.unlink(missing_ok=True)
+    # The service holds the run once the trainer made it: the stack continues it, from the checkpoint if
+    # one was written (else from epoch 0, reusing the sessions posted), never a new run beside it.
+    resume = memo.exists()
     people = ["--people-schedule"] if args.teacher == "none" else []  # the first session earlier
     train = [
         "train",

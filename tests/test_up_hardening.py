@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import time
@@ -270,6 +271,42 @@ def test_a_second_stack_on_one_out_is_refused_and_a_killed_stack_takes_its_parts
                 os.kill(pid, signal.SIGKILL)
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
     assert summary["status"] == "interrupted"  # the trainer's SIGTERM path: checkpointed, resumable
+
+
+def test_a_stack_that_crashed_before_its_first_checkpoint_resumes_its_run_not_a_new_one(tmp_path):
+    """Every part SIGKILLed (a crash, the OOM killer) before the trainer wrote a checkpoint: the same
+    command continues the run the service holds, its labels kept, instead of starting run 2."""
+    proc = subprocess.Popen(
+        up_command(tmp_path, "--train-args=--epochs 100000 --checkpoint-every 100000"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        while not ((tmp_path / "info.json").exists() and len(children(tmp_path)) == 4):
+            assert proc.poll() is None, proc.communicate()[1].decode()[-2000:]
+            time.sleep(0.1)
+        meta = json.loads((tmp_path / "info.json").read_text())
+        with CollieClient(meta["api"], meta["tokens"]["operator"]) as client:
+            deadline = time.monotonic() + 180
+            while client.run(meta["run_id"]).n_labels < 2:  # the first session (epoch 2) labelled
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.2)
+        for pid in children(tmp_path).values():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        proc.kill()
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert not (tmp_path / "trainer" / "checkpoint.pt").exists()
+    again = subprocess.run(up_command(tmp_path, "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert f"collie up: run {meta['run_id']} " in again.stdout
+    with contextlib.closing(sqlite3.connect(tmp_path / "collie.db")) as db:
+        assert db.execute("SELECT id, status FROM runs").fetchall() == [(meta["run_id"], "finished")]  # no run 2
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert (summary["status"], summary["n_labels"]) == ("finished", 4)  # the kept session's and epoch 4's
 
 
 def test_a_closed_terminal_stops_the_stack_like_ctrl_c(tmp_path):
