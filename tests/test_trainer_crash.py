@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from collie.client import CollieClient
-from collie.schemas import QueriesEvent, StatusEvent
+from collie.schemas import QueriesEvent, RunCreate, StatusEvent
 from collie.tasks import get_task
 from collie.teacher import OracleTeacher
 
@@ -268,5 +268,17 @@ def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(
             in said
         )
         assert "Traceback" not in said
+        named = cli(*train_args(tmp_path / "range", api, "--task", "range", "--run-id", str(run_id)), log=log)
+        assert named.wait(timeout=300) == 2  # its metrics would be the run's task's, filed under range
+        assert f"run {run_id} on the service is not this trainer's: --task range here, north there" in log.read_text()
         with CollieClient(api, TOKENS["operator"]) as operator:
             assert operator.run(run_id).status == "finished"  # left as it was
+            held = operator.run(run_id)
+        with CollieClient(api, TOKENS["trainer"]) as trainer:  # a run made for it by hand, judged by Range
+            spec = RunCreate(env="point", task="range", method="collie", dims=held.dims, n_total=2, epochs_total=2)
+            made = trainer.create_run(spec).id
+        follows = train_args(tmp_path / "follows", api, "--epochs", "2", "--feedback-timeout", "0.5")
+        unnamed = cli(*follows, "--run-id", str(made), log=log)
+        assert unnamed.wait(timeout=300) == 0, log.read_text()[-3000:]  # no --task: it follows the run's
+        assert json.loads((tmp_path / "follows" / "config.json").read_text())["task"] == "range"
+        assert json.loads((tmp_path / "follows" / "summary.json").read_text())["config"]["task"] == "range"

@@ -235,7 +235,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
         held = source.client.run(source.run_id)
-        unlike = unlike_the_run(held, cfg)
+        unlike = unlike_the_run(held, cfg, args.given)
         if unlike:  # its sessions would not fit the run (the service refuses other dims) nor its labels mean the same
             raise ValueError(
                 f"run {source.run_id} on the service is not this trainer's: {'; '.join(unlike)} (give the run's "
@@ -244,6 +244,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         rule = from_stored(held.task_definition, held.instruction)
         if rule.task is None and rule.instruction is None:
             raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")
+        cfg.task = held.task  # the rule it follows is the run's: its files and reports name that task
     else:
         if rule.task is not None and rule.definition is None:
             raise ValueError(f"task {cfg.task!r} is a rule function: only a task painted from regions can travel")
@@ -268,14 +269,17 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
-def unlike_the_run(held: RunRead, cfg: Config) -> list[str]:
-    """Where this trainer's config differs from the service's run in what its sessions carry."""
+def unlike_the_run(held: RunRead, cfg: Config, given: frozenset[str] = frozenset()) -> list[str]:
+    """Where this trainer's config differs from the service's run in what its sessions carry, or in
+    the task it was told (`given`: the flags on its command line; with none, it follows the run's)."""
     pairs = {
         "--env": (held.env, cfg.env),
         "--method": (held.method, cfg.method),
         "--segment-length": (held.dims.horizon, cfg.segment_length),
         "--skill-dim": (held.dims.skill_dim, cfg.skill_dim),
     }
+    if given & {"task", "task_file", "instruction"}:  # its metrics would be another task's under this one's name
+        pairs["--task"] = (held.task, cfg.task)
     return [f"{flag} {mine} here, {theirs} there" for flag, (theirs, mine) in pairs.items() if theirs != mine]
 
 
