@@ -1,6 +1,8 @@
 """The child processes of one `collie up`, supervised: a child that dies is started again after a
 backoff (0.5 s, doubling to 10 s), and one that keeps dying — `max_restarts` times without staying
-up `stable_s` in between — ends the stack with an error naming it. Every start and exit is logged to
+up `stable_s` in between — ends the stack with an error naming it and what it said. One that refuses
+to run (exit 2, our commands' usage error: a bad flag, a damaged checkpoint, a revoked token) twice
+in a row ends it at once: the same start would only be refused again. Every start and exit is logged to
 OUT/logs/up.log; OUT/children.json names the live process of each part (for tools and tests)."""
 
 from __future__ import annotations
@@ -17,11 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from collie.child_log import last_error
 from collie.processes import end_with_parent
 from collie.startup import PART_ENV, mark
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
+REFUSED = 2  # our commands' exit code for what they refuse to do (argparse's, and every "error:" line)
 
 
 class Closeable(Protocol):
@@ -49,6 +53,7 @@ class Child:
     restarts: int = 0
     restart_at: float | None = None
     finished: bool = False
+    log_from: int = 0  # where its latest start's lines begin in its log
     exit_codes: list[int] = field(default_factory=list)
 
 
@@ -83,6 +88,7 @@ class Supervisor:
 
     def _spawn(self, child: Child) -> subprocess.Popen:
         log = open(self.out / "logs" / f"{child.name}.log", "ab")  # noqa: SIM115 - lives as long as the child
+        child.log_from = log.tell()
         env = {**child.env, "PYTHONUNBUFFERED": "1", PART_ENV: child.name}  # PART_ENV: its startup marks
         child.proc = subprocess.Popen(
             [sys.executable, "-m", "collie.cli", *child.args()],
@@ -134,12 +140,18 @@ class Supervisor:
                 child.failures = 0
             child.failures += 1
             how = f"signal {-code}" if code < 0 else f"code {code}" + (" (interrupted)" if code == 0 else "")
+            # what it said, when it ended by itself with an error (a signal's victim said nothing of it)
+            said = last_error(self.out / "logs" / f"{child.name}.log", child.log_from) if code > 0 else ""
+            how_said = how + (f": {said}" if said else "")
+            if child.exit_codes[-2:] == [REFUSED, REFUSED]:  # a refusal, twice: not a fault a restart mends
+                self.log(f"{child.name} refused to run again ({how_said}), giving up")
+                raise ChildFailed(f"the {child.name} refuses to run ({how_said})")
             if child.failures > self.max_restarts:
-                self.log(f"{child.name} exited with {how}; {self.max_restarts} restarts did not help, giving up")
-                raise ChildFailed(f"the {child.name} keeps exiting (last: {how}); see {self.out / 'logs'}")
+                self.log(f"{child.name} exited with {how_said}; {self.max_restarts} restarts did not help, giving up")
+                raise ChildFailed(f"the {child.name} keeps exiting (last: {how_said})")
             delay = min(BACKOFF_S * 2 ** (child.failures - 1), MAX_BACKOFF_S)
-            self.log(f"{child.name} exited with {how}; restarting in {delay:.1f} s")
-            print(f"collie up: {child.name} exited with {how}; restarting in {delay:.1f} s", file=sys.stderr)
+            self.log(f"{child.name} exited with {how_said}; restarting in {delay:.1f} s")
+            print(f"collie up: {child.name} exited with {how_said}; restarting in {delay:.1f} s", file=sys.stderr)
             child.restart_at = now + delay
 
     def closing(self, thing: Closeable) -> None:

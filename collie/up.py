@@ -12,7 +12,6 @@ import argparse
 import contextlib
 import json
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -24,6 +23,7 @@ from urllib.parse import quote
 
 from collie.addresses import is_loopback, link_host, local_address, network_address, not_listenable
 from collie.argtypes import ipv4_host, port, seed, sqlite_file
+from collie.child_log import last_error
 from collie.feedback_schedule import next_feedback_epoch
 from collie.pass_through import owned_flags
 from collie.processes import LockHeld, hold_lock
@@ -88,23 +88,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 class Stopped(Exception):
     """Ctrl-C (or SIGTERM) while the stack was starting."""
-
-
-EXCEPTION_LINE = re.compile(r"[A-Za-z_][\w.]*(Error|Exception): ")
-
-
-def last_error(log: Path) -> str:
-    """The last line a child wrote to its log that says what went wrong (empty if none): one of our
-    commands' "collie …: error:" lines, else an exception's line, else any line naming an error."""
-    try:
-        lines = log.read_text(errors="replace").splitlines()
-    except OSError:
-        return ""
-    said = [line.strip() for line in lines if line.strip()]
-    ours = [line for line in said if line.startswith("collie ") and ": error:" in line]  # our CLIs' own words
-    raised = [line for line in said if EXCEPTION_LINE.match(line)]  # a traceback's last line
-    other = [line for line in said if "error" in line.lower() and not line.startswith("(Background on this error")]
-    return (ours or raised or other or said or [""])[-1][:300]
 
 
 def wait_for(

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 from unprivileged import as_nobody, closed_folder
 
-from collie.up import Stopped, last_error, wait_for, what_runs
+from collie.child_log import last_error
+from collie.up import Stopped, wait_for, what_runs
 
 
 def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:

@@ -218,6 +218,25 @@ def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
     assert "giving up" in (tmp_path / "logs" / "up.log").read_text()
 
 
+def test_a_part_that_refuses_to_run_ends_the_stack_at_once_saying_why(tmp_path):
+    """A damaged checkpoint (or a revoked token) is refused the same way at every start: after one
+    retry the stack ends with the trainer's own words, not six starts and "see the logs"."""
+    first = subprocess.run(
+        up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 2"), capture_output=True, text=True, timeout=300
+    )
+    assert first.returncode == 0, first.stderr[-2000:]
+    checkpoint = tmp_path / "trainer" / "checkpoint.pt"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:100])
+    again = subprocess.run(
+        up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300
+    )
+    assert again.returncode == 1 and "Traceback" not in again.stderr
+    assert "collie up: error: the trainer refuses to run (code 2: collie train: error: " in again.stderr
+    assert "checkpoint.pt" in again.stderr.splitlines()[-1]  # what it refused, in the error line itself
+    log = (tmp_path / "logs" / "up.log").read_text()
+    assert log.count("started trainer") == 3  # the first stack's, then one start and one retry
+
+
 def alive(pid: int) -> bool:
     try:
         return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"  # a zombie has ended
