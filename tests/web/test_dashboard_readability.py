@@ -1,5 +1,6 @@
 """What the run page says and draws, read as a person reads it, in Debian's Chromium against a live
-service: labelled segments show their class's colour on the skill map."""
+service: labelled segments show their class's colour on the skill map, and counts of one are
+singular."""
 
 from __future__ import annotations
 
@@ -72,3 +73,9 @@ def test_a_labelled_segment_reads_as_its_class_colour(page: Any) -> None:
     dark = drawn.max(axis=1) < 90
     assert red.mean() > 0.7, f"only {red.mean():.0%} of the segment's pixels are its class colour"
     assert dark.mean() < 0.05, f"{dark.mean():.0%} of the segment's pixels are near-black"
+
+
+def test_counts_of_one_are_singular(page: Any) -> None:
+    assert page.text_content("#curves-note") == "1 evaluation"
+    pace = page.locator("#labeling-body dt:text-is('pace') + dd").inner_text()
+    assert pace.startswith("1 label / min")

@@ -2,6 +2,7 @@
 // by the service (at most `maxPoints` rows, whatever the run's length); live rows are appended
 // and the series thinned again by halves when it grows past twice that.
 
+import { ordinal, plural } from "./format.js";
 import { plot } from "./plotly.js";
 import { CLASS_COLOURS } from "./regions.js";
 
@@ -107,7 +108,7 @@ export class Curves {
     if (this.help) {
       this.help.innerHTML = panels.map((p) => `<li><b>${p.title}</b>: ${p.help}</li>`).join("");
     }
-    this.note.textContent = h.n_stored ? `${h.n_stored} evaluations${h.stride > 1 ? `, every ${h.stride}th shown` : ""}` : "no evaluations yet";
+    this.note.textContent = h.n_stored ? `${plural(h.n_stored, "evaluation")}${h.stride > 1 ? `, every ${ordinal(h.stride)} shown` : ""}` : "no evaluations yet";
     return plot(this.element, traces, layout).then(() => {
       this.element.dataset.points = String(h.epochs.length);
       this.element.dataset.lastEpoch = h.epochs.length ? String(h.epochs[h.epochs.length - 1]) : "";
