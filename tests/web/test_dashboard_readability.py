@@ -1,6 +1,6 @@
 """What the run page says and draws, read as a person reads it, in Debian's Chromium against a live
-service: labelled segments show their class's colour on the skill map, and counts of one are
-singular."""
+service: labelled segments show their class's colour on the skill map, counts of one are singular,
+and a run with one evaluation has a sensible epoch axis."""
 
 from __future__ import annotations
 
@@ -79,3 +79,24 @@ def test_counts_of_one_are_singular(page: Any) -> None:
     assert page.text_content("#curves-note") == "1 evaluation"
     pace = page.locator("#labeling-body dt:text-is('pace') + dd").inner_text()
     assert pace.startswith("1 label / min")
+
+
+def x_ranges(page: Any) -> list[list[float]]:
+    return page.evaluate(
+        "Object.entries(document.querySelector('#curves')._fullLayout)"
+        ".filter(([k]) => /^xaxis\\d*$/.test(k)).map(([, a]) => a.range)"
+    )
+
+
+def test_the_epoch_axis_is_sensible_for_one_evaluation_and_then_more(
+    page: Any, trainer: CollieClient, run: RunRead
+) -> None:
+    """Last in the module: it posts a second evaluation."""
+    ranges = x_ranges(page)
+    assert ranges
+    assert all(low == 0 and 1 <= high <= 2 for low, high in ranges)  # epoch 0 in view, no negative epochs
+    ticks = page.eval_on_selector_all("#curves .xtick text", "ts => ts.map(t => t.textContent)")
+    assert ticks and all(t.isdigit() for t in ticks)  # whole epochs
+    trainer.post_metrics(run.id, MetricsIn(epoch=6, values={"safe_ratio": 0.6, "n_labels": 5.0}))
+    page.wait_for_function("document.querySelector('#curves').dataset.points === '2'")
+    assert all(-0.01 < low <= 0 and 6 <= high < 7 for low, high in x_ranges(page))  # the data's span, from 0
