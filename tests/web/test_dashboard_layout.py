@@ -59,3 +59,29 @@ def test_the_discard_buttons_stay_inside_the_labeling_card(browser: Any, url: st
         page.wait_for_function("document.querySelector('#labelers-stats button').textContent.startsWith('Confirm')")
         assert inside(page, "#labelers-stats button", "#labeling") == []
         assert page.evaluate("(e => e.scrollWidth <= e.clientWidth)(document.querySelector('#labeling'))")
+
+
+def test_the_page_fits_a_phone_width(browser: Any, url: str, artifacts: Any) -> None:
+    """390 × 844: no sideways scroll of the page (wide tables scroll in their own box), and the header
+    bar spans the width."""
+    context = browser.new_context(bypass_csp=True, viewport={"width": 390, "height": 844}, is_mobile=True)
+    try:
+        page = context.new_page()
+        page.set_default_timeout(WAIT_MS)
+        page.goto(url)
+        page.wait_for_selector("#labelers-stats tbody tr button")
+        page.wait_for_function("document.querySelector('#curves').dataset.points === '1'")
+        page.wait_for_function("document.querySelector('#map').dataset.trajectories === '1'")
+        widths = page.evaluate(
+            "({ page: document.documentElement.scrollWidth, view: document.documentElement.clientWidth,"
+            " header: document.querySelector('header').getBoundingClientRect().width })"
+        )
+        assert widths["view"] == 390
+        assert widths["page"] <= widths["view"], f"the page lays out {widths['page']} px wide"
+        assert widths["header"] == widths["view"]
+        for table in ("#runs table", "#labelers table", "#labelers-stats", "#disagreements table"):
+            box = page.locator(table).bounding_box()
+            assert box is not None and box["x"] >= 0  # in the page, scrolled (if at all) by its own box
+        page.screenshot(path=str(artifacts / "dashboard-phone.png"), full_page=True)
+    finally:
+        context.close()
