@@ -24,16 +24,19 @@ function selectedRun() {
   return match ? Number(match[1]) : null;
 }
 
-// No token, or one the service refused: the page says what it needs instead of looking empty.
+// No token, or one the service refused (`message`, its reason): the page says what it needs, once and
+// the same in each table, shows no run, and its forms wait for a token the service takes.
 function askForToken(message) {
   $("#token-form").hidden = false;
-  $("#token-error").textContent = message;
+  $("#token-error").textContent = message ? `token refused: ${message}` : "";
   const why = message ? "this token was refused" : "no token";
-  const needed = `<tr><td colspan="8" class="muted">${why}: paste an operator token above ` +
+  const needed = (columns) => `<tr><td colspan="${columns}" class="muted">${why}: paste an operator token above ` +
     "(the dashboard link <code>collie up</code> prints carries one)</td></tr>";
-  runsBody.innerHTML = needed;
-  $("#labelers-body").innerHTML = needed;
+  runsBody.innerHTML = needed(8);
+  labelers.lock(needed(5));
   runs = [];
+  runPage.close();
+  $("#run").hidden = true;
   showConnection(message ? "refused" : "no token");
 }
 
@@ -87,7 +90,7 @@ function start() {
 takeTokenFromUrl();
 const ui = new URL(window.location.href).searchParams.get("ui");
 if (ui) sessionStorage.setItem("collie-ui", ui);
-const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie-ui"));
+const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie-ui"), askForToken);
 
 runsBody.addEventListener("click", (event) => {
   const row = event.target.closest("tr[data-run-id]");
