@@ -150,15 +150,15 @@ def test_a_wrong_token_cannot_pause(stack: dict[str, Any], browser: Any) -> None
         assert client.run(run_id).control == "run"
 
 
-def test_a_link_to_a_run_that_does_not_exist_says_so_above_the_runs(stack: dict[str, Any], browser: Any) -> None:
+def test_a_link_to_a_run_that_does_not_exist_says_so_where_the_run_was(stack: dict[str, Any], browser: Any) -> None:
     page = browser.new_page(bypass_csp=True)
     page.set_default_timeout(WAIT_MS)
     page.goto(f"{stack['api']}/?token={stack['tokens']['operator']}#run={stack['run_id']}")
     page.wait_for_selector("#run:not([hidden])")
     page.evaluate("window.location.hash = '#run=99999'")  # from an open run to one that does not exist
-    page.wait_for_function("document.querySelector('#runs-message').textContent.startsWith('could not open run 99999')")
-    assert page.is_visible("#runs-message") and page.is_hidden("#run")
-    assert page.text_content("#connection") == "no such run"
+    page.wait_for_function("document.querySelector('#run-problem').textContent.startsWith('Run #99999: no such run')")
+    assert page.is_visible("#run-problem") and page.is_hidden("#run")
+    assert page.text_content("#connection") == "live"  # the connection's, and it is
     assert page.locator(f"#runs-body tr[data-run-id='{stack['run_id']}']").count() == 1  # the runs to pick from
     page.close()
 

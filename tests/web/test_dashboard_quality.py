@@ -184,7 +184,7 @@ def test_the_charts_have_legends_and_labelled_states_are_large(page: Any, artifa
         "document.querySelector('#map').data.filter(t => t.name.startsWith('labelled'))"
         ".map(t => [t.marker.size, t.marker.symbol])"
     )
-    assert all(size >= 10 for size, _ in markers)
+    assert all(max(sizes) >= 10 for sizes, _ in markers)  # each segment ends in a large marker of its class's shape
     assert len({symbol for _, symbol in markers}) == 3  # bad, neutral, good: three shapes
     page.screenshot(path=str(artifacts / "dashboard-quality.png"), full_page=True)
 
@@ -196,8 +196,6 @@ def test_the_labeler_table_stays_inside_its_card(page: Any) -> None:
     button = page.locator("#labelers-stats tbody tr button").first.bounding_box()
     assert card is not None and button is not None
     visible_right = card["x"] + card["width"]
-    assert button["x"] + button["width"] <= visible_right or page.evaluate(
-        "document.querySelector('#labeling').scrollWidth > document.querySelector('#labeling').clientWidth"
-    )  # inside the card, or reachable by the card's own scroll
+    assert button["x"] + button["width"] <= visible_right  # inside the card (test_dashboard_layout.py: armed too)
     no_page_scroll = "document.documentElement.scrollWidth <= document.documentElement.clientWidth"
     assert page.evaluate(no_page_scroll)

@@ -3,6 +3,28 @@
 // run, a bad number) is shown, never hidden.
 
 import { api } from "./api.js";
+import { num, plural } from "./format.js";
+
+// The longest feedback timeout the service takes (collie/schemas.py MAX_FEEDBACK_TIMEOUT_S), read from
+// its OpenAPI schema once an operator starts on the field; null when unreadable (the service still
+// checks, and its refusal is shown).
+let maxTimeout = null;
+export function feedbackTimeoutMax() {
+  maxTimeout ??= fetch("openapi.json")
+    .then((response) => response.json())
+    .then((schema) => {
+      const field = schema.components.schemas.FeedbackPolicy.properties.timeout_s;
+      return (field.anyOf ?? [field]).map((type) => type.maximum).find(Number.isFinite) ?? null;
+    })
+    .catch(() => {
+      maxTimeout = null; // asked again next time
+      return null;
+    });
+  return maxTimeout;
+}
+
+// 604800 → "7 days", 7200 → "2 hours": the limit in words an operator can weigh.
+const inWords = (s) => (s >= 86400 ? plural(num(s / 86400, 1), "day") : s >= 3600 ? plural(num(s / 3600, 1), "hour") : plural(num(s / 60, 1), "minute"));
 
 export function policyText(timeoutS) {
   return timeoutS == null ? "wait for every label" : `continue after ${Number(timeoutS.toPrecision(6))} s`;
@@ -25,11 +47,17 @@ export class Controls {
     for (const [action, button] of Object.entries(this.buttons)) {
       button.addEventListener("click", () => this.press(action));
     }
-    this.policy.form.addEventListener("submit", (event) => {
+    this.policy.seconds.addEventListener("focus", feedbackTimeoutMax); // known by the time Apply is pressed
+    this.policy.form.addEventListener("submit", async (event) => {
       event.preventDefault();
       const text = this.policy.seconds.value.trim();
       if (text === "" || !Number.isFinite(Number(text)) || Number(text) <= 0) {
         this.message.textContent = "enter the seconds (more than 0) to wait for a session's labels";
+        return;
+      }
+      const max = await feedbackTimeoutMax();
+      if (max != null && Number(text) > max) {
+        this.message.textContent = `a session's labels can be waited for at most ${max} s (${inWords(max)}): enter fewer seconds, or Wait for every label`;
         return;
       }
       this.setPolicy(Number(text));

@@ -2,6 +2,7 @@
 // by the service (at most `maxPoints` rows, whatever the run's length); live rows are appended
 // and the series thinned again by halves when it grows past twice that.
 
+import { ordinal, plural } from "./format.js";
 import { plot } from "./plotly.js";
 import { CLASS_COLOURS } from "./regions.js";
 
@@ -25,6 +26,21 @@ const PANELS = [
 const COLUMNS = 2;
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
 const colour = (panel, name, i) => panel.colours?.[name] ?? PALETTE[i % PALETTE.length];
+
+// The epoch axis: never below 0, whole epochs as ticks while there are few. Plotly centres a single
+// point in ±1 (epoch 0 ran from −1 to 1): one evaluation gets two epochs around it instead.
+function epochRange(epochs) {
+  if (!epochs.length) return { rangemode: "nonnegative" };
+  const low = Math.min(...epochs);
+  const high = Math.max(...epochs);
+  // up to 6 ticks; past that Plotly steps by 1, 2, 5… of its own (it chose 0.5 for a span of 4)
+  const whole = high - low <= 5 ? { tick0: 0, dtick: 1 } : {};
+  if (low === high) {
+    const start = Math.max(0, low - 1);
+    return { ...whole, autorange: false, range: [start, start + 2] };
+  }
+  return { ...whole, autorange: true, rangemode: "nonnegative" };
+}
 
 export class Curves {
   constructor(element, note, maxPoints, help = null) {
@@ -79,6 +95,7 @@ export class Curves {
         .filter((k) => shown(series[k])),
     })).filter((panel) => panel.names.length); // axes without a trace would be left out of the grid
     const rows = Math.max(1, Math.ceil(panels.length / COLUMNS));
+    const epochAxis = epochRange(h.epochs);
     const traces = [];
     const layout = {
       grid: { rows, columns: COLUMNS, pattern: "independent", ygap: 0.6, xgap: 0.12 },
@@ -90,10 +107,11 @@ export class Curves {
       panel.names.forEach((name, i) => traces.push({
         type: "scatter", mode: h.epochs.length > 60 ? "lines" : "lines+markers", x: h.epochs, y: series[name],
         name, xaxis: `x${axis}`, yaxis: `y${axis}`, connectgaps: true, marker: { size: 4 },
+        cliponaxis: false, // a point on the axis' end (epoch 0) is drawn whole
         line: { color: colour(panel, name, i), width: 1.5 },
         hovertemplate: `${name}<br>epoch %{x}: %{y:.4g}<extra></extra>`,
       }));
-      layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined };
+      layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined, ...epochAxis };
       layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
       // the panel's legend, under its title (one line would run into the next panel on a narrow
       // screen): each series' name in its line's colour
@@ -107,7 +125,7 @@ export class Curves {
     if (this.help) {
       this.help.innerHTML = panels.map((p) => `<li><b>${p.title}</b>: ${p.help}</li>`).join("");
     }
-    this.note.textContent = h.n_stored ? `${h.n_stored} evaluations${h.stride > 1 ? `, every ${h.stride}th shown` : ""}` : "no evaluations yet";
+    this.note.textContent = h.n_stored ? `${plural(h.n_stored, "evaluation")}${h.stride > 1 ? `, every ${ordinal(h.stride)} shown` : ""}` : "no evaluations yet";
     return plot(this.element, traces, layout).then(() => {
       this.element.dataset.points = String(h.epochs.length);
       this.element.dataset.lastEpoch = h.epochs.length ? String(h.epochs[h.epochs.length - 1]) : "";

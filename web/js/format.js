@@ -30,6 +30,11 @@ export function ago(isoTime, now = Date.now()) {
   return `${(s / 86400).toFixed(1)} d ago`;
 }
 
+// "1 label", "2 labels": `n` as shown (a number or its text), the word singular for exactly one.
+export const plural = (n, word, words = `${word}s`) => `${n} ${String(n) === "1" ? word : words}`;
+
+export const ordinal = (n) => `${n}${[11, 12, 13].includes(n % 100) ? "th" : { 1: "st", 2: "nd", 3: "rd" }[n % 10] ?? "th"}`;
+
 export const of = (n, total) => (total == null ? `${n}` : `${n} / ${total}`);
 
 export function num(x, digits = 2) {

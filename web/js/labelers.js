@@ -34,9 +34,11 @@ function nameProblem(name) {
 }
 
 export class LabelerPanel {
-  constructor(root, uiUrl) {
+  // `onRefused(reason)`: the service refused the token (401); the page asks for another (main.js).
+  constructor(root, uiUrl, onRefused) {
     this.root = root;
     this.uiUrl = uiUrl;
+    this.onRefused = onRefused;
     this.body = root.querySelector("#labelers-body");
     this.message = root.querySelector("#labeler-message");
     this.armed = null;
@@ -55,12 +57,30 @@ export class LabelerPanel {
 
   async load() {
     try {
-      this.render(await api("labelers"));
+      const people = await api("labelers");
+      this.enable(true);
+      this.render(people);
     } catch (error) {
+      if (error.status === 401) {
+        this.onRefused(error.message);
+        return;
+      }
       this.body.innerHTML = `<tr><td colspan="5" class="muted">${
         error.status === 403 ? "only an operator's token may manage labelers" : escapeHtml(error.message)}</td></tr>`;
-      this.root.querySelector("#labeler-create").disabled = error.status === 403;
+      this.enable(error.status !== 403);
     }
+  }
+
+  // No token the service takes: `rowHtml` (the page's one message) in the table, the form disabled.
+  lock(rowHtml) {
+    this.body.innerHTML = rowHtml;
+    this.root.querySelector("#labeler-created").hidden = true;
+    this.message.textContent = "";
+    this.enable(false);
+  }
+
+  enable(on) {
+    for (const control of this.root.querySelectorAll("#labeler-form input, #labeler-form button")) control.disabled = !on;
   }
 
   render(people) {

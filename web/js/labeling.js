@@ -4,7 +4,7 @@
 // queries where labelers or the oracle disagree, each with its path drawn over the task's regions
 // and, when the labeling UI's address is known, a link that replays it in 3D there.
 
-import { ago, escapeHtml, num, of, percent } from "./format.js";
+import { ago, escapeHtml, num, of, percent, plural } from "./format.js";
 import { CLASS_COLOURS, FILL, regionPath } from "./regions.js";
 
 // `names`: the label words in value order, as the API gives them (RunPage.labels); no copy here.
@@ -48,19 +48,19 @@ export function renderLabeling(element, view, ruleless = false, discard = { arme
           <p class="explain">queries whose label counts (the trainer has it)${s.n_total == null ? "" : " / the run's label budget"}</p></dd>
       <dt>quality</dt><dd id="m-quality">${quality}
           <p class="explain">a query counts once its labels are in: the majority, a tie going to the safer label (bad, then neutral)</p></dd>
-      <dt>pace</dt><dd>${num(s.labels_per_min, 1)} labels / min
+      <dt>pace</dt><dd>${plural(num(s.labels_per_min, 1), "label")} / min
           <p class="explain">labels submitted in the last 5 minutes, per minute</p></dd>
       <dt>last label</dt><dd><span data-time="${s.last_label_at ?? ""}" class="since">${ago(s.last_label_at)}</span>
           <p class="explain">when the latest label arrived</p></dd>
       <dt>oracle agrees</dt>
-      <dd id="m-oracle">${ruleless ? "no task rule (instruction only)" : s.judged ? `${percent(s.agreement)} of ${s.judged} labels` : "nothing to judge yet"}
+      <dd id="m-oracle">${ruleless ? "no task rule (instruction only)" : s.judged ? `${percent(s.agreement)} of ${plural(s.judged, "label")}` : "nothing to judge yet"}
           <p class="explain">share of counted labels the task rule gives too, where the rule can judge</p></dd>
       <dt>labelers agree</dt>
       <dd id="m-alpha">${s.alpha == null ? (s.alpha_queries ? "α undefined (every label the same)" : "no query with two labels yet")
-        : `α = ${num(s.alpha, 2)} on ${s.alpha_queries} queries`}
+        : `α = ${num(s.alpha, 2)} on ${plural(s.alpha_queries, "query", "queries")}`}
           <p class="explain">Krippendorff's α on queries with two labels or more: 1 full agreement, 0 what chance gives, below 0 worse</p></dd>
       <dt>labeler pairs agree</dt>
-      <dd id="between-labelers">${s.shared_queries ? `${percent(s.between_labelers)} on ${s.shared_queries} shared segments` : "no segment labelled by two yet"}
+      <dd id="between-labelers">${s.shared_queries ? `${percent(s.between_labelers)} on ${plural(s.shared_queries, "shared segment")}` : "no segment labelled by two yet"}
           <p class="explain">share of labeler pairs that gave the same label (needs no rule)</p></dd>
     </dl>
     ${rows ? `<table id="labelers-stats"><thead><tr><th>labeler</th><th>labels</th><th>skips</th><th>median</th><th>oracle agrees</th><th>α</th><th>gold</th><th></th></tr></thead>

@@ -12,6 +12,7 @@ const runPage = new RunPage($("#run"), showConnection);
 const RUNS_WAIT_S = 20;
 let runs = [];
 let started = 0; // bumped by a new token: the old poll loop ends
+let missing = null; // a run the service does not know: not asked for again until the runs list has it
 
 function showConnection(state) {
   const pill = $("#connection");
@@ -24,16 +25,20 @@ function selectedRun() {
   return match ? Number(match[1]) : null;
 }
 
-// No token, or one the service refused: the page says what it needs instead of looking empty.
+// No token, or one the service refused (`message`, its reason): the page says what it needs, once and
+// the same in each table, shows no run, and its forms wait for a token the service takes.
 function askForToken(message) {
   $("#token-form").hidden = false;
-  $("#token-error").textContent = message;
+  $("#token-error").textContent = message ? `token refused: ${message}` : "";
   const why = message ? "this token was refused" : "no token";
-  const needed = `<tr><td colspan="8" class="muted">${why}: paste an operator token above ` +
+  const needed = (columns) => `<tr><td colspan="${columns}" class="muted">${why}: paste an operator token above ` +
     "(the dashboard link <code>collie up</code> prints carries one)</td></tr>";
-  runsBody.innerHTML = needed;
-  $("#labelers-body").innerHTML = needed;
+  runsBody.innerHTML = needed(8);
+  labelers.lock(needed(5));
   runs = [];
+  runPage.close();
+  $("#run").hidden = true;
+  $("#run-problem").hidden = true;
   showConnection(message ? "refused" : "no token");
 }
 
@@ -41,15 +46,23 @@ async function openSelected() {
   const runId = selectedRun() ?? runs[0]?.id ?? null;
   renderRuns(runsBody, runs, runId);
   if (runId == null || runId === runPage.runId) return;
-  $("#runs-message").textContent = "";
+  if (runId === missing && !runs.some((r) => r.id === runId)) return;
+  const problem = $("#run-problem");
   try {
     await runPage.open(runId, sessionStorage.getItem("collie-ui"));
+    if (runPage.runId === runId) {
+      problem.hidden = true;
+      missing = null; // a later link to it asks again
+    }
   } catch (error) {
     if (error.status === 401) return askForToken(error.message);
-    // no run shown (not the one open before): say it above, where the runs to pick from are
+    // no run shown (not the one open before): said where it would be; the badge is the connection's
     $("#run").hidden = true;
-    $("#runs-message").textContent = `could not open run ${runId}: ${error.message}; pick one above`;
-    showConnection(error.status === 404 ? "no such run" : "down");
+    if (error.status === 404) missing = runId;
+    problem.textContent = `Run #${runId}: ${error.status === 404 ? "no such run on this service"
+      : `could not be opened (${error.message})`} — pick one from the runs above.`;
+    problem.hidden = false;
+    if (error.status == null) showConnection("down"); // no answer at all
   }
 }
 
@@ -65,6 +78,7 @@ async function followRuns(generation) {
       version = page.version;
       runs = page.runs;
       $("#token-form").hidden = true;
+      if (!runPage.source) showConnection("live"); // no run's stream to speak for the connection
       await openSelected();
     } catch (error) {
       if (error.status === 401) {
@@ -87,7 +101,7 @@ function start() {
 takeTokenFromUrl();
 const ui = new URL(window.location.href).searchParams.get("ui");
 if (ui) sessionStorage.setItem("collie-ui", ui);
-const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie-ui"));
+const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie-ui"), askForToken);
 
 runsBody.addEventListener("click", (event) => {
   const row = event.target.closest("tr[data-run-id]");

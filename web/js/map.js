@@ -6,6 +6,8 @@ import { plot } from "./plotly.js";
 import { CLASS_COLOURS, FILL, regionPath, regionShapes, undrawn } from "./regions.js";
 
 const LABEL_SYMBOLS = ["x", "circle", "diamond"]; // by label value (0 bad, 1 neutral, 2 good)
+const STATE_SIZE = 5; // a labelled segment's states
+const END_SIZE = 11; // its last state: large enough to show the class's shape
 const W_SCALE = [[0, CLASS_COLOURS[0]], [0.5, CLASS_COLOURS[1]], [1, CLASS_COLOURS[2]]]; // w ∈ [0, 2]
 
 // One colour per skill: its direction for 2-D skills (as METRA's plots), else its index.
@@ -92,13 +94,19 @@ export class SkillMap {
     if (this.oneD) return [];
     return this.labels.map(({ value: label, name }) => {
       const segments = this.labelled.filter((s) => s.label === label);
-      const x = [], y = [];
-      for (const s of segments) for (const [px, py] of s.xy) { x.push(px); y.push(py); }
+      const x = [], y = [], size = [];
+      for (const s of segments) {
+        s.xy.forEach(([px, py], i) => { x.push(px); y.push(py); size.push(i === s.xy.length - 1 ? END_SIZE : STATE_SIZE); });
+        x.push(null); y.push(null); size.push(0); // a gap: segments are not joined to each other
+      }
+      // Each segment a thick line of its class's colour through small markers, ending in a large
+      // one of its class's shape (bad and neutral told apart at a glance, colour-blind too). No dark
+      // outline: on 20 overlapping states it drew a black smear that hid the colour.
       return {
-        type: "scatter", mode: "markers", x, y, name: `labelled ${name} (${segments.length})`,
-        visible: segments.length ? true : "legendonly", hoverinfo: "name",
-        // large and each class its own shape: bad and neutral must be told apart at a glance
-        marker: { size: 11, symbol: LABEL_SYMBOLS[label], color: CLASS_COLOURS[label], line: { width: 1.2, color: "#222" } },
+        type: "scatter", mode: "lines+markers", x, y, name: `labelled ${name} (${segments.length})`,
+        visible: segments.length ? true : "legendonly", hoverinfo: "name", connectgaps: false,
+        line: { color: CLASS_COLOURS[label], width: 3 },
+        marker: { size, symbol: LABEL_SYMBOLS[label], color: CLASS_COLOURS[label], line: { width: 0 } },
       };
     });
   }

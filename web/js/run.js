@@ -4,7 +4,7 @@
 import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
-import { STATUS_TEXT, coalesce, controlPending, shownStatus } from "./format.js";
+import { STATUS_TEXT, coalesce, controlPending, plural, shownStatus } from "./format.js";
 import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
 import { QualityForm } from "./quality.js";
@@ -141,8 +141,8 @@ export class RunPage {
     this.discard = state;
     try {
       const done = await api(`runs/${runId}/labelers/${labelerId}/discard`, { method: "POST" });
-      const n = done.queries.length;
-      state.message = `discarded ${n} label${n === 1 ? "" : "s"} of ${done.labeler}; ${done.withdrawn.length} had counted and were withdrawn from the trainer`;
+      const counted = done.withdrawn.length === 1 ? "1 had counted and was" : `${done.withdrawn.length} had counted and were`;
+      state.message = `discarded ${plural(done.queries.length, "label")} of ${done.labeler}; ${counted} withdrawn from the trainer`;
     } catch (error) {
       state.message = error.message; // the service names what is wrong (not an operator, a finished run)
     }

@@ -1,0 +1,67 @@
+"""What the dashboard says when it cannot show what was asked, in Debian's Chromium against a live
+service: a token the service refuses, and a link to a run that does not exist."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from service.conftest import TOKENS, make_run_spec
+
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.schemas import MetricsIn, RunRead
+
+from .conftest import operator_page
+
+WAIT_MS = 30_000
+
+
+@pytest.fixture(scope="module")
+def run(trainer: CollieClient) -> RunRead:
+    return trainer.create_run(make_run_spec())
+
+
+def test_a_wrong_token_says_so_once_and_disables_the_forms(browser: Any, live: BackgroundServer, run: RunRead) -> None:
+    with operator_page(browser, f"{live.url}/?token=not-a-token#run={run.id}", wait_ms=WAIT_MS) as page:
+        page.wait_for_selector("#token-form:not([hidden])")
+        page.wait_for_load_state("networkidle")  # every refused request answered: nothing left to overwrite
+        hint = "this token was refused: paste an operator token above"
+        assert page.text_content("#runs-body").startswith(hint)
+        assert page.text_content("#labelers-body") == page.text_content("#runs-body")  # one message
+        assert page.is_disabled("#labeler-name") and page.is_disabled("#labeler-create")
+        assert page.text_content("#token-error") == "token refused: unknown or revoked token"  # the reason
+        assert page.is_hidden("#run")
+        assert page.text_content("#connection") == "token refused"
+        page.fill("#token-input", TOKENS["operator"])  # a valid token: everything comes back
+        page.click("#token-form button")
+        page.wait_for_selector('#labelers-body tr[data-labeler="operator"]')
+        page.wait_for_selector("#run:not([hidden])")
+        assert page.is_enabled("#labeler-name") and page.is_enabled("#labeler-create")
+        assert page.is_hidden("#token-form")
+
+
+def test_a_link_to_a_missing_run_says_so_where_the_run_would_be_shown(
+    browser: Any, live: BackgroundServer, trainer: CollieClient, run: RunRead
+) -> None:
+    with operator_page(browser, f"{live.url}/?token={TOKENS['operator']}#run=99", wait_ms=WAIT_MS) as page:
+        asked: list[str] = []
+        page.on("request", lambda r: asked.append(r.url) if "/api/dashboard/runs/99" in r.url else None)
+        with page.expect_response(lambda r: "/api/dashboard/runs/99" in r.url):
+            page.reload()  # counted from the start
+        epoch = f"document.querySelector('#runs-body tr[data-run-id=\"{run.id}\"]').cells[5].textContent"
+        page.wait_for_function(f"{epoch} === '0'")
+        trainer.post_metrics(run.id, MetricsIn(epoch=7, values={"n_labels": 0.0}))  # the runs list changes
+        page.wait_for_function(f"{epoch} === '7'")
+        page.wait_for_timeout(500)  # time for a second request, were one sent
+        assert len(asked) == 1
+        page.wait_for_function("document.querySelector('#connection').textContent === 'live'")  # the connection's
+        said = "Run #99: no such run on this service — pick one from the runs above."
+        assert page.is_visible("#run-problem") and page.text_content("#run-problem") == said
+        assert page.is_hidden("#run")
+        problem = page.locator("#run-problem").bounding_box()
+        labelers = page.locator("#labelers").bounding_box()
+        assert problem is not None and labelers is not None and problem["y"] > labelers["y"]  # where a run goes
+        page.evaluate(f"window.location.hash = '#run={run.id}'")  # a run that exists
+        page.wait_for_selector("#run:not([hidden])")
+        assert page.is_hidden("#run-problem")
