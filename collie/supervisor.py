@@ -144,8 +144,8 @@ class Supervisor:
             said = last_error(self.out / "logs" / f"{child.name}.log", child.log_from) if code > 0 else ""
             how_said = how + (f": {said}" if said else "")
             if child.exit_codes[-2:] == [REFUSED, REFUSED]:  # a refusal, twice: not a fault a restart mends
-                self.log(f"{child.name} refused to run again ({how_said}), giving up")
-                raise ChildFailed(f"the {child.name} refuses to run ({how_said})")
+                self.log(f"{child.name} ended the same way again ({how_said}), giving up")
+                raise ChildFailed(f"the {child.name} ends the same way again ({how_said})")
             if child.failures > self.max_restarts:
                 self.log(f"{child.name} exited with {how_said}; {self.max_restarts} restarts did not help, giving up")
                 raise ChildFailed(f"the {child.name} keeps exiting (last: {how_said})")

@@ -446,7 +446,7 @@ def run(args: argparse.Namespace) -> int:
         from trainer.threads import apply_openmp_env, resolve_threads
 
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
-        from trainer.loop import Trainer, pick_device
+        from trainer.loop import Trainer, TrainingDiverged, pick_device
         from trainer.networks import fast_ops_pay
 
         mark("imports")  # torch, mujoco, the trainer's modules
@@ -488,6 +488,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie train: error: the labeling service at {args.api} answered {exc}", file=sys.stderr)
                 return 2
         summary = trainer.run(resume=args.resume)
+    except TrainingDiverged as exc:  # summary.json says "failed"; the last good checkpoint is kept
+        print(f"collie train: error: the run failed: {exc}", file=sys.stderr)
+        return 2
     except ResumeError as exc:  # a damaged or missing file of the run folder, named
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2

@@ -73,6 +73,14 @@ CURVE_KEYS: tuple[str, ...] = (
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
 
 
+def non_finite(state: Any, at: str = "agent") -> str | None:
+    """The first place in a (nested) state holding a NaN or an infinity, e.g. agent.qf.net.0.weight."""
+    if isinstance(state, torch.Tensor):
+        return at if state.is_floating_point() and not bool(torch.isfinite(state).all()) else None
+    items = state.items() if isinstance(state, dict) else enumerate(state) if isinstance(state, list | tuple) else ()
+    return next((found for key, value in items if (found := non_finite(value, f"{at}.{key}"))), None)
+
+
 class TrainingDiverged(RuntimeError):
     """A NaN/inf appeared in observations or losses; the last checkpoint is left intact."""
 
@@ -514,6 +522,9 @@ class Trainer:
             raise ResumeError(
                 f"{path} does not fit this run's config.json (copied from another run?): {first[:200]}"
             ) from None
+        damaged = non_finite(self.agent.state_dict())
+        if damaged:  # a flipped bit reads as NaN: training would only fail an epoch later, as if it diverged
+            raise ResumeError(f"{path} holds non-finite values ({damaged}): it is damaged; resume an intact copy")
         metrics = self.out / "metrics.jsonl"  # drop evaluations written after that checkpoint
         if metrics.exists():
             lines = [ln for ln in metrics.read_text(errors="replace").splitlines() if ln]
@@ -598,6 +609,7 @@ class Trainer:
         status: LoopStatus = "finished"
         record: dict[str, Any] | None = None
         refused: SourceRefused | None = None
+        diverged: TrainingDiverged | None = None
         previous_handlers = self._install_signal_handlers()
         try:
             if asking is not None:  # resumed in the feedback wait of epoch self.epoch: its rest first
@@ -617,6 +629,8 @@ class Trainer:
             status = "stopped"
         except SourceRefused as exc:  # no label can come: end resumable, as after a signal
             status, refused = "interrupted", exc
+        except TrainingDiverged as exc:  # the run failed: its summary says so (the checkpoint stays the last good one)
+            status, diverged = "failed", exc
         finally:
             for sig, handler in previous_handlers.items():
                 signal.signal(sig, handler)
@@ -627,7 +641,9 @@ class Trainer:
             status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
         if status in ("stopped", "interrupted"):
             self.checkpoint()
-        summary = self.finish(status, record)
+        summary = self.finish(status, record, error=None if diverged is None else str(diverged))
+        if diverged is not None:
+            raise diverged
         if refused is not None:  # the caller says why, now that the run is saved
             raise SourceRefused(f"{refused}; the run is checkpointed at epoch {self.epoch}")
         if self.feedback.refusal is not None:  # met in the last epoch, after its last control()
@@ -670,7 +686,7 @@ class Trainer:
             self._last_progress = now
             self.reporter.status(StatusReport("training", self.epoch, progress=True))
 
-    def finish(self, status: LoopStatus, record: dict[str, Any] | None) -> dict[str, Any]:
+    def finish(self, status: LoopStatus, record: dict[str, Any] | None, error: str | None = None) -> dict[str, Any]:
         records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         last = record or (records[-1] if records else {})
         # the last evaluation's metrics (its `epoch`), and the run's own epochs and wall time: an
@@ -678,6 +694,7 @@ class Trainer:
         summary = {
             **last,
             "status": status,
+            **({"error": error} if error else {}),
             "epochs_done": self.epoch,
             "wall_s": round(self.wall_s(), 2),
             "config": self.cfg.to_dict(),
@@ -686,7 +703,7 @@ class Trainer:
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
         if status != "interrupted":  # an interrupted run is not over for the service
-            self.reporter.status(StatusReport(status, self.epoch))
+            self.reporter.status(StatusReport(status, self.epoch, error=error))
         return summary
 
     def _tensorboard(self) -> Any:

@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from trainer.config import make_config
+from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
 from trainer.loop import Trainer, TrainingDiverged
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
@@ -100,6 +101,29 @@ def test_nan_stops_the_run_naming_the_epoch_and_keeps_the_checkpoint(tmp_path):
     with pytest.raises(TrainingDiverged, match="non-finite action at epoch 5"):
         t.collect_epoch()
     assert hashlib.sha256(ckpt.read_bytes()).hexdigest() == digest
+
+
+def test_a_run_that_diverges_ends_failed_in_its_summary_and_keeps_its_checkpoint(tmp_path):
+    t = smoke(tmp_path, epochs=4)
+    t.run()
+    digest = hashlib.sha256((tmp_path / "checkpoint.pt").read_bytes()).hexdigest()
+    t.cfg.epochs = 6
+    with torch.no_grad():
+        t.agent.phi.net[0].weight[0, 0] = float("nan")
+    with pytest.raises(TrainingDiverged, match="at epoch 5"):
+        t.run()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "failed" and "non-finite" in summary["error"]  # not the "finished" of epoch 4
+    assert hashlib.sha256((tmp_path / "checkpoint.pt").read_bytes()).hexdigest() == digest
+
+
+def test_a_checkpoint_with_non_finite_values_is_refused_naming_them(tmp_path):
+    smoke(tmp_path, epochs=2).run()
+    state = load_checkpoint(tmp_path / "checkpoint.pt")
+    state["agent"]["qf"]["layers.0.weight"].view(-1)[7] = float("nan")  # as a flipped bit reads
+    save_checkpoint(tmp_path / "checkpoint.pt", state)
+    with pytest.raises(ResumeError, match=r"non-finite values \(agent\.qf\.layers\.0\.weight\): it is damaged"):
+        smoke(tmp_path, epochs=4).resume()
 
 
 @pytest.mark.parametrize(
