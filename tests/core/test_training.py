@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.config import make_config
 from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
+from trainer.config import make_config
 from trainer.loop import Trainer, TrainingDiverged
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
