@@ -307,7 +307,10 @@ class LabelerSession:
                     self.panels.notify(
                         "Moved to another tab", f"segment {query_id} is open in another of your tabs", "orange"
                     )
-                    if self.state.shown is None:  # the worker is the only writer of `shown`
+                    with self.tab as state:  # the worker is the only writer of `shown`
+                        state.drop_moved()
+                        gone = state.shown is None
+                    if gone:  # it no longer labels that one here: the next, or the waiting screen
                         self._show_next()
         except ServiceDown:
             self._retry = action
