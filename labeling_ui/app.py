@@ -14,9 +14,12 @@ import viser
 from collie.addresses import link_host
 from collie.mjmodels import MODEL_NAMES
 from collie.startup import mark
+from labeling_ui.browser import new_tab_id
 from labeling_ui.models import warm_models
 from labeling_ui.scene import south_view
 from labeling_ui.session import LabelerSession, UiConfig
+
+PROBE_S = 3.0  # a page that does not answer a round trip this fast counts as open (see _tab_id)
 
 
 class LabelingApp:
@@ -33,6 +36,7 @@ class LabelingApp:
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
         self.tab_labels: dict[str, list[tuple[int, str]]] = {}  # each browser tab's labels, across its reloads
+        self._tabs: dict[str, LabelerSession] = {}  # each tab id → the connection that goes by it
         self._closing: list[LabelerSession] = []  # closed tabs still in their grace period
         self._lock = threading.Lock()
         self.server.on_client_connect(self._connect)
@@ -60,7 +64,7 @@ class LabelingApp:
         return f"{self.url}?token={quote(token, safe='')}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        session = LabelerSession(client, self.config, self._shown_in, self.tab_labels)
+        session = LabelerSession(client, self.config, self._shown_in, self.tab_labels, self._tab_id)
         with self._lock:
             self.sessions[client.client_id] = session
         session.start()
@@ -77,11 +81,33 @@ class LabelingApp:
             if other.who is not None and other.who == showing.who and key in other.on_screen_or_held():
                 other.taken_over(key)
 
+    def _tab_id(self, session: LabelerSession, tab: str) -> str:
+        """The id `session` goes by: `tab`, the one its page keeps in sessionStorage, unless another
+        open page goes by it. A tab the browser duplicates (or opens with window.open) starts with a
+        copy of that sessionStorage, id included, and the service keeps claims per tab id: the copy
+        gets an id of its own, and the original keeps its segments. A reload's old connection may
+        still be open a moment after its page went, so the other connection's page is asked first:
+        only one that answers makes this tab a copy (a reload keeps its id and gets its segment back)."""
+        while True:
+            with self._lock:
+                holder = self._tabs.get(tab)
+                if holder is None or holder is session or holder.closed.is_set():
+                    self._tabs[tab] = session
+                    return tab
+            if holder.page_open(PROBE_S):
+                tab = new_tab_id()  # taken under the lock above on the next turn
+                continue
+            with self._lock:  # its page is gone: this is that tab, reloaded or reconnected
+                if self._tabs.get(tab) is holder:
+                    self._tabs[tab] = session
+                    return tab
+
     def _disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
             session = self.sessions.pop(client.client_id, None)
             if session is not None:
                 self._closing.append(session)
+                self._tabs = {tab: s for tab, s in self._tabs.items() if s is not session}
         if session is not None:
             session.close()
 

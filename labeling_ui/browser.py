@@ -1,5 +1,4 @@
-"""Who a tab is: the labeler's token and the tab's own id, kept in the tab's sessionStorage,
-never shared by tabs.
+"""Who a tab is: the labeler's token and the tab's own id, kept in the tab's sessionStorage.
 
 A token comes from the labeler URL (`?token=…`, which signs in only the tab it opens) or the
 sign-in field. sessionStorage belongs to one tab (it survives a reload of that tab; another tab,
@@ -7,7 +6,9 @@ or a link opened in one, has its own), so an operator link opened beside a label
 wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` asks for watch mode,
 `?review=RUN&query=ID` for an operator's review of one query (the dashboard's "replay in 3D").
 The tab id names the tab's claims at the service (a claim is one tab's: only it may label the
-segment); it survives a reload, so a reloaded tab gets its segment back.
+segment); it survives a reload, so a reloaded tab gets its segment back. A tab the browser
+duplicates, or one opened with window.open, starts with a copy of the sessionStorage, id
+included: the app (app.py, `_tab_id`) gives such a copy an id of its own (`remember_tab`).
 
 viser does not pass the page URL to the server and reads only localStorage, so a script (viser's
 RunJavascript message, the channel viser itself uses to ship plotly.js) moves the token from the
@@ -111,6 +112,11 @@ def remember_token(client: viser.ClientHandle, token: str | None) -> None:
         run_script(client, f"sessionStorage.setItem({key}, {json.dumps(token)});")
     else:
         run_script(client, f"sessionStorage.removeItem({key});")
+
+
+def remember_tab(client: viser.ClientHandle, tab: str) -> None:
+    """This tab goes by `tab` from now on, across its reloads."""
+    run_script(client, f"sessionStorage.setItem({json.dumps(TAB_KEY)}, {json.dumps(tab)});")
 
 
 def load_prefs(client: viser.ClientHandle, who: str, timeout_s: float = 10.0) -> dict[str, object]:

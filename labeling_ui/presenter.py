@@ -56,8 +56,7 @@ class Presenter:
         with self.tab as state:
             ready = state.next_ready()
         if ready is not None:
-            self.present(link, ready)
-            return True
+            return self.present(link, ready) or self.show_next(link, run)
         claim = self.claims.claim(link, run) if run is not None else None
         if claim is None:
             picked = link.pick_run()
@@ -69,10 +68,11 @@ class Presenter:
         if claim is None:
             self.wait_for(link, run, None, refused=self.claims.refused)
             return False
-        self.present(link, self.claims.prepare(*claim))
-        return True
+        # taken over by another tab while it was prepared: claim again (that one is never handed out here)
+        return self.present(link, self.claims.prepare(*claim)) or self.show_next(link, run)
 
-    def present(self, link: ServiceLink, segment: Segment) -> None:
+    def present(self, link: ServiceLink, segment: Segment) -> bool:
+        """Show `segment`; False when another tab of this labeler took it over since it was claimed."""
         run, query = segment.run, segment.query
         poser: Poser | None = segment.replay
         if poser is not None:
@@ -93,7 +93,8 @@ class Presenter:
         )  # fmt: skip
         earlier = np.asarray(query.path_xy, float)[: query.start + 1] if query.path_xy else None
         with self.tab as state:  # keys from now on apply to this segment
-            state.present(segment, time.perf_counter())
+            if not state.present(segment, time.perf_counter()):
+                return False
             again = segment.key in state.skipped and not segment.revising
         if again:  # the queue came round: say so, or it looks like the skip did nothing
             back = f"{query.query_id} is back: the others are labelled or skipped"
@@ -116,6 +117,7 @@ class Presenter:
         self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
         self.claims.preload(link)
         self.show_progress(link)
+        return True
 
     def show_progress(self, link: ServiceLink) -> None:
         with self.tab as state:

@@ -24,7 +24,7 @@ from collie.client import new_request_id
 from collie.labels import Label
 from collie.schemas import RunRead
 from labeling_ui.actions import Action, Close, Moved, Relabel, Send, SignIn, SignOut, UiConfig, UndoKey, Wake
-from labeling_ui.browser import read_identity, save_prefs
+from labeling_ui.browser import read_identity, remember_tab, save_prefs
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.identity import Identity
@@ -39,6 +39,7 @@ from labeling_ui.timings import KeyTimings
 log = logging.getLogger(__name__)
 
 POLL_S = 0.25  # the worker's tick while idle (skills auto-advance, stream wake-ups)
+PROBE_KEY = "collie-probe"  # read to see whether a page still answers (absent: the answer is None)
 SLOW_ANSWER_S = 0.5  # a label unanswered this long gets a notice (answers take milliseconds)
 SLOW_ANSWER_NOTICE = "The labeling service has not answered yet; your label is kept and sent again until it is taken."
 
@@ -52,9 +53,13 @@ class LabelerSession:
         config: UiConfig,
         on_show: Callable[[LabelerSession, Key], None] = lambda *_: None,
         tab_labels: dict[str, list[Key]] | None = None,
+        tab_id: Callable[[LabelerSession, str], str] = lambda _, tab: tab,
     ) -> None:
         """`on_show(session, key)`: the app tells this labeler's other tabs that this one took a segment.
-        `tab_labels`: each tab's labels by tab id, kept by the app across the tab's reloads."""
+        `tab_labels`: each tab's labels by tab id, kept by the app across the tab's reloads.
+        `tab_id(session, tab)`: the id this tab goes by, given the one its page keeps (the app gives
+        a duplicated tab its own)."""
+        self._tab_id = tab_id
         self.tab_labels = {} if tab_labels is None else tab_labels
         self.client = client
         self.config = config
@@ -107,6 +112,19 @@ class LabelerSession:
         with self.tab as state:
             shown = [state.shown] if state.shown else []
             return {s.key for s in shown + state.ahead} | state.held
+
+    def page_open(self, timeout_s: float) -> bool:
+        """Whether this tab's page is still there: it answers a round trip (a reload's old connection
+        may stay open a moment after its page went). One that is slow to answer counts as open."""
+        if self._closed.is_set():
+            return False
+        try:
+            self.client.local_storage.get_item(PROBE_KEY, timeout=timeout_s)
+        except TimeoutError:
+            return True
+        except RuntimeError:  # the connection closed before the answer
+            return False
+        return True
 
     def taken_over(self, key: Key) -> None:
         """Another tab of this labeler shows `key` now: this one must not label it."""
@@ -202,11 +220,14 @@ class LabelerSession:
     def _work(self) -> None:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         self.panels.fit_window(opened.window_width)
+        tab = self._tab_id(self, opened.tab)
+        if tab != opened.tab:  # a copy of another open tab: a reload of it keeps the id it has now
+            remember_tab(self.client, tab)
         with self.tab as state:
             state.watch_run, state.review = opened.watch, opened.review
-            if opened.tab:  # the labels this tab made before a reload: U walks back through them
-                state.labelled = self.tab_labels.setdefault(opened.tab, state.labelled)
-        self.identity.tab_id = opened.tab  # this tab's claims at the service are its own
+            # the labels this tab made before a reload: U walks back through them
+            state.labelled = self.tab_labels.setdefault(tab, state.labelled)
+        self.identity.tab_id = tab  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)
         else:
@@ -307,7 +328,10 @@ class LabelerSession:
                     self.panels.notify(
                         "Moved to another tab", f"segment {query_id} is open in another of your tabs", "orange"
                     )
-                    if self.state.shown is None:  # the worker is the only writer of `shown`
+                    with self.tab as state:  # the worker is the only writer of `shown`
+                        state.drop_moved()
+                        gone = state.shown is None
+                    if gone:  # it no longer labels that one here: the next, or the waiting screen
                         self._show_next()
         except ServiceDown:
             self._retry = action

@@ -142,7 +142,7 @@ class TabState:
             return Step.WATCH
         if self.phase == Phase.REVIEWING:
             return Step.REVIEW
-        if self.shown is None:
+        if self.shown is None or self.shown.key in self.moved:  # never stays on one another tab took over
             return Step.FIND if now >= self.recheck_at else Step.IDLE
         return Step.ATTEND
 
@@ -193,12 +193,13 @@ class TabState:
     # ---------------------------------------------------------------- claims
 
     def claimed(self, segment: Segment) -> None:
+        # not taken off `moved`: a claim answered before another tab took the segment over, or
+        # handed to both tabs of one id, must not bring it back here (present/preloaded refuse it)
         self.held.add(segment.key)
-        self.moved.discard(segment.key)
 
     def may_show(self, key: Key) -> bool:
-        """A claim came back for `key`: false when another tab of this labeler shows it (the
-        service keeps claims per labeler, so it hands that one out again)."""
+        """A claim came back for `key`: false when another tab of this labeler took it over here
+        (a reload of this tab, or a tab that shared this one's id and so its claims)."""
         return key not in self.moved
 
     def held_in(self, run_id: int) -> int:
@@ -208,8 +209,9 @@ class TabState:
         return prefetch and self.shown is not None and not self.ahead and len(self.held) < MAX_HOLD
 
     def preloaded(self, segment: Segment) -> bool:
-        """A second claim came back: keep it to show next unless it is the one on screen."""
-        if self.shown is not None and segment.key == self.shown.key:
+        """A second claim came back: keep it to show next unless it is the one on screen, or another
+        tab took it over while it was being prepared."""
+        if segment.key in self.moved or (self.shown is not None and segment.key == self.shown.key):
             return False
         if any(s.key == segment.key for s in self.ahead):
             return False
@@ -225,12 +227,16 @@ class TabState:
                 return segment
         return None
 
-    def present(self, segment: Segment, now: float) -> None:
-        """`segment`'s first frame was just sent."""
+    def present(self, segment: Segment, now: float) -> bool:
+        """`segment`'s first frame is about to be sent; False (and nothing changes) when another tab
+        of this labeler took it over after it was claimed here (it is not shown)."""
+        if segment.key in self.moved:
+            return False
         self.claimed(segment)
         segment.appeared, segment.played_to = now, 0.0
         self.shown, self.waiting_on = segment, None
         self.phase = Phase.SHOWING
+        return True
 
     def frame_drawn(self, position: float) -> None:
         if self.shown is not None:
@@ -274,12 +280,22 @@ class TabState:
         return lost
 
     def taken_elsewhere(self, key: Key) -> bool:
-        """Another tab of this labeler now shows `key` (the service keeps claims per labeler, so
-        both tabs would hold one lease): this tab must not label it. True if it was on screen here."""
+        """Another tab of this labeler now shows `key` (a reload of this tab, a relabel, or a tab
+        that shares this one's id): this tab must not label it. True if it was on screen here: the
+        worker then drops it (`drop_moved`) and shows the next (the worker alone changes `shown`)."""
         self.moved.add(key)
         self.held.discard(key)
         self.ahead = [s for s in self.ahead if s.key != key]
         return self.shown is not None and self.shown.key == key
+
+    def drop_moved(self) -> Segment | None:
+        """The segment on screen, if another tab took it over: it leaves this tab, which moves on."""
+        shown = self.shown
+        if shown is None or shown.key not in self.moved:
+            return None
+        self.shown = None
+        self.phase = Phase.WAITING
+        return shown
 
     def release_all(self) -> list[Key]:
         """Hand every claim back (sign-out, a closed tab): the keys to release."""
@@ -356,6 +372,7 @@ class TabState:
         (no lease); the segment on screen comes back after it."""
         segment.revising = True
         self.held.discard(segment.key)
+        self.moved.discard(segment.key)  # picked here: this tab shows it now (the others drop it)
         if self.shown is not None and self.shown.key != segment.key:
             self.ahead.insert(0, self.shown)
 
@@ -368,4 +385,5 @@ class TabState:
         self.ahead = [s for s in self.ahead if s.key != segment.key]
         self.shown = None
         self.claimed(segment)
+        self.moved.discard(segment.key)  # the undo brought it back to this tab
         self.ahead.insert(0, segment)

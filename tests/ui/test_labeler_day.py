@@ -13,10 +13,11 @@ from playwright.sync_api import Browser, Page
 
 from collie.client import CollieClient
 from collie.schemas import MetricsIn
+from labeling_ui.browser import TAB_KEY
 
 from .page import TIMEOUT_S, VIEWPORT, canvas_until, segment_id, wait_segment, wait_text
 from .stack import TOKENS, Stack
-from .test_labeling_ui import NO_DWELL, press, wait_until
+from .test_labeling_ui import NO_DWELL, effective, press, wait_until
 from .test_watch import evaluation
 
 pytestmark = pytest.mark.slow
@@ -107,6 +108,62 @@ def test_a_stale_tab_never_labels_what_it_no_longer_holds(stack: Stack, browser:
     events = stack.trainer.label_events(run.id)
     assert [e.query_id for e in events if e.query_id == shown] == [shown]  # no revision of it
     assert all(e.revises_event_id is None for e in events), "a tab relabelled a segment it did not hold"
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_a_duplicated_tab_labels_segments_of_its_own(stack: Stack, browser: Browser) -> None:
+    """A tab opened with window.open from a labeler's tab (what "Duplicate tab" does too) starts
+    with a copy of its sessionStorage, tab id included: it must get an id and segments of its own,
+    and the original keeps what it shows."""
+    run = stack.post_run("point", 8, seed=13)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0, release_grace_s=30.0)
+    context = profile(browser)
+    original = tab(context, app.labeler_url(stack.new_labeler("dup")))
+    first = wait_segment(original)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+    copied = original.evaluate(f"sessionStorage.getItem({TAB_KEY!r})")
+    with original.expect_popup() as opened:
+        original.evaluate("window.open(location.href)")
+    duplicate = opened.value
+    duplicate.set_default_timeout(TIMEOUT_S * 1000)
+    theirs = wait_segment(duplicate)
+    wait_text(duplicate, "This session")  # the duplicate's worker is past its claims
+    ids = [p.evaluate(f"sessionStorage.getItem({TAB_KEY!r})") for p in (original, duplicate)]
+    assert ids[0] == copied != ids[1], ids  # the original keeps its id, the copy got one of its own
+    assert theirs != first and segment_id(original) == first  # nothing moved off the original
+    for page, key, shown in ((original, "1", first), (duplicate, "2", theirs)):
+        press(page, key)
+        wait_segment(page, shown)
+    assert effective(stack, run.id) == {first: (0, "dup"), theirs: (1, "dup")}
+    events = [(e.query_id, e.kind, e.revises_event_id) for e in stack.trainer.label_events(run.id)]
+    assert sorted(events) == sorted([(first, "label", None), (theirs, "label", None)])
+    now = segment_id(duplicate)
+    duplicate.reload()  # the copy's own id was kept in its sessionStorage: its segment comes back
+    assert wait_segment(duplicate) == now
+    context.close()  # type: ignore[attr-defined]
+
+
+def test_a_tab_whose_segment_another_tab_took_over_moves_on(stack: Stack, browser: Browser) -> None:
+    """Two open tabs going by one id (what a duplicated tab was before it got its own) share that
+    id's claims: the one that shows a segment last labels it, and the other drops it with a notice
+    and moves on by itself (it used to stay on it, refusing every key)."""
+    run = stack.post_run("point", 6, seed=17)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    app._tab_id = lambda _, tab: tab  # type: ignore[method-assign]  # the copy keeps the original's id
+    context = profile(browser)
+    original = tab(context, app.labeler_url(stack.new_labeler("shared-id")))
+    first = wait_segment(original)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+    with original.expect_popup() as opened:
+        original.evaluate("window.open(location.href)")
+    duplicate = opened.value
+    duplicate.set_default_timeout(TIMEOUT_S * 1000)
+    assert wait_segment(duplicate) == first  # the service hands the id's first claim to the copy
+    wait_text(original, "Moved to another tab")
+    moved_on = wait_segment(original, first, timeout_s=30.0)
+    press(original, "1")
+    wait_segment(original, moved_on)
+    assert effective(stack, run.id) == {moved_on: (0, "shared-id")}
     context.close()  # type: ignore[attr-defined]
 
 

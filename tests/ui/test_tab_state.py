@@ -215,10 +215,36 @@ def test_a_claim_on_screen_in_another_tab_may_not_be_shown_here() -> None:
     state = showing(a)
     state.taken_elsewhere(b.key)
     assert not state.may_show(b.key) and state.may_show(segment("c").key)
-    state.claimed(b)  # this tab claimed it again itself
-    assert state.may_show(b.key)
+    state.claimed(b)  # a claim of it answered here (a tab sharing this one's id is handed the same)
+    assert not state.may_show(b.key)
     state.claimed(segment("x", run_id=2))
     assert state.held_in(1) == 2 and state.held_in(2) == 1
+    state.relabelling(b)  # picked from "my labels" here: this tab shows it now, the other drops it
+    assert state.may_show(b.key)
+
+
+def test_a_segment_another_tab_took_over_leaves_the_screen_and_the_tab_moves_on() -> None:
+    a, b = segment("a", frames=1), segment("b", frames=1)
+    state = showing(a, Rules(0.0, 0.0), at=0.0)
+    assert state.preloaded(b)
+    assert state.taken_elsewhere(a.key)  # it was on screen here: the driver is told
+    assert state.next_step(linked=True, now=1.0) == Step.FIND  # never stays on it waiting for keys
+    assert isinstance(state.press(1, 1.0, "r"), Refusal)
+    assert state.drop_moved() is a and state.shown is None and state.phase == Phase.WAITING
+    assert state.drop_moved() is None
+    assert state.next_ready() is b and state.present(b, 2.0)
+    assert isinstance(state.press(1, 3.0, "r"), Submit)  # the next one labels here
+
+
+def test_a_segment_taken_over_while_it_was_prepared_is_not_shown_here() -> None:
+    a, b, c = segment("a"), segment("b"), segment("c")
+    state = showing(a)
+    state.claimed(b)  # a preload's claim came back; its model is being prepared
+    state.taken_elsewhere(b.key)  # meanwhile another tab of this labeler shows it
+    assert not state.preloaded(b) and state.next_ready() is None and b.key not in state.held
+    state.claimed(c)  # the same for the claim of the next segment to show
+    state.taken_elsewhere(c.key)
+    assert state.present(c, 11.0) is False and state.shown is a
 
 
 def test_a_relabel_comes_first_and_the_segment_on_screen_after_it() -> None:
