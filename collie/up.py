@@ -27,6 +27,7 @@ from collie.child_log import last_error
 from collie.feedback_schedule import next_feedback_epoch
 from collie.pass_through import owned_flags
 from collie.processes import LockHeld, hold_lock
+from collie.run_state import run_state
 from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
@@ -505,7 +506,7 @@ class ProgressLine:
 
     def show(self, r: RunRead) -> None:
         epochs = f"{r.epoch}/{r.epochs_total}" if r.epochs_total else str(r.epoch)
-        line = f"{r.status}: epoch {epochs} · labels {r.n_labels}/{r.n_total if r.n_total is not None else '-'}"
+        line = f"{run_state(r)}: epoch {epochs} · labels {r.n_labels}/{r.n_total if r.n_total is not None else '-'}"
         upcoming = next_feedback_epoch(r) if r.status == "training" else None
         if upcoming is not None:  # when people will have something to label
             line += f" · next feedback session at epoch {upcoming}"

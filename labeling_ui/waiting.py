@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from collie.feedback_schedule import next_feedback_epoch
+from collie.run_state import run_state
 from collie.schemas import FINISHED, MetricsRead, RunRead
 
 
@@ -65,15 +66,6 @@ def duration(seconds: float) -> str:
     if seconds < 5400:
         return f"{seconds / 60:.0f} min"
     return f"{seconds / 3600:.1f} h"
-
-
-def run_state(run: RunRead) -> str:
-    """The run's state in words: a run that was stopped says *stopped*, not finished."""
-    if run.control == "stop" and run.status not in FINISHED:
-        return "stopping"
-    if run.status == "finished" and run.control == "stop":
-        return "stopped"
-    return run.status.replace("_", " ")
 
 
 def ended_words(run: RunRead) -> str:

@@ -237,6 +237,9 @@ def test_more_epochs_reopen_a_finished_run_and_a_stopped_one_stays_stopped(tmp_p
             assert resumed.wait(timeout=120) == 0, stopped_log.read_text()[-3000:]
             run = operator.run(stopped_id)
             assert (run.status, run.control, run.epochs_total) == ("finished", "stop", 8)  # not extended
+            assert f"collie train: warning: run {stopped_id} was stopped by an operator: it is not extended to 12" in (
+                stopped_log.read_text()
+            )
             assert "Traceback" not in stopped_log.read_text() and "not delivered" not in stopped_log.read_text()
 
 

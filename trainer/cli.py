@@ -483,7 +483,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         if feedback is not None and args.resume:  # once the run can train: a reopened run always has its trainer
             try:
-                feedback.extend_to(cfg.epochs)
+                kept = feedback.extend_to(cfg.epochs)
+                if kept:
+                    print(f"collie train: warning: {kept}", file=sys.stderr)
             except ApiError as exc:
                 print(f"collie train: error: the labeling service at {args.api} answered {exc}", file=sys.stderr)
                 return 2

@@ -7,8 +7,9 @@ from __future__ import annotations
 from datetime import timedelta
 
 from collie.feedback_schedule import next_feedback_epoch
+from collie.run_state import run_state
 from collie.schemas import MetricsRead, QueueCounts
-from labeling_ui.waiting import EpochClock, forecast, run_state, waiting_text
+from labeling_ui.waiting import EpochClock, forecast, waiting_text
 
 from .test_tab_state import NOW, run
 
@@ -103,4 +104,7 @@ def test_collie_ups_progress_line_says_when_the_next_session_comes(capsys) -> No
     said = capsys.readouterr().err.strip()
     assert said.startswith("training: epoch 137") and said.endswith("· next feedback session at epoch 240")
     line.show(r.model_copy(update={"status": "waiting_for_labels"}))  # it asks now: no "next"
-    assert "next feedback session" not in capsys.readouterr().err
+    said = capsys.readouterr().err
+    assert said.startswith("waiting for labels: epoch 137") and "next feedback session" not in said
+    line.show(r.model_copy(update={"status": "finished", "control": "stop"}))
+    assert capsys.readouterr().err.startswith("stopped: epoch 137")  # not "finished"

@@ -98,12 +98,18 @@ class HttpFeedback(FeedbackSource):
             run = client.create_run(spec)
         return cls(api, token, run.id, **kwargs)
 
-    def extend_to(self, epochs: int) -> None:
+    def extend_to(self, epochs: int) -> str | None:
         """More epochs than the service's run has (a resumed trainer given a larger --epochs): a
-        finished run reopens for them. One an operator stopped, or one that failed, stays ended."""
+        finished run reopens for them. One an operator stopped, or one that failed, stays ended:
+        then the words saying so."""
         held = self._retry(lambda: self.client.run(self.run_id))
-        if held.control != "stop" and held.status != "failed" and epochs > (held.epochs_total or 0):
-            self._retry(lambda: self.client.extend(self.run_id, epochs))
+        if epochs <= (held.epochs_total or 0):
+            return None
+        if held.control == "stop" or held.status == "failed":
+            how = "was stopped by an operator" if held.control == "stop" else "failed"
+            return f"run {self.run_id} {how}: it is not extended to {epochs} epochs"
+        self._retry(lambda: self.client.extend(self.run_id, epochs))
+        return None
 
     # ---------------------------------------------------------------- the interface
 
