@@ -7,6 +7,7 @@ OUT/logs/up.log; OUT/children.json names the live process of each part (for tool
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -22,6 +23,7 @@ from typing import Protocol
 from collie.child_log import last_error
 from collie.processes import end_with_parent
 from collie.startup import PART_ENV, mark
+from collie.whole_files import write_whole
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
@@ -70,8 +72,9 @@ class Supervisor:
 
     def log(self, message: str) -> None:
         line = f"{time.strftime('%Y-%m-%d %H:%M:%S')} {message}"
-        self._log.write(line + "\n")
-        self._log.flush()
+        with contextlib.suppress(OSError):  # a full disk must not end the stack: up.log is its diary
+            self._log.write(line + "\n")
+            self._log.flush()
 
     def start(
         self,
@@ -180,6 +183,10 @@ class Supervisor:
 
     def _write_pids(self) -> None:
         pids = {n: c.proc.pid for n, c in self.children.items() if c.proc is not None}
-        tmp = self.out / "children.json.tmp"
-        tmp.write_text(json.dumps({"up": os.getpid(), "children": pids}))
-        tmp.replace(self.out / "children.json")
+        text = json.dumps({"up": os.getpid(), "children": pids}).encode()
+        try:
+            write_whole(self.out / "children.json", lambda f: f.write(text))
+        except OSError as exc:  # a full disk: the parts still run; children.json is for tools
+            print(
+                f"collie up: warning: cannot write {self.out / 'children.json'}: {exc.strerror or exc}", file=sys.stderr
+            )

@@ -1,22 +1,27 @@
 """Files written whole: into NAME.partial beside the file, then renamed over it in one step, so a
 reader (or a process killed mid-write) never finds half of one. Shared by the trainer's run
-folders and the labeling UI's --info-json."""
+folders and checkpoints, `collie up`'s children.json and the labeling UI's --info-json."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
 
-def write_whole(path: Path, write: Callable[[BinaryIO], object]) -> None:
-    """What `write` writes to a file, at `path`, renamed into place whole; a failed write leaves
-    the old file as it was and no .partial behind. PATH.partial, not PATH with its suffix swapped:
-    `/tmp` would have become `/tmp.tmp`."""
+def write_whole(path: Path, write: Callable[[BinaryIO], object], sync: bool = False) -> None:
+    """What `write` writes to a file, at `path`, renamed into place whole; a failed write (a full
+    disk) leaves the old file as it was and no .partial behind. PATH.partial, not PATH with its
+    suffix swapped: `/tmp` would have become `/tmp.tmp`. `sync`: on disk before the rename (a
+    checkpoint must survive a power cut, not only a killed process)."""
     partial = path.with_name(path.name + ".partial")
     try:
         with open(partial, "wb") as f:
             write(f)
+            if sync:
+                f.flush()
+                os.fsync(f.fileno())
         partial.replace(path)
     finally:
         partial.unlink(missing_ok=True)

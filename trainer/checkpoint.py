@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import pickle
 import zipfile
 from pathlib import Path
@@ -10,14 +9,13 @@ from typing import Any
 
 import torch
 
+from collie.whole_files import write_whole
+
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    """A failed save (a full disk) leaves the last checkpoint as it was, and no partial file."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(state, tmp)
-    with open(tmp, "rb") as f:
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_whole(path, lambda f: torch.save(state, f), sync=True)
 
 
 class ResumeError(ValueError):

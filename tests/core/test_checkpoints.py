@@ -2,6 +2,7 @@
 resume rebuilds exactly, and SIGTERM writing a final checkpoint that `--resume` continues exactly."""
 
 import json
+import pickle
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import pytest
 import torch
 from paced_marks import PacedMarks
 
+from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import make_config
 from trainer.loop import Trainer
 from trainer.replay import FIELDS, TrajectoryReplay
@@ -114,3 +116,12 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
     resumed = [json.loads(ln) for ln in (stopped / "metrics.jsonl").read_text().splitlines()]
     strip = [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
     assert strip == [{k: v for k, v in r.items() if k != "wall_s"} for r in resumed]
+
+
+def test_a_checkpoint_that_cannot_be_written_leaves_the_last_one_and_no_partial_file(tmp_path):
+    """As on a full disk: the save fails midway; the last good checkpoint stays resumable."""
+    path = tmp_path / "checkpoint.pt"
+    save_checkpoint(path, {"epoch": 1})
+    with pytest.raises((pickle.PicklingError, AttributeError, TypeError)):
+        save_checkpoint(path, {"epoch": 2, "unpicklable": lambda: None})
+    assert load_checkpoint(path) == {"epoch": 1} and sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt"]
