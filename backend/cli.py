@@ -90,6 +90,11 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
         if token is not None:
             tokens[role] = token
             overrides[f"{role}_token"] = SecretStr(token)
+    if not tokens and not known:  # a new database and no token given or made: no request could ever get in
+        raise SystemExit(
+            "collie serve: error: --no-generate-tokens with no COLLIE_OPERATOR_TOKEN, COLLIE_TRAINER_TOKEN or "
+            "COLLIE_LABELER_TOKEN set, on a new database: nobody could sign in (set them, or drop --no-generate-tokens)"
+        )
     revoked = {role for role, gone in known.items() if gone}
     return Settings(**overrides), tokens, new, revoked  # type: ignore[arg-type]  # as above
 

@@ -215,6 +215,13 @@ def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     assert "already the token of 'operator'" in out.stderr
 
 
+def test_a_new_database_with_no_token_anyone_could_use_is_refused(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
+    out = collie("serve", "--port", "0", "--db", str(tmp_path / "none.db"), "--no-generate-tokens", env=env)
+    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert "on a new database: nobody could sign in (set them, or drop --no-generate-tokens)" in out.stderr
+
+
 def migrated(path: Path, revision: str) -> Path:
     """A SQLite database at schema `revision`."""
     db = Database(f"sqlite:///{path}")
