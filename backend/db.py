@@ -6,17 +6,20 @@ fails half way with SQLITE_BUSY); any other URL (PostgreSQL) is used as given.""
 from __future__ import annotations
 
 import functools
+import math
 import re
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, Literal
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.pool import StaticPool
 
 Publisher = Callable[[list[tuple[int, int]]], None]
+WROTE_RECENTLY_S = 5.0  # a write this recent answers whether the database takes writes (health)
 
 
 DRIVERS = ("pysqlite", "psycopg")  # the drivers collie installs and is tested on
@@ -104,15 +107,21 @@ class Database:
         self.background_checkpoints = background_checkpoints and is_sqlite(url)
         self.engine = make_engine(url, self.background_checkpoints, synchronous)
         self.publisher = publisher
+        self._wrote_at = -math.inf  # when a write transaction last committed
 
     @contextmanager
     def write(self) -> Iterator[Connection]:
-        with self.engine.connect() as conn:
-            conn.execution_options(write=True)
-            conn.info["published"] = []
-            with conn.begin():
-                yield conn
-            published: list[tuple[int, int]] = conn.info.pop("published")
+        try:
+            with self.engine.connect() as conn:
+                conn.execution_options(write=True)
+                conn.info["published"] = []
+                with conn.begin():
+                    yield conn
+                published: list[tuple[int, int]] = conn.info.pop("published")
+        except DBAPIError:
+            self._wrote_at = -math.inf  # perhaps a full disk, read-only files: the next check writes
+            raise
+        self._wrote_at = time.monotonic()
         if published and self.publisher is not None:
             self.publisher(published)
 
@@ -120,6 +129,23 @@ class Database:
     def read(self) -> Iterator[Connection]:
         with self.engine.connect() as conn, conn.begin():
             yield conn
+
+    def unwritable(self) -> str | None:
+        """None when the database takes writes, else why not (or the write's DBAPIError). A write
+        committed in the last WROTE_RECENTLY_S says so; else, on SQLite, a write transaction that
+        rewrites the header's user_version unchanged (one log frame) fails exactly when a real
+        write would: full disk, read-only or immutable files, I/O error. A server database: whether
+        its transactions are read-only (a standby, default_transaction_read_only); its full disk
+        shows on the writes themselves."""
+        if time.monotonic() - self._wrote_at < WROTE_RECENTLY_S:
+            return None  # a busy service is not slowed by a health check taking the write lock
+        with self.write() as conn:
+            if not is_sqlite(self.url):
+                read_only = conn.exec_driver_sql("SHOW transaction_read_only").scalar()
+                return "its transactions are read-only" if read_only == "on" else None
+            version = int(conn.exec_driver_sql("PRAGMA user_version").scalar() or 0)
+            conn.exec_driver_sql(f"PRAGMA user_version = {version}")
+        return None
 
     def checkpoint(self) -> None:
         """Copy the write-ahead log into the database file. PASSIVE never waits for readers or the

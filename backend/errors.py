@@ -17,7 +17,15 @@ from sqlalchemy.exc import DBAPIError, IntegrityError, InterfaceError, Operation
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
-from backend.services.errors import DatabaseUnreachable, RunOutOfScope, ServiceError, TabNotHolding, Unavailable
+from backend.services.errors import (
+    DatabaseBusy,
+    DatabaseUnreachable,
+    DatabaseUnwritable,
+    RunOutOfScope,
+    ServiceError,
+    TabNotHolding,
+    Unavailable,
+)
 
 MAX_ECHO = 200
 RETRY_AFTER = {"Retry-After": "5"}
@@ -57,10 +65,11 @@ def plain_error(error: dict[str, Any]) -> dict[str, Any]:
 
 
 class OutageLog:
-    """One warning line about an unreachable database every `every_s` at most, with the count of
-    answers refused since: an outage under load must not bury the log (nor be a traceback each)."""
+    """One warning line about a database fault every `every_s` at most, with the count of answers
+    refused since: an outage under load must not bury the log (nor be a traceback each)."""
 
-    def __init__(self, every_s: float = 10.0) -> None:
+    def __init__(self, what: str, every_s: float = 10.0) -> None:
+        self.what = what
         self.every_s = every_s
         self._lock = threading.Lock()
         self._next = 0.0
@@ -72,19 +81,39 @@ class OutageLog:
             if time.monotonic() < self._next:
                 return
             refused, self._refused, self._next = self._refused, 0, time.monotonic() + self.every_s
-        log.warning("database unreachable (%d answer(s) refused with 503): %s", refused, cause)
+        log.warning("database %s (%d answer(s) refused with 503): %s", self.what, refused, cause)
 
 
-def unreachable(exc: DBAPIError, dialect: str) -> DatabaseUnreachable | None:
-    """The database error as an outage, or None for a fault of ours. On a server database every
-    OperationalError is one (the DB-API's "errors related to the database's operation": connection
-    refused, shut down, too many connections); SQLite, a file, only loses a connection it had."""
-    lost = exc.connection_invalidated or (dialect != "sqlite" and isinstance(exc, OperationalError | InterfaceError))
-    return DatabaseUnreachable(exc.orig) if lost else None
+# SQLite's primary result codes (the low byte of an extended one: SQLITE_IOERR_WRITE is 778)
+SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN = 5, 6, 8, 10, 13, 14
+SQLITE_UNWRITABLE = {SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL}
+# PostgreSQL's: read_only_sql_transaction (a standby, default_transaction_read_only), disk_full, io_error
+PG_UNWRITABLE = {"25006", "53100", "58030"}
+
+
+def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | None:
+    """The database error as a 503 the client may retry, or None for a fault of ours (a 500 and a
+    traceback). Judged by the driver's code, not its words: SQLite's result code, PostgreSQL's
+    SQLSTATE. On a server database every other OperationalError is an outage (the DB-API's "errors
+    related to the database's operation": connection refused, shut down, too many connections);
+    SQLite, a file, only loses a connection it had or cannot open the file."""
+    code = getattr(exc.orig, "sqlite_errorcode", None)
+    primary = code & 0xFF if isinstance(code, int) else None
+    if primary in SQLITE_UNWRITABLE or getattr(exc.orig, "sqlstate", None) in PG_UNWRITABLE:
+        return DatabaseUnwritable(exc.orig)
+    if primary in (SQLITE_BUSY, SQLITE_LOCKED):
+        return DatabaseBusy()
+    if (
+        exc.connection_invalidated
+        or primary == SQLITE_CANTOPEN
+        or (dialect != "sqlite" and isinstance(exc, OperationalError | InterfaceError))
+    ):
+        return DatabaseUnreachable(exc.orig)
+    return None
 
 
 def install(app: FastAPI) -> None:
-    outages = OutageLog()
+    outages, unwritable = OutageLog("unreachable"), OutageLog("cannot be written")
 
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
@@ -92,6 +121,8 @@ def install(app: FastAPI) -> None:
             return SafeJSONResponse(exc.body.model_dump(mode="json"), status_code=exc.status)
         if isinstance(exc, DatabaseUnreachable):
             outages.note(exc.cause)
+        elif isinstance(exc, DatabaseUnwritable):
+            unwritable.note(exc.cause)
         headers = RETRY_AFTER if isinstance(exc, Unavailable) else None
         return SafeJSONResponse({"detail": clean_text(exc.detail)}, status_code=exc.status, headers=headers)
 
@@ -111,15 +142,10 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(DBAPIError)
     async def _database_error(request: Request, exc: DBAPIError) -> JSONResponse:
-        outage = unreachable(exc, request.app.state.db.engine.dialect.name)
-        if outage is not None:
-            return await _service_error(request, outage)
-        if not isinstance(exc, OperationalError) or "locked" not in str(exc.orig):
+        fault = database_fault(exc, request.app.state.db.engine.dialect.name)
+        if fault is None:
             raise exc  # a real fault: the 500 handler and its log
-        # SQLite's busy timeout ran out: another process holds the write lock (docs/service.md:
-        # one service process per SQLite file); nothing was written, the client may retry
-        detail = "the database is busy (another process holds its write lock); nothing was written, retry"
-        return SafeJSONResponse({"detail": detail}, status_code=503, headers=RETRY_AFTER)
+        return await _service_error(request, fault)
 
     @app.exception_handler(IntegrityError)
     async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:

@@ -11,6 +11,7 @@ from typing import Any
 
 from fastapi import FastAPI
 from pydantic import BaseModel
+from sqlalchemy.exc import DBAPIError
 
 from backend import __version__, errors, migrate
 from backend.bodies import SessionParser
@@ -19,6 +20,7 @@ from backend.headers import SecurityHeaders
 from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
 from backend.services import auth
+from backend.services.errors import first_line
 from backend.services.events import EventHub
 from backend.services.fanout import StreamFeed
 from backend.services.trainer_contact import TrainerContact
@@ -96,9 +98,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 log.warning("the built-in %s principal is revoked: its token stays refused", role)
 
     async def checkpoints() -> None:
+        # A checkpoint writes the database file: while it cannot be written (full disk, read-only
+        # files) each one fails; keep trying, or the log would grow unchecked once it can again.
+        failing = False
         while True:
             await asyncio.sleep(1.0)
-            await asyncio.to_thread(db.checkpoint)
+            try:
+                await asyncio.to_thread(db.checkpoint)
+            except DBAPIError as exc:
+                if not failing:
+                    log.warning("checkpoint failed, retrying every second: %s", first_line(exc.orig))
+                failing = True
+                continue
+            if failing:
+                log.warning("checkpoint: the database is written again")
+                failing = False
 
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:

@@ -1,4 +1,4 @@
-"""Liveness and database reachability; needs no token."""
+"""Liveness and whether the database takes writes; needs no token."""
 
 from __future__ import annotations
 
@@ -7,18 +7,26 @@ from sqlalchemy import text
 from sqlalchemy.exc import DBAPIError
 
 from backend import __version__
+from backend.errors import database_fault
 from backend.routes.deps import DB
-from backend.services.errors import DatabaseUnreachable
+from backend.services.errors import DatabaseUnreachable, DatabaseUnwritable
 from collie.schemas import ErrorBody, Health
 
 router = APIRouter(tags=["health"])
 
 
-@router.get("/health", responses={503: {"model": ErrorBody, "description": "the database is unreachable"}})
+@router.get(
+    "/health",
+    responses={503: {"model": ErrorBody, "description": "the database is unreachable, busy or cannot be written"}},
+)
 def health(db: DB) -> Health:
     try:
         with db.read() as conn:
             conn.execute(text("SELECT 1"))
-    except DBAPIError as exc:  # whatever the cause, the database does not answer: 503 with Retry-After
-        raise DatabaseUnreachable(exc.orig) from None
+        # and a write: a full disk or read-only files answer every read but refuse every write
+        refused = db.unwritable()
+    except DBAPIError as exc:  # 503 with Retry-After, the cause in one log line
+        raise database_fault(exc, db.engine.dialect.name) or DatabaseUnreachable(exc.orig) from None
+    if refused is not None:
+        raise DatabaseUnwritable(refused)
     return Health(status="ok", version=__version__, database=db.engine.dialect.name)

@@ -57,6 +57,24 @@ class DatabaseUnreachable(Unavailable):
         self.cause = first_line(cause)
 
 
+class DatabaseUnwritable(Unavailable):
+    """The database answers but cannot store anything: its disk is full, its files read-only (or
+    immutable), a PostgreSQL server read-only, or the disk failing. Nothing was written; the cause
+    goes to the log only, in one line."""
+
+    def __init__(self, cause: object) -> None:
+        super().__init__("the database cannot be written (disk full, read-only or failing); nothing was stored, retry")
+        self.cause = first_line(cause)
+
+
+class DatabaseBusy(Unavailable):
+    """SQLite's busy timeout ran out: another process holds the write lock (one service process per
+    SQLite file is supported). Nothing was written; the client may retry."""
+
+    def __init__(self) -> None:
+        super().__init__("the database is busy (another process holds its write lock); nothing was written, retry")
+
+
 class TabNotHolding(Conflict):
     """A label from a tab that does not hold the query's lease; the answer is a NotHeld body."""
 

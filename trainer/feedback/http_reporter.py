@@ -1,6 +1,8 @@
 """Telemetry to the labeling service: status, metrics and rollouts, from the loop's typed reports
 to the wire schemas. Best effort by contract: a failed post is logged, bulky reports are skipped
-for a while after a failure, and nothing raises into the training loop. numpy only, HTTP only."""
+for a while after a failure, and nothing raises into the training loop. The one exception is the
+run's final status (finished, failed): lost, the service would show the run training for ever, so a
+refusal the service may lift is retried for up to a minute. numpy only, HTTP only."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from collie.client import CollieClient
+from collie.client import Backoff, CollieClient, Unavailable
 from collie.schemas import (
     MAX_METRICS,
     MAX_QPOS_WIDTH,
@@ -27,21 +29,37 @@ from trainer.telemetry import MetricsReport, Reporter, RolloutsReport, StatusRep
 
 log = logging.getLogger(__name__)
 QUIET_AFTER_FAILURE_S = 10.0
+FINAL: tuple[RunStatus, ...] = ("finished", "failed")  # a stopped run is reported finished (run_status)
+FINAL_RETRY_S = 60.0  # how long a trainer's exit may wait for the service to take its final status
 
 
 class HttpReporter(Reporter):
     """Posts run `run_id`'s telemetry with a trainer token; `shown` is the last status it delivered."""
 
-    def __init__(self, api: str, token: str, run_id: int, timeout_s: float = 5.0) -> None:
+    def __init__(
+        self,
+        api: str,
+        token: str,
+        run_id: int,
+        timeout_s: float = 5.0,
+        final_retry_s: float = FINAL_RETRY_S,
+        backoff: Backoff | None = None,
+    ) -> None:
         self.run_id = run_id
         self.client = CollieClient(api, token, timeout_s=timeout_s, part="trainer")
         self.shown: RunStatus | None = None
+        self.final_retry_s = final_retry_s
+        self.backoff = backoff or Backoff()  # the clients' one retry policy: 0.1 s doubling to 5 s
         self._quiet_until = 0.0
 
     def status(self, report: StatusReport) -> None:
         status, message = run_status(report)
         post = lambda: self.client.set_status(self.run_id, status, report.epoch, message)  # noqa: E731
-        if self._deliver("status", report.progress, post):
+        if status in FINAL:
+            delivered = self._deliver_final(status, report.epoch, post)
+        else:
+            delivered = self._deliver("status", report.progress, post)
+        if delivered:
             self.shown = status
 
     def metrics(self, report: MetricsReport) -> None:
@@ -64,6 +82,41 @@ class HttpReporter(Reporter):
             log.warning("report %s not delivered: %s", what, exc)
             self._quiet_until = time.monotonic() + QUIET_AFTER_FAILURE_S  # status changes (rare) are still tried
             return False
+
+    def _deliver_final(self, status: RunStatus, epoch: int | None, post: Callable[[], Any]) -> bool:
+        """`post` until it is taken; a refusal the service may lift (Unavailable: a 5xx such as a
+        database it cannot write, 429, no answer) is retried with the shared backoff for up to
+        `final_retry_s`, so the trainer never hangs at its exit; any other (401, 409) is final."""
+        what = f"run {self.run_id}'s final status ({status} at epoch {epoch})"
+        deadline = time.monotonic() + self.final_retry_s
+        delays = self.backoff.delays()
+        failed = False
+        while True:
+            try:
+                post()
+            except Unavailable as exc:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    shown = self.shown or "as it last heard"
+                    log.warning(
+                        "%s not delivered in %.0f s (%s); the service shows the run %s",
+                        what,
+                        self.final_retry_s,
+                        exc,
+                        shown,
+                    )
+                    return False
+                if not failed:  # one line now, one at the end: the trainer's exit waits on this
+                    log.warning("%s not delivered yet (%s); retrying for up to %.0f s", what, exc, self.final_retry_s)
+                    failed = True
+                time.sleep(min(next(delays), left))
+                continue
+            except Exception as exc:  # refused for good (401, 409): retrying cannot help
+                log.warning("report status not delivered: %s", exc)
+                return False
+            if failed:  # the line above said it was not: say it was, in the end
+                log.warning("%s delivered", what)
+            return True
 
 
 def run_status(report: StatusReport) -> tuple[RunStatus, str | None]:
