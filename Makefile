@@ -66,7 +66,7 @@ test-compile: $(STAMP)
 # before rollouts acted through trainer/acting.py's Actor (`--acting torch`: the same seeds), and
 # before the step's fused Adam and fast tanh / one-output Q layer (`--fused-adam false --fast-ops false`).
 # `make bench-guidance FIRST_VERSION_FLAGS=` measures today's defaults instead.
-FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch --fused-adam false --fast-ops false
+FIRST_VERSION_FLAGS ?= --init torch --log-std-min=-5 --diayn sphere --acting torch --fused-adam false --fast-ops false --flush-denormal false
 
 # Every bench-* but bench-baselines and bench-robots (collie report tables) also writes its figures to
 # runs/bench/<name>.json (benchmarks/record.py).

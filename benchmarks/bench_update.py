@@ -42,12 +42,19 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    at width h = 256 and 1024: `tanh_speedup_<h>` (torch.tanh's time ÷ `Tanh`'s, 2σ(2x) − 1) and
    `one_output_speedup_<h>` (the twin Q's one-output layer by bmm ÷ by multiply-sum), with the
    times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`).
+7. A trained agent's update (`--flush-denormal`, trainer/denormals.py): a point `cpu` COLLIE run
+   trained `--aged-epochs` epochs without flushing, resumed twice, each copy's epoch of updates
+   timed alternately with and without flushing denormals. Keys `aged_denormals` (values of the
+   agent's state below float32's smallest normal, mostly Adam's moments of dead units),
+   `aged_update_s_kept` / `aged_update_s_flushed` (median s per epoch), `flush_denormal_speedup`
+   (kept ÷ flushed), `aged_denormals_after` (left in the flushing copy after its epochs).
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
+import shutil
 import tempfile
 import time
 from collections.abc import Callable
@@ -439,7 +446,51 @@ def bench_kernels() -> dict[str, float]:
     return out
 
 
-PARTS = ("update", "flops", "rollout", "sampling", "checkpoint", "kernels")
+def denormals(state: Any) -> int:
+    """How many values of a (nested) state lie below float32's smallest normal, zero excluded."""
+    if isinstance(state, torch.Tensor):
+        tiny = torch.finfo(torch.float32).tiny
+        return int(((state != 0) & (state.abs() < tiny)).sum()) if state.is_floating_point() else 0
+    if isinstance(state, dict):
+        return sum(denormals(v) for v in state.values())
+    if isinstance(state, list | tuple):
+        return sum(denormals(v) for v in state)
+    return 0
+
+
+def bench_aged(epochs: int, rounds: int) -> dict[str, float]:
+    """A point `cpu` COLLIE run (oracle labels) trained `epochs` epochs without flushing, then two
+    copies of it resumed from its checkpoint, one flushing denormals in its update and one not,
+    their epochs' updates timed alternately."""
+    with tempfile.TemporaryDirectory() as tmp:
+        aged = make_config("cpu", "point", out=f"{tmp}/aged", epochs=epochs, flush_denormal=False)
+        Trainer(aged, progress=False).run()
+        copies: dict[bool, Trainer] = {}
+        for on in (False, True):
+            shutil.copytree(aged.out, f"{tmp}/{on}")
+            cfg = make_config("cpu", "point", out=f"{tmp}/{on}", epochs=epochs, flush_denormal=on)
+            copies[on] = Trainer(cfg, progress=False)
+            copies[on].resume()
+            copies[on].rebuild_from_source()
+        count = denormals(copies[False].agent.state_dict())
+        times: dict[bool, list[float]] = {False: [], True: []}
+        for _ in range(rounds):
+            for on, trainer in copies.items():
+                start = time.perf_counter()
+                trainer.train_epoch()
+                times[on].append(time.perf_counter() - start)
+        kept, flushed = float(np.median(times[False])), float(np.median(times[True]))
+        return {
+            "aged_epochs": epochs,
+            "aged_denormals": count,
+            "aged_denormals_after": denormals(copies[True].agent.state_dict()),
+            "aged_update_s_kept": kept,
+            "aged_update_s_flushed": flushed,
+            "flush_denormal_speedup": kept / flushed,
+        }
+
+
+PARTS = ("update", "flops", "rollout", "sampling", "checkpoint", "kernels", "aged")
 
 
 def main() -> None:
@@ -448,6 +499,7 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="gradient steps per timed block")
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = the trainer's default policy)")
+    p.add_argument("--aged-epochs", type=int, default=150, help="epochs of the trained agent of part 7 (aged)")
     p.add_argument("--no-compile", action="store_true", help="skip the compiled update (compilation takes minutes)")
     p.add_argument(
         "--only", choices=PARTS, action="append", help="run only these parts (repeatable; JSON: update-<part>.json)"
@@ -524,6 +576,15 @@ def main() -> None:
                 f"{k[f'one_output_bmm_us_{h}']:.0f} µs vs multiply-sum {k[f'one_output_fast_us_{h}']:.0f} µs "
                 f"({k[f'one_output_speedup_{h}']:.1f}×)"
             )
+    if "aged" in parts:
+        g = bench_aged(a.aged_epochs, max(a.rounds, 8))
+        figures |= g
+        print(
+            f"a trained agent's update (point, cpu preset, {g['aged_epochs']} epochs, "
+            f"{g['aged_denormals']} denormal values in its state): {g['aged_update_s_kept']:.3f} s per epoch, "
+            f"{g['aged_update_s_flushed']:.3f} s flushing them ({g['flush_denormal_speedup']:.2f}×; "
+            f"{g['aged_denormals_after']} left after)"
+        )
     name = "update" if a.only is None else "-".join(["update", *parts])  # a partial run keeps the full file
     record(name, {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **figures})
 

@@ -49,6 +49,7 @@ class Config:
     physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
     compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
     fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
+    flush_denormal: bool = True  # the update flushes denormals to zero (trainer/denormals.py); false: before 12-06
     # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05;
     # None: on where they measured faster (networks.fast_ops_pay), fixed when the trainer starts
     fast_ops: bool | None = None  # tanh as 2σ(2x) − 1 and a multiply-sum one-output layer; unset: where measured faster
@@ -211,6 +212,7 @@ FIRST_VERSION: dict[str, Any] = dict(
     bin_rule="visited",
     fused_adam=False,
     fast_ops=False,
+    flush_denormal=False,
 )
 
 PRESET_VALUES: dict[str, dict[str, Any]] = {

@@ -37,6 +37,7 @@ from collie.whole_files import write_whole
 from trainer.acting import acting_path
 from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
+from trainer.denormals import flushing_denormals
 from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
@@ -313,10 +314,11 @@ class Trainer:
             self.instruction.refresh(self.labelled)
         sums: dict[str, torch.Tensor] = {}
         i, t = self.replay.sample_indices(self.cfg.grad_steps, self.cfg.batch_size, self.rng)
-        for sampled in self.device_replay.batches(i, t):  # no host sync inside the loop
-            info = self.agent.update(sampled.batch, self.weight_fn(sampled))
-            for k, v in info.items():
-                sums[k] = sums.get(k, 0.0) + v
+        with flushing_denormals(self.cfg.flush_denormal):
+            for sampled in self.device_replay.batches(i, t):  # no host sync inside the loop
+                info = self.agent.update(sampled.batch, self.weight_fn(sampled))
+                for k, v in info.items():
+                    sums[k] = sums.get(k, 0.0) + v
         means = {k: float(v) / self.cfg.grad_steps for k, v in sums.items()}  # read once per epoch
         bad = [k for k, v in means.items() if not math.isfinite(v)]
         if bad:

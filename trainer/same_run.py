@@ -13,7 +13,7 @@ from trainer.run_files import read_json_object
 
 # where a run's folder and task file were and how it used the machine: a moved, archived or resumed
 # copy of one run may differ in these and is still that run
-NOT_THE_RUN = ("out", "task_file", "threads", "device", "compile", "fast_ops", "fused_adam")
+NOT_THE_RUN = ("out", "task_file", "threads", "device", "compile", "fast_ops", "fused_adam", "flush_denormal")
 # what a report's rows and columns already say (the method, its task and env, the seed)
 PLACED = ("env", "task", "method", "seed")
 
