@@ -1,9 +1,11 @@
 """The child processes of one `collie up`, supervised: a child that dies is started again after a
 backoff (0.5 s, doubling to 10 s), and one that keeps dying — `max_restarts` times without staying
 up `stable_s` in between — ends the stack with an error naming it and what it said. One that refuses
-to run (exit 2, our commands' usage error: a bad flag, a damaged checkpoint, a revoked token) twice
-in a row ends it at once: the same start would only be refused again. Every start and exit is logged to
-OUT/logs/up.log; OUT/children.json names the live process of each part (for tools and tests)."""
+to run (exit 2: the trainer's, the teacher's and the labeling UI's refusals, e.g. a damaged
+checkpoint, a revoked token) twice in a row ends it at once, and so does one whose `fatal` says no
+restart can help (a trainer whose run failed): the same start would only end the same way. Every
+start and exit is logged to OUT/logs/up.log; OUT/children.json names the live process of each part
+(for tools and tests)."""
 
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from collie.whole_files import write_whole
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
-REFUSED = 2  # our commands' exit code for what they refuse to do (argparse's, and every "error:" line)
+REFUSED = 2  # argparse's exit code, which the trainer, the teacher and the labeling UI use for their refusals too
 
 
 class Closeable(Protocol):
@@ -48,6 +50,8 @@ class Child:
     # an exit 0 before its work is over that is no failure: started again after this many seconds
     # (the teacher, when the trainer reopens a finished run); None: it counts as a death
     again_after_s: float | None = None
+    # called on any other exit: why no restart can help (the trainer's run failed), else None
+    fatal: Callable[[], str | None] | None = None
     pass_fds: tuple[int, ...] = ()  # inherited by each start (the service's listening socket)
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
@@ -84,8 +88,9 @@ class Supervisor:
         done_when_ok: Callable[[], bool] | None = None,
         pass_fds: tuple[int, ...] = (),
         again_after_s: float | None = None,
+        fatal: Callable[[], str | None] | None = None,
     ) -> subprocess.Popen:
-        child = Child(name, args, env, done_when_ok, again_after_s, pass_fds)
+        child = Child(name, args, env, done_when_ok, again_after_s, fatal, pass_fds)
         self.children[name] = child
         return self._spawn(child)
 
@@ -146,9 +151,13 @@ class Supervisor:
             # what it said, when it ended by itself with an error (a signal's victim said nothing of it)
             said = last_error(self.out / "logs" / f"{child.name}.log", child.log_from) if code > 0 else ""
             how_said = how + (f": {said}" if said else "")
+            why = child.fatal() if child.fatal is not None and code != 0 else None
+            if why is not None:
+                self.log(f"{child.name} exited with {how}: {why}; not restarted")
+                raise ChildFailed(f"the {child.name}'s {why}")
             if child.exit_codes[-2:] == [REFUSED, REFUSED]:  # a refusal, twice: not a fault a restart mends
-                self.log(f"{child.name} ended the same way again ({how_said}), giving up")
-                raise ChildFailed(f"the {child.name} ends the same way again ({how_said})")
+                self.log(f"{child.name} refused to run again ({how_said}), giving up")
+                raise ChildFailed(f"the {child.name} refused to run again ({how_said})")
             if child.failures > self.max_restarts:
                 self.log(f"{child.name} exited with {how_said}; {self.max_restarts} restarts did not help, giving up")
                 raise ChildFailed(f"the {child.name} keeps exiting (last: {how_said})")

@@ -99,9 +99,10 @@ def wait_for(
     timeout_s: float = 120.0,
     stopping: dict | None = None,
     log: Path | None = None,
+    since: int = 0,
 ) -> dict:
     """The JSON at path once it exists (and holds `key`), or an error if proc exits first (with the
-    last error line of its `log`); Stopped on Ctrl-C."""
+    last error line of its `log` from byte `since`, where this start's lines begin); Stopped on Ctrl-C."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if stopping is not None and stopping["flag"]:
@@ -114,7 +115,7 @@ def wait_for(
             except json.JSONDecodeError:
                 pass  # being written
         if proc.poll() is not None:
-            said = last_error(log) if log is not None else ""
+            said = last_error(log, since) if log is not None else ""
             raise RuntimeError(
                 f"{what} exited with code {proc.returncode} before it was ready{': ' + said if said else ''}"
             )
@@ -138,6 +139,13 @@ def task_flags(args: argparse.Namespace) -> list[str]:
         args.file_task = load_task_file(args.task_file, args.task, args.env, args.seed).name
         return [*flags, "--task-file", str(args.task_file.resolve())]
     return flags or ["--task", default_task(args.env)]
+
+
+def run_task_flags(args: argparse.Namespace, resume: bool) -> list[str]:
+    """The rule flags a (re)started trainer gets: none for a resumed stack given no rule, which
+    continues its run's own (a default --task would contradict a run made with another)."""
+    given = args.task is not None or args.task_file is not None or args.instruction is not None
+    return args.task_flags if given or not resume else []
 
 
 def run_name(args: argparse.Namespace) -> str:
@@ -319,7 +327,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         "train",
         "--env",
         args.env,
-        *args.task_flags,
+        *run_task_flags(args, resume),
         "--method",
         args.method,
         "--preset",
@@ -353,15 +361,24 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         except (OSError, ValueError):
             return True
 
+    def run_failed() -> str | None:
+        """A trainer that exited with its run failed (summary.json says so: it diverged) ends the
+        stack: a restart would replay the run to the same failure."""
+        try:
+            summary = json.loads((trainer_out / "summary.json").read_text())
+        except (OSError, ValueError):
+            return None
+        return f"run failed: {summary.get('error', 'see its log')}" if summary.get("status") == "failed" else None
+
     trainer = stack.start(
-        "trainer", train_args, trainer_env, done_when_ok=run_is_over
+        "trainer", train_args, trainer_env, done_when_ok=run_is_over, fatal=run_failed
     )  # it waits for the service itself
     from collie.client import CollieClient
 
     logs = out / "logs"
     # short requests: one sent to our socket before a service that then died is never answered
     with CollieClient(api, tokens["operator"], timeout_s=WATCH_TIMEOUT_S) as client:
-        wait_healthy(client, service, logs / "service.log", stopping)
+        wait_healthy(client, service, logs / "service.log", stopping, since=stack.children["service"].log_from)
         resumed = json.loads(memo.read_text())["run_id"] if resume else None
         if resumed is not None:
             held_by_database(client, resumed, memo, db)
@@ -369,7 +386,10 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     if resumed is not None:
         run_id = resumed
     else:
-        run_id = wait_for(memo, trainer, "the trainer", stopping=stopping, log=logs / "trainer.log")["run_id"]
+        since = stack.children["trainer"].log_from
+        run_id = wait_for(memo, trainer, "the trainer", stopping=stopping, log=logs / "trainer.log", since=since)[
+            "run_id"
+        ]
     mark("waited: run created")
     if args.teacher == "oracle":
         teach = ["teacher", "--api", api, "--run", str(run_id), "--until-done", "--noise-band", str(args.noise_band)]
@@ -389,7 +409,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
             return ["label-ui", "--api", api, "--run", str(run_id), *where]
 
         ui = stack.start("labeling_ui", ui_args, child_env())
-        ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log")
+        since = stack.children["labeling_ui"].log_from
+        ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log", since=since)
         mark("waited: labeling UI serving")
         port["labeling_ui"] = int(ui_meta["port"])
         labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])  # its URL names `shown` too
@@ -453,7 +474,7 @@ def listening_socket(host: str, port: int) -> socket.socket:
 
 
 def wait_healthy(
-    client: CollieClient, service: subprocess.Popen, log: Path, stopping: dict, timeout_s: float = 60.0
+    client: CollieClient, service: subprocess.Popen, log: Path, stopping: dict, timeout_s: float = 60.0, since: int = 0
 ) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -464,7 +485,7 @@ def wait_healthy(
             return
         except Exception:  # not up yet
             if service.poll() is not None:
-                said = last_error(log)
+                said = last_error(log, since)
                 raise RuntimeError(
                     f"the service exited with code {service.returncode}{': ' + said if said else ''}"
                 ) from None

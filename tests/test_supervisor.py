@@ -26,3 +26,34 @@ def test_a_children_file_that_cannot_be_written_is_a_warning_not_the_end(
         stack.stop()
     assert f"collie up: warning: cannot write {tmp_path / 'children.json'}: " in capsys.readouterr().err
     assert not (tmp_path / "children.json.partial").exists()
+
+
+def test_a_part_whose_failure_no_restart_can_mend_ends_the_stack_at_its_first_exit(tmp_path: Path) -> None:
+    """The trainer of a run that failed (diverged) would replay it to the same failure: no restart."""
+    from collie.supervisor import ChildFailed
+
+    stack = Supervisor(tmp_path)
+    try:
+        proc = stack.start("trainer", lambda: ["train", "--env", "nope"], dict(os.environ), fatal=lambda: "run failed")
+        proc.wait(timeout=60)
+        with pytest.raises(ChildFailed, match="the trainer's run failed"):
+            stack.check()
+    finally:
+        stack.stop()
+    assert "started trainer" in (tmp_path / "logs" / "up.log").read_text()
+    assert (tmp_path / "logs" / "up.log").read_text().count("started trainer") == 1  # never restarted
+
+
+def test_a_resumed_stack_given_no_rule_passes_none_to_its_trainer() -> None:
+    """A default --task would contradict a run made with another (the trainer refuses it)."""
+    import argparse
+
+    from collie.up import add_arguments, run_task_flags, task_flags
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    bare, named = parser.parse_args([]), parser.parse_args(["--task", "range"])
+    for args in (bare, named):
+        args.task_flags = task_flags(args)
+    assert run_task_flags(bare, resume=True) == [] and run_task_flags(bare, resume=False) == ["--task", "north"]
+    assert run_task_flags(named, resume=True) == ["--task", "range"]

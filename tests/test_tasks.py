@@ -152,6 +152,8 @@ def test_half_cheetah_has_only_the_tasks_of_a_body_on_a_line() -> None:
     with pytest.raises(ValueError, match="task 'north' is not defined for env 'half_cheetah'") as err:
         get_task("north", "half_cheetah")
     assert "half_cheetah's tasks: right, not_flip" in str(err.value)
+    with pytest.raises(ValueError, match=r"not defined for env 'car' \(only for point, ant, quadruped, humanoid\)"):
+        get_task("north", "car")
     assert [default_task(env) for env in ("point", "ant", "half_cheetah", "humanoid", "car")] == [
         "north", "north", "right", "north", "hazard"
     ]  # fmt: skip

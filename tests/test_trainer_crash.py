@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from collie.client import CollieClient
-from collie.schemas import QueriesEvent, RunCreate, StatusEvent
+from collie.schemas import EnvDims, QueriesEvent, RunCreate, StatusEvent
 from collie.tasks import get_task
 from collie.teacher import OracleTeacher
 
@@ -255,6 +255,28 @@ def test_sessions_nobody_answers_in_time_still_spend_the_budget(tmp_path):
             asked = operator.queries(run_id)
             assert (len(asked), operator.run(run_id).n_total) == (6, 6)
             assert sorted({q.session for q in asked}) == [0, 1, 2]
+
+
+def test_a_run_that_ended_on_the_service_is_refused_to_a_trainer_that_cannot_continue_it(tmp_path):
+    """Its sessions would all be refused (409) later, in a traceback: a failed run takes none again,
+    and a finished or stopped one is continued only from a checkpoint (--resume)."""
+    with running_service(tmp_path) as api, CollieClient(api, TOKENS["trainer"]) as trainer:
+        dims = EnvDims(obs_dim=4, nq=2, nv=2, horizon=5, skill_dim=2)  # the smoke point run's
+        ended = {}
+        for status in ("failed", "finished"):
+            run = trainer.create_run(RunCreate(env="point", task="north", method="collie", dims=dims, n_total=4))
+            trainer.set_status(run.id, status, epoch=3)
+            ended[status] = run.id
+        log = tmp_path / "trainer.log"
+        for status, said in (
+            ("failed", "failed on the service: it takes no more sessions (start a new run: another --out)"),
+            ("finished", "on the service is finished, and"),
+        ):
+            out = tmp_path / status
+            proc = cli(*train_args(out, api, "--run-id", str(ended[status])), log=log)
+            assert proc.wait(timeout=300) == 2
+            assert f"collie train: error: run {ended[status]} {said}" in log.read_text()
+            assert "Traceback" not in log.read_text()
 
 
 def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(tmp_path):

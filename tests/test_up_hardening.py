@@ -231,7 +231,7 @@ def test_a_part_that_refuses_to_run_ends_the_stack_at_once_saying_why(tmp_path):
         up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300
     )
     assert again.returncode == 1 and "Traceback" not in again.stderr
-    assert "collie up: error: the trainer ends the same way again (code 2: collie train: error: " in again.stderr
+    assert "collie up: error: the trainer refused to run again (code 2: collie train: error: " in again.stderr
     assert "checkpoint.pt" in again.stderr.splitlines()[-1]  # what it refused, in the error line itself
     log = (tmp_path / "logs" / "up.log").read_text()
     assert log.count("started trainer") == 3  # the first stack's, then one start and one retry

@@ -234,13 +234,16 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     kwargs = {"timeout_s": args.feedback_timeout}
     if run_id is not None:
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
-        held = source.client.run(source.run_id)
+        held = source.held_run()
         unlike = unlike_the_run(held, cfg, args.given)
         if unlike:  # its sessions would not fit the run (the service refuses other dims) nor its labels mean the same
             raise ValueError(
                 f"run {source.run_id} on the service is not this trainer's: {'; '.join(unlike)} (give the run's "
                 "flags, or no --run-id for a new run)"
             )
+        ended = ended_for_this_trainer(held, args.resume, cfg.out)
+        if ended:  # its sessions would all be refused (409): say why now, not in a traceback later
+            raise ValueError(ended)
         rule = from_stored(held.task_definition, held.instruction)
         if rule.task is None and rule.instruction is None:
             raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")
@@ -267,6 +270,18 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     memo.parent.mkdir(parents=True, exist_ok=True)
     write_json(memo, {"api": args.api, "run_id": source.run_id})
     return source, rule
+
+
+def ended_for_this_trainer(held: RunRead, resume: bool, out: str) -> str | None:
+    """Why the service's run takes no training from this trainer, if it does not: a run that failed
+    takes no session again; one that ended (finished, or stopped by an operator) is continued only
+    from a checkpoint (--resume: a stopped run then ends at once, a finished one may be extended)."""
+    if held.status == "failed":
+        return f"run {held.id} failed on the service: it takes no more sessions (start a new run: another --out)"
+    if held.status == "finished" and not resume:
+        how = "was stopped by an operator" if held.control == "stop" else "is finished"
+        return f"run {held.id} on the service {how}, and {out} holds no checkpoint to continue it from"
+    return None
 
 
 def unlike_the_run(held: RunRead, cfg: Config, given: frozenset[str] = frozenset()) -> list[str]:

@@ -7,9 +7,10 @@ with every dead unit (docs/results.md). Flushed, those values read as 0, which c
 does at float32's precision, only the bits of archived runs (`--flush-denormal false` keeps them).
 
 Only the update runs flushed: rollouts, MuJoCo and the evaluation keep IEEE arithmetic, so their
-observations are bit for bit what they were. The mode belongs to the calling thread (and to the
-intra-op threads it starts, which inherit it); with more than one torch thread, those started while
-flushing keep flushing.
+observations are bit for bit what they were. The mode belongs to the calling thread, and a thread
+pool's workers keep the mode of the moment they started, so the trainer flushes only when the update
+runs on one thread (the default on ≤ 4 cores and for small nets, trainer/threads.py): with more,
+which workers flush would depend on when the pool started (a resumed run's would differ).
 """
 
 from __future__ import annotations

@@ -314,7 +314,8 @@ class Trainer:
             self.instruction.refresh(self.labelled)
         sums: dict[str, torch.Tensor] = {}
         i, t = self.replay.sample_indices(self.cfg.grad_steps, self.cfg.batch_size, self.rng)
-        with flushing_denormals(self.cfg.flush_denormal):
+        # one thread only: the mode is the calling thread's, and a pool's workers keep the one they started with
+        with flushing_denormals(self.cfg.flush_denormal and torch.get_num_threads() == 1):
             for sampled in self.device_replay.batches(i, t):  # no host sync inside the loop
                 info = self.agent.update(sampled.batch, self.weight_fn(sampled))
                 for k, v in info.items():
@@ -328,8 +329,7 @@ class Trainer:
     def diverged(self, what: str) -> None:
         ckpt = self.out / "checkpoint.pt"
         where = f"last checkpoint kept at {ckpt}" if ckpt.exists() else "no checkpoint was written yet"
-        self.reporter.status(StatusReport("failed", self.epoch, error=what))
-        raise TrainingDiverged(f"{what} at epoch {self.epoch}; {where}")
+        raise TrainingDiverged(f"{what} at epoch {self.epoch}; {where}")  # run() reports "failed", once
 
     # ---- evaluation ----------------------------------------------------------------------
     def evaluate(self) -> dict[str, Any]:

@@ -137,7 +137,8 @@ def _read(row: Any, counts: QueueCounts) -> RunRead:
 def ended(run_id: int, status: str, control: str) -> str:
     """How an ended run is named in a refusal: one an operator stopped is said to be stopped (its
     status is "finished", as the trainer reports it), never finished."""
-    return f"run {run_id} was stopped by an operator" if control == "stop" else f"run {run_id} is {status}"
+    stopped = control == "stop" and status != "failed"  # a run that failed while stopping failed
+    return f"run {run_id} was stopped by an operator" if stopped else f"run {run_id} is {status}"
 
 
 def row(conn: Connection, run_id: int) -> Any:

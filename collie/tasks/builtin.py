@@ -65,7 +65,7 @@ def geometry(env: str) -> Geometry:
 
 def plane_geometry(env: str) -> Geometry:
     """The geometry of a task drawn in the x-y plane, which a body moving along a line does not have."""
-    if env in LINE_ENVS:
+    if env in LINE_ENVS or env not in ENV_GEOMETRY:  # the car too: only the plane's bodies are named
         raise EnvNotSupported([e for e in ENV_GEOMETRY if e not in LINE_ENVS])
     return geometry(env)
 

@@ -27,6 +27,7 @@ numpy only: no torch here, and no database — only HTTP.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
@@ -37,7 +38,7 @@ from typing import Any, Literal, TypeVar
 import numpy as np
 
 from collie import startup
-from collie.client import ApiError, Backoff, CollieClient, Unauthorized, Unreachable, retrying
+from collie.client import ApiError, Backoff, CollieClient, Overloaded, Unauthorized, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
 from collie.schemas import (
@@ -48,6 +49,7 @@ from collie.schemas import (
     QueryIn,
     QueryRead,
     RunCreate,
+    RunRead,
     RunStatus,
     SessionPost,
     StreamEvent,
@@ -60,6 +62,7 @@ from trainer.telemetry import StatusReport
 log = logging.getLogger(__name__)
 events_page_size = 1000  # the service's largest page
 T = TypeVar("T")
+CREATE_ATTEMPTS = 8  # a busy service (503, 429) is asked again for about 10 s (the shared backoff)
 
 
 class HttpFeedback(FeedbackSource):
@@ -92,17 +95,29 @@ class HttpFeedback(FeedbackSource):
     @classmethod
     def create(cls, api: str, token: str, spec: RunCreate, **kwargs: Any) -> HttpFeedback:
         """Create the run on the service and return a source for it (timeout_s defaults to the
-        spec's feedback_timeout_s)."""
+        spec's feedback_timeout_s). A busy service's 503 or 429 (nothing stored) is waited out; an
+        unanswered request is not sent again, which might make the run twice."""
         kwargs.setdefault("timeout_s", spec.feedback_timeout_s)
         with CollieClient(api, token) as client:
-            run = client.create_run(spec)
+            delays = Backoff().delays()
+            for _ in range(CREATE_ATTEMPTS - 1):
+                with contextlib.suppress(Overloaded):
+                    run = client.create_run(spec)
+                    break
+                time.sleep(next(delays))
+            else:
+                run = client.create_run(spec)
         return cls(api, token, run.id, **kwargs)
+
+    def held_run(self) -> RunRead:
+        """The run as the service holds it, waiting out a restart or a busy database."""
+        return self._retry(lambda: self.client.run(self.run_id))
 
     def extend_to(self, epochs: int) -> str | None:
         """More epochs than the service's run has (a resumed trainer given a larger --epochs): a
         finished run reopens for them. One an operator stopped, or one that failed, stays ended:
         then the words saying so."""
-        held = self._retry(lambda: self.client.run(self.run_id))
+        held = self.held_run()
         if epochs <= (held.epochs_total or 0):
             return None
         if held.control == "stop" or held.status == "failed":
