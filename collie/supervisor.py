@@ -60,6 +60,7 @@ class Child:
     restart_at: float | None = None
     finished: bool = False
     log_from: int = 0  # where its latest start's lines begin in its log
+    early_ends: int = 0  # exits 0 in a row before its work was over, each within stable_s of its start
     exit_codes: list[int] = field(default_factory=list)
 
 
@@ -141,8 +142,11 @@ class Supervisor:
                 self.log(f"{child.name} finished (exit 0)")
                 continue
             if code == 0 and child.again_after_s is not None:
-                self.log(f"{child.name} ended (exit 0) before its work; starting it again in {child.again_after_s:g} s")
-                child.restart_at = now + child.again_after_s
+                # doubling while it keeps ending at once (a stopped run's teacher until the trainer sees the stop)
+                child.early_ends = 0 if now - child.started_at >= self.stable_s else child.early_ends + 1
+                delay = min(child.again_after_s * 2 ** max(child.early_ends - 1, 0), MAX_BACKOFF_S * 3)
+                self.log(f"{child.name} ended (exit 0) before its work; starting it again in {delay:g} s")
+                child.restart_at = now + delay
                 continue
             if now - child.started_at >= self.stable_s:
                 child.failures = 0
