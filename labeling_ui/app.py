@@ -91,7 +91,9 @@ class LabelingApp:
         while True:
             with self._lock:
                 holder = self._tabs.get(tab)
-                if holder is None or holder is session or holder.closed.is_set():
+                # the same page come back (a network blip): its old connection may look open for a while
+                again = holder is not None and holder.page is not None and holder.page == session.page
+                if holder is None or holder is session or holder.closed.is_set() or again:
                     self._tabs[tab] = session
                     return tab
             if holder.page_open(PROBE_S):

@@ -30,6 +30,7 @@ TOKEN_KEY = "collie-token"
 TAB_KEY = "collie-tab"
 LEGACY_KEY = "viser-user:collie-token"  # where earlier versions kept it, shared by every tab
 TAB_ID = re.compile(r"tab-[0-9a-f]{24}")  # what the script above writes (collie.schemas.TabId allows it)
+PAGE_ID = re.compile(r"page-[0-9a-f]{24}")  # one page load's id (window.colliePage)
 _STORAGE_PREFIX = "viser-user:"  # what viser's client puts before keys written via its API
 
 _HANDOFF = """
@@ -44,10 +45,15 @@ if (sessionStorage.getItem(%(tab)s) === null) {  // crypto.randomUUID needs http
   const bytes = crypto.getRandomValues(new Uint8Array(12));
   sessionStorage.setItem(%(tab)s, "tab-" + Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join(""));
 }
+if (window.colliePage === undefined) {  // this page load's own: a reconnect of the page keeps it, a copy has another
+  const bytes = crypto.getRandomValues(new Uint8Array(12));
+  window.colliePage = "page-" + Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
+}
 localStorage.removeItem(%(legacy)s);
 localStorage.setItem(%(handoff)s, JSON.stringify({
   token: sessionStorage.getItem(%(key)s), watch: url.searchParams.get("watch"), tab: sessionStorage.getItem(%(tab)s),
-  review: url.searchParams.get("review"), query: url.searchParams.get("query"), width: window.innerWidth
+  review: url.searchParams.get("review"), query: url.searchParams.get("query"), width: window.innerWidth,
+  page: window.colliePage
 }));
 """
 
@@ -64,6 +70,8 @@ class TabIdentity:
     # ?review=RUN&query=ID: replay that query for an operator, label nothing (as given: review.py checks it)
     review: tuple[int, str] | None = None
     window_width: int | None = None  # the browser window's, in CSS pixels, when the tab opened
+    # the page load's own id: a connection that comes back from the same page (a network blip) has it
+    page: str | None = None
 
 
 def run_script(client: viser.ClientHandle, source: str) -> None:
@@ -98,6 +106,7 @@ def read_identity(client: viser.ClientHandle, timeout_s: float = 30.0) -> TabIde
         tab if isinstance(tab, str) and TAB_ID.fullmatch(tab) else new_tab_id(),
         None if run is None else (_run_id(run) or 0, query if isinstance(query, str) else ""),  # 0: no run
         width if isinstance(width := found.get("width"), int) and width > 0 else None,
+        page if isinstance(page := found.get("page"), str) and PAGE_ID.fullmatch(page) else None,
     )
 
 

@@ -60,6 +60,7 @@ class LabelerSession:
         `tab_id(session, tab)`: the id this tab goes by, given the one its page keeps (the app gives
         a duplicated tab its own)."""
         self._tab_id = tab_id
+        self.page: str | None = None  # the page load it serves (browser.TabIdentity.page), once read
         self.tab_labels = {} if tab_labels is None else tab_labels
         self.client = client
         self.config = config
@@ -220,6 +221,7 @@ class LabelerSession:
     def _work(self) -> None:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         self.panels.fit_window(opened.window_width)
+        self.page = opened.page  # before the app compares it with its other connections' (_tab_id)
         tab = self._tab_id(self, opened.tab)
         if tab != opened.tab:  # a copy of another open tab: a reload of it keeps the id it has now
             remember_tab(self.client, tab)

@@ -324,3 +324,27 @@ def test_speed_and_loop_persist_per_labeler(stack: Stack, browser: Browser) -> N
     assert live and live[0].player.speed == 2.0 and live[0].player.loop is False
     page.get_by_role("button", name="Reset view (north up)").click()  # the control is there and answers
     context.close()  # type: ignore[attr-defined]
+
+
+def test_a_page_that_reconnects_keeps_its_tab_id_while_its_old_connection_looks_open() -> None:
+    """After a network blip the page's new connection arrives while the old one is half-open (its
+    page cannot answer the app's question, which counts as open): the page load's own id says it is
+    the same page, so it keeps its tab id, its claims and its undo history; a copy of the tab has
+    another page id and gets a tab id of its own."""
+    import threading
+    from types import SimpleNamespace
+
+    from labeling_ui.app import LabelingApp
+    from labeling_ui.session import UiConfig
+
+    app = LabelingApp(UiConfig(api="http://127.0.0.1:9"), port=0, warm=())
+    try:
+        tab, page = "tab-" + "a" * 24, "page-" + "b" * 24
+        old = SimpleNamespace(page=page, closed=threading.Event(), page_open=lambda timeout_s: True)
+        app._tabs[tab] = old  # type: ignore[assignment]
+        back = SimpleNamespace(page=page, closed=threading.Event(), page_open=lambda timeout_s: True)
+        assert app._tab_id(back, tab) == tab  # type: ignore[arg-type]
+        copy = SimpleNamespace(page="page-" + "c" * 24)
+        assert app._tab_id(copy, tab) != tab  # type: ignore[arg-type]
+    finally:
+        app.stop()
