@@ -148,7 +148,8 @@ def test_not_flip_needs_a_body_that_can_tip_over() -> None:
 def test_half_cheetah_has_only_the_tasks_of_a_body_on_a_line() -> None:
     """Its y is always 0: the paper defines Right and Not-Flip for it, and a wedge or disc in x-y would
     judge a line through the plane (North: every x but 0 bad)."""
-    assert task_registry.tasks_for("half_cheetah") == ("right", "not_flip")
+    built_in = [t for t in task_registry.tasks_for("half_cheetah") if t in TASK_NAMES]  # other tests register more
+    assert built_in == ["right", "not_flip"]
     with pytest.raises(ValueError, match="task 'north' is not defined for env 'half_cheetah'") as err:
         get_task("north", "half_cheetah")
     assert "half_cheetah's tasks: right, not_flip" in str(err.value)

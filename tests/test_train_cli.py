@@ -196,10 +196,15 @@ def test_epochs_beyond_what_the_service_stores_are_refused_before_it_is_asked(tm
     assert not (tmp_path / "run").exists()
 
 
-def test_the_default_task_on_the_car_names_the_cars_tasks(tmp_path: Path) -> None:
+def test_the_car_runs_its_own_task_by_default_and_a_plane_task_is_refused_naming_its_own(tmp_path: Path) -> None:
     refused(
-        train("--env", "car", "--out", str(tmp_path / "run")), "task 'north' is not defined for env 'car'", "hazard"
+        train("--env", "car", "--task", "north", "--out", str(tmp_path / "north")),
+        "task 'north' is not defined for env 'car'",
+        "car's tasks: hazard",
     )
+    given_none = train("--env", "car", "--epochs", "1", "--out", str(tmp_path / "run"))
+    assert given_none.returncode == 0, given_none.stderr[-3000:]
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["task"] == "hazard"
 
 
 @pytest.mark.parametrize(
