@@ -412,7 +412,6 @@ def _outcome(ray: Any, ref: Any, spec: RunSpec) -> tuple[RunSpec, dict[str, Any]
 UNRECOGNIZED_HINT = "; flags for every `collie train` go after --, e.g. collie sweep … -- --epochs 2"
 DASHED_VALUE_OPTIONS = ("--downstream-flags",)  # its value is flags: `--downstream-flags "--kind zero_shot"`
 DEFAULT_TASKS = "north,range,hole_north"
-ENV_TASKS = {"half_cheetah": "right,not_flip", "car": "hazard"}  # the paper's, where North is not defined
 
 
 class _Refusal(Exception):
@@ -472,7 +471,7 @@ def train_flags_problem(specs: list[RunSpec]) -> str | None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from collie.tasks import task_names
+    from collie.tasks import ENV_TASKS, task_names
     from trainer.envs.registry import ENV_NAMES
 
     # Each default is shown: together they are the full grid a bare `collie sweep` runs (the epilog).
@@ -481,7 +480,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--tasks",
         default=None,
         help=f"comma-separated, of: {', '.join(task_names())} or a --task-file's task (default: {DEFAULT_TASKS}; "
-        f"{'; '.join(f'{env}: {tasks}' for env, tasks in ENV_TASKS.items())}) "
+        f"{'; '.join(env + ': ' + ','.join(tasks) for env, tasks in ENV_TASKS.items())}) "
         "— with --task-file and no --tasks, the files' tasks alone",
     )
     p.add_argument(
@@ -560,9 +559,11 @@ def file_tasks(files: list[str], env: str, layout_seed: int) -> tuple[dict[str, 
 def chosen_tasks(given: str | None, from_files: dict[str, str], env: str) -> tuple[list[str], str | None]:
     """The sweep's tasks: --tasks (default DEFAULT_TASKS or the env's ENV_TASKS, none beside task files), then
     each file's task not named there; or the problem naming --tasks' empty entry."""
+    from collie.tasks import ENV_TASKS
+
     if given is None and from_files:
         return list(from_files), None
-    tasks, empty = names("--tasks", given or ENV_TASKS.get(env, DEFAULT_TASKS))
+    tasks, empty = names("--tasks", given or ",".join(ENV_TASKS.get(env, ())) or DEFAULT_TASKS)
     return list(dict.fromkeys([*tasks, *from_files])), empty
 
 

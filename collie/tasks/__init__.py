@@ -6,7 +6,7 @@ See docs/tasks.md for the rules, boundary conventions and how to add a task.
 """
 
 from collie.tasks.builtin import BUILTIN_TASKS as TASK_NAMES
-from collie.tasks.builtin import ENV_GEOMETRY, Geometry, default_task
+from collie.tasks.builtin import ENV_GEOMETRY, ENV_TASKS, Geometry, default_task
 from collie.tasks.classes import BAD, CLASS_NAMES, CLASSES, GOOD, NEUTRAL
 from collie.tasks.definition import NotDeclarative, from_definition, task_for_run, to_definition
 from collie.tasks.hazard import HAZARD_RADIUS, hazard_layout
@@ -19,6 +19,7 @@ __all__ = [
     "CLASSES",
     "CLASS_NAMES",
     "ENV_GEOMETRY",
+    "ENV_TASKS",
     "GOOD",
     "HAZARD_RADIUS",
     "NEUTRAL",

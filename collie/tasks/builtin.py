@@ -54,7 +54,8 @@ PITCHLESS_ENVS = ("point",)  # no body orientation: its pitch is undefined (nan)
 # A body that runs along x (its y is always 0): the paper defines only Right and Not-Flip for it; a
 # wedge, disc or hole in x-y would judge a line through the plane, which no labeler could follow.
 LINE_ENVS = ("half_cheetah",)
-ENV_DEFAULT_TASK = {"half_cheetah": "right", "car": "hazard"}  # the paper's first task for each; else North
+# the paper's tasks for the bodies North is not defined on (the first: a run's default; sweeps run all)
+ENV_TASKS: dict[str, tuple[str, ...]] = {"half_cheetah": ("right", "not_flip"), "car": ("hazard",)}
 
 
 def geometry(env: str) -> Geometry:
@@ -72,7 +73,7 @@ def plane_geometry(env: str) -> Geometry:
 
 def default_task(env: str) -> str:
     """The task a run of `env` gets when none is named."""
-    return ENV_DEFAULT_TASK.get(env, "north")
+    return ENV_TASKS.get(env, ("north",))[0]
 
 
 def _holes(centres: tuple[tuple[float, float], ...], radius: float) -> tuple[Disc, ...]:
