@@ -48,6 +48,9 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    agent's state below float32's smallest normal, mostly Adam's moments of dead units),
    `aged_update_s_kept` / `aged_update_s_flushed` (median s per epoch), `flush_denormal_speedup`
    (kept ÷ flushed), `aged_denormals_after` (left in the flushing copy after its epochs).
+8. A whole run (`--only whole`): a point `cpu` COLLIE run of `--whole-epochs` epochs (the
+   preset's 400) without and then with flushing denormals. Keys `whole_run_s_kept`,
+   `whole_run_s_flushed` (wall s, rollouts and evaluations included), `whole_run_speedup`.
 """
 
 from __future__ import annotations
@@ -490,7 +493,24 @@ def bench_aged(epochs: int, rounds: int) -> dict[str, float]:
         }
 
 
-PARTS = ("update", "flops", "rollout", "sampling", "checkpoint", "kernels", "aged")
+def bench_whole_run(epochs: int) -> dict[str, float]:
+    """A whole point `cpu` COLLIE run (oracle labels) of `epochs` epochs, without flushing denormals
+    and then with, one after the other: their wall times, rollouts and evaluations included."""
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for on, name in ((False, "kept"), (True, "flushed")):
+            cfg = make_config("cpu", "point", out=f"{tmp}/{name}", epochs=epochs, flush_denormal=on)
+            start = time.perf_counter()
+            Trainer(cfg, progress=False).run()
+            out[f"whole_run_s_{name}"] = time.perf_counter() - start
+    return {
+        "whole_run_epochs": epochs,
+        **out,
+        "whole_run_speedup": out["whole_run_s_kept"] / out["whole_run_s_flushed"],
+    }
+
+
+PARTS = ("update", "flops", "rollout", "sampling", "checkpoint", "kernels", "aged", "whole")
 
 
 def main() -> None:
@@ -500,6 +520,7 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = the trainer's default policy)")
     p.add_argument("--aged-epochs", type=int, default=150, help="epochs of the trained agent of part 7 (aged)")
+    p.add_argument("--whole-epochs", type=int, default=400, help="epochs of each whole run of part 8 (whole)")
     p.add_argument("--no-compile", action="store_true", help="skip the compiled update (compilation takes minutes)")
     p.add_argument(
         "--only", choices=PARTS, action="append", help="run only these parts (repeatable; JSON: update-<part>.json)"
@@ -584,6 +605,13 @@ def main() -> None:
             f"{g['aged_denormals']} denormal values in its state): {g['aged_update_s_kept']:.3f} s per epoch, "
             f"{g['aged_update_s_flushed']:.3f} s flushing them ({g['flush_denormal_speedup']:.2f}×; "
             f"{g['aged_denormals_after']} left after)"
+        )
+    if "whole" in parts:
+        w = bench_whole_run(a.whole_epochs)
+        figures |= w
+        print(
+            f"a whole point cpu run of {w['whole_run_epochs']} epochs: {w['whole_run_s_kept']:.1f} s, "
+            f"{w['whole_run_s_flushed']:.1f} s flushing denormals ({w['whole_run_speedup']:.2f}×)"
         )
     name = "update" if a.only is None else "-".join(["update", *parts])  # a partial run keeps the full file
     record(name, {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **figures})
