@@ -1,6 +1,7 @@
 """The child processes of one `collie up`, supervised: a child that dies is started again after a
 backoff (0.5 s, doubling to 10 s), and one that keeps dying — `max_restarts` times without staying
-up `stable_s` in between — ends the stack with an error naming it and what it said. One that refuses
+up `stable_s` or making progress a restart keeps (`progress`: the trainer's checkpoint) in between —
+ends the stack with an error naming it and what it said. One that refuses
 to run (exit 2: the trainer's, the teacher's and the labeling UI's refusals, e.g. a damaged
 checkpoint, a revoked token) twice in a row ends it at once, and so does one whose `fatal` says no
 restart can help (a trainer whose run failed): the same start would only end the same way. Every
@@ -53,6 +54,10 @@ class Child:
     # called on any other exit: why no restart can help (the trainer's run failed), else None
     fatal: Callable[[], str | None] | None = None
     pass_fds: tuple[int, ...] = ()  # inherited by each start (the service's listening socket)
+    # what a restart keeps of its work (the trainer's checkpoint): a start that changed it was no
+    # failure to repeat, however short; None: only staying up `stable_s` counts
+    progress: Callable[[], object] | None = None
+    progress_at_start: object = None
     proc: subprocess.Popen | None = None
     started_at: float = 0.0
     failures: int = 0  # deaths since it last stayed up stable_s
@@ -90,8 +95,9 @@ class Supervisor:
         pass_fds: tuple[int, ...] = (),
         again_after_s: float | None = None,
         fatal: Callable[[], str | None] | None = None,
+        progress: Callable[[], object] | None = None,
     ) -> subprocess.Popen:
-        child = Child(name, args, env, done_when_ok, again_after_s, fatal, pass_fds)
+        child = Child(name, args, env, done_when_ok, again_after_s, fatal, pass_fds, progress)
         self.children[name] = child
         return self._spawn(child)
 
@@ -112,6 +118,7 @@ class Supervisor:
         )
         log.close()  # the child holds its own copy
         child.started_at, child.restart_at = time.monotonic(), None
+        child.progress_at_start = child.progress() if child.progress is not None else None
         mark(f"spawned {child.name}")
         self.log(f"started {child.name} (pid {child.proc.pid})")
         self._write_pids()
@@ -148,7 +155,7 @@ class Supervisor:
                 self.log(f"{child.name} ended (exit 0) before its work; starting it again in {delay:g} s")
                 child.restart_at = now + delay
                 continue
-            if now - child.started_at >= self.stable_s:
+            if now - child.started_at >= self.stable_s or self._progressed(child):
                 child.failures = 0
             child.failures += 1
             how = f"signal {-code}" if code < 0 else f"code {code}" + (" (interrupted)" if code == 0 else "")
@@ -169,6 +176,10 @@ class Supervisor:
             self.log(f"{child.name} exited with {how_said}; restarting in {delay:.1f} s")
             print(f"collie up: {child.name} exited with {how_said}; restarting in {delay:.1f} s", file=sys.stderr)
             child.restart_at = now + delay
+
+    @staticmethod
+    def _progressed(child: Child) -> bool:
+        return child.progress is not None and child.progress() != child.progress_at_start
 
     def closing(self, thing: Closeable) -> None:
         """Close `thing` (e.g. the socket the service inherits) once the children are stopped."""

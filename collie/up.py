@@ -370,8 +370,16 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
             return None
         return f"run failed: {summary.get('error', 'see its log')}" if summary.get("status") == "failed" else None
 
+    def checkpointed() -> int | None:
+        """When the trainer last checkpointed: a trainer killed again and again still progresses
+        while each start gets this far (a restart resumes from it)."""
+        try:
+            return (trainer_out / "checkpoint.pt").stat().st_mtime_ns
+        except OSError:
+            return None
+
     trainer = stack.start(
-        "trainer", train_args, trainer_env, done_when_ok=run_is_over, fatal=run_failed
+        "trainer", train_args, trainer_env, done_when_ok=run_is_over, fatal=run_failed, progress=checkpointed
     )  # it waits for the service itself
     from collie.client import CollieClient
 

@@ -57,3 +57,45 @@ def test_a_resumed_stack_given_no_rule_passes_none_to_its_trainer() -> None:
         args.task_flags = task_flags(args)
     assert run_task_flags(bare, resume=True) == [] and run_task_flags(bare, resume=False) == ["--task", "north"]
     assert run_task_flags(named, resume=True) == ["--task", "range"]
+
+
+def _killed_and_checked(stack: Supervisor, name: str) -> None:
+    """SIGKILL the part's current process and let the supervisor see it die (and plan a restart)."""
+    proc = stack.proc(name)
+    proc.kill()
+    proc.wait(timeout=30)
+    stack.check()
+
+
+def _restarted(stack: Supervisor, name: str, before: int) -> None:
+    deadline = time.monotonic() + 30
+    while stack.proc(name).pid == before and time.monotonic() < deadline:
+        time.sleep(0.1)
+        stack.check()
+    assert stack.proc(name).pid != before, "not restarted"
+
+
+@pytest.mark.parametrize("progressing", [True, False])
+def test_a_part_killed_again_and_again_is_restarted_while_it_makes_progress(tmp_path: Path, progressing: bool) -> None:
+    """A trainer killed twice within `stable_s` ends the stack, unless its checkpoint moved between
+    the kills: each start then got somewhere, and the next resumes from there."""
+    from collie.supervisor import ChildFailed
+
+    checkpoints = [0]
+    stack = Supervisor(tmp_path, max_restarts=1, stable_s=600)
+    serve = ["serve", "--port", "0", "--db", str(tmp_path / "c.db"), "--tokens-json", str(tmp_path / "t.json")]
+    try:
+        stack.start("service", lambda: serve, dict(os.environ), progress=lambda: checkpoints[0])
+        first = stack.proc("service").pid
+        _killed_and_checked(stack, "service")  # the first death: restarted
+        _restarted(stack, "service", first)
+        if progressing:
+            checkpoints[0] += 1  # the restarted start checkpointed before it was killed
+            second = stack.proc("service").pid
+            _killed_and_checked(stack, "service")
+            _restarted(stack, "service", second)
+        else:
+            with pytest.raises(ChildFailed, match="the service keeps exiting"):
+                _killed_and_checked(stack, "service")
+    finally:
+        stack.stop()
