@@ -92,6 +92,12 @@ def make_engine(url: str, background_checkpoints: bool = False, synchronous: Syn
     return create_engine(url, pool_pre_ping=True, pool_size=8, max_overflow=24)
 
 
+def _changes(conn: Connection) -> int | None:
+    """Rows SQLite's connection has changed since it opened (None for other databases)."""
+    changes = getattr(conn.connection.dbapi_connection, "total_changes", None)
+    return changes if isinstance(changes, int) else None
+
+
 class Database:
     """Short transactions over one engine. Stream events a write appended (conn.info["published"],
     (run_id, event id) pairs) are handed to `publisher` only once the transaction is durable."""
@@ -115,13 +121,16 @@ class Database:
             with self.engine.connect() as conn:
                 conn.execution_options(write=True)
                 conn.info["published"] = []
+                changes_before = _changes(conn)
                 with conn.begin():
                     yield conn
                 published: list[tuple[int, int]] = conn.info.pop("published")
+                changed = changes_before is None or _changes(conn) != changes_before
         except DBAPIError:
             self._wrote_at = -math.inf  # perhaps a full disk, read-only files: the next check writes
             raise
-        self._wrote_at = time.monotonic()
+        if changed:  # SQLite commits a transaction that changed nothing on a full disk too: no proof
+            self._wrote_at = time.monotonic()
         if published and self.publisher is not None:
             self.publisher(published)
 
@@ -132,7 +141,7 @@ class Database:
 
     def unwritable(self) -> str | None:
         """None when the database takes writes, else why not (or the write's DBAPIError). A write
-        committed in the last WROTE_RECENTLY_S says so; else, on SQLite, a write transaction that
+        that changed rows, committed in the last WROTE_RECENTLY_S, says so; else, on SQLite, a write transaction that
         rewrites the header's user_version unchanged (one log frame) fails exactly when a real
         write would: full disk, read-only or immutable files, I/O error. A server database: whether
         its transactions are read-only (a standby, default_transaction_read_only); its full disk
@@ -145,6 +154,7 @@ class Database:
                 return "its transactions are read-only" if read_only == "on" else None
             version = int(conn.exec_driver_sql("PRAGMA user_version").scalar() or 0)
             conn.exec_driver_sql(f"PRAGMA user_version = {version}")
+        self._wrote_at = time.monotonic()  # a frame was written, though no row changed
         return None
 
     def checkpoint(self) -> None:

@@ -211,3 +211,31 @@ def test_a_read_only_postgresql_is_503_and_health_says_so(
     lines = [r.getMessage() for r in logged if r.levelno >= logging.WARNING]
     assert any(line.startswith("database cannot be written (") for line in lines), lines
     assert [r for r in logged if r.exc_info] == []
+
+
+def test_a_write_that_changed_nothing_is_no_proof_the_database_takes_writes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SQLite commits an empty write transaction on a full disk too: health must still look."""
+    from sqlalchemy.exc import DBAPIError
+
+    from backend import db as database
+    from backend.db import Database
+
+    monkeypatch.setattr(database, "WROTE_RECENTLY_S", 0.2)
+    db = Database(f"sqlite:///{tmp_path / 'c.db'}")
+    try:
+        with db.write() as conn:
+            conn.exec_driver_sql("CREATE TABLE t (x INTEGER)")
+            conn.exec_driver_sql("INSERT INTO t VALUES (1)")
+        time.sleep(0.3)  # that write is no longer recent
+        with no_file_may_grow():
+            with db.write() as conn:  # committed though no file may grow: it wrote nothing
+                conn.exec_driver_sql("SELECT x FROM t").all()
+            with pytest.raises(DBAPIError, match="disk I/O error"):  # the write check ran, and failed
+                db.unwritable()
+        with db.write() as conn:
+            conn.exec_driver_sql("UPDATE t SET x = 2")
+        assert db.unwritable() is None
+    finally:
+        db.dispose()
