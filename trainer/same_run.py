@@ -11,9 +11,20 @@ from typing import Any
 from trainer.config import FIRST_VERSION, Config, make_config
 from trainer.run_files import read_json_object
 
-# where a run's folder and task file were and how it used the machine: a moved, archived or resumed
-# copy of one run may differ in these and is still that run
-NOT_THE_RUN = ("out", "task_file", "threads", "device", "compile", "fast_ops", "fused_adam", "flush_denormal")
+# where a run's folder and task file were, how it used the machine and how often it checkpointed
+# (resume is exact: the same metrics to the last digit): a moved, archived or resumed copy of one
+# run may differ in these and is still that run
+NOT_THE_RUN = (
+    "out",
+    "task_file",
+    "threads",
+    "device",
+    "compile",
+    "fast_ops",
+    "fused_adam",
+    "flush_denormal",
+    "checkpoint_every",
+)
 # what a report's rows and columns already say (the method, its task and env, the seed)
 PLACED = ("env", "task", "method", "seed")
 

@@ -259,7 +259,8 @@ def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_
 
 def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_path):
     """The researcher's mix: METRA at `--preset cpu --epochs 40` (seeds 0, 1) and a smoke seed 2,
-    COLLIE beside COLLIE-L2; where and how a run ran (its folder, threads) is no difference."""
+    COLLIE beside COLLIE-L2; where and how a run ran (its folder, threads, how often it checkpointed)
+    is no difference."""
     from trainer.config import make_config
 
     def config(preset, method, **more):
@@ -268,7 +269,8 @@ def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_p
     sw, mix = tmp_path / "sw", tmp_path / "mix"
     for seed, cov in enumerate([10.0, 20.0]):
         fake_run(sw, "point", "north", "metra", seed, cov, config=config("cpu", "metra", epochs=40, out=f"sw/{seed}"))
-        fake_run(sw, "point", "north", "collie", seed, 30.0 + seed, config=config("cpu", "collie", threads=seed))
+        ran = config("cpu", "collie", threads=seed, checkpoint_every=10 + seed)
+        fake_run(sw, "point", "north", "collie", seed, 30.0 + seed, config=ran)
     fake_run(mix, "point", "north", "metra", 2, 99.0, config=config("smoke", "metra"))
     fake_run(mix, "point", "north", "collie", 0, 5.0, config=config("cpu", "collie", distance="l2"))
     fake_run(mix, "point", "range", "metra", 0, 7.0, config=config("smoke", "metra"))  # alone in its cell
@@ -278,7 +280,7 @@ def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_p
         "| METRA | – | 7.00 |",
         "| METRA (preset=cpu, epochs=40) | 15.00 ± 7.07 | – |",
         "| METRA (preset=smoke) | 99.00 | – |",
-        "| COLLIE | 30.50 ± 0.71 | – |",  # threads 0 and 1: one configuration
+        "| COLLIE | 30.50 ± 0.71 | – |",  # threads 0 and 1, checkpoints every 10 and 11: one configuration
         "| COLLIE (distance=l2) | 5.00 | – |",
     ]
     assert "configurations differ are not averaged" in text
