@@ -20,7 +20,8 @@ pytestmark = pytest.mark.slow
 # The UI silently ignores a label key pressed less than min_dwell_s after the segment appeared (a
 # double tap), counted from just after the server flushed its first frame (presenter.py): on a busy
 # machine the page may show the segment before that clock starts, so no sleep in the test is sure to
-# outlast it. These UIs run without it (a key then always counts); test_tab_state tests the rule.
+# outlast it. These UIs run without it (a key then always counts); test_tab_state tests the rule, and
+# the dwell test below the rule in the browser, pressing until the key counts.
 NO_DWELL = 0.0
 
 
@@ -63,6 +64,45 @@ def test_label_five_by_keys_then_undo(stack: Stack, browser: Browser, artifacts:
     assert wait_segment(page, seen[-1]) == after
     expected[seen[-1]] = 2
     assert {q: v for q, (v, _) in effective(stack, run.id).items()} == expected
+    page.context.close()
+
+
+def test_a_key_as_a_segment_appears_is_ignored_and_counts_once_it_has_been_watched(
+    stack: Stack, browser: Browser
+) -> None:
+    """The dwell: a key pressed as a segment appears (the second half of a double tap, a held key)
+    labels nothing; the same key once the segment has been on screen `min_dwell_s` labels it, with
+    at least that long recorded, and a key pressed just after it does not label the next segment."""
+    dwell = 4.0
+    run = stack.post_run("point", 3, task="range_north")
+    ui = stack.ui(run.id, min_dwell_s=dwell, min_played=0.0)
+    page = open_labeler(browser, ui.labeler_url(stack.new_labeler("tapper")))
+
+    def tap_until_labelled(key: str, count: int) -> None:
+        """`key` every 0.3 s until the service holds `count` labels (the dwell's clock starts when
+        the server sent the first frame, which on a busy machine may be after the page showed it)."""
+        deadline = time.monotonic() + TIMEOUT_S
+        while len(effective(stack, run.id)) < count:
+            assert time.monotonic() < deadline, f"the key {key} never counted"
+            press(page, key)
+            time.sleep(0.3)
+
+    first = wait_segment(page)
+    press(page, "1")  # as it appears: within the dwell, or before its clock even started
+    time.sleep(1.0)
+    assert effective(stack, run.id) == {} and segment_id(page) == first
+    tap_until_labelled("1", 1)
+    [label] = stack.trainer.effective_labels(run.id)
+    assert (label.query_id, label.label) == (first, 0)
+    assert label.seconds is not None and label.seconds >= dwell
+
+    second = wait_segment(page, first)
+    tap_until_labelled("3", 2)  # its last tap or two land on the third segment as it appears
+    third = wait_segment(page, second)
+    press(page, "3")
+    time.sleep(1.0)
+    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {first: 0, second: 2}
+    assert segment_id(page) == third
     page.context.close()
 
 
