@@ -146,6 +146,8 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
                 person.submit(run_id, claim.query.query_id, given[claim.query.query_id])  # type: ignore[arg-type]
             log = trainer.stdout.read()  # type: ignore[union-attr]
             assert trainer.returncode == 0, log[-3000:]
+            memo = out / "service_run.json"
+            assert f"collie train: created run {run_id} on {server.url} (remembered in {memo})" in log
             run = person.run(run_id)
         page = httpx.get(
             f"{server.url}/api/dashboard/runs/{run_id}", headers={"Authorization": f"Bearer {TOKENS['operator']}"}

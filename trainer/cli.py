@@ -269,6 +269,9 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         source = HttpFeedback.create(args.api, token, spec, **kwargs)
     memo.parent.mkdir(parents=True, exist_ok=True)
     write_json(memo, {"api": args.api, "run_id": source.run_id})
+    # the id a labeler's UI and a teacher are started with (`--run N`)
+    made = "continues" if run_id is not None else "created"
+    print(f"collie train: {made} run {source.run_id} on {args.api} (remembered in {memo})", file=sys.stderr)
     return source, rule
 
 
