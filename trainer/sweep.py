@@ -367,7 +367,8 @@ def ray_address_problem(address: str) -> str | None:
     if address == "auto":
         return None
     host, _, port = address.removeprefix("ray://").rpartition(":")
-    if host.strip("[]") and port.isascii() and port.isdigit() and 0 < int(port) <= 65535:  # "²": no int
+    named = host.strip("[]") and "/" not in host  # "http://head": a URL of another scheme
+    if named and port.isascii() and port.isdigit() and 0 < int(port) <= 65535:  # "²": no int
         return None
     return f"--ray {address!r} is not a Ray address: auto, HOST:PORT of the head, or ray://HOST:PORT"
 
@@ -653,7 +654,7 @@ def run(args: argparse.Namespace) -> int:
         downstream=args.downstream,
         downstream_flags=tuple(shlex.split(args.downstream_flags)),
     )
-    wrong = train_flags_problem([s for s in specs if to_train(s)])
+    wrong = train_flags_problem(specs)  # finished runs too: a typo is one, whether or not a run is left
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2

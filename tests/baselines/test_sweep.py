@@ -175,6 +175,7 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--methods", "lsd", "--", "--threads", "2"], "flags after -- may not set --threads: "),
         (["--ray", "notanaddr"], "--ray 'notanaddr' is not a Ray address: auto, HOST:PORT of the head, or ray://"),
         (["--ray", "head:²"], "--ray 'head:²' is not a Ray address"),  # a digit to str.isdigit, no int: was a traceback
+        (["--ray", "http://head:6379"], "--ray 'http://head:6379' is not a Ray address"),  # was: "no Ray head answers"
     ],
 )
 def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsys, monkeypatch, given, message):
@@ -190,6 +191,18 @@ def test_bad_arguments_are_one_line_errors_before_any_run_starts(tmp_path, capsy
     err = capsys.readouterr().err
     assert err.startswith(f"collie sweep: error: {message.format(file=file)}") and len(err.splitlines()) == 1, err
     assert launched == [] and not (tmp_path / "runs").exists()  # nothing launched, no empty report
+
+
+def test_a_bad_train_flag_is_refused_when_every_run_has_finished_too(tmp_path, capsys, monkeypatch):
+    """Was: "1 runs, 1 already finished", exit 0: the typo went unnoticed until a run was left to do."""
+    from collie.cli import main
+
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: pytest.fail(f"launched {cmd}"))
+    finished(tmp_path / "runs" / "point-north-lsd-s0")
+    argv = ["sweep", "--seeds", "1", "--methods", "lsd", "--tasks", "north", "--out", str(tmp_path / "runs")]
+    assert main([*argv, "--", "--epohcs", "3"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("collie sweep: error: collie train would refuse lsd on north (--epohcs 3): unrecognized")
 
 
 def test_a_ray_address_where_no_head_answers_is_a_one_line_error(tmp_path):
