@@ -49,11 +49,15 @@ def refusal_line(exc: PermissionError) -> str:
 def main(argv: list[str] | None = None) -> int:
     from collie.startup import mark
 
+    argv = sys.argv[1:] if argv is None else argv
+    wanted = argv[0] if argv and not argv[0].startswith("-") else None
+    if wanted == "train":  # a SIGTERM in its seconds of imports ends it with a word, as Ctrl-C does
+        from collie import early_term
+
+        early_term.note_sigterm()
     mark("python start")
     parser = argparse.ArgumentParser(prog="collie", description=__doc__)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    argv = sys.argv[1:] if argv is None else argv
-    wanted = argv[0] if argv and not argv[0].startswith("-") else None
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         # train: no abbreviated flags, so what `up --train-args` and `sweep -- …` may not set is matched exactly
         p = sub.add_parser(name, help=help_text, description=help_text, allow_abbrev=name != "train")

@@ -354,11 +354,12 @@ def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, tmp_pa
     )
 
 
-def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path) -> None:
-    marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark ("trainer built")
+@pytest.mark.parametrize("at", ["python start", "imports"])  # torch's import next (was: exit 143, no word); envs next
+def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path, at: str) -> None:
+    marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark
     cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
-    marks.signal_at(proc, lambda m: m.what == "imports", signal.SIGTERM)  # torch loaded; envs next
+    marks.signal_at(proc, lambda m: m.what == at, signal.SIGTERM)
     try:
         _, err = proc.communicate(timeout=180)
     finally:

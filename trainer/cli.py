@@ -8,14 +8,13 @@ import dataclasses
 import json
 import os
 import re
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
+from collie import early_term
 from collie.argtypes import http_url, int_in, record_id, seed
 from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
@@ -402,21 +401,10 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
-# Noted, not raised: a KeyboardInterrupt raised where the signal lands may be inside a finalizer
-# (GC), where Python prints it as "Exception ignored" and goes on; the start ends before training.
-_TERM_ASKED = threading.Event()
-
-
-def _as_ctrl_c(_signum: int, _frame: object) -> None:
-    _TERM_ASKED.set()
-
-
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
-    # SIGTERM while the run starts (imports, envs) ends it before training as Ctrl-C does, with a
-    # line, not by the signal; the training loop puts its own handler over this one (a final checkpoint)
-    signal.signal(signal.SIGTERM, _as_ctrl_c)
+    early_term.note_sigterm()  # collie.cli did already, before the imports; `python -m trainer.cli` did not
 
     made: list[Path] = []
     locked = False
@@ -493,7 +481,7 @@ def run(args: argparse.Namespace) -> int:
         remove_if_empty(made)
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
-    if _TERM_ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
+    if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
     from collie.client import ApiError
     from trainer.feedback import SourceRefused

@@ -47,7 +47,7 @@ class Config:
     device: str = "auto"  # auto → cuda when available
     threads: int = 0  # torch intra-op threads; 0 = auto (trainer/threads.py: 1 on ≤ 4 cores or small nets)
     physics_threads: int = 0  # rollout groups overlapping the policy; 0 = 1 = one group (trainer/envs/vector.py)
-    compile: bool = False  # torch.compile the networks' training passes (trainer/compiled.py); off: not faster here
+    compile: bool = False  # torch.compile the networks' training passes (Metra.compile); off: not faster here
     fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
     flush_denormal: bool = True  # the update flushes denormals to zero (trainer/denormals.py); false: before 12-06
     # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05;
