@@ -7,6 +7,7 @@ import ipaddress
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlsplit
 
 
@@ -112,3 +113,14 @@ def int_in(low: int | None, high: int, why: str = "") -> Callable[[str], int]:
 seed = int_in(0, 2**32 - 1, "a random generator's seed")
 # an open file a parent process hands down: 0 or more (a descriptor is a C int)
 file_descriptor = int_in(0, 2**31 - 1, "a file descriptor")
+
+
+class Given(argparse.Action):
+    """`store` that also records the flag as given (in `given`, which the parser must default to an
+    empty frozenset): a resumed run warns about those it ignores, and only those."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None
+    ) -> None:
+        setattr(namespace, self.dest, values)
+        namespace.given = frozenset({*namespace.given, self.dest})

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from collie.addresses import is_loopback, link_host, local_address, network_address, not_listenable
-from collie.argtypes import ipv4_host, port, seed, sqlite_file
+from collie.argtypes import Given, ipv4_host, port, seed, sqlite_file
 from collie.child_log import last_error
 from collie.feedback_schedule import next_feedback_epoch
 from collie.pass_through import owned_flags
@@ -43,7 +43,10 @@ DATABASE_ENV = "COLLIE_DATABASE_URL"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="point", help="point (default), ant, half_cheetah, quadruped, humanoid or car")
+    p.set_defaults(given=frozenset())  # the run's flags given on this command line (Given)
+    p.add_argument(
+        "--env", default="point", action=Given, help="point (default), ant, half_cheetah, quadruped, humanoid or car"
+    )
     p.add_argument(
         "--task",
         default=None,
@@ -51,9 +54,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--task-file", type=Path, default=None, help="a task rule from a TOML/JSON/Python file")
     p.add_argument("--instruction", default=None, help="no rule: people label by this intent in words")
-    p.add_argument("--method", default="collie", help="collie (default), metra, oracle, or a baseline (collie train)")
-    p.add_argument("--preset", default="cpu", help="cpu (default: this machine), paper (a GPU) or smoke (seconds)")
-    p.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
+    p.add_argument(
+        "--method", default="collie", action=Given, help="collie (default), metra, oracle, or a baseline (collie train)"
+    )
+    p.add_argument(
+        "--preset", default="cpu", action=Given, help="cpu (default: this machine), paper (a GPU) or smoke (seconds)"
+    )
+    p.add_argument("--seed", type=seed, default=0, action=Given, help="the run's seed (default 0)")
     p.add_argument(
         "--teacher",
         choices=("none", "oracle"),
@@ -459,7 +466,8 @@ def what_runs(args: argparse.Namespace, stored: Path | None) -> str:
     if args.instruction is not None or args.task is None:  # only a task given by name is compared
         config.pop("task", None)
     runs = {k: str(config.get(k, v)) for k, v in asked.items()}
-    differ = [f"--{k} {asked[k]}" for k in asked if runs[k] != str(asked[k])]
+    given = {*args.given, *(["task"] if args.task is not None else [])}
+    differ = [f"--{k} {asked[k]}" for k in asked if k in given and runs[k] != str(asked[k])]
     if differ:
         print(f"collie up: warning: resuming a {runs['env']} {runs['task']} {runs['method']} run; "
               f"{', '.join(differ)} ignored (another --out starts a new run)", file=sys.stderr)  # fmt: skip

@@ -178,15 +178,21 @@ def test_a_refusal_names_the_paths_it_has_and_no_none() -> None:
     assert refusal_line(PermissionError("not allowed")) == "not allowed"
 
 
-def test_flags_a_resumed_run_ignores_are_named_seed_included(
+def test_flags_a_resumed_run_ignores_are_named_seed_included_and_only_those_given(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    from collie.up import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
     stored = tmp_path / "config.json"
-    stored.write_text(json.dumps({"env": "point", "task": "north", "method": "collie", "preset": "cpu", "seed": 0}))
-    args = argparse.Namespace(env="point", task="north", method="collie", preset="cpu", seed=5, instruction=None)
-    assert what_runs(args, stored) == "point north collie (cpu)"
+    stored.write_text(json.dumps({"env": "point", "task": "north", "method": "collie", "preset": "smoke", "seed": 0}))
+    args = parser.parse_args(["--seed", "5", "--task", "north"])
+    assert what_runs(args, stored) == "point north collie (smoke)"
     said = capsys.readouterr().err
-    assert "resuming a point north collie run; --seed 5 ignored (another --out starts a new run)" in said
-    args.seed = 0
-    what_runs(args, stored)
-    assert capsys.readouterr().err == ""  # nothing differs: nothing said
+    # not "--preset cpu": that is the default, which nobody asked for (was named)
+    assert "resuming a point north collie run; --seed 5 ignored (another --out starts a new run)\n" in said
+    what_runs(parser.parse_args(["--seed", "0", "--env", "point"]), stored)
+    assert capsys.readouterr().err == ""  # nothing given differs: nothing said
+    what_runs(parser.parse_args(["--env", "ant", "--preset", "cpu"]), stored)
+    assert "run; --env ant, --preset cpu ignored" in capsys.readouterr().err

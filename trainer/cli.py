@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from collie import early_term
-from collie.argtypes import http_url, int_in, record_id, seed
+from collie.argtypes import Given, http_url, int_in, record_id, seed
 from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import default_task, task_names
@@ -38,26 +38,26 @@ DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -xâ€
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.set_defaults(given=frozenset())  # the run's flags given on this command line (_Given)
-    p.add_argument("--env", default="point", action=_Given, help="point, ant, half_cheetah, quadruped, humanoid or car")
+    p.set_defaults(given=frozenset())  # the run's flags given on this command line (Given)
+    p.add_argument("--env", default="point", action=Given, help="point, ant, half_cheetah, quadruped, humanoid or car")
     p.add_argument(
         "--task",
         default=None,
-        action=_Given,
+        action=Given,
         help=f"one of: {', '.join(task_names())} (default north; right on half_cheetah, hazard on car; docs/tasks.md)",
     )
     p.add_argument(
         "--task-file",
         default=None,
-        action=_Given,
+        action=Given,
         help="a task rule from a TOML/JSON spec or a Python file (docs/tasks.md)",
     )
     p.add_argument(
-        "--instruction", default=None, action=_Given, help="no rule: people label by this intent in words (needs --api)"
+        "--instruction", default=None, action=Given, help="no rule: people label by this intent in words (needs --api)"
     )
-    p.add_argument("--method", default="collie", action=_Given, help=f"one of: {', '.join(METHODS)}")
-    p.add_argument("--preset", default="cpu", action=_Given, help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--seed", type=seed, default=0, action=_Given)
+    p.add_argument("--method", default="collie", action=Given, help=f"one of: {', '.join(METHODS)}")
+    p.add_argument("--preset", default="cpu", action=Given, help=f"one of: {', '.join(PRESETS)}")
+    p.add_argument("--seed", type=seed, default=0, action=Given)
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -103,13 +103,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                 metavar="BOOL",
                 nargs="?",
                 const=True,
-                action=_Given,
+                action=Given,
                 help=note,
             )
         else:
             kinds: dict[str, Callable[[str], Any]] = {"int": int_type(f.name), "float": float}
             kind = kinds.get(str(f.type), str)
-            group.add_argument(option, dest=f.name, default=None, type=kind, action=_Given, help=note)
+            group.add_argument(option, dest=f.name, default=None, type=kind, action=Given, help=note)
 
 
 MAX_HIDDEN = 65_536  # units per layer: one layer this wide already holds 17 GB of weights (hiddenÂ² float32)
@@ -126,16 +126,6 @@ def int_type(name: str) -> Callable[[str], int]:
     if name == "epochs":
         return int_in(None, MAX_INT, "the most a run's epochs on the labeling service may be")
     return int_in(None, MAX_INT)
-
-
-class _Given(argparse.Action):
-    """`store` that also records the flag as given: a resumed run warns about those it ignores."""
-
-    def __call__(
-        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None
-    ) -> None:
-        setattr(namespace, self.dest, values)
-        namespace.given = frozenset({*namespace.given, self.dest})
 
 
 RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
