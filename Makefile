@@ -84,12 +84,13 @@ profile-update: $(STAMP)
 bench-contention: $(STAMP)
 	$(PY) benchmarks/bench_contention.py
 
-# The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
+# Seconds from `collie up` to the first labelable segment, split by part;
 # e.g. FIRST_SEGMENT_ARGS="--env ant --runs quiet" (issue 12's Ant stack), "--browser" (the segment on screen)
 FIRST_SEGMENT_ARGS ?=
 bench-first-segment: $(STAMP)
 	$(PY) benchmarks/bench_first_segment.py $(FIRST_SEGMENT_ARGS)
 
+# The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
 bench-gpu: $(STAMP)
 	$(PY) benchmarks/bench_gpu.py
 

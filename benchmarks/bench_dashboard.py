@@ -15,6 +15,7 @@ cold_load_median_ms, cold_load_max_ms, page_answer_ms, page_answer_bytes, full_a
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import statistics
@@ -190,6 +191,7 @@ def answer(api: str, path: str) -> tuple[float, int]:
 
 
 def main() -> int:
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from chromium import chromium
     from record import record

@@ -58,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     mark("python start")
     parser = argparse.ArgumentParser(prog="collie", description=__doc__)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    chosen = parser  # the command's own parser once known: its errors read "collie train: error: …"
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         # train: no abbreviated flags, so what `up --train-args` and `sweep -- …` may not set is matched exactly
         p = sub.add_parser(name, help=help_text, description=help_text, allow_abbrev=name != "train")
@@ -68,11 +69,12 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error(f"'{name}' is not available: {exc}")
             module.add_arguments(p)
             p.set_defaults(_module=module)
+            chosen = p
             argv = joined_values(argv, getattr(module, "DASHED_VALUE_OPTIONS", ()))
     args, unknown = parser.parse_known_args(argv)
     if unknown:  # as parse_args says it, with the command's hint where it has one (sweep: train flags after --)
         hint = getattr(getattr(args, "_module", None), "UNRECOGNIZED_HINT", "")  # none before the command's name
-        parser.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
+        chosen.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
     try:
         return int(args._module.run(args) or 0)
     except KeyboardInterrupt:  # Ctrl-C where the command keeps no handler of its own: a line, not a traceback

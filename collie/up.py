@@ -87,10 +87,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--info-json", type=Path, default=None, help="write URLs, run id and tokens here")
     p.add_argument("--exit-when-done", action="store_true", help="exit 0 when the run finishes")
     p.add_argument("--no-label-ui", action="store_true", help="do not start the labeling UI")
-    p.add_argument("--ui-port", type=port, default=8080, help="labeling UI port (0 = any free port; default 8080)")
+    p.add_argument("--ui-port", type=port, default=8090, help="labeling UI port (0 = any free port; default 8090)")
     p.add_argument("--train-args", default="", help='extra `collie train` flags, e.g. "--epochs 50"')
     p.add_argument(
-        "--max-restarts", type=int, default=5, help="restarts of a part that keeps dying before the stack gives up"
+        "--max-restarts",
+        type=int,
+        default=5,
+        help="restarts of a part that keeps dying before the stack gives up (default 5)",
     )
 
 

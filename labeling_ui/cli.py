@@ -28,7 +28,7 @@ MAX_FPS = 1000  # far above any screen's: more only skips frames
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, type=http_url, help="the labeling service, e.g. http://127.0.0.1:8000")
-    parser.add_argument("--port", type=port, default=8090, help="port to serve on (0: any free port)")
+    parser.add_argument("--port", type=port, default=8090, help="port to serve on (0: any free port; default 8090)")
     parser.add_argument("--host", type=ipv4_host, default="127.0.0.1", help="interface to bind (0.0.0.0 for every one)")
     parser.add_argument("--run", type=record_id, default=None, help="label only this run (default: newest with work)")
     parser.add_argument("--token", default=None, help="print a labeler URL that signs in with this token")
@@ -37,10 +37,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--lease-s",
         type=float_in(0, MAX_LEASE_S),  # the service refuses a longer (or no) claim: every claim would fail
         default=60.0,
-        help=f"claim length, renewed while a tab is open (at most {MAX_LEASE_S:g} s)",
+        help=f"claim length, renewed while a tab is open (default 60 s; at most {MAX_LEASE_S:g} s)",
     )
     parser.add_argument(
-        "--fps", type=float_in(0, MAX_FPS), default=20.0, help=f"segment frames per second at 1x (at most {MAX_FPS})"
+        "--fps",
+        type=float_in(0, MAX_FPS),
+        default=20.0,
+        help=f"segment frames per second at 1x (default 20; at most {MAX_FPS})",
     )
     parser.add_argument(
         "--warm",
