@@ -21,8 +21,11 @@ the pixels per side (viser's `?fixedDpr=0.5`). What each removal gains is what t
 a frame.
 
     python benchmarks/bench_browser_ceiling.py          # make bench-browser-ceiling
-Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case below, and `ant_as_seen_fps`,
+Writes runs/bench/browser_ceiling.json: `<case>_fps` for each case above — `empty_still_fps`,
+`empty_one_moved_fps`, `static<S>_still_fps`, `static<S>_one_moved_fps`, `static<S>_<M>_moved_fps`
+(S = --static, M = --moved; static30_20_moved_fps by default) — and `ant_as_seen_fps`,
 `ant_no_grid_fps`, `ant_no_grid_paths_fps`, `ant_no_robot_fps`, `ant_half_resolution_fps`.
+Settings: hz, static, moved, seconds, viewport, and the Chromium version.
 """
 
 from __future__ import annotations
@@ -144,8 +147,10 @@ def main() -> int:
         f"static{n}_one_moved": (n, 1),
         f"static{n}_{args.moved}_moved": (n, args.moved),
     }
-    figures: dict[str, float | int | str] = {"hz": args.hz, "static": args.static, "viewport": args.viewport}
+    figures: dict[str, float] = {}
+    settings = {"hz": args.hz, "static": args.static, "moved": args.moved, "seconds": args.seconds}
     with chromium() as browser:
+        settings |= {"viewport": args.viewport, "chromium": browser.version}
         print(f"bench-browser-ceiling · chromium {browser.version} · viewport {args.viewport} · {args.hz:g} Hz")
         for name, (n_static, n_moved) in cases.items():
             start = time.perf_counter()
@@ -157,7 +162,7 @@ def main() -> int:
         for name, fps in ant_parts(browser, args.seconds).items():
             figures[f"ant_{name}_fps"] = fps
             print(f"  ant {name:<20} {fps:6.1f} frames/s", flush=True)
-    record("browser_ceiling", figures)
+    record("browser_ceiling", figures, settings)
     return 0
 
 

@@ -12,7 +12,10 @@ run before the kills are done. Kills are spread by progress, not by time: kill i
 run's progress (the mean of its label and epoch fractions, the highest seen so far) passes
 0.8·(i+1)/(kills+1), and until the last part killed is back, so every kill lands on a live stack
 and the run always moves on between kills.
-Writes chaos.json beside OUT, the stack's folder (default OUT runs/bench/chaos: runs/bench/chaos.json)."""
+JSON (chaos.json beside OUT, the stack's folder; default OUT runs/bench/chaos: runs/bench/chaos.json):
+kills (part → kills), kills_total, labels_wanted, labels_stored, labels_applied, duplicates, lost,
+applied_not_stored, sessions, sessions_re_asked, queries_asked, finished, exit_code, wall_s.
+Settings: short, kills, seed, teacher_rate."""
 
 from __future__ import annotations
 
@@ -28,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from record import record
 
 from collie.client import CollieClient
 
@@ -169,10 +173,15 @@ def main(argv: list[str] | None = None) -> int:
             if up.poll() is None:
                 up.kill()
     result = tally(out, done, code, time.monotonic() - started)
-    (out.parent / "chaos.json").write_text(json.dumps(result, indent=1))
     for key, value in result.items():
         print(f"{key:>20}: {value}")
-    print(f"written to {out.parent / 'chaos.json'}")
+    settings = {
+        "short": args.short,
+        "kills": kills,
+        "seed": args.seed,
+        "teacher_rate": cmd[cmd.index("--teacher-rate") + 1],
+    }
+    record("chaos", result, settings, folder=out.parent)
     ok = result["finished"] and result["lost"] == 0 and result["duplicates"] == 0 and result["sessions_re_asked"] == 0
     return 0 if ok else 1
 

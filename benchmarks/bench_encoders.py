@@ -15,7 +15,8 @@
     python benchmarks/bench_encoders.py --steps 2000 --batch 256     # a GPU
 
 JSON (runs/bench/encoders.json): per kind (separate, shared) steps_per_s, train_s, final_losses,
-probe_r2_untrained, probe_r2_policy, probe_r2_qf; and shared_over_separate_speed.
+probe_r2_untrained, probe_r2_policy, probe_r2_qf; and shared_over_separate_speed. Settings:
+steps, batch, episodes, hidden, threads, device (the CPU and GPU commands above differ in them).
 """
 
 from __future__ import annotations
@@ -165,7 +166,9 @@ def main() -> None:
         )
     print(f"shared / separate speed: {sh['steps_per_s'] / sep['steps_per_s']:.2f}×")
     print(json.dumps(report))
-    record("encoders", {**report, "shared_over_separate_speed": sh["steps_per_s"] / sep["steps_per_s"]})
+    settings = {"steps": a.steps, "batch": a.batch, "episodes": a.episodes, "hidden": a.hidden}
+    settings |= {"threads": torch.get_num_threads(), "device": str(dev)}  # the figures depend on every one
+    record("encoders", {**report, "shared_over_separate_speed": sh["steps_per_s"] / sep["steps_per_s"]}, settings)
 
 
 if __name__ == "__main__":

@@ -17,12 +17,15 @@ segment until the bench sees it pending. `--browser` also opens the labeler's li
 Chromium (tests/chromium.py) as the stack comes up, as a person would, and times the segment on
 screen: the UI's claim and first frame (the browser is then the busy process: no busy loop).
 
-JSON (runs/bench/first_segment.json, or first_segment_ENV.json for another env): first_segment_s
-(busy), first_segment_quiet_s, and per measured run (`busy`, `quiet`) its `parts` (part → what →
-wall s) and `parts_cpu` (the same in CPU s), `trainer` and `trainer_cpu` (its epochs summed by
-kind), `first_feedback_epoch`, `last_epoch`, `trainer_spawn_s`, `posted_s` (the trainer's post, since start),
-`pending_s`, and with --browser `tab_open_s` (the page loaded), `claimed_s` (the tab's claim, seen
-on the service) and `on_screen_s` (its id on the page, sent with the first frame).
+JSON (runs/bench/first_segment.json; first_segment_ENV.json for another env, and a suffix for
+another preset, --browser and a single run: first_segment_ant-quiet.json for `--env ant --runs
+quiet`): first_segment_s (the busy run: beside a busy process, or with --browser beside the
+browser tab), first_segment_quiet_s, and per measured run (`busy`, `quiet`) its `parts` (part →
+what → wall s) and `parts_cpu` (the same in CPU s), `trainer` and `trainer_cpu` (its epochs summed
+by kind), `first_feedback_epoch`, `last_epoch`, `trainer_spawn_s`, `posted_s` (the trainer's post,
+since start), `pending_s`, and with --browser, in the busy run only, `tab_open_s` (the page
+loaded), `claimed_s` (the tab's claim, seen on the service) and `on_screen_s` (its id on the page,
+sent with the first frame). Settings: env, preset, browser, runs.
 """
 
 from __future__ import annotations
@@ -225,7 +228,7 @@ def main() -> None:
     ap.add_argument("--runs", choices=("both", "quiet", "busy"), default="both", help="which of the two to measure")
     ap.add_argument("--browser", action="store_true", help="open the labeler tab in Chromium, no busy loop")
     args = ap.parse_args()
-    figures: dict = {"env": args.env, "preset": args.preset, "browser": args.browser}
+    figures: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         if args.runs in ("both", "quiet"):
             quiet = measured("quiet machine", Path(tmp) / "quiet", args.env, False, args.preset, args.timeout_s)
@@ -249,7 +252,17 @@ def main() -> None:
     if "first_segment_s" in figures:
         target = "target ≤ 45 s" if args.env == "point" else "target ≤ 600 s"
         print(f"first segment to label, beside it: {figures['first_segment_s']:.1f} s ({target})")
-    record("first_segment" if args.env == "point" else f"first_segment_{args.env}", figures)
+    settings = {"env": args.env, "preset": args.preset, "browser": args.browser, "runs": args.runs}
+    record(record_name(args), figures, settings)
+
+
+def record_name(args: argparse.Namespace) -> str:
+    """first_segment[_ENV][-PRESET][-browser][-quiet|-busy]: a partial or browser run never
+    overwrites the whole default one's figures."""
+    name = "first_segment" if args.env == "point" else f"first_segment_{args.env}"
+    name += "" if args.preset == "cpu" else f"-{args.preset}"
+    name += "-browser" if args.browser else ""
+    return name + ("" if args.runs == "both" else f"-{args.runs}")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,9 @@ before the first session. `--method metra` times METRA's update instead. Without
 `no CUDA device` and exits 0 (`--device cpu --preset smoke` runs the same code on the CPU, as the
 test suite does).
 JSON (runs/bench/gpu.json): per env updates_per_s, env_steps_per_s, eval_s, peak_gpu_mb,
-epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device and method.
+epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device, preset and
+method (also the file's settings, with the timed epochs). Without CUDA it writes nothing: a
+machine without a GPU must not overwrite a GPU's figures.
 """
 
 from __future__ import annotations
@@ -113,7 +115,7 @@ def main() -> int:
             f"eval {r['eval_s']:6.1f} s  peak {r['peak_gpu_mb']:8.0f} MB  → a full run of {r['epochs_full']} "
             f"epochs ≈ {r['projected_hours']:.1f} h"
         )
-    record("gpu", figures)
+    record("gpu", figures, {"device": name, "preset": a.preset, "method": a.method, "epochs": a.epochs})
     return 0
 
 

@@ -7,7 +7,9 @@ wall time per run, and writes the same table as markdown next to the runs.
 Expected (issue 2): on North, COLLIE's safe ratio ≥ 0.90 while METRA's stays ≤ 0.5; COLLIE's safe
 coverage above METRA's on every task; each run ≤ 10 minutes.
 JSON (runs/bench/guidance.json): `<task>/<method>` → {<metric>_mean, <metric>_std, seeds} for the
-metrics safe_coverage, safe_ratio, composite_coverage, weighted_composite_coverage, wall_s.
+metrics safe_coverage, safe_ratio, composite_coverage, weighted_composite_coverage, wall_s; its
+settings: env, preset, tasks, methods, seeds, out and the extra train_flags (`make bench-guidance`
+passes the first version's, FIRST_VERSION_FLAGS), so runs with other flags read apart.
 """
 
 from __future__ import annotations
@@ -90,7 +92,8 @@ def main() -> None:
             values = [float(r[m]) for r in runs if m in r]
             cell[f"{m}_mean"], cell[f"{m}_std"] = float(np.mean(values)), float(np.std(values))
         figures[f"{task}/{method}"] = cell
-    record("guidance", figures)
+    settings = {"env": a.env, "preset": "cpu", "tasks": tasks, "methods": methods, "seeds": a.seeds, "out": a.out}
+    record("guidance", figures, settings | {"train_flags": a.extra})  # what tells one table's runs from another's
 
 
 if __name__ == "__main__":

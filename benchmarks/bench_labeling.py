@@ -22,7 +22,9 @@ JSON (runs/bench/labeling.json): one key per printed row, its name in snake case
 (e.g. `in_page_median_ms`, `three_labelers_in_page_median_ms`, `ant_scene_build_ms`,
 `server_1x_fps`, `browser_ant_paused_fps`); `--only-crowd` writes only the
 three-labeler rows, to runs/bench/labeling_crowd.json. The `three_labelers_segments_still_*`
-rows are a diagnostic: the same crowd with each segment held on its first frame.
+rows are a diagnostic: the same crowd with each segment held on its first frame. Settings: the
+redundancy the crowd rows used (1 where the service has none), labels, think_s, viewport, and the
+Chromium version.
 """
 
 from __future__ import annotations
@@ -244,7 +246,8 @@ def main() -> int:
         wait_ms = 1000 * wait_s
         row("wait per label (median key → next segment)", wait_ms, "ms", f"small vs {HUMAN_S} s", wait_s / HUMAN_S)
         row("own time per label that still makes 1000 / h", HUMAN_S - wait_s, "s", "(info)")
-    record("labeling" if everything else "labeling_crowd", FIGURES)
+    settings = {"redundancy": redundancy, "labels": args.labels, "think_s": args.think_s, "viewport": args.viewport}
+    record("labeling" if everything else "labeling_crowd", FIGURES, settings | {"chromium": renderer})
     return 0
 
 

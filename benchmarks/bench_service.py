@@ -23,7 +23,8 @@ JSON (runs/bench/service.json): one object per configuration, under its name, wi
 baseline_p50_ms, baseline_p99_ms, label_rps, label_p50_ms, label_p99_ms, claim_p99_ms,
 stream_p50_ms, stream_p99_ms, post_1000_s, stream_missing, baseline_cpu_ms, label_cpu_ms,
 big_body_mib, big_body_rss_growth_ratio, big_body_health_p99_ms, idle_streams,
-idle_streams_core_share.
+idle_streams_core_share; and startup_s, the service start. Settings: rate, seconds, big_mib,
+streams.
 """
 
 from __future__ import annotations
@@ -366,8 +367,11 @@ def main() -> int:
             results[name] = with_service(args, tmp / name.split(",")[0], {**env, **extra}, base_port, baseline.pid)
             print_figures(name, results[name], args)
         compare(results)
-        record("service", {name: figures_of(f) for name, f in results.items()})
-        print(f"service start (import + migrations, fresh interpreter): {startup_seconds(tmp / 'start.db'):.2f} s")
+        start_s = startup_seconds(tmp / "start.db")
+        print(f"service start (import + migrations, fresh interpreter): {start_s:.2f} s")
+        settings = {"rate": args.rate, "seconds": args.seconds, "big_mib": args.big_mib, "streams": args.streams}
+        figures = {name: figures_of(f) for name, f in results.items()} | {"startup_s": start_s}
+        record("service", figures, settings)  # label_rps follows the offered rate
         return 0
     finally:
         baseline.terminate()

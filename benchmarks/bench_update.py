@@ -1,5 +1,8 @@
 """make bench-update: the trainer's inner costs as ratios measured in one run (machines are noisy;
-absolute numbers are printed for context only). JSON: runs/bench/update.json.
+absolute numbers are printed for context only). Every part below runs by default, the two
+training-run parts (7, 8) included. JSON: runs/bench/update.json; with `--only` the parts asked
+for, in PARTS order, name the file instead (`--only flops --only update`: update-update-flops.json),
+so a partial run never overwrites the whole one. Settings: env, threads, device.
 
 1. Update cost: gradient steps/s of the full paper-size update (φ + λ + SAC + w with 800
    labelled states, 2×1024 MLPs, batch 256) beside a plain SAC update of the same networks and
@@ -31,7 +34,8 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    rollouts). Where the default rollout's time goes, each part timed alone over one episode, µs
    per step of all 8 envs: `rollout_step_us_<env>` (the whole rollout), `policy_us_<env>` (the
    `actor` path acting for the 8 rows), `physics_us_<env>` (`VectorEnv.step`), `raw_us_<env>` (the
-   raw loop's time for 8 env steps). `--only rollout` runs just this part.
+   raw loop's time for 8 env steps); `physics_threads_<env>` and `batch_threads_<env>`: the
+   default rollout's groups and MuJoCo threads. `--only rollout` runs just this part.
 4. Device data path: 32 batches gathered, normalised and made tensors by the device path
    (trainer/device_replay.py) ÷ the host path it replaced (numpy gather, normalise, as_tensor).
    Key `device_sampling_ratio` (≤ 1: costs nothing on the CPU).
@@ -43,13 +47,13 @@ absolute numbers are printed for context only). JSON: runs/bench/update.json.
    `one_output_speedup_<h>` (the twin Q's one-output layer by bmm ÷ by multiply-sum), with the
    times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`).
 7. A trained agent's update (`--flush-denormal`, trainer/denormals.py): a point `cpu` COLLIE run
-   trained `--aged-epochs` epochs without flushing, resumed twice, each copy's epoch of updates
+   trained `--aged-epochs` epochs (key `aged_epochs`) without flushing, resumed twice, each copy's epoch of updates
    timed alternately with and without flushing denormals. Keys `aged_denormals` (values of the
    agent's state below float32's smallest normal, mostly Adam's moments of dead units),
    `aged_update_s_kept` / `aged_update_s_flushed` (median s per epoch), `flush_denormal_speedup`
    (kept ÷ flushed), `aged_denormals_after` (left in the flushing copy after its epochs).
-8. A whole run (`--only whole`): a point `cpu` COLLIE run of `--whole-epochs` epochs (the
-   preset's 400) without and then with flushing denormals. Keys `whole_run_s_kept`,
+8. A whole run (`--only whole` alone): a point `cpu` COLLIE run of `--whole-epochs` epochs (key
+   `whole_run_epochs`; the preset's 400) without and then with flushing denormals. Keys `whole_run_s_kept`,
    `whole_run_s_flushed` (wall s, rollouts and evaluations included), `whole_run_speedup`.
 """
 
@@ -523,10 +527,10 @@ def main() -> None:
     p.add_argument("--whole-epochs", type=int, default=400, help="epochs of each whole run of part 8 (whole)")
     p.add_argument("--no-compile", action="store_true", help="skip the compiled update (compilation takes minutes)")
     p.add_argument(
-        "--only", choices=PARTS, action="append", help="run only these parts (repeatable; JSON: update-<part>.json)"
+        "--only", choices=PARTS, action="append", help="run only these parts (repeatable; JSON: update-<parts>.json)"
     )
     a = p.parse_args()
-    parts = a.only or list(PARTS)
+    parts = [part for part in PARTS if part in (a.only or PARTS)]  # PARTS order: one file name per set
     torch.set_num_threads(resolve_threads(a.threads, 1024))
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}")
@@ -614,7 +618,7 @@ def main() -> None:
             f"{w['whole_run_s_flushed']:.1f} s flushing denormals ({w['whole_run_speedup']:.2f}×)"
         )
     name = "update" if a.only is None else "-".join(["update", *parts])  # a partial run keeps the full file
-    record(name, {"env": a.env, "threads": torch.get_num_threads(), "device": dev, **figures})
+    record(name, figures, {"env": a.env, "threads": torch.get_num_threads(), "device": str(dev)})
 
 
 if __name__ == "__main__":

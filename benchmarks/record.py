@@ -1,15 +1,19 @@
 """Every benchmark's final figures as JSON, so runs can be compared: runs/bench/<name>.json.
 
-The file holds the figures a benchmark's docstring names, plus where and when they were measured
-(commit, the host's CPU model and core count, load average, torch version and the CPU kernels it
-chose when loaded). Each run overwrites it. The CPU matters: the same 2-core machine has been lent
-on hosts whose one-thread matmul rate differed by 2×, and torch's AVX-512 kernels (tanh, bmm) rank
-differently against `--fast-ops` than its AVX2 ones (docs/results.md).
+The file holds the figures a benchmark's docstring names (`figures`), the settings it ran with
+where they change the figures (`settings`: flags, counts, sizes), and where and when they were
+measured (`meta`: commit, the host's CPU model and core count, load average, torch version and the
+CPU kernels it chose when loaded). Each run overwrites it. Strict JSON: a figure that is not finite
+(a break-even never reached, a percentile of nothing) is written as null. The CPU matters: the
+same 2-core machine has been lent on hosts whose one-thread matmul rate differed by 2×, and
+torch's AVX-512 kernels (tanh, bmm) rank differently against `--fast-ops` than its AVX2 ones
+(docs/results.md).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import subprocess
@@ -37,8 +41,22 @@ def _cpu_model() -> str | None:
     return next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")), None)
 
 
-def record(name: str, figures: dict[str, Any]) -> Path:
-    """Write `figures` (JSON-serialisable) to runs/bench/<name>.json and say where."""
+def _strict(value: Any) -> Any:
+    """`value` with every non-finite float as None (JSON has no Infinity or NaN; jq refuses them)."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict(v) for v in value]
+    if isinstance(value, int | float | str | bool) or value is None:
+        return None if isinstance(value, float) and not math.isfinite(value) else value
+    return _strict(float(value))  # numpy scalars and the like
+
+
+def record(
+    name: str, figures: dict[str, Any], settings: dict[str, Any] | None = None, folder: Path | None = None
+) -> Path:
+    """Write `figures` (JSON-serialisable) and the `settings` they were measured with to
+    runs/bench/<name>.json (or `folder`/<name>.json), and say where."""
     torch = sys.modules.get("torch")
     meta = {
         "bench": name,
@@ -51,8 +69,10 @@ def record(name: str, figures: dict[str, Any]) -> Path:
         "torch": getattr(torch, "__version__", None),
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability() if torch is not None else None,
     }
-    BENCH_DIR.mkdir(parents=True, exist_ok=True)
-    path = BENCH_DIR / f"{name}.json"
-    path.write_text(json.dumps({"meta": meta, "figures": figures}, indent=2, default=float))
+    folder = folder or BENCH_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.json"
+    whole = {"meta": meta, "settings": settings or {}, "figures": figures}
+    path.write_text(json.dumps(_strict(whole), indent=2, allow_nan=False))
     print(f"figures written to {path}")
     return path

@@ -21,7 +21,7 @@ def test_short_chaos_run_loses_nothing_and_finishes(tmp_path):
         text=True,
         timeout=900,
     )
-    result = json.loads((tmp_path / "chaos.json").read_text())
+    result = json.loads((tmp_path / "chaos.json").read_text())["figures"]
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert result["kills_total"] >= 10 and all(n >= 2 for n in result["kills"].values()), result["kills"]
     assert result["finished"]

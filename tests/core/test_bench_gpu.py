@@ -39,3 +39,18 @@ def test_its_code_path_runs_on_the_cpu(tmp_path):
         written["figures"]["method"] == "collie"
         and figures["labelled_states"] == cfg.total_queries * cfg.segment_length
     )
+    assert written["settings"] == {"device": "cpu", "preset": "smoke", "method": "collie", "epochs": 1}
+
+
+def test_a_figure_that_is_not_finite_is_written_as_strict_json_null(tmp_path, monkeypatch):
+    """`compile_break_even_steps_<h>` is inf when compiling never pays: JSON has no Infinity."""
+    monkeypatch.syspath_prepend(str(BENCH.parent))
+    monkeypatch.setenv("COLLIE_BENCH_DIR", str(tmp_path))
+    import numpy as np
+    from record import record
+
+    path = record("t", {"never": float("inf"), "nothing": [float("nan"), np.float32(0.5)]}, {"steps": 3}, tmp_path)
+    text = path.read_text()
+    assert "Infinity" not in text and "NaN" not in text
+    written = json.loads(text)
+    assert written["figures"] == {"never": None, "nothing": [None, 0.5]} and written["settings"] == {"steps": 3}
