@@ -176,6 +176,11 @@ class RunCreate(Wire):
     def _rule_or_instruction(self) -> RunCreate:
         if self.task_definition is not None and self.instruction is not None:
             raise ValueError("a run has a task_definition (a rule) or an instruction (no rule), not both")
+        if self.task_definition is not None and self.task_definition.name != self.task:
+            # the run would read as one task and be judged by another's rule
+            raise ValueError(
+                f"task {self.task!r} and its task_definition (named {self.task_definition.name!r}) must name one task"
+            )
         return self
 
     @field_validator("config")

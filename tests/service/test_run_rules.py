@@ -76,6 +76,16 @@ def test_a_malformed_definition_is_refused(live: BackgroundServer) -> None:
     assert httpx.post(f"{live.url}/api/runs", json=both, headers=headers).status_code == 422
 
 
+def test_a_definition_of_another_name_than_the_task_is_refused(live: BackgroundServer) -> None:
+    """Was 201: the run read as task north but was judged by the rule named pit."""
+    headers = {"Authorization": f"Bearer {TOKENS['trainer']}"}
+    before = httpx.get(f"{live.url}/api/runs", headers=headers).json()
+    body = {**make_run_spec(task="north").model_dump(mode="json"), "task_definition": POLYGON}
+    answer = httpx.post(f"{live.url}/api/runs", json=body, headers=headers)
+    assert answer.status_code == 422 and "task 'north' and its task_definition (named 'pit')" in answer.text
+    assert httpx.get(f"{live.url}/api/runs", headers=headers).json() == before
+
+
 def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path: Path) -> None:
     path = tmp_path / "old.db"
     db = Database(f"sqlite:///{path}")
