@@ -31,7 +31,7 @@ from pydantic import (
 
 from collie.env_names import EnvName
 from collie.labels import Label
-from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
+from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition, Text
 
 _LABELS: dict[int, Label] = {int(v): v for v in Label}  # built once: every label crosses this check
 
@@ -67,13 +67,6 @@ NotHeldReason = Literal["other_tab", "other_labeler", "labelled_by_you", "labell
 OutOfScopeReason = Literal["other_runs", "other_trainer"]  # a token limited to other runs; another trainer's run
 
 
-def _no_nul(text: str) -> str:
-    if "\x00" in text:  # PostgreSQL text cannot hold it, and no person means it
-        raise ValueError("text must not contain the NUL character (\\u0000)")
-    return text
-
-
-Text = Annotated[str, AfterValidator(_no_nul)]  # free text stored as text: no NUL
 MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
@@ -253,7 +246,7 @@ class FeedbackPolicy(Wire):
 class StatusUpdate(Wire):
     status: RunStatus
     epoch: int | None = Field(default=None, ge=0, le=MAX_INT)
-    message: str | None = Field(default=None, max_length=1000)
+    message: Text | None = Field(default=None, max_length=1000)
 
 
 class RunExtend(Wire):

@@ -229,6 +229,43 @@ def test_run_spec_is_validated(live: BackgroundServer) -> None:
         assert post(live.url, "trainer", "/api/runs", json=bad).status_code == 422
 
 
+RULE = {
+    "name": "pit",
+    "description": "Keep out of the pit.",
+    "meaning": {"bad": "in the pit"},
+    "regions": [{"kind": "disc", "desirability": 0, "centre": [0, 0], "radius": 1, "name": "pit"}],
+    "source": "pit.toml",
+}
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda d: d.update(description="Keep out\x00"),
+        lambda d: d["meaning"].update(bad="in\x00the pit"),
+        lambda d: d["regions"][0].update(name="p\x00t"),
+        lambda d: d.update(source="pit\x00.toml"),
+    ],
+)
+def test_a_nul_in_a_rules_text_is_refused_as_in_other_free_text(live: BackgroundServer, change: Callable) -> None:
+    """Was 201 (free text elsewhere, an instruction for one, refuses it: PostgreSQL text cannot hold it)."""
+    rule = json.loads(json.dumps(RULE))
+    change(rule)
+    body = {**make_run_spec(task="pit").model_dump(mode="json"), "task_definition": rule}
+    response = post(live.url, "trainer", "/api/runs", json=body)
+    assert response.status_code == 422 and "NUL character" in response.text, response.text
+
+
+def test_a_nul_in_a_status_message_is_refused(live: BackgroundServer, trainer: CollieClient) -> None:
+    created = trainer.create_run(make_run_spec())
+    body = {"status": "failed", "epoch": 1, "message": "diverged\x00"}
+    response = httpx.put(
+        f"{live.url}/api/runs/{created.id}/status", json=body, headers={"Authorization": f"Bearer {TOKENS['trainer']}"}
+    )
+    assert response.status_code == 422 and "NUL character" in response.text, response.text
+    assert trainer.run(created.id).status == "training"
+
+
 def test_database_stays_consistent(tmp_path: Path) -> None:
     """After a burst of refused requests the effective labels recomputed from the event log equal
     the cached ones."""
