@@ -284,6 +284,8 @@ def test_a_python_task_file_that_fails_names_the_file_and_line(tmp_path: Path, m
 def test_a_directory_or_non_utf8_spec_is_named(tmp_path: Path) -> None:
     with pytest.raises(TaskFileError, match="is a directory"):
         load_task_file(tmp_path)
+    with pytest.raises(TaskFileError, match="/dev/null: is not a regular file"):  # was: "no such file"
+        load_task_file("/dev/null")
     latin = tmp_path / "latin.toml"
     latin.write_bytes('# a comment\nname = "caf\xe9"\n'.encode("latin-1"))
     with pytest.raises(TaskFileError, match=r"latin.toml: line 2: not UTF-8 text"):
