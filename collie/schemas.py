@@ -29,7 +29,7 @@ from pydantic import (
     model_validator,
 )
 
-from collie.env_names import EnvName
+from collie.env_names import ENV_JOINTS, EnvName
 from collie.labels import Label
 from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition, Text
 
@@ -169,6 +169,11 @@ class RunCreate(Wire):
     def _rule_or_instruction(self) -> RunCreate:
         if self.task_definition is not None and self.instruction is not None:
             raise ValueError("a run has a task_definition (a rule) or an instruction (no rule), not both")
+        joints = ENV_JOINTS[self.env]
+        if (self.dims.nq, self.dims.nv) != joints:  # the labeling UI could replay none of its segments
+            raise ValueError(
+                f"dims nq {self.dims.nq}, nv {self.dims.nv} are not {self.env}'s (nq {joints[0]}, nv {joints[1]})"
+            )
         if self.task_definition is not None and self.task_definition.name != self.task:
             # the run would read as one task and be judged by another's rule
             raise ValueError(

@@ -247,7 +247,7 @@ def test_bad_python_task_files_are_refused_clearly(tmp_path: Path) -> None:
 
 
 def test_a_run_has_a_rule_or_an_instruction_not_both() -> None:
-    dims = EnvDims(obs_dim=4, nq=3, nv=2, horizon=5, skill_dim=2)
+    dims = EnvDims(obs_dim=4, nq=2, nv=2, horizon=5, skill_dim=2)
     definition = to_definition(get_task("north"))
     with pytest.raises(ValidationError, match="not both"):
         RunCreate(env="point", task="x", method="collie", dims=dims, task_definition=definition, instruction="be nice")

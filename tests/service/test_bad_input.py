@@ -162,7 +162,7 @@ def test_session_limits(tight: BackgroundServer) -> None:
         with pytest.raises(ApiError) as err:
             trainer.post_session(created.id, make_session(0, 6))
         assert err.value.status == 422 and "at most 5" in err.value.detail
-        big = make_session(0, 1, EnvDims(obs_dim=4000, nq=3, nv=2, horizon=5, skill_dim=2))
+        big = make_session(0, 1, EnvDims(obs_dim=4000, nq=2, nv=2, horizon=5, skill_dim=2))
         with pytest.raises(ApiError) as err:
             trainer.post_session(created.id, big)
         assert err.value.status == 413
@@ -227,6 +227,18 @@ def test_run_spec_is_validated(live: BackgroundServer) -> None:
         bad = json.loads(json.dumps(spec))
         change(bad)
         assert post(live.url, "trainer", "/api/runs", json=bad).status_code == 422
+
+
+def test_a_run_whose_dims_are_not_its_envs_is_refused(live: BackgroundServer) -> None:
+    """Was 201: the labeling UI, which replays the env's model, then failed every segment."""
+    spec = make_run_spec().model_dump(mode="json")
+    for env, dims, said in (
+        ("humanoid", {"nq": 2}, "dims nq 2, nv 2 are not humanoid's (nq 28, nv 27)"),
+        ("point", {"nv": 3}, "dims nq 2, nv 3 are not point's (nq 2, nv 2)"),
+    ):
+        body = {**spec, "env": env, "task": "north", "dims": {**spec["dims"], **dims}}
+        response = post(live.url, "trainer", "/api/runs", json=body)
+        assert response.status_code == 422 and said in response.text, response.text
 
 
 RULE = {

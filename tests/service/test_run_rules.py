@@ -45,7 +45,10 @@ def test_a_run_of_no_known_env_or_task_is_refused(live: BackgroundServer) -> Non
         ({"env": "moon"}, "Input should be 'point', 'ant', 'half_cheetah', 'quadruped', 'humanoid' or 'car'"),
         ({"task": "no_such_task"}, "unknown task 'no_such_task'; valid tasks: north,"),
         ({"task": "not_flip"}, "task 'not_flip' is not defined for env 'point'"),
-        ({"env": "half_cheetah"}, "task 'range_north' is not defined for env 'half_cheetah'"),  # it runs on a line
+        (  # it runs on a line
+            {"env": "half_cheetah", "dims": {**body["dims"], "nq": 9, "nv": 9}},
+            "task 'range_north' is not defined for env 'half_cheetah'",
+        ),
     ):
         answer = httpx.post(f"{live.url}/api/runs", json={**body, **change}, headers=headers)
         assert answer.status_code == 422 and said in answer.text, answer.text
