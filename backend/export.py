@@ -4,7 +4,9 @@ from the database file (the service may be running: SQLite in WAL mode lets read
 from __future__ import annotations
 
 import argparse
+import sqlite3
 import sys
+from contextlib import closing
 from pathlib import Path
 
 from sqlalchemy.engine import make_url
@@ -27,6 +29,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effective", action="store_true", help="one effective label per query, not every event")
 
 
+def unversioned(path: Path) -> str | None:
+    """Why the SQLite file at `path` is no collie database, if it is not, found read-only: the
+    service's connection sets WAL mode, which writes into the file (4 KB into an empty one) before
+    the file could be refused."""
+    try:
+        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as conn:
+            tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            versioned = "alembic_version" in tables and conn.execute("SELECT 1 FROM alembic_version").fetchone()
+    except sqlite3.Error as exc:
+        return f"is not a collie database ({exc})"
+    return None if versioned else "is not a collie database (no schema version)"
+
+
 def run(args: argparse.Namespace) -> int:
     url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
     try:
@@ -37,6 +52,10 @@ def run(args: argparse.Namespace) -> int:
     where = describe(url) if args.db is None else str(args.db)
     if is_sqlite(url) and not Path(make_url(url).database or "").is_file():  # never create an empty one by mistake
         print(f"collie export: error: no database at {where}", file=sys.stderr)
+        return 2
+    refused = unversioned(Path(make_url(url).database or "")) if is_sqlite(url) else None
+    if refused is not None:  # left as it was
+        print(f"collie export: error: {where} {refused}", file=sys.stderr)
         return 2
     db = Database(url)
     try:

@@ -29,9 +29,9 @@ from pydantic import (
     model_validator,
 )
 
-from collie.env_names import EnvName
+from collie.env_names import ENV_JOINTS, EnvName
 from collie.labels import Label
-from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition
+from collie.task_schemas import MAX_INSTRUCTION, TaskDefinition, Text
 
 _LABELS: dict[int, Label] = {int(v): v for v in Label}  # built once: every label crosses this check
 
@@ -67,13 +67,6 @@ NotHeldReason = Literal["other_tab", "other_labeler", "labelled_by_you", "labell
 OutOfScopeReason = Literal["other_runs", "other_trainer"]  # a token limited to other runs; another trainer's run
 
 
-def _no_nul(text: str) -> str:
-    if "\x00" in text:  # PostgreSQL text cannot hold it, and no person means it
-        raise ValueError("text must not contain the NUL character (\\u0000)")
-    return text
-
-
-Text = Annotated[str, AfterValidator(_no_nul)]  # free text stored as text: no NUL
 MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]
@@ -176,6 +169,16 @@ class RunCreate(Wire):
     def _rule_or_instruction(self) -> RunCreate:
         if self.task_definition is not None and self.instruction is not None:
             raise ValueError("a run has a task_definition (a rule) or an instruction (no rule), not both")
+        joints = ENV_JOINTS[self.env]
+        if (self.dims.nq, self.dims.nv) != joints:  # the labeling UI could replay none of its segments
+            raise ValueError(
+                f"dims nq {self.dims.nq}, nv {self.dims.nv} are not {self.env}'s (nq {joints[0]}, nv {joints[1]})"
+            )
+        if self.task_definition is not None and self.task_definition.name != self.task:
+            # the run would read as one task and be judged by another's rule
+            raise ValueError(
+                f"task {self.task!r} and its task_definition (named {self.task_definition.name!r}) must name one task"
+            )
         return self
 
     @field_validator("config")
@@ -248,7 +251,7 @@ class FeedbackPolicy(Wire):
 class StatusUpdate(Wire):
     status: RunStatus
     epoch: int | None = Field(default=None, ge=0, le=MAX_INT)
-    message: str | None = Field(default=None, max_length=1000)
+    message: Text | None = Field(default=None, max_length=1000)
 
 
 class RunExtend(Wire):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
 CLASS_OF_NAME = {"bad": 0, "neutral": 1, "good": 2}
 MAX_REGIONS = 64
@@ -22,6 +22,14 @@ MAX_TOTAL_VERTICES = 1024  # a run's definition travels in every RunRead: keep i
 MAX_TEXT = 2000
 MAX_INSTRUCTION = 2000
 
+
+def _no_nul(text: str) -> str:
+    if "\x00" in text:  # PostgreSQL text cannot hold it, and no person means it
+        raise ValueError("text must not contain the NUL character (\\u0000)")
+    return text
+
+
+Text = Annotated[str, AfterValidator(_no_nul)]  # free text stored as text: no NUL (collie.schemas uses it too)
 TaskName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
 Point = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2, description="[x, y]")]
 
@@ -43,7 +51,7 @@ class Spec(BaseModel):
 
 class RegionBase(Spec):
     desirability: Literal[0, 1, 2] = Field(description="class inside the region: 0 bad, 1 neutral, 2 good")
-    name: str | None = Field(default=None, min_length=1, max_length=64, description="optional, unique in the task")
+    name: Text | None = Field(default=None, min_length=1, max_length=64, description="optional, unique in the task")
 
     @field_validator("desirability", mode="before")
     @classmethod
@@ -101,9 +109,9 @@ REGION_KINDS = ("disc", "outside_disc", "wedge_north", "halfplane_left", "halfpl
 class TaskMeaning(Spec):
     """One line per class, for a labeler: what a bad / neutral / good state is in this task."""
 
-    bad: str | None = Field(default=None, max_length=MAX_TEXT)
-    neutral: str | None = Field(default=None, max_length=MAX_TEXT)
-    good: str | None = Field(default=None, max_length=MAX_TEXT)
+    bad: Text | None = Field(default=None, max_length=MAX_TEXT)
+    neutral: Text | None = Field(default=None, max_length=MAX_TEXT)
+    good: Text | None = Field(default=None, max_length=MAX_TEXT)
 
     def by_class(self) -> dict[int, str]:
         return {CLASS_OF_NAME[k]: v for k, v in self.model_dump().items() if v is not None}
@@ -113,11 +121,11 @@ class TaskDefinition(Spec):
     """A task rule as data: `background` everywhere, then each region painted over it in order."""
 
     name: TaskName
-    description: str = Field(min_length=1, max_length=MAX_TEXT, description="plain language for a labeler")
+    description: Text = Field(min_length=1, max_length=MAX_TEXT, description="plain language for a labeler")
     meaning: TaskMeaning = Field(default_factory=TaskMeaning)
     background: Literal[0, 1, 2] = 1
     regions: list[RegionSpec] = Field(max_length=MAX_REGIONS)
-    source: str = Field(default="", max_length=256, description="where it came from: builtin, or a file's name")
+    source: Text = Field(default="", max_length=256, description="where it came from: builtin, or a file's name")
 
     @field_validator("background", mode="before")
     @classmethod

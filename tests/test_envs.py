@@ -24,6 +24,11 @@ def test_env_names() -> None:
     assert ENV_NAMES == collie.env_names.ENV_NAMES  # the names the service takes runs of, and the UI replays
 
 
+def test_the_services_joint_table_is_the_models() -> None:
+    """The service refuses a run whose dims are not its env's by this table (it imports no MuJoCo)."""
+    assert {name: (load_model(name).nq, load_model(name).nv) for name in ENV_NAMES} == collie.env_names.ENV_JOINTS
+
+
 @pytest.mark.parametrize("name", DIMS)
 def test_reset_and_step_shapes(name: str) -> None:
     obs_dim, action_dim, nq = DIMS[name]

@@ -247,7 +247,7 @@ def test_bad_python_task_files_are_refused_clearly(tmp_path: Path) -> None:
 
 
 def test_a_run_has_a_rule_or_an_instruction_not_both() -> None:
-    dims = EnvDims(obs_dim=4, nq=3, nv=2, horizon=5, skill_dim=2)
+    dims = EnvDims(obs_dim=4, nq=2, nv=2, horizon=5, skill_dim=2)
     definition = to_definition(get_task("north"))
     with pytest.raises(ValidationError, match="not both"):
         RunCreate(env="point", task="x", method="collie", dims=dims, task_definition=definition, instruction="be nice")
@@ -284,6 +284,8 @@ def test_a_python_task_file_that_fails_names_the_file_and_line(tmp_path: Path, m
 def test_a_directory_or_non_utf8_spec_is_named(tmp_path: Path) -> None:
     with pytest.raises(TaskFileError, match="is a directory"):
         load_task_file(tmp_path)
+    with pytest.raises(TaskFileError, match="/dev/null: is not a regular file"):  # was: "no such file"
+        load_task_file("/dev/null")
     latin = tmp_path / "latin.toml"
     latin.write_bytes('# a comment\nname = "caf\xe9"\n'.encode("latin-1"))
     with pytest.raises(TaskFileError, match=r"latin.toml: line 2: not UTF-8 text"):

@@ -113,6 +113,42 @@ class RunResult:
         return rank, self.variant, self.setting
 
 
+# the figures the report reads from a run's side files as numbers: a damaged one leaves the run out
+SUMMARY_NUMBERS = (
+    *(m for m, _, _ in METRICS),
+    *(f"{rule}_{m}" for rule in BIN_RULES for m in CORNER_METRICS),
+)
+DOWNSTREAM_NUMBERS = {"zero_shot": ("mean", "best"), "hierarchical": ("mean", "random_skills_mean")}
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _checked_side_files(folder: Path, summary: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The run's variant (sweep_run.json) and downstream results (downstream.json), once every
+    figure the report reads from them and from `summary` is of its type; RunFolderError naming the
+    file and the field if not (a hand-edited or foreign file would stop the whole report)."""
+    for key in SUMMARY_NUMBERS:
+        if summary.get(key) is not None and not _is_number(summary[key]):
+            raise RunFolderError(f"{folder / 'summary.json'}: its {key} {summary[key]!r:.40} is not a number")
+    sweep, down = folder / "sweep_run.json", folder / "downstream.json"
+    variant = read_json_object(sweep).get("variant", "") if sweep.exists() else ""
+    if not isinstance(variant, str):
+        raise RunFolderError(f"{sweep}: its variant {variant!r:.40} is not a string")
+    downstream = read_json_object(down) if down.exists() else {}
+    for kind, keys in DOWNSTREAM_NUMBERS.items():
+        if kind not in downstream:
+            continue
+        result = downstream[kind]
+        if not isinstance(result, dict):
+            raise RunFolderError(f"{down}: its {kind} is not a JSON object")
+        bad = [k for k in keys if not _is_number(result.get(k))]
+        if bad:
+            raise RunFolderError(f"{down}: its {kind} has no number {' or '.join(bad)}")
+    return variant, downstream
+
+
 def load_run(folder: Path) -> RunResult:
     """The run in `folder`; RunFolderError naming the file and why if one of its files is broken."""
     summary = read_json_object(folder / "summary.json")
@@ -129,7 +165,7 @@ def load_run(folder: Path) -> RunResult:
         seed = int(cfg["seed"])
     except ValueError:
         raise RunFolderError(f"{config_path}: its config's seed {cfg['seed']!r} is not a whole number") from None
-    sweep, down = folder / "sweep_run.json", folder / "downstream.json"
+    variant, downstream = _checked_side_files(folder, summary)
     return RunResult(
         folder,
         str(cfg["env"]),
@@ -138,8 +174,8 @@ def load_run(folder: Path) -> RunResult:
         seed,
         summary.get("status", "?"),
         summary,
-        read_json_object(sweep).get("variant", "") if sweep.exists() else "",
-        read_json_object(down) if down.exists() else {},
+        variant,
+        downstream,
         cfg,
     )
 

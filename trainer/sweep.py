@@ -564,7 +564,8 @@ def chosen_tasks(given: str | None, from_files: dict[str, str], env: str) -> tup
 
     if given is None and from_files:
         return list(from_files), None
-    tasks, empty = names("--tasks", given or ",".join(ENV_TASKS.get(env, ())) or DEFAULT_TASKS)
+    default = ",".join(ENV_TASKS.get(env, ())) or DEFAULT_TASKS
+    tasks, empty = names("--tasks", default if given is None else given)  # --tasks '': refused, not the default
     return list(dict.fromkeys([*tasks, *from_files])), empty
 
 

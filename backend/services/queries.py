@@ -50,7 +50,7 @@ SUMMARY_COLUMNS = (
 
 def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: int) -> SessionPosted:
     run = runs.row(conn, run_id)
-    if run.status in FINISHED:
+    if run.status in FINISHED or run.control == "stop":  # a stopped run's queries could never be claimed
         raise Conflict(runs.ended(run_id, run.status, run.control))
     if len(body.queries) > max_queries:
         raise Invalid(f"{len(body.queries)} queries in one session, at most {max_queries}")

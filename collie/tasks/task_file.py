@@ -45,8 +45,10 @@ def load_task_file(
     path = Path(path)
     if path.is_dir():
         raise TaskFileError(path, "", "is a directory, not a task file")
-    if not path.is_file():
+    if not path.exists():
         raise TaskFileError(path, "", "no such file")
+    if not path.is_file():  # /dev/null, a pipe: nothing a rule could be read from
+        raise TaskFileError(path, "", "is not a regular file (a task file is a .toml, .json or .py file)")
     if path.suffix == ".py":
         definition = _from_python(path, task, env, layout_seed)
     elif path.suffix not in SPEC_SUFFIXES:

@@ -243,6 +243,36 @@ def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, c
     assert err.startswith(f"collie report: error: {cut}: not a readable .npz") and len(err.strip().splitlines()) == 1
 
 
+SIDE_DAMAGE = [
+    ("summary.json", {"corner_safe_coverage": "hi"}, "its corner_safe_coverage 'hi' is not a number"),
+    ("summary.json", {"corner_safe_coverage": [1]}, "its corner_safe_coverage [1] is not a number"),
+    ("downstream.json", {"zero_shot": {}}, "its zero_shot has no number mean or best"),
+    ("downstream.json", {"zero_shot": 5}, "its zero_shot is not a JSON object"),
+    ("downstream.json", {"hierarchical": {"mean": 1.0}}, "its hierarchical has no number random_skills_mean"),
+    ("sweep_run.json", {"variant": 5}, "its variant 5 is not a string"),
+]
+
+
+@pytest.mark.parametrize(("name", "content", "why"), SIDE_DAMAGE)
+def test_a_run_with_a_damaged_side_file_is_named_and_left_out(tmp_path, capsys, name, content, why):
+    """Was a ValueError, TypeError or KeyError from the tables, with report.md and runs.csv half written."""
+    from collie.cli import main
+
+    runs = tmp_path / "runs"
+    fake_run(runs, "point", "north", "oracle", 0, 9.0)
+    damaged = fake_run(runs, "point", "north", "metra", 0, -5.0)
+    path = damaged / name
+    held = json.loads(path.read_text()) if path.exists() else {}
+    path.write_text(json.dumps({**held, **content}))
+    assert main(["report", str(runs), "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert "| Oracle | 9.00 |" in out and "METRA" not in out.split("Left out")[0]
+    assert f"Left out (unreadable or twice): `{damaged}` ({path}: {why})" in out
+    assert main(["report", str(damaged), "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie report: error: {path}: {why}") and len(err.strip().splitlines()) == 1
+
+
 def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_is_its_own_row(tmp_path):
     from trainer.report import write_report
 

@@ -145,6 +145,8 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--tasks", "hazard"], "task hazard on --env point: task 'hazard' is not defined for env 'point'"),
         (["--tasks", "north,,range"], "--tasks 'north,,range': entry 2 of 3 is empty"),
         (["--methods", "metra,"], "--methods 'metra,': entry 2 of 2 is empty"),
+        (["--tasks", ""], "--tasks '': entry 1 of 1 is empty"),  # was: the default task grid, run for hours
+        (["--methods", ""], "--methods '': entry 1 of 1 is empty"),
         (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
         (["--out", "{file}"], "--out {file} is a file, not a folder"),
         (["--jobs", "0"], "--jobs must be ≥ 1"),

@@ -21,7 +21,7 @@ from collie.schemas import EnvDims, QueryIn, RunCreate, RunRead, SessionPost
 from .postgres import PostgresServer
 
 TOKENS = {"operator": "op-token-0123456789", "trainer": "tr-token-0123456789", "labeler": "lb-token-0123456789"}
-DIMS = EnvDims(obs_dim=4, nq=3, nv=2, horizon=5, skill_dim=2)
+DIMS = EnvDims(obs_dim=4, nq=2, nv=2, horizon=5, skill_dim=2)  # a point run's joints (nq, nv)
 
 
 DATABASES = ("sqlite", "postgresql")

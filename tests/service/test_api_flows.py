@@ -289,6 +289,18 @@ def test_a_run_an_operator_stopped_is_said_stopped_in_every_refusal(
         assert (err.value.status, err.value.detail) == (409, f"run {run.id} was stopped by an operator")
 
 
+def test_a_stopped_run_takes_no_session_before_its_trainer_reports_the_stop(
+    operator: CollieClient, trainer: CollieClient, run: RunRead
+) -> None:
+    """Was 201: the stopped run's status is still "training", and the session's queries could never be claimed."""
+    operator.stop(run.id)
+    before = trainer.run(run.id).queue
+    with pytest.raises(ApiError) as err:
+        trainer.post_session(run.id, make_session(1, 2))
+    assert (err.value.status, err.value.detail) == (409, f"run {run.id} was stopped by an operator")
+    assert trainer.run(run.id).queue == before
+
+
 def test_labelled_history_pages(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
     for value in (0, 1, 2):
         claim = labeler.claim(run.id)

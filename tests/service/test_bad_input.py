@@ -162,7 +162,7 @@ def test_session_limits(tight: BackgroundServer) -> None:
         with pytest.raises(ApiError) as err:
             trainer.post_session(created.id, make_session(0, 6))
         assert err.value.status == 422 and "at most 5" in err.value.detail
-        big = make_session(0, 1, EnvDims(obs_dim=4000, nq=3, nv=2, horizon=5, skill_dim=2))
+        big = make_session(0, 1, EnvDims(obs_dim=4000, nq=2, nv=2, horizon=5, skill_dim=2))
         with pytest.raises(ApiError) as err:
             trainer.post_session(created.id, big)
         assert err.value.status == 413
@@ -227,6 +227,55 @@ def test_run_spec_is_validated(live: BackgroundServer) -> None:
         bad = json.loads(json.dumps(spec))
         change(bad)
         assert post(live.url, "trainer", "/api/runs", json=bad).status_code == 422
+
+
+def test_a_run_whose_dims_are_not_its_envs_is_refused(live: BackgroundServer) -> None:
+    """Was 201: the labeling UI, which replays the env's model, then failed every segment."""
+    spec = make_run_spec().model_dump(mode="json")
+    for env, dims, said in (
+        ("humanoid", {"nq": 2}, "dims nq 2, nv 2 are not humanoid's (nq 28, nv 27)"),
+        ("point", {"nv": 3}, "dims nq 2, nv 3 are not point's (nq 2, nv 2)"),
+    ):
+        body = {**spec, "env": env, "task": "north", "dims": {**spec["dims"], **dims}}
+        response = post(live.url, "trainer", "/api/runs", json=body)
+        assert response.status_code == 422 and said in response.text, response.text
+
+
+RULE = {
+    "name": "pit",
+    "description": "Keep out of the pit.",
+    "meaning": {"bad": "in the pit"},
+    "regions": [{"kind": "disc", "desirability": 0, "centre": [0, 0], "radius": 1, "name": "pit"}],
+    "source": "pit.toml",
+}
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda d: d.update(description="Keep out\x00"),
+        lambda d: d["meaning"].update(bad="in\x00the pit"),
+        lambda d: d["regions"][0].update(name="p\x00t"),
+        lambda d: d.update(source="pit\x00.toml"),
+    ],
+)
+def test_a_nul_in_a_rules_text_is_refused_as_in_other_free_text(live: BackgroundServer, change: Callable) -> None:
+    """Was 201 (free text elsewhere, an instruction for one, refuses it: PostgreSQL text cannot hold it)."""
+    rule = json.loads(json.dumps(RULE))
+    change(rule)
+    body = {**make_run_spec(task="pit").model_dump(mode="json"), "task_definition": rule}
+    response = post(live.url, "trainer", "/api/runs", json=body)
+    assert response.status_code == 422 and "NUL character" in response.text, response.text
+
+
+def test_a_nul_in_a_status_message_is_refused(live: BackgroundServer, trainer: CollieClient) -> None:
+    created = trainer.create_run(make_run_spec())
+    body = {"status": "failed", "epoch": 1, "message": "diverged\x00"}
+    response = httpx.put(
+        f"{live.url}/api/runs/{created.id}/status", json=body, headers={"Authorization": f"Bearer {TOKENS['trainer']}"}
+    )
+    assert response.status_code == 422 and "NUL character" in response.text, response.text
+    assert trainer.run(created.id).status == "training"
 
 
 def test_database_stays_consistent(tmp_path: Path) -> None:

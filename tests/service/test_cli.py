@@ -9,8 +9,10 @@ import json
 import os
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -102,6 +104,21 @@ def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -
     env = {k: v for k, v in os.environ.items() if k != "COLLIE_DATABASE_URL"}
     out = collie("export", "--run", "1", cwd=empty, env=env)
     assert out.returncode == 2 and "no database at" in out.stderr and list(empty.iterdir()) == []
+
+
+def test_a_refused_export_leaves_the_file_as_it_was(tmp_path: Path) -> None:
+    """Was: an empty file got 4 KB (and another program's database WAL mode) before the refusal."""
+    empty = tmp_path / "empty.db"
+    empty.touch()
+    other = tmp_path / "other.db"
+    with closing(sqlite3.connect(other)) as conn:
+        conn.execute("CREATE TABLE notes (text TEXT)")
+        conn.commit()
+    for path in (empty, other):
+        before = path.read_bytes()
+        out = collie("export", "--db", str(path), "--run", "1")
+        assert out.returncode == 2 and f"{path} is not a collie database (no schema version)" in out.stderr, out.stderr
+        assert path.read_bytes() == before and not path.with_name(path.name + "-wal").exists()
 
 
 def test_migrations_build_exactly_the_models(tmp_path: Path) -> None:

@@ -125,6 +125,17 @@ def test_stop_while_waiting_raises(live: BackgroundServer, feedback: HttpFeedbac
         assert feedback.control() == "stop"
 
 
+def test_a_stop_the_trainer_has_not_seen_yet_ends_its_next_session(
+    live: BackgroundServer, feedback: HttpFeedback
+) -> None:
+    """The service refuses the session (409); the trainer ends as at a stop it saw (was: the 409 raised)."""
+    with CollieClient(live.url, TOKENS["operator"]) as operator:
+        operator.stop(feedback.run_id)
+    with pytest.raises(StopRequested, match="stopped by an operator"):
+        feedback.collect(0, 0, segments(0, 2))
+    assert list(feedback.client.queries(feedback.run_id)) == []
+
+
 def test_an_interrupt_ends_a_wait_within_one_chunk(feedback: HttpFeedback) -> None:
     """The trainer's signal handler calls interrupt() before it raises: should Python drop that
     raise (in a weakref callback or __del__), the wait still ends, at its next look."""

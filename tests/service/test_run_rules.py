@@ -45,7 +45,10 @@ def test_a_run_of_no_known_env_or_task_is_refused(live: BackgroundServer) -> Non
         ({"env": "moon"}, "Input should be 'point', 'ant', 'half_cheetah', 'quadruped', 'humanoid' or 'car'"),
         ({"task": "no_such_task"}, "unknown task 'no_such_task'; valid tasks: north,"),
         ({"task": "not_flip"}, "task 'not_flip' is not defined for env 'point'"),
-        ({"env": "half_cheetah"}, "task 'range_north' is not defined for env 'half_cheetah'"),  # it runs on a line
+        (  # it runs on a line
+            {"env": "half_cheetah", "dims": {**body["dims"], "nq": 9, "nv": 9}},
+            "task 'range_north' is not defined for env 'half_cheetah'",
+        ),
     ):
         answer = httpx.post(f"{live.url}/api/runs", json={**body, **change}, headers=headers)
         assert answer.status_code == 422 and said in answer.text, answer.text
@@ -74,6 +77,16 @@ def test_a_malformed_definition_is_refused(live: BackgroundServer) -> None:
         assert response.status_code == 422, response.text
     both = {**body, "task_definition": POLYGON, "instruction": "stay west"}
     assert httpx.post(f"{live.url}/api/runs", json=both, headers=headers).status_code == 422
+
+
+def test_a_definition_of_another_name_than_the_task_is_refused(live: BackgroundServer) -> None:
+    """Was 201: the run read as task north but was judged by the rule named pit."""
+    headers = {"Authorization": f"Bearer {TOKENS['trainer']}"}
+    before = httpx.get(f"{live.url}/api/runs", headers=headers).json()
+    body = {**make_run_spec(task="north").model_dump(mode="json"), "task_definition": POLYGON}
+    answer = httpx.post(f"{live.url}/api/runs", json=body, headers=headers)
+    assert answer.status_code == 422 and "task 'north' and its task_definition (named 'pit')" in answer.text
+    assert httpx.get(f"{live.url}/api/runs", headers=headers).json() == before
 
 
 def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path: Path) -> None:

@@ -5,8 +5,9 @@ labeling UI's viser server on port 0."""
 from __future__ import annotations
 
 import math
+import sqlite3
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,6 +73,7 @@ class Stack:
     trainer: CollieClient
     operator: CollieClient
     apps: list[LabelingApp] = field(default_factory=list)
+    db: Path | None = None  # the service's SQLite file
 
     @property
     def api(self) -> str:
@@ -99,8 +101,12 @@ class Stack:
             if "redundancy" not in RunCreate.model_fields:
                 raise ValueError("this service has no redundancy run setting (RunCreate.redundancy)")
             extra["redundancy"] = redundancy
-        spec = RunCreate(env=env, task=task, method="collie", dims=dims_of(rollout_env), n_total=100, **extra)
+        spec = RunCreate(env=rollout_env, task=task, method="collie", dims=dims_of(rollout_env), n_total=100, **extra)
         run = self.trainer.create_run(spec)
+        if rollout_env != env:  # the service takes no such run now: one stored before it checked dims
+            assert self.db is not None
+            with closing(sqlite3.connect(self.db)) as conn, conn:
+                conn.execute("UPDATE runs SET env = ? WHERE id = ?", (env, run.id))
         if n_queries:
             self.post_session(run.id, rollout_env, 0, n_queries, seed)
         self.trainer.set_status(run.id, "waiting_for_labels", epoch=3)
@@ -124,7 +130,7 @@ def real_stack(db: Path) -> Iterator[Stack]:
         CollieClient(service.url, TOKENS["trainer"]) as trainer,
         CollieClient(service.url, TOKENS["operator"]) as operator,
     ):
-        stack = Stack(service, trainer, operator)
+        stack = Stack(service, trainer, operator, db=db)
         try:
             yield stack
         finally:

@@ -21,7 +21,7 @@ from collie.schemas import EnvDims, MetricsIn, Rollout, RolloutsIn, RunRead
 from .conftest import operator_page
 
 WAIT_MS = 30_000
-DIMS = EnvDims(obs_dim=4, nq=3, nv=2, horizon=20, skill_dim=2)  # 20 states a segment, as a real run's
+DIMS = EnvDims(obs_dim=4, nq=2, nv=2, horizon=20, skill_dim=2)  # 20 states a segment, as a real run's
 BAD_Y = -12.0  # the bad segment's row, clear of the others and of the trajectories
 
 

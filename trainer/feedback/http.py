@@ -38,7 +38,7 @@ from typing import Any, Literal, TypeVar
 import numpy as np
 
 from collie import startup
-from collie.client import ApiError, Backoff, CollieClient, Overloaded, Unauthorized, Unreachable, retrying
+from collie.client import ApiError, Backoff, CollieClient, Conflict, Overloaded, Unauthorized, Unreachable, retrying
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
 from collie.schemas import (
@@ -135,7 +135,13 @@ class HttpFeedback(FeedbackSource):
             self._retire_leftovers(before_session=session)
             self._swept = True
         body = SessionPost(session=session, epoch=epoch, queries=[to_wire(s) for s in segments])
-        posted = self._retry(lambda: self.client.post_session(self.run_id, body))
+        try:
+            posted = self._retry(lambda: self.client.post_session(self.run_id, body))
+        except Conflict:  # an operator stopped the run since we last looked: it takes no session, we end
+            self._pump(0.0)
+            if self._control == "stop":
+                raise StopRequested(f"run {self.run_id} was stopped by an operator") from None
+            raise
         startup.mark("segments posted", epoch)
         startup.done()  # the start is over once a segment is out
         if posted.reused:  # this position was posted before (a resumed trainer): its queries, not new ones
