@@ -90,7 +90,11 @@ def weakness(token: str) -> str | None:
 
 def write_secret(path: Path, text: str) -> None:
     """Write a file holding secrets, readable by its owner only, in one rename (a reader never
-    sees half of it, and it is never world-readable, not even for a moment)."""
+    sees half of it, and it is never world-readable, not even for a moment). A path that is no
+    regular file (/dev/null, a FIFO) is written in place, as collie.whole_files does."""
+    if path.exists() and not path.is_file() and not path.is_dir():
+        path.write_text(text)
+        return
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(path.name + ".partial")
     partial.unlink(missing_ok=True)

@@ -14,7 +14,13 @@ def write_whole(path: Path, write: Callable[[BinaryIO], object], sync: bool = Fa
     """What `write` writes to a file, at `path`, renamed into place whole; a failed write (a full
     disk) leaves the old file as it was and no .partial behind. PATH.partial, not PATH with its
     suffix swapped: `/tmp` would have become `/tmp.tmp`. `sync`: on disk before the rename (a
-    checkpoint must survive a power cut, not only a killed process)."""
+    checkpoint must survive a power cut, not only a killed process). A path that is no regular
+    file, such as /dev/null or a FIFO, is written in place: renamed over, /dev/null would become
+    a plain file for every program on the machine (as root)."""
+    if path.exists() and not path.is_file() and not path.is_dir():
+        with open(path, "wb") as f:
+            write(f)
+        return
     partial = path.with_name(path.name + ".partial")
     try:
         with open(partial, "wb") as f:

@@ -36,9 +36,8 @@ def read_json_object(path: Path) -> dict[str, Any]:
 
 def write_json(path: Path, data: Any) -> None:
     """`data` as indented JSON at `path`, renamed into place whole."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(json.dumps(data, indent=2))
-    partial.replace(path)
+    text = json.dumps(data, indent=2).encode()
+    write_whole(path, lambda f: f.write(text))
 
 
 def copy_whole(source: Path, target: Path) -> None:

@@ -51,3 +51,29 @@ def test_a_binary_write_cut_short_leaves_the_old_file_whole(tmp_path: Path) -> N
     assert not path.with_name(path.name + ".partial").exists()  # nothing half-written left beside it
     copy_whole(path, tmp_path / "archived.npz")
     assert int(read_arrays(tmp_path / "archived.npz", ("epoch",))["epoch"]) == 3
+
+
+@pytest.mark.parametrize("how", ["json", "whole", "secret"])
+def test_a_path_that_is_no_regular_file_is_written_in_place_not_renamed_over(tmp_path: Path, how: str) -> None:
+    """`--info-json /dev/null` (as root) once made /dev/null a plain file for the whole machine: a
+    rename over it. A FIFO stands in for /dev/null here: a reader gets the text, and it stays a FIFO."""
+    import os
+    import stat
+    import threading
+
+    from collie.tokens import write_secret
+
+    fifo = tmp_path / "sink"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    if how == "json":
+        write_json(fifo, {"a": 1})
+    elif how == "whole":
+        write_whole(fifo, lambda f: f.write(b'{"a": 1}'))
+    else:
+        write_secret(fifo, '{"a": 1}')
+    reader.join(10)
+    assert stat.S_ISFIFO(fifo.stat().st_mode) and json.loads(got[0]) == {"a": 1}
+    assert not (tmp_path / "sink.partial").exists()
