@@ -14,6 +14,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from paced_marks import PacedMarks
@@ -228,6 +229,43 @@ def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> No
 def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> None:
     (run_copy / name).write_text('{"epochs": 3,')
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))
+
+
+@pytest.mark.parametrize(("key", "value"), [("hidden", '"64"'), ("hidden", "64.5"), ("epochs", "null")])
+def test_a_config_value_of_another_type_is_named_on_resume(run_copy: Path, key: str, value: str) -> None:
+    """Was a TypeError traceback from deep in the trainer."""
+    config = run_copy / "config.json"
+    config.write_text(json.dumps(json.loads(config.read_text()) | {key: json.loads(value)}))
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(config), repr(key), value)
+
+
+@pytest.mark.parametrize("line", ['{"x": 1}', "[1]", '{"epoch": "3"}'])
+def test_a_metrics_line_without_an_integer_epoch_is_named(run_copy: Path, line: str) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    metrics.write_text(line + "\n" + metrics.read_text())  # was a KeyError or TypeError traceback
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(metrics), "line 1", "epoch")
+
+
+@pytest.mark.parametrize("how", ["truncated", "slots beyond the replay"])
+def test_a_damaged_replay_chunk_is_named(run_copy: Path, how: str) -> None:
+    chunk = sorted((run_copy / "replay").glob("*.npz"))[-1]
+    if how == "truncated":  # was zipfile.BadZipFile
+        chunk.write_bytes(chunk.read_bytes()[:300])
+    else:  # was an IndexError
+        with np.load(chunk) as data:
+            arrays = dict(data)
+        arrays["slots"] = arrays["slots"] + 10_000
+        with open(chunk, "wb") as f:
+            np.savez(f, **arrays)
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "damaged")
+
+
+def test_a_checkpoint_of_another_run_of_the_same_shapes_is_refused(run_copy: Path, tmp_path: Path) -> None:
+    """Was resumed silently: the other seed's networks and replay continued under this run's name."""
+    other = tmp_path / "other"
+    assert train("--epochs", "1", "--out", str(other), "--seed", "1").returncode == 0
+    shutil.copyfile(other / "checkpoint.pt", run_copy / "checkpoint.pt")
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "copied from another run", "seed (1 there")
 
 
 def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:

@@ -423,10 +423,13 @@ def run(args: argparse.Namespace) -> int:
             # RunFolderError naming it; a missing one: the checkpoint's copy
             saved = Path(cfg.out) / "config.json"
             stored = read_json_object(saved) if saved.exists() else checkpoint_config(Path(cfg.out))
-            stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
-            stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-            stored |= {k: getattr(cfg, k) for k in RESUME_RUNTIME if k in args.given}
-            asked, cfg = cfg, Config.from_stored(stored)
+            source = str(saved if saved.exists() else Path(cfg.out) / "checkpoint.pt")
+            asked, cfg = cfg, Config.from_stored(stored, source)  # a value of a wrong type: named
+            cfg.epochs = max(cfg.epochs, asked.epochs if args.epochs else 0)
+            cfg.out = asked.out  # where the folder is now (it may have been moved since)
+            for k in RESUME_RUNTIME:
+                if k in args.given:
+                    setattr(cfg, k, getattr(asked, k))
             ignored = ignored_on_resume(args, asked, cfg)
             if ignored:
                 print(
