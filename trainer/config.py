@@ -140,10 +140,15 @@ class Config:
             "knn_k",
             "checkpoint_every",
             "skill_dim",
+            "eval_trajectories",
         ):
             need(getattr(self, name) >= 1, f"{flag(name)} must be ≥ 1, got {getattr(self, name)}")
+        for f in dataclasses.fields(self):  # inf or nan: first, so that `--lr inf` is named as what it is
+            value = getattr(self, f.name)
+            if f.type == "float" and isinstance(value, float):
+                need(math.isfinite(value), f"{flag(f.name)} must be a finite number, got {value}")
         need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
-        for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "eval_trajectories", "noise_band"):
+        for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "noise_band"):
             need(getattr(self, name) >= 0, f"{flag(name)} must be ≥ 0, got {getattr(self, name)}")
         for name in ("gamma", "tau"):  # a discount and a Polyak rate: fractions
             need(0 < getattr(self, name) <= 1, f"{flag(name)} must be in (0, 1], got {getattr(self, name)}")
@@ -162,6 +167,11 @@ class Config:
             self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
             f"--replay-capacity {self.replay_capacity} must hold one epoch of transitions "
             f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
+        )
+        need(
+            self.batch_size <= self.replay_capacity,
+            f"--batch-size {self.batch_size} must be ≤ --replay-capacity {self.replay_capacity} (the transitions "
+            "a batch is drawn from)",
         )
         need(
             re.fullmatch(DEVICE_NAMES, self.device) is not None,
