@@ -14,6 +14,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from paced_marks import PacedMarks
@@ -137,6 +138,11 @@ def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None
         ("--gamma", "2", ("--gamma", "(0, 1]")),
         ("--total-queries", "-1", ("--total-queries", "≥ 0")),
         ("--lr", "0", ("--lr", "> 0")),
+        ("--lr", "inf", ("--lr", "finite", "inf")),  # was accepted
+        ("--target-entropy-scale", "nan", ("--target-entropy-scale", "finite")),
+        ("--eval-trajectories", "0", ("--eval-trajectories", "≥ 1")),  # was "num_envs must be >= 1" later
+        ("--batch-size", "6000", ("--batch-size 6000", "--replay-capacity 5000")),  # was accepted
+        ("--instruction", "", ("--instruction is empty",)),  # was "unknown task 'instruction'"
     ],
 )
 def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value: str, words: tuple[str, ...]) -> None:
@@ -196,6 +202,48 @@ def test_epochs_beyond_what_the_service_stores_are_refused_before_it_is_asked(tm
     assert not (tmp_path / "run").exists()
 
 
+def api_train(service: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """A METRA smoke run through the service (it asks no labels: nobody need answer)."""
+    return train("--method", "metra", "--api", service, "--token", TOKENS["trainer"], *args)
+
+
+@pytest.fixture(scope="module")
+def service_run(service: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A finished 2-epoch run the service holds; its folder's service_run.json names it."""
+    out = tmp_path_factory.mktemp("service_run") / "run"
+    proc = api_train(service, "--epochs", "2", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out
+
+
+def test_resume_with_another_run_than_the_folders_is_refused(service: str, service_run: Path, tmp_path: Path) -> None:
+    """Was resumed silently into run N: the checkpoint went on with another run's task and labels."""
+    run = Path(shutil.copytree(service_run, tmp_path / "run"))
+    mine = json.loads((run / "service_run.json").read_text())["run_id"]
+    other = tmp_path / "other"  # another run on the service, of other config (seed 1)
+    assert api_train(service, "--epochs", "1", "--seed", "1", "--out", str(other)).returncode == 0
+    theirs = json.loads((other / "service_run.json").read_text())["run_id"]
+    proc = api_train(service, "--out", str(run), "--resume", "--epochs", "3", "--run-id", str(theirs))
+    refused(proc, f"{run} belongs to run {mine} on {service}", f"not run {theirs}", f"--run-id {mine}")
+    # the folder's run on another address: refused unless the service there holds this very run
+    elsewhere = "http://127.0.0.1:9"
+    (run / "service_run.json").write_text(json.dumps({"api": elsewhere, "run_id": theirs}))
+    proc = api_train(service, "--out", str(run), "--resume", "--epochs", "3", "--run-id", str(theirs))
+    refused(proc, f"belongs to run {theirs} on {elsewhere}", f"run {theirs} on {service} is another run", "seed")
+    (run / "service_run.json").write_text(json.dumps({"api": elsewhere, "run_id": mine}))  # moved: `collie up --port 0`
+    proc = api_train(service, "--out", str(run), "--resume", "--epochs", "3", "--run-id", str(mine))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+@pytest.mark.parametrize("run_id", ["1e400", "1.5", "true", "0", "-1", '"1"'])
+def test_a_service_run_json_without_a_run_id_is_named(run_copy: Path, service: str, run_id: str) -> None:
+    """1e400 was an OverflowError traceback, 1.5 and true were run 1, 0 and -1 got the advice --run-id 0."""
+    (run_copy / "service_run.json").write_text(f'{{"api": "{service}", "run_id": {run_id}}}')
+    proc = api_train(service, "--out", str(run_copy), "--resume", "--epochs", "3")
+    line = refused(proc, str(run_copy / "service_run.json"), "damaged", "not a run id", "give the run's --run-id")
+    assert "--run-id 0" not in line and "--run-id -1" not in line
+
+
 def test_the_car_runs_its_own_task_by_default_and_a_plane_task_is_refused_naming_its_own(tmp_path: Path) -> None:
     refused(
         train("--env", "car", "--task", "north", "--out", str(tmp_path / "north")),
@@ -228,6 +276,43 @@ def test_a_bad_value_names_its_flag(tmp_path: Path, flag: str, value: str) -> No
 def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> None:
     (run_copy / name).write_text('{"epochs": 3,')
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))
+
+
+@pytest.mark.parametrize(("key", "value"), [("hidden", '"64"'), ("hidden", "64.5"), ("epochs", "null")])
+def test_a_config_value_of_another_type_is_named_on_resume(run_copy: Path, key: str, value: str) -> None:
+    """Was a TypeError traceback from deep in the trainer."""
+    config = run_copy / "config.json"
+    config.write_text(json.dumps(json.loads(config.read_text()) | {key: json.loads(value)}))
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(config), repr(key), value)
+
+
+@pytest.mark.parametrize("line", ['{"x": 1}', "[1]", '{"epoch": "3"}'])
+def test_a_metrics_line_without_an_integer_epoch_is_named(run_copy: Path, line: str) -> None:
+    metrics = run_copy / "metrics.jsonl"
+    metrics.write_text(line + "\n" + metrics.read_text())  # was a KeyError or TypeError traceback
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(metrics), "line 1", "epoch")
+
+
+@pytest.mark.parametrize("how", ["truncated", "slots beyond the replay"])
+def test_a_damaged_replay_chunk_is_named(run_copy: Path, how: str) -> None:
+    chunk = sorted((run_copy / "replay").glob("*.npz"))[-1]
+    if how == "truncated":  # was zipfile.BadZipFile
+        chunk.write_bytes(chunk.read_bytes()[:300])
+    else:  # was an IndexError
+        with np.load(chunk) as data:
+            arrays = dict(data)
+        arrays["slots"] = arrays["slots"] + 10_000
+        with open(chunk, "wb") as f:
+            np.savez(f, **arrays)
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "damaged")
+
+
+def test_a_checkpoint_of_another_run_of_the_same_shapes_is_refused(run_copy: Path, tmp_path: Path) -> None:
+    """Was resumed silently: the other seed's networks and replay continued under this run's name."""
+    other = tmp_path / "other"
+    assert train("--epochs", "1", "--out", str(other), "--seed", "1").returncode == 0
+    shutil.copyfile(other / "checkpoint.pt", run_copy / "checkpoint.pt")
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "copied from another run", "seed (1 there")
 
 
 def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:

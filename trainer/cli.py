@@ -24,6 +24,7 @@ from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, field_notes, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object, write_json
+from trainer.same_run import differing_keys
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
@@ -163,6 +164,8 @@ def config_from_args(args: argparse.Namespace) -> Config:
         for f in dataclasses.fields(Config)
         if f.name not in ("env", "preset", "extra")
     }
+    if args.instruction is not None and not args.instruction.strip():  # else read as the task "instruction"
+        raise ValueError("--instruction is empty: say in words what people label by (or drop it for a task rule)")
     if args.instruction is not None and args.task is not None:
         raise ValueError("--instruction is for a run without a rule: drop --task (or drop --instruction)")
     if args.instruction is not None:
@@ -210,11 +213,16 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     wait_for_service(args.api, token)
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
-    if run_id is None and memo.exists():
-        try:
-            run_id = int(read_json_object(memo)["run_id"])
-        except (ValueError, KeyError, TypeError) as exc:  # RunFolderError is a ValueError
-            raise ValueError(f"{memo} is damaged ({exc}); give the run's --run-id") from None
+    remembered = remembered_run(memo) if memo.exists() and (run_id is None or args.resume) else None
+    if remembered is not None and args.resume:  # the checkpoint is that run's: another's would lose its labels
+        mine, where = remembered
+        if run_id is not None and run_id != mine:
+            raise ValueError(
+                f"--resume: {cfg.out} belongs to run {mine}{f' on {where}' if where else ''} (service_run.json), "
+                f"not run {run_id}: give --run-id {mine}, or another --out for run {run_id}"
+            )
+    if run_id is None and remembered is not None:
+        run_id = remembered[0]
         if not args.resume:  # a trainer that died before its first checkpoint: a new run would orphan it
             raise ValueError(
                 f"{cfg.out} belongs to run {run_id} of the service but holds no checkpoint: give --run-id {run_id} "
@@ -225,6 +233,15 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         source = HttpFeedback(args.api, token, int(run_id), **kwargs)
         held = source.held_run()
         unlike = unlike_the_run(held, cfg, args.given)
+        if remembered is not None and args.resume and remembered[1] not in (None, args.api):
+            # the service moved (`collie up --port 0`), or this is another service: its run must be this one
+            moved = [k for k in differing_keys(held.config, cfg.to_dict()) if k != "epochs"]
+            if moved:
+                raise ValueError(
+                    f"--resume: {cfg.out} belongs to run {remembered[0]} on {remembered[1]} (service_run.json); "
+                    f"run {run_id} on {args.api} is another run (its config differs in {', '.join(moved)}): give "
+                    f"--api {remembered[1]}, or another --out"
+                )
         if unlike:  # its sessions would not fit the run (the service refuses other dims) nor its labels mean the same
             raise ValueError(
                 f"run {source.run_id} on the service is not this trainer's: {'; '.join(unlike)} (give the run's "
@@ -262,6 +279,20 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     made = "continues" if run_id is not None else "created"
     print(f"collie train: {made} run {source.run_id} on {args.api} (remembered in {memo})", file=sys.stderr)
     return source, rule
+
+
+def remembered_run(memo: Path) -> tuple[int, str | None]:
+    """The run id and service URL a run folder's service_run.json names (an id: a positive integer,
+    as the service's; not 1.5 or true read as run 1); ValueError naming the file if it is damaged."""
+    from collie.schemas import MAX_INT
+
+    data = read_json_object(memo)  # RunFolderError (a ValueError) naming it
+    run_id, api = data.get("run_id"), data.get("api")
+    if not isinstance(run_id, int) or isinstance(run_id, bool) or not 1 <= run_id <= MAX_INT:
+        raise ValueError(f"{memo} is damaged (run_id {json.dumps(run_id)} is not a run id); give the run's --run-id")
+    if api is not None and not isinstance(api, str):
+        raise ValueError(f"{memo} is damaged (api {json.dumps(api)} is not a URL); give the run's --run-id")
+    return run_id, api
 
 
 def ended_for_this_trainer(held: RunRead, resume: bool, out: str) -> str | None:
@@ -423,10 +454,13 @@ def run(args: argparse.Namespace) -> int:
             # RunFolderError naming it; a missing one: the checkpoint's copy
             saved = Path(cfg.out) / "config.json"
             stored = read_json_object(saved) if saved.exists() else checkpoint_config(Path(cfg.out))
-            stored["epochs"] = max(stored["epochs"], cfg.epochs if args.epochs else 0)
-            stored["out"] = cfg.out  # where the folder is now (it may have been moved since)
-            stored |= {k: getattr(cfg, k) for k in RESUME_RUNTIME if k in args.given}
-            asked, cfg = cfg, Config.from_stored(stored)
+            source = str(saved if saved.exists() else Path(cfg.out) / "checkpoint.pt")
+            asked, cfg = cfg, Config.from_stored(stored, source)  # a value of a wrong type: named
+            cfg.epochs = max(cfg.epochs, asked.epochs if args.epochs else 0)
+            cfg.out = asked.out  # where the folder is now (it may have been moved since)
+            for k in RESUME_RUNTIME:
+                if k in args.given:
+                    setattr(cfg, k, getattr(asked, k))
             ignored = ignored_on_resume(args, asked, cfg)
             if ignored:
                 print(

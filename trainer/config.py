@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 import math
 import re
+import types
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 from collie.tasks import default_task
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
 from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
+from trainer.run_files import RunFolderError
 
 LABEL_METHODS = tuple(n for n, m in METHODS.items() if m.asks_labels)  # they ask the feedback source for labels
 RULE_METHODS = tuple(n for n, m in METHODS.items() if m.guidance == "task")  # they read the rule itself
@@ -137,10 +140,15 @@ class Config:
             "knn_k",
             "checkpoint_every",
             "skill_dim",
+            "eval_trajectories",
         ):
             need(getattr(self, name) >= 1, f"{flag(name)} must be ≥ 1, got {getattr(self, name)}")
+        for f in dataclasses.fields(self):  # inf or nan: first, so that `--lr inf` is named as what it is
+            value = getattr(self, f.name)
+            if f.type == "float" and isinstance(value, float):
+                need(math.isfinite(value), f"{flag(f.name)} must be a finite number, got {value}")
         need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
-        for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "eval_trajectories", "noise_band"):
+        for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "noise_band"):
             need(getattr(self, name) >= 0, f"{flag(name)} must be ≥ 0, got {getattr(self, name)}")
         for name in ("gamma", "tau"):  # a discount and a Polyak rate: fractions
             need(0 < getattr(self, name) <= 1, f"{flag(name)} must be in (0, 1], got {getattr(self, name)}")
@@ -159,6 +167,11 @@ class Config:
             self.replay_capacity >= self.episode_steps * self.episodes_per_epoch,
             f"--replay-capacity {self.replay_capacity} must hold one epoch of transitions "
             f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
+        )
+        need(
+            self.batch_size <= self.replay_capacity,
+            f"--batch-size {self.batch_size} must be ≤ --replay-capacity {self.replay_capacity} (the transitions "
+            "a batch is drawn from)",
         )
         need(
             re.fullmatch(DEVICE_NAMES, self.device) is not None,
@@ -192,15 +205,42 @@ class Config:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_stored(cls, stored: dict[str, Any]) -> Config:
+    def from_stored(cls, stored: dict[str, Any], source: str = "the stored config") -> Config:
         """A run's saved config.json: keys this version does not know are dropped, and options the
-        run predates take the value it ran with (`FIRST_VERSION`), not today's default."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{**FIRST_VERSION, **{k: v for k, v in stored.items() if k in known}})
+        run predates take the value it ran with (`FIRST_VERSION`), not today's default. A value of
+        another type than its field's (`"hidden": "64"`, edited by hand): RunFolderError naming
+        `source`, the key and the value, not a TypeError deep in the trainer."""
+        hints = get_type_hints(cls)
+        values = {**FIRST_VERSION, **{k: v for k, v in stored.items() if k in hints}}
+        for key, value in values.items():
+            kind = of_type(value, hints[key])
+            if kind:
+                raise RunFolderError(f"{source}: {key!r} must be {kind}, got {json.dumps(value, default=repr)}")
+        return cls(**values)
 
     @property
     def n_sessions(self) -> int:
         return -(-self.total_queries // self.queries_per_session)
+
+
+def of_type(value: Any, hint: Any) -> str | None:
+    """None if `value` (as JSON gives it) fits the field type `hint`, else what it should be: an int
+    is no bool and no float; a float may be written as an int."""
+    if get_origin(hint) is Literal:
+        return None if value in get_args(hint) else f"one of {', '.join(map(json.dumps, get_args(hint)))}"
+    if isinstance(hint, types.UnionType):
+        wrong = [of_type(value, h) for h in get_args(hint)]
+        return None if None in wrong else " or ".join(w for w in wrong if w)
+    if hint is type(None):
+        return None if value is None else "null"
+    if hint is bool:
+        return None if isinstance(value, bool) else "true or false"
+    if hint is int:
+        return None if isinstance(value, int) and not isinstance(value, bool) else "an integer"
+    if hint is float:
+        return None if isinstance(value, int | float) and not isinstance(value, bool) else "a number"
+    origin = get_origin(hint) or hint
+    return None if isinstance(value, origin) else f"a {origin.__name__}"  # dict: `extra`
 
 
 # What runs saved before these options existed ran with (they wrote no such key).

@@ -510,9 +510,30 @@ class Trainer:
             return {}  # signals reach only the main thread; an embedded trainer keeps its host's handlers
         return {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
 
+    def check_checkpoint_config(self, path: Path, saved: Any) -> None:
+        """Refuse a checkpoint whose own config is another run's (one copied from a run of the same
+        network shapes would load, and continue that run under this one's name). Its epochs may be
+        fewer (--resume --epochs extends a run); where and how it ran do not count (same_run)."""
+        from trainer.same_run import differing_keys
+
+        if not isinstance(saved, dict):  # a checkpoint from before it carried its config
+            return
+        try:
+            theirs = Config.from_stored(saved, f"{path}'s config").to_dict()
+        except ValueError as exc:
+            raise ResumeError(str(exc)) from None
+        keys = [k for k in differing_keys(theirs, self.cfg.to_dict()) if k != "epochs"]
+        if keys:
+            raise ResumeError(
+                f"{path} does not fit this run's config.json (copied from another run?): its config differs in "
+                + ", ".join(f"{k} ({theirs.get(k)!r} there, {getattr(self.cfg, k, None)!r} here)" for k in keys[:6])
+                + (f" and {len(keys) - 6} more" if len(keys) > 6 else "")
+            )
+
     def resume(self) -> None:
         path = self.out / "checkpoint.pt"
         state = load_checkpoint(path)
+        self.check_checkpoint_config(path, state.get("config"))
         try:
             self.load_state_dict(state)
         except ResumeError:  # a file of the run named already (a replay chunk missing)
@@ -538,7 +559,10 @@ class Trainer:
                     if i == len(lines) - 1:  # a crash while appending tears only the last line
                         break
                     raise ResumeError(f"{metrics} line {i + 1} is not valid JSON ({exc.msg})") from None
-                if record["epoch"] <= self.epoch:
+                epoch = record.get("epoch") if isinstance(record, dict) else None
+                if not isinstance(epoch, int) or isinstance(epoch, bool):  # written by hand, or another file's
+                    raise ResumeError(f'{metrics} line {i + 1} is no evaluation (no integer "epoch"): {ln[:80]}')
+                if epoch <= self.epoch:
                     keep.append(ln)
             text = "".join(ln + "\n" for ln in keep).encode()
             write_whole(metrics, lambda f: f.write(text))  # a kill here leaves the history whole

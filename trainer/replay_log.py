@@ -12,6 +12,8 @@ disk, and a chunk written after the last checkpoint (a crash in between) is igno
 from __future__ import annotations
 
 import os
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -70,9 +72,12 @@ class ReplayLog:
             try:
                 with np.load(path) as data:
                     slots = data["slots"]
+                    if slots.dtype.kind not in "iu" or (len(slots) and not 0 <= slots.min() <= slots.max() < r.size):
+                        raise IndexError(f"its slots are not within this run's replay of {r.size} trajectories")
                     for key in FIELDS:
                         getattr(r, key)[slots] = data[key]
-            except (OSError, ValueError, KeyError, EOFError) as exc:  # truncated or overwritten
+            except (OSError, ValueError, KeyError, EOFError, IndexError, zipfile.BadZipFile, zlib.error) as exc:
+                # truncated, overwritten, or another run's (slots beyond this replay's, arrays of other shapes)
                 raise ResumeError(f"replay chunk {path} is damaged ({type(exc).__name__}: {exc})") from None
             self.owner[slots] = chunk
         r.next, r.count = int(record["next"]), int(record["count"])
