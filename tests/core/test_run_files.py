@@ -14,20 +14,24 @@ from collie.whole_files import write_whole
 from trainer.run_files import RunFolderError, copy_whole, read_arrays, read_json_object, write_json
 
 
-def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path) -> None:
+    """A full disk mid-write (a file size limit stands in: the kernel refuses the write past 16 bytes)."""
+    import resource
+    import signal
+
     path = tmp_path / "summary.json"
     write_json(path, {"status": "finished", "epochs_done": 3})
-
-    def disk_full(self: Path, text: str) -> int:  # half the text lands, then the disk is full
-        with open(self, "w") as f:
-            f.write(text[: len(text) // 2])
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(Path, "write_text", disk_full)
-    with pytest.raises(OSError, match="No space left"):
-        write_json(path, {"status": "finished", "epochs_done": 4})
-    monkeypatch.undo()
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG, not death
+    resource.setrlimit(resource.RLIMIT_FSIZE, (16, hard))
+    try:
+        with pytest.raises(OSError, match="File too large"):
+            write_json(path, {"status": "finished", "epochs_done": 4})
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, handler)
     assert read_json_object(path) == {"status": "finished", "epochs_done": 3}
+    assert not (tmp_path / "summary.json.partial").exists()
 
 
 def test_a_file_cut_short_is_named(tmp_path: Path) -> None:
