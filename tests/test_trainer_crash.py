@@ -5,6 +5,7 @@ import contextlib
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -307,3 +308,13 @@ def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(
         assert unnamed.wait(timeout=300) == 0, log.read_text()[-3000:]  # no --task: it follows the run's
         assert json.loads((tmp_path / "follows" / "config.json").read_text())["task"] == "range"
         assert json.loads((tmp_path / "follows" / "summary.json").read_text())["config"]["task"] == "range"
+
+        # a run made before the service kept rules (migration 0007): no rule stored, its task named
+        with CollieClient(api, TOKENS["trainer"]) as trainer:
+            old = trainer.create_run(spec.model_copy(update={"task": "hole"})).id
+        with sqlite3.connect(tmp_path / "c.db") as db:
+            db.execute("UPDATE runs SET task_definition = NULL WHERE id = ?", (old,))
+        older = cli(*train_args(tmp_path / "older", api, "--epochs", "2", "--feedback-timeout", "0.5"), "--run-id",
+                    str(old), log=log)  # fmt: skip
+        assert older.wait(timeout=300) == 0, log.read_text()[-3000:]  # was: "holds neither a task rule nor …"
+        assert json.loads((tmp_path / "older" / "task.json").read_text())["definition"]["name"] == "hole"

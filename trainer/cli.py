@@ -251,8 +251,14 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         if ended:  # its sessions would all be refused (409): say why now, not in a traceback later
             raise ValueError(ended)
         rule = from_stored(held.task_definition, held.instruction)
-        if rule.task is None and rule.instruction is None:
-            raise ValueError(f"run {source.run_id} on the service holds neither a task rule nor an instruction")
+        if rule.task is None and rule.instruction is None:  # a run made before the service kept rules (12-01)
+            try:
+                rule = choose_rule(dataclasses.replace(cfg, task=held.task, task_file="", instruction=""))
+            except ValueError as exc:
+                raise ValueError(
+                    f"run {source.run_id} on the service holds neither a task rule nor an instruction, and its "
+                    f"task {held.task!r} is no built-in one ({exc})"
+                ) from None
         cfg.task = held.task  # the rule it follows is the run's: its files and reports name that task
     else:
         if rule.task is not None and rule.definition is None:
