@@ -94,3 +94,19 @@ def test_a_saved_run_from_before_these_options_keeps_what_it_ran_with() -> None:
     old = Config.from_stored({**saved, "a_key_from_the_future": 1})
     assert (old.obs_norm, old.init, old.log_std_min, old.diayn) == ("rollout", "torch", -5.0, "sphere")
     assert not old.fused_adam and not old.fast_ops  # a resumed old run keeps its step's arithmetic
+
+
+def test_a_saved_run_without_acting_is_dated_by_its_keys() -> None:
+    """Rollouts acted through `Actor` ("fast") from 12-01 16:07, but `acting` entered the config
+    only on 12-05: before then a config shows the fast path by holding `physics_threads` (16:48).
+    A run from before acted through torch; resumed fast, its next epochs differed from the old
+    code's continuation (and a report took it for today's runs)."""
+    from trainer.same_run import differing_keys
+
+    today = make_config("cpu", "point").to_dict()
+    fast = {k: v for k, v in today.items() if k != "acting"}  # 12-01 17:00 to 12-05
+    torch_era = {k: v for k, v in fast.items() if k != "physics_threads"}  # before 12-01 16:07
+    assert Config.from_stored(fast).acting == "fast" and Config.from_stored(torch_era).acting == "torch"
+    assert differing_keys(torch_era, today) == ["acting"]  # was []: averaged with today's runs
+    assert differing_keys(torch_era, {**today, "acting": "torch"}) == []  # what reproduces it
+    assert differing_keys(fast, today) == []

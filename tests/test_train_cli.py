@@ -462,3 +462,19 @@ def test_an_abbreviated_flag_is_not_taken_for_the_flag(tmp_path: Path) -> None:
     last = proc.stderr.strip().splitlines()[-1]  # the command named: `collie up --train-args` quotes it (was "collie:")
     assert proc.returncode == 2 and last.startswith("collie train: error: unrecognized arguments: --ou"), last
     assert not (tmp_path / "run").exists()
+
+
+def test_a_resumed_run_saved_before_some_options_says_what_it_assumed(run_copy: Path) -> None:
+    """A run saved by an older collie lacks the keys of options added since: it resumes with what it
+    ran with (FIRST_VERSION), and says so once, as config.json is rewritten with them."""
+    saved = json.loads((run_copy / "config.json").read_text())
+    for key in ("fused_adam", "fast_ops", "flush_denormal"):
+        del saved[key]
+    (run_copy / "config.json").write_text(json.dumps(saved))
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    said = f"collie train: {run_copy / 'config.json'} predates some options; it resumes as it ran: "
+    assert said + "--fused-adam false, --fast-ops false, --flush-denormal false" in proc.stderr, proc.stderr[-2000:]
+    assert json.loads((run_copy / "config.json").read_text())["fused_adam"] is False
+    again = train("--out", str(run_copy), "--resume", "--epochs", "4")
+    assert again.returncode == 0 and "predates" not in again.stderr  # said once: the keys are written now

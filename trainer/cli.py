@@ -21,7 +21,7 @@ from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
 from trainer.checkpoint import ResumeError
-from trainer.config import PRESETS, Config, field_notes, flag, make_config, people_schedule
+from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.same_run import differing_keys
@@ -467,6 +467,10 @@ def run(args: argparse.Namespace) -> int:
             for k in RESUME_RUNTIME:
                 if k in args.given:
                     setattr(cfg, k, getattr(asked, k))
+            assumed = {k: v for k, v in first_version(stored).items() if k not in stored}
+            if assumed:  # config.json is rewritten with them: say so once, when they are filled in
+                said = ", ".join(f"{flag(k)} {v if isinstance(v, str) else json.dumps(v)}" for k, v in assumed.items())
+                print(f"collie train: {source} predates some options; it resumes as it ran: {said}", file=sys.stderr)
             ignored = ignored_on_resume(args, asked, cfg)
             if ignored:
                 print(

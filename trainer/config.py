@@ -211,7 +211,7 @@ class Config:
         another type than its field's (`"hidden": "64"`, edited by hand): RunFolderError naming
         `source`, the key and the value, not a TypeError deep in the trainer."""
         hints = get_type_hints(cls)
-        values = {**FIRST_VERSION, **{k: v for k, v in stored.items() if k in hints}}
+        values = {**first_version(stored), **{k: v for k, v in stored.items() if k in hints}}
         for key, value in values.items():
             kind = of_type(value, hints[key])
             if kind:
@@ -253,7 +253,20 @@ FIRST_VERSION: dict[str, Any] = dict(
     fused_adam=False,
     fast_ops=False,
     flush_denormal=False,
+    acting="torch",
 )
+# Options whose later value a saved config shows by holding a key that came after it. `acting`
+# entered the config on 12-05 (5136c49), but rollouts acted through `Actor` ("fast") from 12-01
+# 16:07 (18403cf); `physics_threads`, saved from 16:48 (7288454), tells the two apart. A run
+# started in the 41 minutes between reads as torch.
+LATER_BY_KEY: dict[str, tuple[str, Any]] = {"acting": ("physics_threads", "fast")}
+
+
+def first_version(stored: dict[str, Any]) -> dict[str, Any]:
+    """What a saved config ran with for the options it holds no key of (FIRST_VERSION, with
+    LATER_BY_KEY's values where its own keys date it)."""
+    return FIRST_VERSION | {k: later for k, (key, later) in LATER_BY_KEY.items() if key in stored}
+
 
 PRESET_VALUES: dict[str, dict[str, Any]] = {
     "paper": {},  # the dataclass defaults are the paper's values

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from trainer.config import FIRST_VERSION, Config, make_config
+from trainer.config import FIRST_VERSION, Config, first_version, make_config
 from trainer.run_files import read_json_object
 
 # where a run's folder and task file were, how it used the machine and how often it checkpointed
@@ -33,7 +33,7 @@ def comparable(cfg: dict[str, Any]) -> dict[str, Any]:
     """`cfg` as this version reads it, without NOT_THE_RUN: a key it lacks takes the value the run
     had (`Config.from_stored`: an option the run predates) or else its preset's; unknown keys dropped."""
     preset = {k: v for k, v in preset_defaults(cfg).items() if k not in FIRST_VERSION}
-    full = Config.from_stored({**preset, **cfg}).to_dict()
+    full = Config.from_stored({**preset, **first_version(cfg), **cfg}).to_dict()  # dated by cfg's own keys
     return {k: v for k, v in full.items() if k not in NOT_THE_RUN}
 
 
