@@ -307,6 +307,10 @@ def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(
         unnamed = cli(*follows, "--run-id", str(made), log=log)
         assert unnamed.wait(timeout=300) == 0, log.read_text()[-3000:]  # no --task: it follows the run's
         assert json.loads((tmp_path / "follows" / "config.json").read_text())["task"] == "range"
+        assert json.loads((tmp_path / "follows" / "config.json").read_text())["total_queries"] == 2  # the run's budget
+        budget = cli(*train_args(tmp_path / "budget", api, "--total-queries", "9", "--run-id", str(made)), log=log)
+        assert budget.wait(timeout=300) == 2  # it would ask past the budget the run holds (and shows)
+        assert f"run {made} on the service is not this trainer's: --total-queries 9 here, 2 there" in log.read_text()
         assert json.loads((tmp_path / "follows" / "summary.json").read_text())["config"]["task"] == "range"
 
         # a run made before the service kept rules (migration 0007): no rule stored, its task named

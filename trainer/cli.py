@@ -260,6 +260,8 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
                     f"task {held.task!r} is no built-in one ({exc})"
                 ) from None
         cfg.task = held.task  # the rule it follows is the run's: its files and reports name that task
+        if METHODS[cfg.method].asks_labels and held.n_total:  # and its label budget, the dashboard's (None: unset)
+            cfg.total_queries = held.n_total
     else:
         if rule.task is not None and rule.definition is None:
             raise ValueError(f"task {cfg.task!r} is a rule function: only a task painted from regions can travel")
@@ -324,6 +326,8 @@ def unlike_the_run(held: RunRead, cfg: Config, given: frozenset[str] = frozenset
     }
     if given & {"task", "task_file", "instruction"}:  # its metrics would be another task's under this one's name
         pairs["--task"] = (held.task, cfg.task)
+    if "total_queries" in given and METHODS[cfg.method].asks_labels:  # it would ask past (or short of) the budget
+        pairs["--total-queries"] = (held.n_total, cfg.total_queries)
     return [f"{flag} {mine} here, {theirs} there" for flag, (theirs, mine) in pairs.items() if theirs != mine]
 
 
