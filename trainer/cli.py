@@ -67,7 +67,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     add_token_arguments(p, "trainer")  # --token / --token-file / COLLIE_TOKEN, for --api
     p.add_argument(
-        "--run-id", type=record_id, default=None, help="existing run id on the service (default: create one)"
+        "--run-id",
+        type=record_id,
+        default=None,
+        help="existing run id on the service, whose task and label budget it follows (default: create one)",
     )
     p.add_argument(
         "--feedback-timeout",
