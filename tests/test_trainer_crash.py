@@ -308,6 +308,20 @@ def test_a_trainer_unlike_the_run_it_is_given_is_refused_naming_the_differences(
         assert unnamed.wait(timeout=300) == 0, log.read_text()[-3000:]  # no --task: it follows the run's
         assert json.loads((tmp_path / "follows" / "config.json").read_text())["task"] == "range"
         assert json.loads((tmp_path / "follows" / "config.json").read_text())["total_queries"] == 2  # the run's budget
+        # the service moved (collie up --port 0): a run made by hand holds no config to tell it by, and is
+        # not refused for the keys it lacks; a damaged memo is no dead end when the run is named
+        memo = tmp_path / "follows" / "service_run.json"
+        memo.write_text(json.dumps({"api": "http://127.0.0.1:9", "run_id": made}))
+        moved = cli(
+            *follows[:-4], "--feedback-timeout", "0.5", "--epochs", "3", "--resume", "--run-id", str(made), log=log
+        )
+        assert moved.wait(timeout=300) == 0, log.read_text()[-3000:]
+        memo.write_text("{")
+        damaged = cli(
+            *follows[:-4], "--feedback-timeout", "0.5", "--epochs", "4", "--resume", "--run-id", str(made), log=log
+        )
+        assert damaged.wait(timeout=300) == 0, log.read_text()[-3000:]
+        assert f"collie train: warning: {memo}: not JSON" in log.read_text()
         budget = cli(*train_args(tmp_path / "budget", api, "--total-queries", "9", "--run-id", str(made)), log=log)
         assert budget.wait(timeout=300) == 2  # it would ask past the budget the run holds (and shows)
         assert f"run {made} on the service is not this trainer's: --total-queries 9 here, 2 there" in log.read_text()

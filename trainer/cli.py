@@ -216,7 +216,15 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     wait_for_service(args.api, token)
     memo = Path(cfg.out) / "service_run.json"
     run_id = args.run_id
-    remembered = remembered_run(memo) if memo.exists() and (run_id is None or args.resume) else None
+    remembered = None
+    if memo.exists() and (run_id is None or args.resume):
+        try:
+            remembered = remembered_run(memo)
+        except ValueError as exc:
+            if run_id is None:
+                raise ValueError(f"{exc}; give the run's --run-id") from None
+            # the run is named: the memo would only check that it is this folder's, and cannot be read
+            print(f"collie train: warning: {exc}; continuing with run {run_id}", file=sys.stderr)
     if remembered is not None and args.resume:  # the checkpoint is that run's: another's would lose its labels
         mine, where = remembered
         if run_id is not None and run_id != mine:
@@ -238,7 +246,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         unlike = unlike_the_run(held, cfg, args.given)
         if remembered is not None and args.resume and remembered[1] not in (None, args.api):
             # the service moved (`collie up --port 0`), or this is another service: its run must be this one
-            moved = [k for k in differing_keys(held.config, cfg.to_dict()) if k != "epochs"]
+            moved = service_moved_unlike(held.config, cfg)
             if moved:
                 raise ValueError(
                     f"--resume: {cfg.out} belongs to run {remembered[0]} on {remembered[1]} (service_run.json); "
@@ -263,7 +271,8 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
                     f"task {held.task!r} is no built-in one ({exc})"
                 ) from None
         cfg.task = held.task  # the rule it follows is the run's: its files and reports name that task
-        if METHODS[cfg.method].asks_labels and held.n_total:  # and its label budget, the dashboard's (None: unset)
+        joining = not args.resume  # a resumed trainer keeps its checkpoint's budget, as all its config
+        if joining and METHODS[cfg.method].asks_labels and held.n_total is not None:  # the run's, as the dashboard's
             cfg.total_queries = held.n_total
     else:
         if rule.task is not None and rule.definition is None:
@@ -292,6 +301,16 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
+def service_moved_unlike(held: dict[str, Any], cfg: Config) -> list[str]:
+    """The config keys in which the run a moved service holds differs from this folder's, among
+    those it holds (a run made by hand may hold few or none), epochs aside (more extend a run)."""
+    try:
+        keys = differing_keys(held, cfg.to_dict())
+    except ValueError:  # a hand-made config of the wrong types: nothing to compare by
+        return []
+    return [k for k in keys if k != "epochs" and k in held]
+
+
 def remembered_run(memo: Path) -> tuple[int, str | None]:
     """The run id and service URL a run folder's service_run.json names (an id: a positive integer,
     as the service's; not 1.5 or true read as run 1); ValueError naming the file if it is damaged."""
@@ -300,9 +319,9 @@ def remembered_run(memo: Path) -> tuple[int, str | None]:
     data = read_json_object(memo)  # RunFolderError (a ValueError) naming it
     run_id, api = data.get("run_id"), data.get("api")
     if not isinstance(run_id, int) or isinstance(run_id, bool) or not 1 <= run_id <= MAX_INT:
-        raise ValueError(f"{memo} is damaged (run_id {json.dumps(run_id)} is not a run id); give the run's --run-id")
+        raise ValueError(f"{memo} is damaged (run_id {json.dumps(run_id)} is not a run id)")
     if api is not None and not isinstance(api, str):
-        raise ValueError(f"{memo} is damaged (api {json.dumps(api)} is not a URL); give the run's --run-id")
+        raise ValueError(f"{memo} is damaged (api {json.dumps(api)} is not a URL)")
     return run_id, api
 
 
@@ -329,7 +348,7 @@ def unlike_the_run(held: RunRead, cfg: Config, given: frozenset[str] = frozenset
     }
     if given & {"task", "task_file", "instruction"}:  # its metrics would be another task's under this one's name
         pairs["--task"] = (held.task, cfg.task)
-    if "total_queries" in given and METHODS[cfg.method].asks_labels:  # it would ask past (or short of) the budget
+    if "total_queries" in given and METHODS[cfg.method].asks_labels and held.n_total is not None:  # past the budget
         pairs["--total-queries"] = (held.n_total, cfg.total_queries)
     return [f"{flag} {mine} here, {theirs} there" for flag, (theirs, mine) in pairs.items() if theirs != mine]
 
