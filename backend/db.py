@@ -125,7 +125,7 @@ class Database:
                 with conn.begin():
                     yield conn
                 published: list[tuple[int, int]] = conn.info.pop("published")
-                changed = changes_before is None or _changes(conn) != changes_before
+                changed = changes_before is not None and _changes(conn) != changes_before  # unknown: no proof
         except DBAPIError:
             self._wrote_at = -math.inf  # perhaps a full disk, read-only files: the next check writes
             raise
@@ -140,18 +140,19 @@ class Database:
             yield conn
 
     def unwritable(self) -> str | None:
-        """None when the database takes writes, else why not (or the write's DBAPIError). A write
-        that changed rows, committed in the last WROTE_RECENTLY_S, says so; else, on SQLite, a write transaction that
-        rewrites the header's user_version unchanged (one log frame) fails exactly when a real
-        write would: full disk, read-only or immutable files, I/O error. A server database: whether
-        its transactions are read-only (a standby, default_transaction_read_only); its full disk
-        shows on the writes themselves."""
+        """None when the database takes writes, else why not (or the write's DBAPIError). SQLite: a
+        write that changed rows, committed in the last WROTE_RECENTLY_S, says so; else a write
+        transaction that rewrites the header's user_version unchanged (one log frame) fails exactly
+        when a real write would: full disk, read-only or immutable files, I/O error. A server
+        database: whether its transactions are read-only (a standby, default_transaction_read_only),
+        asked every time; its full disk shows on the writes themselves."""
         if time.monotonic() - self._wrote_at < WROTE_RECENTLY_S:
             return None  # a busy service is not slowed by a health check taking the write lock
-        with self.write() as conn:
-            if not is_sqlite(self.url):
+        if not is_sqlite(self.url):  # a question, not a write: its answer proves no write
+            with self.read() as conn:
                 read_only = conn.exec_driver_sql("SHOW transaction_read_only").scalar()
-                return "its transactions are read-only" if read_only == "on" else None
+            return "its transactions are read-only" if read_only == "on" else None
+        with self.write() as conn:
             version = int(conn.exec_driver_sql("PRAGMA user_version").scalar() or 0)
             conn.exec_driver_sql(f"PRAGMA user_version = {version}")
         self._wrote_at = time.monotonic()  # a frame was written, though no row changed

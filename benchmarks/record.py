@@ -49,7 +49,9 @@ def _strict(value: Any) -> Any:
         return [_strict(v) for v in value]
     if isinstance(value, int | float | str | bool) or value is None:
         return None if isinstance(value, float) and not math.isfinite(value) else value
-    return _strict(float(value))  # numpy scalars and the like
+    if hasattr(value, "item"):  # a numpy or torch scalar: its Python value (an int stays an int)
+        return _strict(value.item())
+    return str(value)  # a Path, a device: as it reads
 
 
 def record(

@@ -1,8 +1,9 @@
 """SIGTERM while `collie train` starts (its imports take seconds: torch; then envs, the epoch-0
 evaluation): noted here, and the start ends as Ctrl-C does (`collie train: interrupted`, exit 130)
 once it reaches `trainer.cli.run`'s check, instead of dying by the signal with no word. Light, so
-`collie.cli` installs it before importing the trainer; the training loop puts its own handler over
-it (a final checkpoint)."""
+`collie.cli` installs it before importing the trainer. The training loop puts its own handler over
+it (a final checkpoint) and, if one came after that check (while the run resumed, rebuilt its
+labels or ran its epoch-0 evaluation), stops at once, checkpointed."""
 
 from __future__ import annotations
 

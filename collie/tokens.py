@@ -14,6 +14,8 @@ import secrets
 import sys
 from pathlib import Path
 
+from collie.whole_files import not_replaceable
+
 TOKEN_ENV = "COLLIE_TOKEN"
 HEADER_SAFE = re.compile(r"[!-~]+")  # printable ASCII without spaces: what a bearer header carries
 MIN_TOKEN = 16  # a generated token has 43 characters
@@ -91,8 +93,8 @@ def weakness(token: str) -> str | None:
 def write_secret(path: Path, text: str) -> None:
     """Write a file holding secrets, readable by its owner only, in one rename (a reader never
     sees half of it, and it is never world-readable, not even for a moment). A path that is no
-    regular file (/dev/null, a FIFO) is written in place, as collie.whole_files does."""
-    if path.exists() and not path.is_file() and not path.is_dir():
+    regular file (/dev/null, a FIFO) or in /dev is written in place, as collie.whole_files does."""
+    if not_replaceable(path):
         path.write_text(text)
         return
     path.parent.mkdir(parents=True, exist_ok=True)

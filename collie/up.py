@@ -380,13 +380,12 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
             return None
         return f"run failed: {summary.get('error', 'see its log')}" if summary.get("status") == "failed" else None
 
-    def checkpointed() -> int | None:
-        """When the trainer last checkpointed: a trainer killed again and again still progresses
-        while each start gets this far (a restart resumes from it)."""
-        try:
-            return (trainer_out / "checkpoint.pt").stat().st_mtime_ns
-        except OSError:
-            return None
+    def checkpointed() -> int:
+        """The newest replay chunk a checkpoint wrote (trainer/replay_log.py): it grows only with new
+        trajectories, so a trainer killed again and again still progresses while each start gets
+        this far, and one that only rewrites its checkpoint at the same epoch on the way out does not."""
+        chunks = (trainer_out / "replay").glob("*.npz") if (trainer_out / "replay").is_dir() else ()
+        return max((int(f.stem) for f in chunks if f.stem.isdigit()), default=-1)
 
     trainer = stack.start(
         "trainer", train_args, trainer_env, done_when_ok=run_is_over, fatal=run_failed, progress=checkpointed

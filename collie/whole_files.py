@@ -15,9 +15,9 @@ def write_whole(path: Path, write: Callable[[BinaryIO], object], sync: bool = Fa
     disk) leaves the old file as it was and no .partial behind. PATH.partial, not PATH with its
     suffix swapped: `/tmp` would have become `/tmp.tmp`. `sync`: on disk before the rename (a
     checkpoint must survive a power cut, not only a killed process). A path that is no regular
-    file, such as /dev/null or a FIFO, is written in place: renamed over, /dev/null would become
-    a plain file for every program on the machine (as root)."""
-    if path.exists() and not path.is_file() and not path.is_dir():
+    file, such as /dev/null or a FIFO, or anything in /dev, is written in place: renamed over,
+    /dev/null would become a plain file for every program on the machine (as root)."""
+    if not_replaceable(path):
         with open(path, "wb") as f:
             write(f)
         return
@@ -31,3 +31,11 @@ def write_whole(path: Path, write: Callable[[BinaryIO], object], sync: bool = Fa
         partial.replace(path)
     finally:
         partial.unlink(missing_ok=True)
+
+
+def not_replaceable(path: Path) -> bool:
+    """A path whose file a rename must not replace: a device, FIFO or socket, or anything in /dev
+    (/dev/stdout is a link). A link elsewhere is replaced, not followed: one planted in /tmp must
+    not turn a write into a write of whatever it points at."""
+    in_dev = path.absolute().parts[:2] == ("/", "dev")
+    return in_dev or (path.exists() and not path.is_file() and not path.is_dir())

@@ -478,3 +478,22 @@ def test_a_resumed_run_saved_before_some_options_says_what_it_assumed(run_copy: 
     assert json.loads((run_copy / "config.json").read_text())["fused_adam"] is False
     again = train("--out", str(run_copy), "--resume", "--epochs", "4")
     assert again.returncode == 0 and "predates" not in again.stderr  # said once: the keys are written now
+
+
+def test_sigterm_after_the_start_before_the_first_epoch_stops_the_run_checkpointed(tmp_path: Path) -> None:
+    """Between the start's check and the loop's own handler (the run's files, its epoch-0
+    evaluation) a SIGTERM was noted and then ignored: `collie up` waited 15 s and killed it."""
+    marks = PacedMarks(tmp_path)
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [*TRAIN, "--out", str(out), "--epochs", "3"], stderr=subprocess.PIPE, text=True, env=marks.env
+    )
+    marks.signal_at(proc, lambda m: m.what == "run files, tensorboard", signal.SIGTERM)  # the evaluation next
+    try:
+        _, err = proc.communicate(timeout=180)
+    finally:
+        proc.kill()
+        marks.release()
+    assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["status"], summary["epochs_done"]) == ("interrupted", 0) and (out / "checkpoint.pt").exists()

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from collie import startup
+from collie import early_term, startup
 from collie.labels import Label
 from collie.whole_files import write_whole
 from trainer.acting import acting_path
@@ -508,7 +508,10 @@ class Trainer:
     def _install_signal_handlers(self) -> dict[int, Any]:
         if threading.current_thread() is not threading.main_thread():
             return {}  # signals reach only the main thread; an embedded trainer keeps its host's handlers
-        return {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
+        before: dict[int, Any] = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
+        if early_term.ASKED.is_set():  # a SIGTERM while the run resumed, rebuilt or evaluated: stop at once
+            self._signalled = signal.SIGTERM
+        return before
 
     def check_checkpoint_config(self, path: Path, saved: Any) -> None:
         """Refuse a checkpoint whose own config is another run's (one copied from a run of the same

@@ -49,8 +49,12 @@ def test_a_figure_that_is_not_finite_is_written_as_strict_json_null(tmp_path, mo
     import numpy as np
     from record import record
 
-    path = record("t", {"never": float("inf"), "nothing": [float("nan"), np.float32(0.5)]}, {"steps": 3}, tmp_path)
+    figures = {"never": float("inf"), "nothing": [float("nan"), np.float32(0.5)], "n": np.int64(3)}
+    path = record("t", figures, {"steps": 3, "out": tmp_path}, tmp_path)
     text = path.read_text()
     assert "Infinity" not in text and "NaN" not in text
     written = json.loads(text)
-    assert written["figures"] == {"never": None, "nothing": [None, 0.5]} and written["settings"] == {"steps": 3}
+    assert written["figures"] == {"never": None, "nothing": [None, 0.5], "n": 3} and isinstance(
+        written["figures"]["n"], int
+    )
+    assert written["settings"] == {"steps": 3, "out": str(tmp_path)}

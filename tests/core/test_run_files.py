@@ -81,3 +81,11 @@ def test_a_path_that_is_no_regular_file_is_written_in_place_not_renamed_over(tmp
     reader.join(10)
     assert stat.S_ISFIFO(fifo.stat().st_mode) and json.loads(got[0]) == {"a": 1}
     assert not (tmp_path / "sink.partial").exists()
+
+
+def test_the_machines_own_files_are_never_renamed_over() -> None:
+    """/dev/stdout is a link: replaced by a rename, it would be a plain file for every program."""
+    from collie.whole_files import not_replaceable
+
+    assert not_replaceable(Path("/dev/stdout")) and not_replaceable(Path("/dev/null"))
+    assert not not_replaceable(Path("/tmp/collie-info.json"))  # a link planted there is replaced, not followed
