@@ -262,7 +262,7 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     assert pixels.std() > 10.0  # not a blank screen
     assert "being labelled elsewhere" not in page.inner_text("body")
     stack.operator.stop(run.id)
-    stack.post_session(run.id, "ant", 9, 1)  # a stream event wakes the tab
+    stack.trainer.post_metrics(run.id, MetricsIn(epoch=4, values={"loss": 1.0}))  # a stream event wakes the tab
     wait_text(page, "stopping")
     assert "finished" not in page.inner_text("body")
     wait_text(page, "This run takes no more labels")
