@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -235,13 +236,23 @@ def test_resume_with_another_run_than_the_folders_is_refused(service: str, servi
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
-@pytest.mark.parametrize("run_id", ["1e400", "1.5", "true", "0", "-1", '"1"'])
-def test_a_service_run_json_without_a_run_id_is_named(run_copy: Path, service: str, run_id: str) -> None:
-    """1e400 was an OverflowError traceback, 1.5 and true were run 1, 0 and -1 got the advice --run-id 0."""
-    (run_copy / "service_run.json").write_text(f'{{"api": "{service}", "run_id": {run_id}}}')
+def test_a_service_run_json_without_a_run_id_is_named(run_copy: Path, service: str) -> None:
+    """1e400 was an OverflowError traceback."""
+    (run_copy / "service_run.json").write_text(f'{{"api": "{service}", "run_id": 1e400}}')
     proc = api_train(service, "--out", str(run_copy), "--resume", "--epochs", "3")
-    line = refused(proc, str(run_copy / "service_run.json"), "damaged", "not a run id", "give the run's --run-id")
-    assert "--run-id 0" not in line and "--run-id -1" not in line
+    refused(proc, str(run_copy / "service_run.json"), "damaged", "not a run id", "give the run's --run-id")
+
+
+@pytest.mark.parametrize("run_id", ["1e400", "1.5", "true", "0", "-1", '"1"'])
+def test_only_a_positive_integer_is_a_remembered_run_id(tmp_path: Path, run_id: str) -> None:
+    """1.5 and true were read as run 1; 0 and -1 got the advice --run-id 0, which argparse refuses."""
+    from trainer.cli import remembered_run
+
+    memo = tmp_path / "service_run.json"
+    memo.write_text(f'{{"api": "http://127.0.0.1:8000", "run_id": {run_id}}}')
+    with pytest.raises(ValueError, match=f"{re.escape(str(memo))} is damaged .*is not a run id") as err:
+        remembered_run(memo)
+    assert "--run-id 0" not in str(err.value) and "--run-id -1" not in str(err.value)
 
 
 def test_the_car_runs_its_own_task_by_default_and_a_plane_task_is_refused_naming_its_own(tmp_path: Path) -> None:
@@ -278,18 +289,36 @@ def test_a_damaged_run_file_is_named_on_resume(run_copy: Path, name: str) -> Non
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(run_copy / name))
 
 
-@pytest.mark.parametrize(("key", "value"), [("hidden", '"64"'), ("hidden", "64.5"), ("epochs", "null")])
-def test_a_config_value_of_another_type_is_named_on_resume(run_copy: Path, key: str, value: str) -> None:
+def test_a_config_value_of_another_type_is_named_on_resume(run_copy: Path) -> None:
     """Was a TypeError traceback from deep in the trainer."""
     config = run_copy / "config.json"
-    config.write_text(json.dumps(json.loads(config.read_text()) | {key: json.loads(value)}))
-    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(config), repr(key), value)
+    config.write_text(json.dumps(json.loads(config.read_text()) | {"hidden": "64"}))
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(config), repr("hidden"), '"64"')
 
 
-@pytest.mark.parametrize("line", ['{"x": 1}', "[1]", '{"epoch": "3"}'])
-def test_a_metrics_line_without_an_integer_epoch_is_named(run_copy: Path, line: str) -> None:
+@pytest.mark.parametrize(
+    ("key", "value", "kind"),
+    [
+        ("hidden", '"64"', "an integer"),
+        ("hidden", "64.5", "an integer"),
+        ("epochs", "null", "an integer"),
+        ("fused_adam", "1", "true or false"),
+        ("acting", '"fastest"', 'one of "fast", "torch"'),
+        ("lr", "true", "a number"),
+    ],
+)
+def test_a_stored_config_value_of_another_type_is_named(key: str, value: str, kind: str) -> None:
+    from trainer.config import Config, make_config
+    from trainer.run_files import RunFolderError
+
+    stored = make_config("smoke", "point").to_dict() | {key: json.loads(value)}
+    with pytest.raises(RunFolderError, match=re.escape(f"config.json: {key!r} must be {kind}, got {value}")):
+        Config.from_stored(stored, "config.json")
+
+
+def test_a_metrics_line_without_an_integer_epoch_is_named(run_copy: Path) -> None:
     metrics = run_copy / "metrics.jsonl"
-    metrics.write_text(line + "\n" + metrics.read_text())  # was a KeyError or TypeError traceback
+    metrics.write_text('{"epoch": "3"}\n' + metrics.read_text())  # was a TypeError traceback ({"x": 1}: KeyError)
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(metrics), "line 1", "epoch")
 
 
