@@ -8,7 +8,8 @@ so a partial run never overwrites the whole one. Settings: env, threads, device.
    labelled states, 2×1024 MLPs, batch 256) beside a plain SAC update of the same networks and
    METRA's update (w ≡ 1). Keys `full_steps_per_s`, `sac_steps_per_s`, `metra_steps_per_s`,
    `cost_ratio` (goal ≤ 1.3), and `cost_ratio_flops`: the same ratio in FLOPs, what the step costs
-   when every matmul runs at one rate (the floor of `cost_ratio` for the same mathematics).
+   when every matmul runs at one rate (the floor of `cost_ratio` for the same mathematics);
+   `metra_cost_ratio_flops`: METRA's step (w ≡ 1: no labelled states to encode) ÷ SAC's, in FLOPs.
 2. Update FLOP rate: the FLOPs of one full update (counted by torch's FlopCounterMode, forward and
    backward; key `update_gflop_<h>`) times its steps/s, ÷ this machine's rate for a (256 × h)·(h × h)
    matmul, one thread, for h = 256 and 1024. Keys `update_gflops_<h>`, `matmul_gflops_<h>`,
@@ -203,14 +204,15 @@ def bench_update(env_name: str, steps: int, rounds: int) -> dict[str, float]:
         for k, fn in steps_fns.items():
             rates[k].append(timed(fn, steps))
     med = {k: float(np.median(v)) for k, v in rates.items()}
-    _, full_counted, sac_counted, _ = update_setup(env_name, 1024, dev, fast_ops=False)  # every matmul counted
-    counted_full, counted_sac = flops(full_counted), flops(sac_counted)
+    _, full_counted, sac_counted, metra_counted = update_setup(env_name, 1024, dev, fast_ops=False)  # every matmul
+    counted_full, counted_sac, counted_metra = flops(full_counted), flops(sac_counted), flops(metra_counted)
     return {
         "full_steps_per_s": med["full"],
         "sac_steps_per_s": med["sac"],
         "metra_steps_per_s": med["metra"],
         "cost_ratio": med["sac"] / med["full"],
         "cost_ratio_flops": counted_full / counted_sac,
+        "metra_cost_ratio_flops": counted_metra / counted_sac,
     }
 
 
@@ -543,6 +545,7 @@ def main() -> None:
         print(f"  plain SAC step    {u['sac_steps_per_s']:8.1f} steps/s")
         print(f"  METRA step (w ≡ 1) {u['metra_steps_per_s']:7.1f} steps/s")
         print(f"  cost ratio        {u['cost_ratio']:8.2f}×   (goal ≤ 1.30×; in FLOPs {u['cost_ratio_flops']:.2f}×)")
+        print(f"  METRA's step ÷ SAC's, in FLOPs: {u['metra_cost_ratio_flops']:.2f}× (no labelled states to encode)")
     if "flops" in parts:
         f = bench_flops(a.env, a.steps, a.rounds, compiled=not a.no_compile)
         figures |= f
