@@ -4,12 +4,11 @@ from the database file (the service may be running: SQLite in WAL mode lets read
 from __future__ import annotations
 
 import argparse
-import sqlite3
 import sys
-from contextlib import closing
 from pathlib import Path
 
-from sqlalchemy.engine import make_url
+from sqlalchemy import create_engine
+from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import DBAPIError
 
 from backend import migrate
@@ -29,17 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effective", action="store_true", help="one effective label per query, not every event")
 
 
-def unversioned(path: Path) -> str | None:
-    """Why the SQLite file at `path` is no collie database, if it is not, found read-only: the
-    service's connection sets WAL mode, which writes into the file (4 KB into an empty one) before
-    the file could be refused."""
-    try:
-        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as conn:
-            tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-            versioned = "alembic_version" in tables and conn.execute("SELECT 1 FROM alembic_version").fetchone()
-    except sqlite3.Error as exc:
-        return f"is not a collie database ({exc})"
-    return None if versioned else "is not a collie database (no schema version)"
+def looking(url: str, db: Database) -> Engine:
+    """An engine to read the schema version with before anything is written: a SQLite file opened
+    read-only (the service's connections set WAL mode, which writes into the file, 4 KB into an
+    empty one, before it could be refused); a server's database through `db`."""
+    if not is_sqlite(url):
+        return db.engine
+    return create_engine(f"sqlite:///file:{Path(make_url(url).database or '').resolve()}?mode=ro&uri=true")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,14 +48,11 @@ def run(args: argparse.Namespace) -> int:
     if is_sqlite(url) and not Path(make_url(url).database or "").is_file():  # never create an empty one by mistake
         print(f"collie export: error: no database at {where}", file=sys.stderr)
         return 2
-    refused = unversioned(Path(make_url(url).database or "")) if is_sqlite(url) else None
-    if refused is not None:  # left as it was
-        print(f"collie export: error: {where} {refused}", file=sys.stderr)
-        return 2
-    db = Database(url)
+    db = Database(url)  # connects only when used
+    probe = looking(url, db)
     try:
         try:
-            found = migrate.current(db.engine)
+            found = migrate.current(probe)
         except DBAPIError as exc:  # a file that is no SQLite database, a server that refuses us
             fault = "is not a collie database" if is_sqlite(url) else "cannot be read"
             print(f"collie export: error: {where} {fault} ({first_line(exc.orig)})", file=sys.stderr)
@@ -81,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie export: error: {exc.detail}", file=sys.stderr)
         return 1
     finally:
+        probe.dispose()
         db.dispose()
     sys.stdout.write(text if text.endswith("\n") else text + "\n")
     return 0
