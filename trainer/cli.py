@@ -305,10 +305,10 @@ def service_moved_unlike(held: dict[str, Any], cfg: Config) -> list[str]:
     """The config keys in which the run a moved service holds differs from this folder's, among
     those it holds (a run made by hand may hold few or none), epochs aside (more extend a run)."""
     try:
-        keys = differing_keys(held, cfg.to_dict())
+        keys = differing_keys(held, cfg.to_dict(), besides=("epochs",))
     except ValueError:  # a hand-made config of the wrong types: nothing to compare by
         return []
-    return [k for k in keys if k != "epochs" and k in held]
+    return [k for k in keys if k in held]
 
 
 def remembered_run(memo: Path) -> tuple[int, str | None]:

@@ -525,7 +525,7 @@ class Trainer:
             theirs = Config.from_stored(saved, f"{path}'s config").to_dict()
         except ValueError as exc:
             raise ResumeError(str(exc)) from None
-        keys = [k for k in differing_keys(theirs, self.cfg.to_dict()) if k != "epochs"]
+        keys = differing_keys(theirs, self.cfg.to_dict(), besides=("epochs",))
         if keys:
             raise ResumeError(
                 f"{path} does not fit this run's config.json (copied from another run?): its config differs in "

@@ -37,10 +37,11 @@ def comparable(cfg: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in full.items() if k not in NOT_THE_RUN}
 
 
-def differing_keys(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """The config keys whose values differ between `a` and `b`, NOT_THE_RUN aside, sorted."""
+def differing_keys(a: dict[str, Any], b: dict[str, Any], besides: tuple[str, ...] = ()) -> list[str]:
+    """The config keys whose values differ between `a` and `b`, NOT_THE_RUN and `besides` aside
+    (("epochs",): more of them extend a run, a resumed one included), sorted."""
     ca, cb = comparable(a), comparable(b)
-    return sorted(k for k in ca.keys() | cb.keys() if ca.get(k) != cb.get(k))
+    return sorted(k for k in ca.keys() | cb.keys() if ca.get(k) != cb.get(k) and k not in besides)
 
 
 def preset_defaults(cfg: dict[str, Any]) -> dict[str, Any]:
