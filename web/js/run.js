@@ -18,9 +18,9 @@ export class RunPage {
     this.onConnection = onConnection;
     this.map = new SkillMap(root.querySelector("#map"), root.querySelector("#map-note"));
     this.curves = new Curves(root.querySelector("#curves"), root.querySelector("#curves-note"), MAX_POINTS, root.querySelector("#curves-help"));
-    this.controls = new Controls(root, (run) => this.showRun(run));
+    this.controls = new Controls(root, (run) => this.showAnswer(run));
     this.quality = new QualityForm(root, (run) => {
-      this.showRun(run);
+      this.showAnswer(run);
       this.refreshLabeling();
     });
     this.colourBy = root.querySelector("#colour-by");
@@ -50,6 +50,7 @@ export class RunPage {
     if (this.runId !== runId) return;
     this.root.hidden = false;
     this.epoch = 0;
+    this.lastEventId = page.last_event_id; // the newest run event shown: older answers do not undo it
     this.run = page.run;
     this.root.querySelector("#run-title").textContent = `Run #${runId} · ${page.run.env} ${page.run.task} · ${page.run.method}`;
     this.setWatchLink(watchUrl, runId);
@@ -67,7 +68,7 @@ export class RunPage {
     ]);
     this.seeEpoch(page.metrics.epochs.at(-1) ?? 0);
     this.seeEpoch(page.rollouts?.epoch ?? 0);
-    this.source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, {
+    const handlers = {
       status: (e) => this.onStatus(e),
       control: (e) => this.showRun({ ...this.run, control: e.data.control }),
       policy: (e) => this.showRun({ ...this.run, feedback_timeout_s: e.data.timeout_s }),
@@ -77,7 +78,14 @@ export class RunPage {
       retired: () => this.refreshLabeling(),
       label: () => this.refreshLabeling(),
       withdrawn: () => this.refreshLabeling(),
-    }, this.onConnection);
+    };
+    for (const [name, handle] of Object.entries(handlers)) {
+      handlers[name] = (e) => {
+        this.lastEventId = Math.max(this.lastEventId, e.id);
+        handle(e);
+      };
+    }
+    this.source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, handlers, this.onConnection);
     this.timer = setInterval(() => this.refreshLabeling(), LABELING_REFRESH_MS);
   }
 
@@ -100,6 +108,16 @@ export class RunPage {
   uiLink(params) {
     const query = new URLSearchParams({ ...params, token: token() });
     return `${this.watchUrl}${this.watchUrl.includes("?") ? "&" : "?"}${query}`;
+  }
+
+  // The service's answer to this page's own request (pause, quality, ...): a snapshot taken when
+  // the request was served. The stream may have shown newer events by the time it arrives (the
+  // trainer's "paused" can overtake the answer to "pause"); those fields keep the stream's values.
+  showAnswer(run) {
+    if (run.id !== this.runId) return; // another run was opened meanwhile
+    if (run.last_event_id >= this.lastEventId) return this.showRun(run);
+    const { status, epoch, control, feedback_timeout_s } = this.run;
+    this.showRun({ ...run, status, epoch, control, feedback_timeout_s });
   }
 
   showRun(run) {
