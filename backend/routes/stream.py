@@ -110,7 +110,7 @@ async def stream(
 
     def still_allowed() -> bool:
         with db.read() as conn:
-            return auth.active(conn, caller.id)
+            return auth.may_still_see(conn, caller.id, run_id)
 
     async def frames() -> AsyncIterator[str]:
         subscription: Subscription | None = None

@@ -172,10 +172,12 @@ def _active_operators(conn: Connection) -> int:
     return len(rows.all())
 
 
-def active(conn: Connection, principal_id: int) -> bool:
-    """The principal exists and is not revoked (an open stream asks, now and then)."""
-    found = select(Principal.id).where(Principal.id == principal_id, Principal.revoked_at.is_(None))
-    return conn.execute(found).first() is not None
+def may_still_see(conn: Connection, principal_id: int, run_id: int) -> bool:
+    """The principal exists, is not revoked, and its scope still holds `run_id` (an open stream of
+    the run asks, now and then: a change made by another process reaches it so)."""
+    found = select(Principal.runs).where(Principal.id == principal_id, Principal.revoked_at.is_(None))
+    row = conn.execute(found).first()
+    return row is not None and (row.runs is None or run_id in row.runs)
 
 
 def revoke(conn: Connection, principal_id: int) -> LabelerRead:

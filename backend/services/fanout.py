@@ -66,6 +66,7 @@ class StreamFeed:
         self._task: asyncio.Task[None] | None = None
         self.open_by_caller: Counter[int] = Counter()
         self._revoked: set[int] = set()  # principals revoked in this process (a stream may be opening)
+        self._scopes: dict[int, list[int] | None] = {}  # labelers' runs as last set in this process (likewise)
         self._closed = False
         hub.listen(self._published)
 
@@ -88,7 +89,9 @@ class StreamFeed:
             last = await anyio.to_thread.run_sync(self._last_id, run_id)
             self._cursor.setdefault(run_id, last)
         subscription = Subscription(run_id, after, caller_id)
-        subscription.ended = caller_id in self._revoked or self._closed  # revoked or stopping since its check
+        scope = self._scopes.get(caller_id)
+        outside = scope is not None and run_id not in scope
+        subscription.ended = caller_id in self._revoked or outside or self._closed  # changed since its check
         self._subscribers[run_id].add(subscription)
         return subscription
 
@@ -103,7 +106,8 @@ class StreamFeed:
                     subscription.signal.set()
 
     def end_streams_outside(self, caller_id: int, runs: list[int] | None) -> None:
-        """A labeler's scope shrank: its open streams of runs it may no longer see close now."""
+        """A labeler's scope changed: its open streams of runs it may no longer see close now."""
+        self._scopes[caller_id] = runs
         for run_id, subscribers in self._subscribers.items():
             for subscription in subscribers:
                 if subscription.caller_id == caller_id and runs is not None and run_id not in runs:

@@ -3,6 +3,7 @@ a revoked principal stays revoked — a restart with the same bootstrap token in
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import httpx
 import pytest
 
 from backend.main import create_app
+from backend.routes import stream as stream_route
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient, NotInScope
 from collie.schemas import MetricsIn, RolloutsIn, RunRead
@@ -154,6 +156,41 @@ def test_an_operator_changes_a_labelers_runs(
         assert err.value.status == 403
         assert operator.set_labeler_runs(created.id, None).runs is None  # every run again
         assert {mine.id, other.id} <= {r.id for r in movable.runs()}
+
+
+def test_a_scope_narrowed_through_another_service_process_ends_its_streams_at_the_heartbeat(
+    live: BackgroundServer,
+    database_url: str,
+    trainer: CollieClient,
+    operator: CollieClient,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(stream_route, "HEARTBEAT_S", 0.5)
+    mine, other = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
+    created = operator.create_labeler("narrowed-elsewhere", runs=[mine.id, other.id])
+    headers = {"Authorization": f"Bearer {created.token}"}
+    with (
+        BackgroundServer(create_app(settings_for(database_url))) as elsewhere,  # a second process, one database
+        httpx.stream("GET", f"{elsewhere.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held,
+    ):
+        lines = held.iter_lines()
+        assert next(lines).startswith("retry:")
+        assert operator.set_labeler_runs(created.id, [other.id]).runs == [other.id]  # through `live`
+        deadline = time.monotonic() + 10
+        for _ in lines:  # keep-alives, then the end (the heartbeat reads the scope)
+            assert time.monotonic() < deadline, "a stream of a run outside the labeler's runs stayed open"
+
+
+def test_a_stream_opening_as_its_scope_narrows_ends_at_once(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient
+) -> None:
+    mine, other = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
+    created = operator.create_labeler("narrowed-while-opening", runs=[mine.id, other.id])
+    live.app.state.feed.end_streams_outside(created.id, [other.id])  # the change lands between check and subscribe
+    headers = {"Authorization": f"Bearer {created.token}"}
+    with httpx.stream("GET", f"{live.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held:
+        assert held.status_code == 200  # its check read the scope before the change
+        assert [ln for ln in held.iter_lines() if ln.startswith("data:")] == []  # it ends (else: a read timeout)
 
 
 def test_a_scope_change_is_refused_where_it_makes_no_sense(operator: CollieClient, labeler: CollieClient) -> None:
