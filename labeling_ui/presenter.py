@@ -138,9 +138,10 @@ class Presenter:
     def wait_for(self, link: ServiceLink, run: RunRead | None, status: str | None, refused: str | None = None) -> None:
         """Nothing claimable in `run` (None: no run is open; `status` says so); `refused`: the
         service's reason, when it refused the claim (e.g. this labeler's other tabs hold enough)."""
+        since = run.last_event_id if run is not None else None  # read before the claim
         run = link.run(run.id) if run is not None else None  # fresh counts, after our own claims
         with self.tab as state:
-            state.nothing_claimable(run, time.monotonic(), self.wait_s)
+            state.nothing_claimable(run, time.monotonic(), self.wait_s, since)
             held_here = state.held_in(run.id) if run is not None else 0
             waiting_on = state.waiting_on
         if waiting_on is None:

@@ -242,11 +242,15 @@ class TabState:
         if self.shown is not None:
             self.shown.played_to = max(self.shown.played_to, position)
 
-    def nothing_claimable(self, run: RunRead | None, now: float, wait_s: float) -> None:
+    def nothing_claimable(self, run: RunRead | None, now: float, wait_s: float, since: int | None = None) -> None:
         """No segment to show: wait on `run`'s stream (None: no run is open), and try a claim again
-        `wait_s` after `now` without a wake-up (an hour for a run that is over)."""
+        `wait_s` after `now` without a wake-up (an hour for a run that is over). `since`: the run's
+        last event id read before the failed claim; events after it wake the tab (segments posted
+        between the claim and `run`'s later read would otherwise wait for the recheck)."""
         self.shown = None
-        self.waiting_on = None if run is None else (run.id, run.last_event_id)
+        self.waiting_on = None
+        if run is not None:
+            self.waiting_on = (run.id, run.last_event_id if since is None else min(since, run.last_event_id))
         over = run is not None and (run.status in FINISHED or run.control == "stop")
         self.recheck_at = now + (CLOSED_RECHECK_S if over else wait_s)
         if self.phase != Phase.SIGNED_OUT:

@@ -203,6 +203,13 @@ def test_nothing_claimable_waits_on_the_stream_until_the_recheck_or_a_wake_up() 
     assert state.waiting_on is None and state.idle_run is None and state.recheck_at == 110.0
 
 
+def test_events_between_the_failed_claim_and_the_runs_read_wake_the_tab() -> None:
+    state = showing(segment("a"))
+    after_claim = run(3).model_copy(update={"last_event_id": 42})  # a session was posted meanwhile (event 42)
+    state.nothing_claimable(after_claim, now=100.0, wait_s=10.0, since=41)
+    assert state.waiting_on == (3, 41)  # event 42 wakes the tab at once, not the recheck 10 s on
+
+
 def test_a_run_that_is_over_is_rechecked_rarely() -> None:
     state = showing(segment("a"))
     for over in (run().model_copy(update={"status": "finished"}), run().model_copy(update={"control": "stop"})):
