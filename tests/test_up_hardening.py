@@ -310,11 +310,16 @@ def test_a_stack_that_crashed_before_its_first_checkpoint_resumes_its_run_not_a_
             while client.run(meta["run_id"]).n_labels < 2:  # the first session (epoch 2) labelled
                 assert time.monotonic() < deadline and proc.poll() is None
                 time.sleep(0.2)
-        for pid in children(tmp_path).values():
+        proc.send_signal(signal.SIGSTOP)  # held first: it restarts no part while they are killed
+        crashed = children(tmp_path)
+        for pid in crashed.values():
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         proc.kill()
         proc.wait()
+        deadline = time.monotonic() + 60  # gone, and with them their hold on the stack's lock
+        while any(alive(pid) for pid in crashed.values()) and time.monotonic() < deadline:
+            time.sleep(0.2)
     finally:
         if proc.poll() is None:
             proc.kill()

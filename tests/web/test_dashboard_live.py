@@ -47,7 +47,6 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
         str(out),
         "--info-json",
         str(info),
-        "--exit-when-done",
         "--no-label-ui",
         "--train-args=--epochs 100000 --eval-every 2",
     ]  # long enough to pause; evaluated often
