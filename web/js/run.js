@@ -29,6 +29,7 @@ export class RunPage {
     this.renderCurves = coalesce(() => this.curves.render(), 200);
     this.source = null;
     this.timer = null;
+    this.gen = 0; // bumped by each close (open closes first): an open still loading sees it is stale
     this.discard = { armed: null, message: "" };
     root.querySelector("#labeling-body").addEventListener("click", (event) => {
       const button = event.target.closest("button[data-discard]");
@@ -38,16 +39,17 @@ export class RunPage {
 
   async open(runId, watchUrl) {
     this.close();
+    const gen = this.gen;
     this.runId = runId;
     this.discard = { armed: null, message: "" };
     let page;
     try {
       page = await api(`dashboard/runs/${runId}?max_points=${MAX_POINTS}`);
     } catch (error) {
-      if (this.runId === runId) this.runId = null; // the next runs update tries again
+      if (gen === this.gen) this.runId = null; // the next runs update tries again
       throw error;
     }
-    if (this.runId !== runId) return;
+    if (gen !== this.gen) return; // another open (this run's again too) or a close came meanwhile
     this.root.hidden = false;
     this.epoch = 0;
     this.lastEventId = page.last_event_id; // the newest run event shown: older answers do not undo it
@@ -66,6 +68,7 @@ export class RunPage {
       this.map.set({ task: page.task, rollouts: page.rollouts, labelled: page.labelled, labels: page.labels, colourBy: this.colourBy.value, env: page.run.env }),
       this.curves.load(page.metrics),
     ]);
+    if (gen !== this.gen) return; // the same while the charts drew: no stream or timer for this one
     this.seeEpoch(page.metrics.epochs.at(-1) ?? 0);
     this.seeEpoch(page.rollouts?.epoch ?? 0);
     const handlers = {
@@ -81,15 +84,18 @@ export class RunPage {
     };
     for (const [name, handle] of Object.entries(handlers)) {
       handlers[name] = (e) => {
+        if (source !== this.source) return; // a closed stream's last events are another page's
         this.lastEventId = Math.max(this.lastEventId, e.id);
         handle(e);
       };
     }
-    this.source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, handlers, this.onConnection);
+    const source = stream(`runs/${runId}/stream`, { after: page.last_event_id }, handlers, this.onConnection);
+    this.source = source;
     this.timer = setInterval(() => this.refreshLabeling(), LABELING_REFRESH_MS);
   }
 
   close() {
+    this.gen += 1;
     this.source?.close();
     clearInterval(this.timer);
     this.source = null;
@@ -115,7 +121,10 @@ export class RunPage {
   // trainer's "paused" can overtake the answer to "pause"); those fields keep the stream's values.
   showAnswer(run) {
     if (run.id !== this.runId) return; // another run was opened meanwhile
-    if (run.last_event_id >= this.lastEventId) return this.showRun(run);
+    if (run.last_event_id >= this.lastEventId) {
+      this.lastEventId = run.last_event_id;
+      return this.showRun(run);
+    }
     const { status, epoch, control, feedback_timeout_s } = this.run;
     this.showRun({ ...run, status, epoch, control, feedback_timeout_s });
   }

@@ -1,0 +1,143 @@
+"""The dashboard shows the newest of what it heard when answers come back out of order, in Debian's
+Chromium against a live service: the test holds chosen answers (Playwright's page.route) and lets
+them through late, as a busy machine or network does. Each hold makes one interleaving happen every
+time; each check waits for a later answer that has to pass through the service, so the late one has
+long been handled by then."""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from playwright.sync_api import Browser, BrowserContext, Page, Route
+from service.conftest import TOKENS, make_run_spec
+
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.schemas import MetricsIn
+
+WAIT_MS = 30_000
+PLOTLY = "**/vendor/plotly-basic.min.js"  # held: every chart waits for it, so an open stays mid-draw
+
+
+class Held:
+    """The requests matching `pattern` while `holding`: each answered by the service when it is made
+    (unless fetch=False) and handed to the page by `release`, or at once if holding ended while the
+    service answered."""
+
+    def __init__(self, page: Page, pattern: Any, fetch: bool = True) -> None:
+        self.page = page
+        self.fetch = fetch
+        self.holding = True
+        self.routes: list[tuple[Route, Any]] = []
+        self.released: set[int] = set()
+        page.route(pattern, self.handle)
+
+    def handle(self, route: Route) -> None:
+        if not self.holding:
+            route.continue_()
+            return
+        self.routes.append((route, route.fetch() if self.fetch else None))
+        if not self.holding:
+            self.release(len(self.routes) - 1)
+
+    def wait(self, n: int) -> None:
+        """Until `n` requests are held (their answers fetched)."""
+        deadline = time.monotonic() + WAIT_MS / 1000
+        while len(self.routes) < n:
+            assert time.monotonic() < deadline, f"{len(self.routes)} of {n} requests held"
+            self.page.wait_for_timeout(20)  # Playwright hands the page's requests over meanwhile
+
+    def release(self, i: int, **answer: Any) -> None:
+        """Held request `i`'s answer (or `answer`: route.fulfill's arguments) to the page, once."""
+        if i in self.released:
+            return
+        self.released.add(i)
+        route, fetched = self.routes[i]
+        if answer:
+            route.fulfill(**answer)
+        elif fetched is not None:
+            route.fulfill(response=fetched)
+        else:
+            route.continue_()
+
+
+@pytest.fixture(scope="module")
+def context(browser: Browser) -> Iterator[BrowserContext]:
+    # bypass_csp: Playwright's wait_for_function evaluates strings, which the dashboard's CSP refuses
+    context = browser.new_context(bypass_csp=True, viewport={"width": 1400, "height": 1000})
+    context.set_default_timeout(WAIT_MS)
+    yield context
+    context.close()
+
+
+@pytest.fixture
+def page(context: BrowserContext) -> Iterator[Page]:
+    page = context.new_page()
+    yield page
+    page.close()
+
+
+def goto(page: Page, live: BackgroundServer, run_id: int) -> None:
+    """The dashboard at run `run_id`, not waiting for the page's load (a held script delays it)."""
+    page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run_id}", wait_until="commit")
+
+
+def streams(page: Page) -> list[int]:
+    """The runs whose event streams the page opens from now on."""
+    opened: list[int] = []
+    page.on("request", lambda r: (m := re.search(r"/api/runs/(\d+)/stream", r.url)) and opened.append(int(m[1])))
+    return opened
+
+
+def title_is(page: Page, run_id: int) -> None:
+    page.wait_for_function(f"document.querySelector('#run-title').textContent.startsWith('Run #{run_id} ')")
+
+
+def shown_epoch(page: Page, trainer: CollieClient, run_id: int, epoch: int) -> None:
+    """A metrics row of the open run, through the service and the run's stream, is on the page."""
+    trainer.post_metrics(run_id, MetricsIn(epoch=epoch, values={"safe_ratio": 0.5}))
+    page.wait_for_function(f"document.querySelector('#run-epoch').textContent === '{epoch}'")
+
+
+def test_a_run_opened_while_another_draws_gets_only_its_own_stream(
+    page: Page, live: BackgroundServer, trainer: CollieClient
+) -> None:
+    """A's charts still draw when the operator opens B: A's stream must not start (its events
+    would land on B's page, and nothing would ever close it)."""
+    a, b = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
+    opened = streams(page)
+    plotly = Held(page, PLOTLY, fetch=False)
+    goto(page, live, a.id)
+    plotly.wait(1)
+    title_is(page, a.id)  # A's snapshot shown; its charts wait for Plotly
+    page.evaluate(f"window.location.hash = '#run={b.id}'")
+    title_is(page, b.id)
+    with page.expect_request(lambda r: f"/api/runs/{b.id}/stream" in r.url):
+        plotly.release(0)
+    shown_epoch(page, trainer, b.id, 3)
+    assert opened == [b.id]
+
+
+def test_a_run_opened_again_while_it_draws_has_one_stream(
+    page: Page, live: BackgroundServer, trainer: CollieClient
+) -> None:
+    """#run=A, a missing run, A again, all while A's first charts draw: one stream of A, not two
+    (each metrics row would be drawn twice)."""
+    a = trainer.create_run(make_run_spec())
+    opened = streams(page)
+    plotly = Held(page, PLOTLY, fetch=False)
+    goto(page, live, a.id)
+    plotly.wait(1)
+    title_is(page, a.id)
+    page.evaluate("window.location.hash = '#run=99999'")
+    page.wait_for_function("document.querySelector('#run-problem').textContent.startsWith('Run #99999: no such')")
+    page.evaluate(f"window.location.hash = '#run={a.id}'")
+    page.wait_for_selector("#run:not([hidden])")  # the second open's snapshot shown; its charts wait too
+    with page.expect_request(lambda r: f"/api/runs/{a.id}/stream" in r.url):
+        plotly.release(0)
+    shown_epoch(page, trainer, a.id, 3)
+    assert opened == [a.id]
