@@ -141,3 +141,19 @@ def test_a_run_opened_again_while_it_draws_has_one_stream(
         plotly.release(0)
     shown_epoch(page, trainer, a.id, 3)
     assert opened == [a.id]
+
+
+def test_a_failed_open_of_a_run_left_behind_does_not_hide_the_run_opened_since(
+    page: Page, live: BackgroundServer, trainer: CollieClient
+) -> None:
+    a, b = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
+    snapshot = Held(page, re.compile(rf"/api/dashboard/runs/{a.id}\?"), fetch=False)
+    goto(page, live, a.id)
+    snapshot.wait(1)  # A's page is asked for; the operator moves on to B
+    page.evaluate(f"window.location.hash = '#run={b.id}'")
+    title_is(page, b.id)
+    with page.expect_response(lambda r: f"/api/dashboard/runs/{a.id}?" in r.url):
+        snapshot.release(0, status=503, json={"detail": "the service is busy"})
+    shown_epoch(page, trainer, b.id, 3)
+    assert page.is_visible("#run") and page.is_hidden("#run-problem")
+    title_is(page, b.id)

@@ -13,6 +13,7 @@ const RUNS_WAIT_S = 20;
 let runs = [];
 let started = 0; // bumped by a new token: the old poll loop ends
 let missing = null; // a run the service does not know: not asked for again until the runs list has it
+let opening = 0; // bumped by each open: a failure of one the operator has left is not shown
 
 function showConnection(state) {
   const pill = $("#connection");
@@ -48,6 +49,7 @@ async function openSelected() {
   if (runId == null || runId === runPage.runId) return;
   if (runId === missing && !runs.some((r) => r.id === runId)) return;
   const problem = $("#run-problem");
+  const open = ++opening;
   try {
     await runPage.open(runId, sessionStorage.getItem("collie-ui"));
     if (runPage.runId === runId) {
@@ -56,6 +58,7 @@ async function openSelected() {
     }
   } catch (error) {
     if (error.status === 401) return askForToken(error.message);
+    if (open !== opening) return; // another run was opened meanwhile: its page stays
     // no run shown (not the one open before): said where it would be; the badge is the connection's
     $("#run").hidden = true;
     if (error.status === 404) missing = runId;
