@@ -17,10 +17,21 @@ from service.conftest import TOKENS, make_run_spec
 
 from backend.server import BackgroundServer
 from collie.client import CollieClient
-from collie.schemas import MetricsIn
+from collie.schemas import MetricsIn, Rollout, RolloutsIn
 
 WAIT_MS = 30_000
 PLOTLY = "**/vendor/plotly-basic.min.js"  # held: every chart waits for it, so an open stays mid-draw
+
+# What the elements at `selectors` say (their text, or `attribute`; "" where there is none), joined
+# by " · ": each change from now on once, in window.seen[key].
+WATCH = """([key, selectors, attribute]) => {
+  const say = (e) => (e ? (attribute ? e.getAttribute(attribute) : e.textContent) : "");
+  const read = () => selectors.map((s) => say(document.querySelector(s))).join(" · ");
+  const seen = [read()];
+  new MutationObserver(() => read() !== seen.at(-1) && seen.push(read()))
+    .observe(document.body, { attributes: true, childList: true, characterData: true, subtree: true });
+  (window.seen ??= {})[key] = seen;
+}"""
 
 
 class Held:
@@ -103,6 +114,10 @@ def shown_epoch(page: Page, trainer: CollieClient, run_id: int, epoch: int) -> N
     page.wait_for_function(f"document.querySelector('#run-epoch').textContent === '{epoch}'")
 
 
+def seen(page: Page, key: str) -> list[str]:
+    return page.evaluate(f"window.seen[{key!r}]")
+
+
 def test_a_run_opened_while_another_draws_gets_only_its_own_stream(
     page: Page, live: BackgroundServer, trainer: CollieClient
 ) -> None:
@@ -157,3 +172,29 @@ def test_a_failed_open_of_a_run_left_behind_does_not_hide_the_run_opened_since(
     shown_epoch(page, trainer, b.id, 3)
     assert page.is_visible("#run") and page.is_hidden("#run-problem")
     title_is(page, b.id)
+
+
+def test_a_late_answer_for_older_rollouts_does_not_redraw_them(
+    page: Page, live: BackgroundServer, trainer: CollieClient
+) -> None:
+    run = trainer.create_run(make_run_spec())
+
+    def post(epoch: int) -> None:
+        trainer.post_rollouts(
+            run.id, RolloutsIn(epoch=epoch, rollouts=[Rollout(skill=[1.0, 0.0], xy=[[0, 0], [1, epoch]])])
+        )
+
+    post(2)
+    goto(page, live, run.id)
+    page.wait_for_selector("#map[data-epoch='2']", state="attached")
+    latest = Held(page, re.compile(rf"/api/runs/{run.id}/rollouts\?"))
+    post(4)
+    latest.wait(1)  # the page asked for the latest rollouts: epoch 4's, held
+    latest.holding = False
+    page.evaluate(WATCH, ["map", ["#map"], "data-epoch"])
+    post(6)
+    page.wait_for_selector("#map[data-epoch='6']", state="attached")
+    latest.release(0)  # epoch 4's answer, after epoch 6's
+    post(8)
+    page.wait_for_selector("#map[data-epoch='8']", state="attached")
+    assert seen(page, "map") == ["2", "6", "8"]

@@ -59,6 +59,25 @@ export function coalesce(fn, ms) {
   };
 }
 
+// Requests whose answers can come back out of order: each takes a number (`ask`), and its answer
+// is `fresh` only if no later request's answer was taken; `skip` makes every answer asked for so
+// far stale (something newer was shown another way).
+export class Latest {
+  asked = 0;
+  taken = 0;
+  ask() {
+    return ++this.asked;
+  }
+  fresh(n) {
+    if (n <= this.taken) return false;
+    this.taken = n;
+    return true;
+  }
+  skip() {
+    this.taken = this.asked;
+  }
+}
+
 export function escapeHtml(text) {
   return String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
 }

@@ -4,7 +4,7 @@
 import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
-import { STATUS_TEXT, coalesce, controlPending, plural, shownStatus } from "./format.js";
+import { Latest, STATUS_TEXT, coalesce, controlPending, plural, shownStatus } from "./format.js";
 import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
 import { QualityForm } from "./quality.js";
@@ -30,6 +30,7 @@ export class RunPage {
     this.source = null;
     this.timer = null;
     this.gen = 0; // bumped by each close (open closes first): an open still loading sees it is stale
+    this.rolloutAnswers = new Latest(); // each rollouts event starts a request: answers can come back out of order
     this.discard = { armed: null, message: "" };
     root.querySelector("#labeling-body").addEventListener("click", (event) => {
       const button = event.target.closest("button[data-discard]");
@@ -197,8 +198,9 @@ export class RunPage {
 
   async loadRollouts() {
     const runId = this.runId;
+    const asked = this.rolloutAnswers.ask();
     const [latest] = await api(`runs/${runId}/rollouts?limit=1&states=false`);
-    if (latest && runId === this.runId) {
+    if (latest && runId === this.runId && this.rolloutAnswers.fresh(asked)) {
       this.seeEpoch(latest.epoch);
       await this.map.set({ rollouts: latest });
     }
