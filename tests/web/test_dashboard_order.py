@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from playwright.sync_api import Browser, BrowserContext, Page, Route
-from service.conftest import TOKENS, make_run_spec
+from service.conftest import TOKENS, make_run_spec, make_session
 
 from backend.server import BackgroundServer
 from collie.client import CollieClient
@@ -74,6 +74,12 @@ class Held:
             route.fulfill(response=fetched)
         else:
             route.continue_()
+
+    def release_all(self) -> None:
+        """Holding ends: every held answer to the page, in the order asked."""
+        self.holding = False
+        for i in range(len(self.routes)):
+            self.release(i)
 
 
 @pytest.fixture(scope="module")
@@ -198,3 +204,63 @@ def test_a_late_answer_for_older_rollouts_does_not_redraw_them(
     post(8)
     page.wait_for_selector("#map[data-epoch='8']", state="attached")
     assert seen(page, "map") == ["2", "6", "8"]
+
+
+def test_late_labeling_answers_undo_neither_counts_nor_quality_settings_nor_a_discard(
+    page: Page, live: BackgroundServer, trainer: CollieClient, operator: CollieClient
+) -> None:
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 2}))
+    trainer.post_session(run.id, make_session(0, 4))
+    labeler = CollieClient(live.url, operator.create_labeler("order-web").token)
+    row = "#labelers-stats tr[data-labeler='order-web']"
+    sessions = iter(range(1, 10))
+
+    def reload() -> None:  # new queries: an event, and the page asks for the labeling panel again
+        trainer.post_session(run.id, make_session(next(sessions), 1))
+
+    def label() -> None:  # a label of r = 2 by one labeler makes no event of its own
+        claim = labeler.claim(run.id)
+        assert claim is not None
+        labeler.submit(run.id, claim.query.query_id, 1)
+        reload()
+
+    def labels_shown(n: int) -> None:
+        page.wait_for_function(f"document.querySelector(\"{row} td.labels\")?.textContent === '{n}'")
+
+    goto(page, live, run.id)
+    page.wait_for_selector("#quality[data-redundancy='2']", state="attached")
+    page.wait_for_selector("#labeling-body dl")  # the panel drawn from the snapshot
+    page.evaluate(WATCH, ["labels", ["#discard-message", f"{row} td.labels"], None])
+    page.evaluate(WATCH, ["redundancy", ["#quality"], "data-redundancy"])
+    labeling = Held(page, re.compile(rf"/api/dashboard/runs/{run.id}/labeling$"))
+    label()
+    labeling.wait(1)  # asked for after the first label: 1 label, r = 2
+    page.fill("#quality-redundancy", "3")
+    page.click("#quality-apply")
+    page.wait_for_selector("#quality[data-redundancy='3']", state="attached")  # the PUT's answer
+    labeling.wait(2)  # the refresh after it (or the page's 5 s one before it)
+    labeling.release(0)  # asked for before the PUT's answer, arriving after it
+    labeling.holding = False
+    label()
+    labels_shown(2)
+    labeling.release_all()  # the rest: asked for before the answer that showed 2 labels
+    label()
+    labels_shown(3)
+
+    labeling.holding = True
+    held = len(labeling.routes)
+    reload()
+    labeling.wait(held + 1)  # asked for before the discard: 3 labels
+    page.click(f"{row} button[data-discard]")  # arms
+    with page.expect_response(lambda r: r.url.endswith("/discard")):
+        page.click(f"{row} button[data-discard]")
+    labeling.release(held)  # arriving after the discard's answer
+    labeling.release_all()  # the reload after the discard, if it was held
+    labels_shown(0)
+    labeler.close()
+    assert page.text_content("#discard-message").startswith("discarded 3 labels of order-web")
+    shown = [said_count.split(" · ") for said_count in seen(page, "labels")]  # the page's own 5 s reloads may add some
+    counts = [int(count) for said, count in shown if count and not said]
+    assert counts == sorted(counts) and counts[-1] == 3  # the late answers' 1 never came back
+    assert [count for said, count in shown if said] == ["0"]  # the discard's message only beside its result
+    assert seen(page, "redundancy") == ["2", "3"]

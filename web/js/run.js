@@ -21,6 +21,7 @@ export class RunPage {
     this.controls = new Controls(root, (run) => this.showAnswer(run));
     this.quality = new QualityForm(root, (run) => {
       this.showAnswer(run);
+      this.labelingAnswers.skip(); // a labeling answer asked for before it would put the old settings back
       this.refreshLabeling();
     });
     this.colourBy = root.querySelector("#colour-by");
@@ -30,7 +31,8 @@ export class RunPage {
     this.source = null;
     this.timer = null;
     this.gen = 0; // bumped by each close (open closes first): an open still loading sees it is stale
-    this.rolloutAnswers = new Latest(); // each rollouts event starts a request: answers can come back out of order
+    this.labelingAnswers = new Latest(); // each refresh and each rollouts event starts a request:
+    this.rolloutAnswers = new Latest(); // their answers can come back out of order
     this.discard = { armed: null, message: "" };
     root.querySelector("#labeling-body").addEventListener("click", (event) => {
       const button = event.target.closest("button[data-discard]");
@@ -174,7 +176,9 @@ export class RunPage {
     } catch (error) {
       state.message = error.message; // the service names what is wrong (not an operator, a finished run)
     }
-    if (runId === this.runId) this.refreshLabeling(); // a failed reload marks the connection down
+    if (runId !== this.runId) return;
+    this.labelingAnswers.skip(); // an answer asked for before the discard would show the labels back
+    this.refreshLabeling(); // a failed reload marks the connection down
   }
 
   seeEpoch(epoch) {
@@ -209,8 +213,9 @@ export class RunPage {
   async loadLabeling() {
     const runId = this.runId;
     if (runId == null) return;
+    const asked = this.labelingAnswers.ask();
     const view = await api(`dashboard/runs/${runId}/labeling`);
-    if (runId !== this.runId) return;
+    if (runId !== this.runId || !this.labelingAnswers.fresh(asked)) return;
     this.renderLabeling(view);
     this.root.querySelector("#run-labels").textContent = view.labeling.n_labels;
     this.run = { ...this.run, n_labels: view.labeling.n_labels, queue: view.labeling.queue };
