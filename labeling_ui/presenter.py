@@ -138,7 +138,7 @@ class Presenter:
     def wait_for(self, link: ServiceLink, run: RunRead | None, status: str | None, refused: str | None = None) -> None:
         """Nothing claimable in `run` (None: no run is open; `status` says so); `refused`: the
         service's reason, when it refused the claim (e.g. this labeler's other tabs hold enough)."""
-        since = run.last_event_id if run is not None else None  # read before the claim
+        since = run.last_event_id if run is not None else None  # as read before the claim, maybe long before
         run = link.run(run.id) if run is not None else None  # fresh counts, after our own claims
         with self.tab as state:
             state.nothing_claimable(run, time.monotonic(), self.wait_s, since)

@@ -117,7 +117,13 @@ async def stream(
         try:
             subscription = await feed.subscribe(run_id, start, caller.id)
             yield "retry: 1000\n\n"
+            loop = asyncio.get_running_loop()
+            checked = loop.time()
             while not subscription.ended:
+                if loop.time() >= checked + HEARTBEAT_S:  # revoked or narrowed by another process, busy or silent
+                    checked = loop.time()
+                    if not await anyio.to_thread.run_sync(still_allowed):
+                        return
                 if subscription.lagged:
                     sent = await feed.backlog(subscription)
                 else:
@@ -132,10 +138,8 @@ async def stream(
                     continue
                 subscription.signal.clear()
                 try:
-                    await asyncio.wait_for(subscription.signal.wait(), HEARTBEAT_S)
+                    await asyncio.wait_for(subscription.signal.wait(), max(0.0, checked + HEARTBEAT_S - loop.time()))
                 except TimeoutError:
-                    if not await anyio.to_thread.run_sync(still_allowed):  # revoked by another process
-                        return
                     yield ": keep-alive\n\n"
         except DBAPIError as exc:  # the database went away: the stream ends, the client resumes from its last id
             log.warning("stream of run %d ended: database unreachable: %s", run_id, first_line(exc.orig))

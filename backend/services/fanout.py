@@ -18,7 +18,7 @@ from sqlalchemy.exc import DBAPIError
 
 from backend.db import Database
 from backend.models import Run
-from backend.services import events
+from backend.services import auth, events
 from backend.services.errors import first_line
 from backend.services.events import EventHub
 from collie.schemas import StreamEvent
@@ -65,8 +65,6 @@ class StreamFeed:
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self.open_by_caller: Counter[int] = Counter()
-        self._revoked: set[int] = set()  # principals revoked in this process (a stream may be opening)
-        self._scopes: dict[int, list[int] | None] = {}  # labelers' runs as last set in this process (likewise)
         self._closed = False
         hub.listen(self._published)
 
@@ -85,20 +83,22 @@ class StreamFeed:
             self._wake.set()
 
     async def subscribe(self, run_id: int, after: int, caller_id: int) -> Subscription:
-        if run_id not in self._cursor:
-            last = await anyio.to_thread.run_sync(self._last_id, run_id)
-            self._cursor.setdefault(run_id, last)
+        """A stream of `run_id` for `caller_id`, ended at once if the caller was revoked or lost the
+        run since its token was checked (another process's change, a token cache's old scope)."""
         subscription = Subscription(run_id, after, caller_id)
-        scope = self._scopes.get(caller_id)
-        outside = scope is not None and run_id not in scope
-        subscription.ended = caller_id in self._revoked or outside or self._closed  # changed since its check
-        self._subscribers[run_id].add(subscription)
+        self._subscribers[run_id].add(subscription)  # first: a change in this process from now on ends it
+        try:
+            last, allowed = await anyio.to_thread.run_sync(self._opening, run_id, caller_id)  # one made before
+        except BaseException:
+            self.unsubscribe(subscription)
+            raise
+        self._cursor.setdefault(run_id, last)
+        subscription.ended = subscription.ended or not allowed or self._closed
         return subscription
 
     def end_streams_of(self, caller_id: int) -> None:
         """A revoked principal's open streams close now (those in other processes at their next
         heartbeat, when they find the principal revoked)."""
-        self._revoked.add(caller_id)
         for subscribers in self._subscribers.values():
             for subscription in subscribers:
                 if subscription.caller_id == caller_id:
@@ -107,7 +107,6 @@ class StreamFeed:
 
     def end_streams_outside(self, caller_id: int, runs: list[int] | None) -> None:
         """A labeler's scope changed: its open streams of runs it may no longer see close now."""
-        self._scopes[caller_id] = runs
         for run_id, subscribers in self._subscribers.items():
             for subscription in subscribers:
                 if subscription.caller_id == caller_id and runs is not None and run_id not in runs:
@@ -196,9 +195,10 @@ class StreamFeed:
         with self.db.read() as conn:
             return events.read_after(conn, run_id, after)
 
-    def _last_id(self, run_id: int) -> int:
+    def _opening(self, run_id: int, caller_id: int) -> tuple[int, bool]:
+        """The run's last event id, and whether the caller may still see the run."""
         with self.db.read() as conn:
-            return events.last_id(conn, run_id)
+            return events.last_id(conn, run_id), auth.may_still_see(conn, caller_id, run_id)
 
     def _last_ids(self, run_ids: list[int]) -> dict[int, int]:
         with self.db.read() as conn:

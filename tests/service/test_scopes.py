@@ -3,6 +3,7 @@ a revoked principal stays revoked — a restart with the same bootstrap token in
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 from backend.main import create_app
 from backend.routes import stream as stream_route
 from backend.server import BackgroundServer
+from backend.services import auth
 from collie.client import ApiError, CollieClient, NotInScope
 from collie.schemas import MetricsIn, RolloutsIn, RunRead
 
@@ -169,28 +171,46 @@ def test_a_scope_narrowed_through_another_service_process_ends_its_streams_at_th
     mine, other = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
     created = operator.create_labeler("narrowed-elsewhere", runs=[mine.id, other.id])
     headers = {"Authorization": f"Bearer {created.token}"}
+    chatting = threading.Event()
+
+    def chatty_trainer(url: str) -> None:  # events more often than the heartbeat: the stream is never silent
+        with CollieClient(url, TOKENS["trainer"]) as client:
+            epoch = 0
+            while not chatting.wait(0.1):
+                epoch += 1
+                client.post_metrics(mine.id, MetricsIn(epoch=epoch, values={"x": 1.0}))
+
     with (
         BackgroundServer(create_app(settings_for(database_url))) as elsewhere,  # a second process, one database
         httpx.stream("GET", f"{elsewhere.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held,
     ):
         lines = held.iter_lines()
         assert next(lines).startswith("retry:")
-        assert operator.set_labeler_runs(created.id, [other.id]).runs == [other.id]  # through `live`
-        deadline = time.monotonic() + 10
-        for _ in lines:  # keep-alives, then the end (the heartbeat reads the scope)
-            assert time.monotonic() < deadline, "a stream of a run outside the labeler's runs stayed open"
+        chat = threading.Thread(target=chatty_trainer, args=(elsewhere.url,), daemon=True)
+        chat.start()
+        try:
+            assert operator.set_labeler_runs(created.id, [other.id]).runs == [other.id]  # through `live`
+            deadline = time.monotonic() + 10
+            for _ in lines:  # metrics, then the end (the heartbeat reads the scope)
+                assert time.monotonic() < deadline, "a stream of a run outside the labeler's runs stayed open"
+        finally:
+            chatting.set()
+            chat.join(10)
 
 
-def test_a_stream_opening_as_its_scope_narrows_ends_at_once(
+def test_a_stream_opening_with_a_cached_scope_that_has_since_narrowed_ends_at_once(
     live: BackgroundServer, trainer: CollieClient, operator: CollieClient
 ) -> None:
     mine, other = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
     created = operator.create_labeler("narrowed-while-opening", runs=[mine.id, other.id])
-    live.app.state.feed.end_streams_outside(created.id, [other.id])  # the change lands between check and subscribe
-    headers = {"Authorization": f"Bearer {created.token}"}
-    with httpx.stream("GET", f"{live.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held:
-        assert held.status_code == 200  # its check read the scope before the change
-        assert [ln for ln in held.iter_lines() if ln.startswith("data:")] == []  # it ends (else: a read timeout)
+    with CollieClient(live.url, created.token) as narrowed:
+        narrowed.run(mine.id)  # the service's token cache now holds its scope with `mine`
+        with live.app.state.db.write() as conn:  # as another service process would: this one's cache stays
+            auth.set_runs(conn, created.id, [other.id])
+        headers = {"Authorization": f"Bearer {created.token}"}
+        with httpx.stream("GET", f"{live.url}/api/runs/{mine.id}/stream", headers=headers, timeout=10) as held:
+            assert held.status_code == 200  # its check read the cached scope
+            assert [ln for ln in held.iter_lines() if ln.startswith("data:")] == []  # it ends (else: a read timeout)
 
 
 def test_a_scope_change_is_refused_where_it_makes_no_sense(operator: CollieClient, labeler: CollieClient) -> None:

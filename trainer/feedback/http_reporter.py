@@ -79,7 +79,8 @@ class HttpReporter(Reporter):
             post()
             return True
         except Exception as exc:  # best effort by contract: a dashboard never stops training
-            log.warning("report %s not delivered: %s", what, exc)
+            why = " (the service is busy or unreachable; best effort)" if isinstance(exc, Unavailable) else ""
+            log.warning("report %s not delivered%s: %s", what, why, exc)
             self._quiet_until = time.monotonic() + QUIET_AFTER_FAILURE_S  # status changes (rare) are still tried
             return False
 

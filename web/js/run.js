@@ -43,6 +43,8 @@ export class RunPage {
   async open(runId, watchUrl) {
     this.close();
     const gen = this.gen;
+    this.labelingAnswers.skip(); // answers asked for before this open are older than its snapshot
+    this.rolloutAnswers.skip();
     this.runId = runId;
     this.discard = { armed: null, message: "" };
     let page;
@@ -121,15 +123,15 @@ export class RunPage {
 
   // The service's answer to this page's own request (pause, quality, ...): a snapshot taken when
   // the request was served. The stream may have shown newer events by the time it arrives (the
-  // trainer's "paused" can overtake the answer to "pause"); those fields keep the stream's values.
+  // trainer's "paused" can overtake the answer to "pause"); those fields keep the values shown.
   showAnswer(run) {
     if (run.id !== this.runId) return; // another run was opened meanwhile
     if (run.last_event_id >= this.lastEventId) {
       this.lastEventId = run.last_event_id;
       return this.showRun(run);
     }
-    const { status, epoch, control, feedback_timeout_s } = this.run;
-    this.showRun({ ...run, status, epoch, control, feedback_timeout_s });
+    const { status, epoch, control, feedback_timeout_s, n_labels, queue } = this.run; // counts: the labeling panel's
+    this.showRun({ ...run, status, epoch, control, feedback_timeout_s, n_labels, queue });
   }
 
   showRun(run) {
