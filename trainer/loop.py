@@ -294,7 +294,7 @@ class Trainer:
 
     def rebuild_from_source(self) -> None:
         """The service is the source of truth for labels: rebuild D0/D1/D2 from its history."""
-        history = self.feedback.history()
+        history = self.feedback.history(held=list(self.asked))  # the checkpoint's segments, labelled or not
         if history is None:
             return
         self.labelled.load_state_dict({})

@@ -242,6 +242,24 @@ def test_leftovers_of_sessions_the_replay_skips_are_retired(live: BackgroundServ
     again.close()
 
 
+def test_a_restarted_trainer_gets_late_labels_of_the_sessions_it_holds(
+    live: BackgroundServer, feedback: HttpFeedback
+) -> None:
+    url, run_id = live.url, feedback.run_id
+    feedback.timeout_s = 0.1
+    asked = segments(0, 3)
+    assert feedback.collect(0, 0, asked) == []  # the trainer moved on without labels (its timeout)
+    feedback.close()
+    again = HttpFeedback(url, TOKENS["trainer"], run_id, timeout_s=0.1)  # restarted from a checkpoint holding them
+    assert again.history(held=[s.query_id for s in asked]) == []
+    label_in_background(url, run_id, 2).join()  # labels come late, after the restart
+    assert as_dict(again.revisions()) == {"s0-q0": 0, "s0-q1": 1}  # as they would have before it
+    again.collect(1, 10, segments(1, 1))
+    with CollieClient(url, TOKENS["labeler"]) as labeler:  # the held one still unlabelled is no leftover
+        assert labeler.queries(run_id, status="retired") == []
+    again.close()
+
+
 def test_reposted_session_keeps_the_stored_segments(live: BackgroundServer, feedback: HttpFeedback) -> None:
     feedback.timeout_s = 0.2
     original = segments(0, 2, seed=1)

@@ -8,6 +8,7 @@ them later through `revisions`; the loop applies them to D0/D1/D2 before the nex
 from __future__ import annotations
 
 import abc
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -84,9 +85,11 @@ class FeedbackSource(abc.ABC):
     def load_state_dict(self, state: dict[str, Any]) -> None:  # noqa: B027
         """Restore what state_dict returned."""
 
-    def history(self) -> list[tuple[Segment, int]] | None:
+    def history(self, held: Collection[str] = ()) -> list[tuple[Segment, int]] | None:
         """All labelled segments known to the source (used to rebuild D0/D1/D2 after a restart).
-        None when the source keeps no history (then the trainer's checkpoint is authoritative)."""
+        None when the source keeps no history (then the trainer's checkpoint is authoritative).
+        `held`: the query ids whose segments the trainer already holds (its checkpoint's), labelled
+        or not: a label one of them gets later is a revision for the trainer, as before the restart."""
         return None
 
     def close(self) -> None:  # noqa: B027

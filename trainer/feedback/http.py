@@ -32,7 +32,7 @@ import functools
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, Literal, TypeVar
 
 import numpy as np
@@ -204,7 +204,7 @@ class HttpFeedback(FeedbackSource):
             self._show("training", epoch)
         return self._control
 
-    def history(self) -> list[tuple[Segment, int]]:
+    def history(self, held: Collection[str] = ()) -> list[tuple[Segment, int]]:
         """Every labelled segment of the run, once each (the trainer rebuilds D0/D1/D2 from it)."""
         self._pump(0.0)
         items = self._retry(lambda: list(self.client.labelled(self.run_id)))
@@ -213,6 +213,8 @@ class HttpFeedback(FeedbackSource):
             self._given[item.query.query_id] = item.label
             self._changed.discard(item.query.query_id)
             result.append((from_wire(item.query), int(item.label)))
+        for query_id in held:  # unlabelled but held (a session the trainer left on its timeout): late
+            self._given.setdefault(query_id, None)  # labels come as revisions, and it is no leftover to retire
         return result  # leftovers stay open: the resumed loop replays their sessions and waits for them
 
     def close(self) -> None:
