@@ -124,20 +124,19 @@ def retire(conn: Connection, run_id: int, query_ids: list[str]) -> Retired:
     """Close unlabelled queries: nobody can claim or label them any more. Labelled ones stay."""
     runs.row(conn, run_id)
     wanted = set(query_ids)
-    rows = conn.execute(
-        select(Query.id, Query.query_id).where(
-            Query.run_id == run_id, Query.query_id.in_(wanted), Query.status.in_(("pending", "leased"))
-        )
-    ).all()
-    if rows:
+    # one conditional UPDATE: on PostgreSQL a label committed while it waited for the row is seen
+    # (the condition is checked again on the row it waited for), so the label is not overwritten
+    done = sorted(
         conn.execute(
             update(Query)
-            .where(Query.id.in_([r.id for r in rows]))
+            .where(Query.run_id == run_id, Query.query_id.in_(wanted), Query.status.in_(("pending", "leased")))
             .values(status="retired", lease_owner_id=None, lease_expires_at=None)
-        )
-        events.append(conn, run_id, QueriesRetired(query_ids=[r.query_id for r in rows]), time.time())
-    done = {r.query_id for r in rows}
-    return Retired(retired=sorted(done), not_retired=sorted(wanted - done))
+            .returning(Query.query_id)
+        ).scalars()
+    )
+    if done:
+        events.append(conn, run_id, QueriesRetired(query_ids=done), time.time())
+    return Retired(retired=done, not_retired=sorted(wanted - set(done)))
 
 
 def summary_select() -> Select:  # its many columns: any row shape
