@@ -18,6 +18,8 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["control"])
 async def set_quality(run_id: RunId, request: Request, _: OperatorCaller, db: DB) -> RunRead:
     body = await parse_body(request, QualitySettings)  # read after the caller is checked
     with db.write() as conn:
+        if body.redundancy is not None:
+            labels.hold_unlabelled(conn, run_id)  # no label in flight decides on the r being replaced
         read = runs.set_quality(conn, run_id, body)
         if body.redundancy is not None and labels.count_reached(conn, run_id, time.time()):
             read = runs.get(conn, run_id)  # counts changed: queries that waited for more labels count now

@@ -89,7 +89,6 @@ _LOOKUP = (
         *_QUERY_STATE,
         Run.status.label("run_status"),
         Run.control.label("run_control"),
-        Run.redundancy,
         Run.task,
         Run.task_definition,
         Run.instruction,
@@ -108,7 +107,13 @@ _SEEN = (
     .join(Query, Query.id == LabelEvent.query_pk)
     .where(LabelEvent.labeler_id == bindparam("me"), LabelEvent.client_request_id == bindparam("request_id"))
 )
-_INSERT_EVENT = insert(LabelEvent).returning(LabelEvent.id)
+_INSERT_EVENT = insert(LabelEvent).returning(LabelEvent.id, LabelEvent.redundancy)
+# a label given under the run's r as it is now: read in the INSERT, after the lookup locked the
+# query (on PostgreSQL a lookup that waited for the lock, see hold_unlabelled, still joins the
+# run row from before the wait, when an operator may have changed r), at no extra statement
+_INSERT_RUN_LABEL = _INSERT_EVENT.values(
+    redundancy=select(Run.redundancy).where(Run.id == bindparam("r_run")).scalar_subquery()
+)
 _MY_VOTE = select(LabelVote.event_id, LabelVote.value).where(
     LabelVote.query_pk == bindparam("pk"), LabelVote.labeler_id == bindparam("me")
 )
@@ -161,7 +166,9 @@ def _record(
     request_id: str,
     now: float,
     revises: int | None,
-) -> LabelEventRead:
+) -> tuple[LabelEventRead, int | None]:
+    """The label event, and the r a label is given under (None for a skip or an undo): the run's
+    now, 1 for a gold copy."""
     event = {
         "run_id": run_id,
         "query_pk": q.id,
@@ -172,10 +179,13 @@ def _record(
         "client_request_id": request_id,
         "revises_event_id": revises,
         "created_at": now,
-        "redundancy": _redundancy(q) if kind == "label" else None,  # the r a label is given under
     }
-    event_id = conn.execute(_INSERT_EVENT, event).scalar_one()
-    return LabelEventRead(
+    if kind == "label" and q.gold_of is None:
+        event_id, redundancy = conn.execute(_INSERT_RUN_LABEL, {**event, "r_run": run_id}).one()
+    else:  # a skip or an undo (no r), or a gold copy's label (r = 1)
+        r = 1 if kind == "label" else None
+        event_id, redundancy = conn.execute(_INSERT_EVENT, {**event, "redundancy": r}).one()
+    read = LabelEventRead(
         id=event_id,
         run_id=run_id,
         query_id=q.query_id,
@@ -188,11 +198,7 @@ def _record(
         revises_event_id=revises,
         created_at=now,
     )
-
-
-def _redundancy(q: Any) -> int:
-    """The r a query is under now: the run's, 1 for a gold copy."""
-    return 1 if q.gold_of is not None else int(q.redundancy)
+    return read, redundancy
 
 
 def _announce(
@@ -291,7 +297,7 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
                 if live
                 else f"you hold no lease on query '{body.query_id}'"
             )
-        event = _record(conn, run_id, q, caller, kind, None, body.seconds, body.client_request_id, now, None)
+        event, _ = _record(conn, run_id, q, caller, kind, None, body.seconds, body.client_request_id, now, None)
         if q.gold_of is not None:  # a skipped gold copy is not served again (it stays its labeler's)
             conn.execute(_SET_QUERY, {"pk": q.id, "status": "retired", "lease_expires_at": None})
             return LabelAck(event=event, label=None, query_status="retired", duplicate=False)
@@ -309,13 +315,13 @@ def submit(conn: Connection, run_id: int, caller: Caller, body: LabelSubmit) -> 
         )
         raise Conflict(f"query '{body.query_id}' {reason}; claim a query before labelling it")
     revises = mine
-    event = _record(conn, run_id, q, caller, kind, value, body.seconds, body.client_request_id, now, revises)
+    event, r = _record(conn, run_id, q, caller, kind, value, body.seconds, body.client_request_id, now, revises)
     if mine is None:
         conn.execute(_INSERT_VOTE, {"query_pk": q.id, "labeler_id": caller.id, "value": value, "event_id": event.id})
     else:  # a revision replaces the caller's vote in place
         conn.execute(_REVISE_VOTE, {"pk": q.id, "me": caller.id, "value": value, "event_id": event.id})
     votes = conn.execute(_VOTES, {"pk": q.id}).scalars().all()
-    label = consensus.effective(votes, _redundancy(q), counted=q.status == "labelled")
+    label = consensus.effective(votes, int(r or 1), counted=q.status == "labelled")  # a label's r is never None
     if label is not None:
         change = {"status": "labelled", "label": label, "label_event_id": event.id, "lease_expires_at": None}
         status = "labelled"
@@ -366,7 +372,7 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
         tab = q.lease_tab if keep else None
     else:
         raise Conflict(f"query '{body.query_id}' was labelled by someone else")
-    event = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)
+    event, _ = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)
     change = {
         "status": status,
         "lease_owner_id": owner,
@@ -408,7 +414,7 @@ def discard_votes(conn: Connection, run_id: int, labeler_id: int, operator: Call
     for q in conn.execute(_VOTED_BY, {"run": run_id, "who": labeler_id}).all():
         conn.execute(_DROP_MY_VOTE, {"pk": q.id, "me": labeler_id})
         request_id = f"discard-by-{operator.id}-{secrets.token_hex(8)}"
-        event = _record(conn, run_id, q, caller, "undo", None, None, request_id, now, q.vote_event_id)
+        event, _ = _record(conn, run_id, q, caller, "undo", None, None, request_id, now, q.vote_event_id)
         held = q.status == "leased" and q.lease_expires_at is not None and q.lease_expires_at > now
         change: dict[str, Any] = {"label": None, "label_event_id": None}
         if q.status == "labelled" or (q.status == "leased" and not held):
@@ -419,6 +425,14 @@ def discard_votes(conn: Connection, run_id: int, labeler_id: int, operator: Call
             withdrawn.append(q.query_id)
         queries.append(q.query_id)
     return VotesDiscarded(run_id=run_id, labeler=who.name, queries=queries, withdrawn=withdrawn)
+
+
+def hold_unlabelled(conn: Connection, run_id: int) -> None:
+    """Before the run's redundancy changes (PostgreSQL; SQLite serialises its writers already):
+    lock its unlabelled queries, in id order, so a label in flight commits first (count_reached
+    then sees its vote) and one that comes after waits for the new r."""
+    unlabelled = Query.run_id == run_id, Query.status.in_(("pending", "leased"))
+    conn.execute(select(Query.id).where(*unlabelled).order_by(Query.id).with_for_update()).all()
 
 
 def count_reached(conn: Connection, run_id: int, now: float) -> list[str]:

@@ -1,0 +1,156 @@
+"""Writes that interleave on PostgreSQL (SQLite serialises its writers, so there they cannot):
+retiring queries while a label for one of them commits, and lowering the redundancy while a label
+is in flight. Each test holds one side's transaction open at the moment that matters (a
+transaction of its own, or a hook pausing a second service process on the same database), so
+the interleaving happens every time."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import pytest
+from sqlalchemy import create_engine, event, text
+
+from backend.main import create_app
+from backend.server import BackgroundServer
+from collie.client import CollieClient
+from collie.schemas import Retired
+
+from .conftest import TOKENS, make_run_spec, make_session, new_database_url, settings_for
+
+
+@pytest.fixture(scope="module")
+def database_url(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> str:
+    return new_database_url("postgresql", request, tmp_path_factory)
+
+
+def test_a_label_committed_while_retire_waits_for_its_row_is_kept(
+    live: BackgroundServer, database_url: str, trainer: CollieClient
+) -> None:
+    run = trainer.create_run(make_run_spec())
+    trainer.post_session(run.id, make_session(0, 2))
+    labelled, open_ = "0-0", "0-1"
+    engine = create_engine(database_url)
+    answer: list[Retired] = []
+    try:
+        with engine.connect() as submit, engine.connect() as watcher:
+            # a label's transaction, not committed yet: it holds the row retire will wait for
+            mark = "UPDATE queries SET status = 'labelled', label = 0 WHERE run_id = :run AND query_id = :q"
+            submit.execute(text(mark), {"run": run.id, "q": labelled})
+            retiring = threading.Thread(target=lambda: answer.append(trainer.retire(run.id, [labelled, open_])))
+            retiring.start()
+            deadline = time.monotonic() + 30
+            waiting = "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'"
+            while not watcher.execute(text(waiting)).scalar():  # retire blocks on the row
+                assert time.monotonic() < deadline and retiring.is_alive(), "retire never waited for the row"
+                time.sleep(0.05)
+                watcher.rollback()  # a fresh snapshot each look
+            submit.commit()
+            retiring.join(30)
+    finally:
+        engine.dispose()
+    assert answer == [Retired(retired=[open_], not_retired=[labelled])]
+    kept = trainer.query(run.id, labelled)
+    assert (kept.status, kept.label) == ("labelled", 0)
+
+
+@contextmanager
+def paused_after(
+    database_url: str, statement: str
+) -> Iterator[tuple[BackgroundServer, threading.Event, threading.Event]]:
+    """A second service process on the database whose first statement starting with `statement`
+    pauses once executed, its transaction open, until `go`: yields (server, paused, go)."""
+    server = BackgroundServer(create_app(settings_for(database_url)))
+    paused, go = threading.Event(), threading.Event()
+
+    def hook(conn: Any, cursor: Any, sql: str, *args: Any) -> None:
+        if sql.lstrip().upper().startswith(statement) and not paused.is_set():
+            paused.set()
+            assert go.wait(60), "never let go"
+
+    with server:
+        event.listen(server.app.state.db.engine, "after_cursor_execute", hook)
+        try:
+            yield server, paused, go
+        finally:
+            go.set()
+
+
+def wait(condition: Callable[[], bool], what: str) -> None:
+    deadline = time.monotonic() + 30
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+def lock_waits(database_url: str) -> Callable[[], int]:
+    """How many of the database's sessions wait for a lock now."""
+    engine = create_engine(database_url)
+
+    def count() -> int:
+        with engine.connect() as conn:
+            return int(
+                conn.execute(text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")).scalar_one()
+            )
+
+    return count
+
+
+def labelled_by(live: BackgroundServer, operator: CollieClient, run_id: int, names: list[str]) -> list[CollieClient]:
+    return [CollieClient(live.url, operator.create_labeler(f"{name}-{run_id}").token) for name in names]
+
+
+def test_redundancy_lowered_while_a_vote_is_in_flight_counts_the_vote(
+    live: BackgroundServer, database_url: str, trainer: CollieClient, operator: CollieClient
+) -> None:
+    """r 3 → 2 while the second vote's transaction is open: the change waits for it, then counts it."""
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 3}))
+    trainer.post_session(run.id, make_session(0, 1))
+    ann, bob = labelled_by(live, operator, run.id, ["ann", "bob"])
+    ann.submit(run.id, ann.claim(run.id).query.query_id, 0)
+    query_id = bob.claim(run.id).query.query_id
+    waiting = lock_waits(database_url)
+    with (
+        paused_after(database_url, "INSERT INTO LABEL_VOTES") as (elsewhere, paused, go),
+        CollieClient(elsewhere.url, bob.token) as bob_elsewhere,
+    ):
+        voting = threading.Thread(target=lambda: bob_elsewhere.submit(run.id, query_id, 0))
+        voting.start()
+        assert paused.wait(30), "bob's vote never reached the database"
+        lowering = threading.Thread(target=lambda: operator.set_quality(run.id, redundancy=2))
+        lowering.start()
+        wait(lambda: waiting() > 0 or not lowering.is_alive(), "the change neither waited nor ended")
+        go.set()
+        voting.join(30)
+        lowering.join(30)
+    assert trainer.query(run.id, query_id).status == "labelled"  # two votes, r = 2: it counts
+
+
+def test_a_vote_that_waited_for_a_redundancy_change_is_counted_under_the_new_one(
+    live: BackgroundServer, database_url: str, trainer: CollieClient, operator: CollieClient
+) -> None:
+    """r 3 → 2 committed while the second vote waits for the query's row: the vote sees r = 2."""
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 3}))
+    trainer.post_session(run.id, make_session(0, 1))
+    ann, bob = labelled_by(live, operator, run.id, ["ann", "bob"])
+    ann.submit(run.id, ann.claim(run.id).query.query_id, 0)
+    query_id = bob.claim(run.id).query.query_id
+    waiting = lock_waits(database_url)
+    with (
+        paused_after(database_url, "UPDATE RUNS SET REDUNDANCY") as (elsewhere, paused, go),
+        CollieClient(elsewhere.url, TOKENS["operator"]) as operator_elsewhere,
+    ):
+        lowering = threading.Thread(target=lambda: operator_elsewhere.set_quality(run.id, redundancy=2))
+        lowering.start()
+        assert paused.wait(30), "the change never reached the database"
+        voting = threading.Thread(target=lambda: bob.submit(run.id, query_id, 0))
+        voting.start()
+        wait(lambda: waiting() > 0 or not voting.is_alive(), "the vote neither waited nor ended")
+        go.set()
+        lowering.join(30)
+        voting.join(30)
+    assert trainer.query(run.id, query_id).status == "labelled"
