@@ -32,6 +32,7 @@ from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
 from collie.supervisor import ChildFailed, Supervisor
 from collie.tasks import default_task
+from collie.teacher_principal import teacher_token
 from collie.tokens import MIN_TOKEN, TOKEN_ENV, random_token, read_tokens_file, weakness, write_secret
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
@@ -414,7 +415,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         # Its work is over with the trainer's: one that found the run finished before the trainer
         # reopened it for more epochs (a resumed --epochs) is started again.
         teacher_done = lambda: stack.finished("trainer")  # noqa: E731
-        stack.start("teacher", lambda: teach, child_env(tokens["labeler"]), teacher_done, again_after_s=TEACHER_AGAIN_S)
+        own = teacher_token(api, tokens["operator"], out)  # not the label link's: a person there is another labeler
+        stack.start("teacher", lambda: teach, child_env(own), teacher_done, again_after_s=TEACHER_AGAIN_S)
     labeler_url = None
     if not args.no_label_ui:
         ui_info = out / "labeling_ui.json"

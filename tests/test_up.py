@@ -85,6 +85,13 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     )
     assert export.returncode == 0, export.stderr
     in_db = {row["query_id"]: row["label"] for row in json.loads(export.stdout)}
+    # the teacher labels as its own principal: a person on the label link (`labeler`) is another one
+    assert {row["labeler"] for row in json.loads(export.stdout)} == {"oracle-teacher"}
+    teacher = json.loads((tmp_path / "teacher_token.json").read_text())
+    assert (
+        teacher["token"] not in meta["tokens"].values()
+        and (tmp_path / "teacher_token.json").stat().st_mode & 0o077 == 0
+    )
     ckpt = torch.load(tmp_path / "trainer" / "checkpoint.pt", weights_only=False)
     applied = {qid: seg["label"] for qid, seg in ckpt["labelled"].items()}
     assert applied == in_db and len(applied) == n_total
