@@ -89,6 +89,9 @@ SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_C
 SQLITE_UNWRITABLE = {SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL}
 # PostgreSQL's: read_only_sql_transaction (a standby, default_transaction_read_only), disk_full, io_error
 PG_UNWRITABLE = {"25006", "53100", "58030"}
+# serialization_failure, deadlock_detected: two transactions of service processes took rows in
+# different orders, and the server rolled this one back (nothing written; a retry succeeds)
+PG_CONFLICT = {"40001", "40P01"}
 
 
 def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | None:
@@ -101,7 +104,7 @@ def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | None:
     primary = code & 0xFF if isinstance(code, int) else None
     if primary in SQLITE_UNWRITABLE or getattr(exc.orig, "sqlstate", None) in PG_UNWRITABLE:
         return DatabaseUnwritable(exc.orig)
-    if primary in (SQLITE_BUSY, SQLITE_LOCKED):
+    if primary in (SQLITE_BUSY, SQLITE_LOCKED) or getattr(exc.orig, "sqlstate", None) in PG_CONFLICT:
         return DatabaseBusy()
     if (
         exc.connection_invalidated

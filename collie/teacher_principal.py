@@ -10,24 +10,57 @@ import itertools
 import json
 from pathlib import Path
 
-from collie.client import Backoff, CollieClient, retrying
+from collie.client import ApiError, Backoff, CollieClient, Conflict, Unauthorized, Unavailable, retrying
+from collie.schemas import LabelerCreated
 from collie.tokens import write_secret
 
 NAME = "oracle-teacher"
 TOKEN_FILE = "teacher_token.json"
+BACKOFF = Backoff(max_s=2.0)
 
 
-def teacher_token(api: str, operator_token: str, out: Path) -> str:
-    """The teacher's labeler token: the one `out` keeps, else a new principal's (created with the
-    operator's token, named `oracle-teacher`, or `oracle-teacher-2`… where the name is taken)."""
+def teacher_token(api: str, operator_token: str, out: Path, run_id: int) -> str:
+    """The teacher's labeler token: the one `out` keeps while the service takes it for run
+    `run_id`, else a new principal's (made with the operator's token, named `oracle-teacher`, or
+    `oracle-teacher-2`… where the name is taken). RuntimeError when the service refuses."""
     path = out / TOKEN_FILE
+    try:
+        with CollieClient(api, operator_token) as client:
+            kept = _kept(path)
+            if kept is not None and _takes(api, kept, run_id):
+                return kept
+            created = _create(client)
+    except (ApiError, Unavailable) as exc:
+        raise RuntimeError(f"the oracle teacher's labeler could not be made: {exc}") from None
+    write_secret(path, json.dumps({"name": created.name, "token": created.token}))
+    return created.token
+
+
+def _kept(path: Path) -> str | None:
     try:
         return str(json.loads(path.read_text())["token"])
     except (OSError, ValueError, KeyError, TypeError):  # none yet, or damaged: a new principal
-        pass
-    with CollieClient(api, operator_token) as client:
-        taken = {p.name for p in retrying(client.labelers, Backoff(max_s=2.0), attempts=30)}
-        names = itertools.chain([NAME], (f"{NAME}-{i}" for i in itertools.count(2)))
-        created = client.create_labeler(next(n for n in names if n not in taken))  # once: a retry might make two
-    write_secret(path, json.dumps({"name": created.name, "token": created.token}))
-    return created.token
+        return None
+
+
+def _takes(api: str, token: str, run_id: int) -> bool:
+    """Whether the service takes `token` for the run (not on another database, nor revoked)."""
+    with CollieClient(api, token) as teacher:
+        try:
+            retrying(lambda: teacher.run(run_id), BACKOFF, attempts=30)
+        except Unauthorized:
+            return False
+    return True
+
+
+def _create(client: CollieClient) -> LabelerCreated:
+    taken = {p.name for p in retrying(client.labelers, BACKOFF, attempts=30)}
+    for i in itertools.count(1):
+        name = NAME if i == 1 else f"{NAME}-{i}"
+        if name in taken:
+            continue
+        try:
+            return client.create_labeler(name)  # once: a retry of an unanswered one might make two
+        except Conflict:  # taken meanwhile (another stack on the same lab database)
+            continue
+    raise AssertionError("never: the count has no end")

@@ -415,7 +415,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         # Its work is over with the trainer's: one that found the run finished before the trainer
         # reopened it for more epochs (a resumed --epochs) is started again.
         teacher_done = lambda: stack.finished("trainer")  # noqa: E731
-        own = teacher_token(api, tokens["operator"], out)  # not the label link's: a person there is another labeler
+        own = teacher_token(api, tokens["operator"], out, run_id)  # not the link's: a person there is another labeler
         stack.start("teacher", lambda: teach, child_env(own), teacher_done, again_after_s=TEACHER_AGAIN_S)
     labeler_url = None
     if not args.no_label_ui:

@@ -68,11 +68,12 @@ class DatabaseUnwritable(Unavailable):
 
 
 class DatabaseBusy(Unavailable):
-    """SQLite's busy timeout ran out: another process holds the write lock (one service process per
-    SQLite file is supported). Nothing was written; the client may retry."""
+    """SQLite's busy timeout ran out (another process holds the write lock: one service process per
+    SQLite file is supported), or PostgreSQL rolled the transaction back for a concurrent one (a
+    deadlock between service processes). Nothing was written; the client may retry."""
 
     def __init__(self) -> None:
-        super().__init__("the database is busy (another process holds its write lock); nothing was written, retry")
+        super().__init__("the database is busy with another process's writes; nothing was written, retry")
 
 
 class TabNotHolding(Conflict):

@@ -15,8 +15,9 @@ The trainer's side of the contract (docs/service.md):
   its checkpoint. A session is identified by its schedule position (`session`): re-posting one
   already posted (the replay reaches it again) stores nothing; `collect` then replaces the given
   segments, in place in the list, by the stored session's and waits only for the labels it still
-  lacks. Unlabelled leftovers of sessions before the first one posted are retired on the service,
-  so a label the trainer cannot use is never taken.
+  lacks. Unlabelled leftovers of earlier sessions whose segments the checkpoint holds
+  (`history(held=)`) stay open, their late labels coming as revisions; those it does not hold are
+  retired on the service, so a label the trainer cannot use is never taken.
 - A segment id the service already holds in a new session keeps the stored segment: `collect`
   copies the stored arrays into the given segment in place.
 - The service going away (restart, network) is waited out with backoff; `control` never blocks
