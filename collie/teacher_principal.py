@@ -10,13 +10,14 @@ import itertools
 import json
 from pathlib import Path
 
-from collie.client import ApiError, Backoff, CollieClient, Conflict, Unauthorized, Unavailable, retrying
+from collie.client import ApiError, Backoff, CollieClient, Conflict, NotInScope, Unauthorized, Unavailable, retrying
 from collie.schemas import LabelerCreated
 from collie.tokens import write_secret
 
 NAME = "oracle-teacher"
 TOKEN_FILE = "teacher_token.json"
 BACKOFF = Backoff(max_s=2.0)
+ATTEMPTS = 8  # about 10 s of a service that does not answer (it answered a moment ago), then an error
 
 
 def teacher_token(api: str, operator_token: str, out: Path, run_id: int) -> str:
@@ -44,17 +45,23 @@ def _kept(path: Path) -> str | None:
 
 
 def _takes(api: str, token: str, run_id: int) -> bool:
-    """Whether the service takes `token` for the run (not on another database, nor revoked)."""
+    """Whether the service takes `token` (not revoked, not from another database). One an operator
+    limited to other runs is an error to settle, not a reason to make an unlimited one."""
     with CollieClient(api, token) as teacher:
         try:
-            retrying(lambda: teacher.run(run_id), BACKOFF, attempts=30)
+            retrying(lambda: teacher.run(run_id), BACKOFF, attempts=ATTEMPTS)
+        except NotInScope:
+            raise RuntimeError(
+                f"the oracle teacher's labeler is limited to other runs than run {run_id}: give it this "
+                f"run (dashboard, Labelers) or remove {TOKEN_FILE} from the stack's folder for a new one"
+            ) from None
         except Unauthorized:
             return False
     return True
 
 
 def _create(client: CollieClient) -> LabelerCreated:
-    taken = {p.name for p in retrying(client.labelers, BACKOFF, attempts=30)}
+    taken = {p.name for p in retrying(client.labelers, BACKOFF, attempts=ATTEMPTS)}
     for i in itertools.count(1):
         name = NAME if i == 1 else f"{NAME}-{i}"
         if name in taken:

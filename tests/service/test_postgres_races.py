@@ -164,7 +164,9 @@ def test_a_vote_that_waited_for_a_redundancy_change_is_counted_under_the_new_one
     assert trainer.query(run.id, query_id).status == "labelled"
 
 
-def test_a_deadlock_between_service_processes_is_a_busy_database_the_client_may_retry(database_url: str) -> None:
+def test_a_deadlock_between_service_processes_is_a_busy_database_the_client_may_retry(
+    live: BackgroundServer, database_url: str
+) -> None:
     """PostgreSQL rolls one of two transactions back when each waits for the other's row: the
     service answers that one 503 (busy, nothing written), not an outage or a 500."""
     engine = create_engine(database_url)
@@ -188,6 +190,7 @@ def test_a_deadlock_between_service_processes_is_a_busy_database_the_client_may_
             t.start()
         for t in threads:
             t.join(30)
+        assert not any(t.is_alive() for t in threads), "a transaction still waits"
     finally:
         engine.dispose()
     assert len(failed) == 1, failed

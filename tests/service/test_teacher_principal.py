@@ -35,5 +35,10 @@ def test_the_teacher_gets_its_own_labeler_kept_across_restarts_and_renewed_once_
     kept.write_text("{not json")  # a damaged file: a new labeler, not a traceback
     assert teacher_token(live.url, TOKENS["operator"], tmp_path, run.id) not in (first, renewed)
 
+    [newest] = [p for p in operator.labelers() if p.name == json.loads(kept.read_text())["name"]]
+    operator.set_labeler_runs(newest.id, [trainer.create_run(make_run_spec()).id])  # an operator limits it
+    with pytest.raises(RuntimeError, match=f"limited to other runs than run {run.id}"):
+        teacher_token(live.url, TOKENS["operator"], tmp_path, run.id)  # said, not undone by a new labeler
+
     with pytest.raises(RuntimeError, match="the oracle teacher's labeler could not be made"):
         teacher_token(live.url, "not-a-token", tmp_path / "elsewhere", run.id)
