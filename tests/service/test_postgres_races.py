@@ -21,7 +21,7 @@ from backend.main import create_app
 from backend.server import BackgroundServer
 from backend.services.errors import DatabaseBusy
 from collie.client import CollieClient
-from collie.schemas import Retired
+from collie.schemas import Retired, RunRead
 
 from .conftest import TOKENS, make_run_spec, make_session, new_database_url, settings_for
 
@@ -107,19 +107,22 @@ def lock_waits(database_url: str) -> Iterator[Callable[[], int]]:
         engine.dispose()
 
 
-def labelled_by(live: BackgroundServer, operator: CollieClient, run_id: int, names: list[str]) -> list[CollieClient]:
-    return [CollieClient(live.url, operator.create_labeler(f"{name}-{run_id}").token) for name in names]
+def one_vote_of_three(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient
+) -> tuple[RunRead, CollieClient, str]:
+    """A run under r = 3 whose one query has ann's vote and is claimed by bob: (run, bob, query)."""
+    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 3}))
+    trainer.post_session(run.id, make_session(0, 1))
+    ann, bob = (CollieClient(live.url, operator.create_labeler(f"{name}-{run.id}").token) for name in ("ann", "bob"))
+    ann.submit(run.id, ann.claim(run.id).query.query_id, 0)
+    return run, bob, bob.claim(run.id).query.query_id
 
 
 def test_redundancy_lowered_while_a_vote_is_in_flight_counts_the_vote(
     live: BackgroundServer, database_url: str, trainer: CollieClient, operator: CollieClient
 ) -> None:
     """r 3 → 2 while the second vote's transaction is open: the change waits for it, then counts it."""
-    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 3}))
-    trainer.post_session(run.id, make_session(0, 1))
-    ann, bob = labelled_by(live, operator, run.id, ["ann", "bob"])
-    ann.submit(run.id, ann.claim(run.id).query.query_id, 0)
-    query_id = bob.claim(run.id).query.query_id
+    run, bob, query_id = one_vote_of_three(live, trainer, operator)
     with (
         lock_waits(database_url) as waiting,
         paused_after(database_url, "INSERT INTO LABEL_VOTES") as (elsewhere, paused, go),
@@ -142,11 +145,7 @@ def test_a_vote_that_waited_for_a_redundancy_change_is_counted_under_the_new_one
 ) -> None:
     """r 3 → 2 committed while the second vote waits for the query's row (the change holds it, see
     hold_unlabelled): the vote is given under r = 2, read after the wait, not the r of before it."""
-    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 3}))
-    trainer.post_session(run.id, make_session(0, 1))
-    ann, bob = labelled_by(live, operator, run.id, ["ann", "bob"])
-    ann.submit(run.id, ann.claim(run.id).query.query_id, 0)
-    query_id = bob.claim(run.id).query.query_id
+    run, bob, query_id = one_vote_of_three(live, trainer, operator)
     with (
         lock_waits(database_url) as waiting,
         paused_after(database_url, "UPDATE RUNS SET REDUNDANCY") as (elsewhere, paused, go),
