@@ -97,8 +97,8 @@ class StreamFeed:
         return subscription
 
     def end_streams_of(self, caller_id: int) -> None:
-        """A revoked principal's open streams close now (those in other processes at their next
-        heartbeat, when they find the principal revoked)."""
+        """A revoked principal's open streams close now (those in other processes within 15 s, when
+        their next check finds the principal revoked)."""
         for subscribers in self._subscribers.values():
             for subscription in subscribers:
                 if subscription.caller_id == caller_id:
