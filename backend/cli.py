@@ -45,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-generate-tokens",
         action="store_true",
-        help="only use tokens from the environment (no tokens file read, none generated)",
+        help="only use tokens from the environment (none generated; a --tokens-json file's other tokens are kept, "
+        "not used)",
     )
     parser.add_argument(
         "--log-level", default="warning", choices=("critical", "error", "warning", "info", "debug", "trace")
@@ -61,6 +62,17 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     except ValueError as exc:
         raise SystemExit(f"collie serve: error: --tokens-json {exc}; move it away") from None
     return {role: tokens[role] for role in ROLES if role in tokens}
+
+
+def kept_in_file(path: Path, tokens: dict[str, str], revoked: set[str]) -> dict[str, str]:
+    """With --no-generate-tokens: the tokens file's entries for the roles the environment does not
+    set, which an earlier start generated and wrote only there. Rewriting the file without them
+    would lose the one copy of tokens the database still accepts. An unreadable file has none."""
+    try:
+        written = written_tokens(path)
+    except SystemExit:
+        return {}
+    return {role: t for role, t in written.items() if role not in tokens and role not in revoked}
 
 
 def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str], set[str]]:
@@ -150,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
-        write_secret(args.tokens_json, json.dumps({"api": url, "tokens": tokens}, indent=1))
+        written = kept_in_file(args.tokens_json, tokens, revoked) if args.no_generate_tokens else {}
+        write_secret(args.tokens_json, json.dumps({"api": url, "tokens": written | tokens}, indent=1))
     server = uvicorn_server(app, args.log_level)
     # Ctrl-C (or SIGTERM) is the way to stop, at any moment from here on: the handler only sets
     # uvicorn's exit flag, which it reads once it serves (and its own handlers do the same). Not a

@@ -15,8 +15,9 @@ from collie.schemas import ErrorBody, Health
 router = APIRouter(tags=["health"])
 
 
-@router.get(
+@router.api_route(  # HEAD too: `curl -I` and load balancers' probes
     "/health",
+    methods=["GET", "HEAD"],
     responses={503: {"model": ErrorBody, "description": "the database is unreachable, busy or cannot be written"}},
 )
 def health(db: DB) -> Health:

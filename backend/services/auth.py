@@ -156,7 +156,8 @@ def set_runs(conn: Connection, principal_id: int, runs: list[int] | None) -> Lab
     if row is None:
         raise NotFound(f"no principal {principal_id}")
     if row.role != "labeler":
-        raise Invalid(f"only a labeler token can be limited to runs, not a {row.role} token ('{row.name}')")
+        article = "an" if row.role == "operator" else "a"
+        raise Invalid(f"only a labeler token can be limited to runs, not {article} {row.role} token ('{row.name}')")
     if row.revoked_at is not None:
         raise Conflict(f"'{row.name}' is revoked: its token is valid for no run, and revoking is final")
     conn.execute(update(Principal).where(Principal.id == principal_id).values(runs=_scope(conn, runs)))

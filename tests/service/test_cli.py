@@ -195,6 +195,28 @@ def test_a_restarted_service_keeps_its_tokens(tmp_path: Path) -> None:
         stop(server)
 
 
+def test_no_generate_tokens_keeps_the_tokens_file_s_other_tokens(tmp_path: Path) -> None:
+    """Was: a start with --no-generate-tokens rewrote the tokens file with the environment's tokens
+    only, and the tokens an earlier start generated (written nowhere else) were lost."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db, tokens_file = tmp_path / "keep.db", tmp_path / "tokens.json"
+    server, _ = start_serve(db, tokens_file, env)
+    first = json.loads(tokens_file.read_text())["tokens"]
+    stop(server)
+    env = {**env, "COLLIE_TRAINER_TOKEN": "trainer-from-env-0123456789"}
+    command = [sys.executable, "-m", "collie.cli", "serve", "--port", "0", "--db", str(db)]
+    command += ["--tokens-json", str(tokens_file), "--no-generate-tokens"]
+    server = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        api = server.stdout.readline().split("listening on ")[1].split()[0]  # type: ignore[union-attr]
+        kept = json.loads(tokens_file.read_text())["tokens"]
+        assert kept == {**first, "trainer": "trainer-from-env-0123456789"}
+        with CollieClient(api, first["operator"]) as operator:
+            assert operator.me().name == "operator"
+    finally:
+        stop(server)
+
+
 def test_a_start_that_cannot_listen_is_a_one_line_error_that_makes_no_database(tmp_path: Path) -> None:
     """A port in use, an address not this machine's, a bad --fd: refused before the database and its
     tokens are made (they would never be printed, and the next start would keep them: a lockout)."""
