@@ -136,7 +136,12 @@ class Supervisor:
             if child.finished or child.proc is None:
                 continue
             if child.restart_at is not None:
-                if now >= child.restart_at:
+                if child.exit_codes[-1:] == [0] and child.done_when_ok is not None and child.done_when_ok():
+                    # it ended before its work was over, which is over now (the teacher of a run
+                    # that finished: it sees the end before the trainer has written its last files)
+                    child.finished, child.restart_at = True, None
+                    self.log(f"{child.name} finished (exit 0)")
+                elif now >= child.restart_at:
                     child.restarts += 1
                     self._spawn(child)
                 continue
@@ -152,7 +157,7 @@ class Supervisor:
                 # doubling while it keeps ending at once (a stopped run's teacher until the trainer sees the stop)
                 child.early_ends = 0 if now - child.started_at >= self.stable_s else child.early_ends + 1
                 delay = min(child.again_after_s * 2 ** max(child.early_ends - 1, 0), MAX_BACKOFF_S * 3)
-                self.log(f"{child.name} ended (exit 0) before its work; starting it again in {delay:g} s")
+                self.log(f"{child.name} ended (exit 0) before its work was over; again in {delay:g} s unless over")
                 child.restart_at = now + delay
                 continue
             if now - child.started_at >= self.stable_s or self._progressed(child):

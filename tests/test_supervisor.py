@@ -99,3 +99,23 @@ def test_a_part_killed_again_and_again_is_restarted_while_it_makes_progress(tmp_
                 _killed_and_checked(stack, "service")
     finally:
         stack.stop()
+
+
+def test_a_part_that_ended_early_is_not_restarted_once_its_work_is_over(tmp_path: Path) -> None:
+    """The oracle teacher sees a run finished (and exits 0) before the trainer has written its last
+    files and exited: the teacher is then done, not started again (was: restarted, and the log said
+    it ended "before its work")."""
+    over = False
+    stack = Supervisor(tmp_path)
+    try:
+        proc = stack.start("teacher", lambda: ["--help"], dict(os.environ), lambda: over, again_after_s=1.0)
+        proc.wait(timeout=60)
+        stack.check()  # its work is not over yet: a restart is planned
+        over = True  # the trainer finished within the delay
+        time.sleep(1.2)
+        stack.check()
+        assert stack.finished("teacher") and stack.proc("teacher") is proc
+    finally:
+        stack.stop()
+    log = (tmp_path / "logs" / "up.log").read_text()
+    assert log.count("started teacher") == 1 and "teacher finished (exit 0)" in log

@@ -186,6 +186,9 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
     assert page["labelled"] and all(s["oracle"] is None for s in page["labelled"])
     assert {s["query_id"]: s["label"] for s in page["labelled"]} == given
     assert any("w" in r["extra"] for r in page["rollouts"]["rollouts"])  # the map can colour by w(s)
+    if page["rollouts"]["epoch"] == last["epoch"]:  # w_mean is the mean of the same w(s) (sent to 2 decimals)
+        shown = [x for r in page["rollouts"]["rollouts"] for x in r["extra"]["w"]]
+        assert abs(sum(shown) / len(shown) - last["w_mean"]) < 0.006, (sum(shown) / len(shown), last["w_mean"])
     assert run_task(run) is None and rule_text(run, None)[:2] == ("Instruction", instruction)
     with pytest.raises(ValueError, match="instruction alone: zero-shot motion needs a rule"):
         run_downstream(out, trajectories=2)

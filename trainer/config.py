@@ -146,7 +146,8 @@ class Config:
         for f in dataclasses.fields(self):  # inf or nan: first, so that `--lr inf` is named as what it is
             value = getattr(self, f.name)
             if f.type == "float" and isinstance(value, float):
-                need(math.isfinite(value), f"{flag(f.name)} must be a finite number, got {value}")
+                hint = " (no smoothing: a large value such as 1e9)" if f.name == "k_beta" else ""
+                need(math.isfinite(value), f"{flag(f.name)} must be a finite number, got {value}{hint}")
         need(self.seed >= 0, f"--seed must be ≥ 0, got {self.seed}")  # numpy's generators take no negative seed
         for name in ("grad_steps", "start_transitions", "warmup", "total_queries", "noise_band"):
             need(getattr(self, name) >= 0, f"{flag(name)} must be ≥ 0, got {getattr(self, name)}")

@@ -355,12 +355,14 @@ class Trainer:
             "n_labels": len(self.labelled),
             "n_labelled_states": [d0, d1, d2],
             **self.labels_per_class(),
-            **self.guidance_summary(w),
             "lambda": float(self.agent.log_lambda.detach().exp()),
             "alpha": float(self.agent.log_alpha.detach().exp()),
             "beta": self.beta(),
             "wall_s": round(self.wall_s(), 2),
             **{k: v for k, v in self.last_info.items() if k not in ("lam", "alpha")},
+            # after the update's diagnostics, whose w_mean is the last batch's: once guidance is on,
+            # w_mean is the evaluations', as w_min and w_max (before, both are 1)
+            **self.guidance_summary(w),
         }
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
