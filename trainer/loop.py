@@ -360,7 +360,7 @@ class Trainer:
             "beta": self.beta(),
             "wall_s": round(self.wall_s(), 2),
             **{k: v for k, v in self.last_info.items() if k not in ("lam", "alpha")},
-            # after the update's diagnostics, whose w_mean is the last batch's: once guidance is on,
+            # after the update's diagnostics, whose w_mean is the epoch's batches': once guidance is on,
             # w_mean is the evaluations', as w_min and w_max (before, both are 1)
             **self.guidance_summary(w),
         }
