@@ -7,6 +7,7 @@ machine); `collie <command> --help` says more about each command."""
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -46,6 +47,25 @@ def refusal_line(exc: PermissionError) -> str:
     return f"{said}: {where}" if where else said
 
 
+# What a file system says of a path a command writes that is the machine's state, not a bug: read-only,
+# full, over quota. Reported in a line; any other OSError keeps its traceback.
+UNWRITABLE = (errno.EROFS, errno.ENOSPC, errno.EDQUOT)
+
+
+def unwritable_line(exc: OSError) -> str | None:
+    """ "cannot write PATH: Read-only file system" for a file system's refusal (a full disk's write
+    names no path: "cannot write: No space left on device"); for a file where a folder must go (a
+    path through a file, --out a-file/x), "cannot use PATH: Not a directory"; None for any other
+    OSError, which is a bug to show whole."""
+    said = exc.strerror or str(exc)
+    where = exc.filename2 if exc.filename2 is not None else exc.filename  # a copy's or rename's: its target
+    if exc.errno in UNWRITABLE:
+        return f"cannot write {where}: {said}" if where is not None else f"cannot write: {said}"
+    if exc.errno == errno.ENOTDIR and exc.filename is not None:
+        return f"cannot use {exc.filename}: {said}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from collie.startup import mark
 
@@ -82,6 +102,12 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except PermissionError as exc:  # a file, folder or port this user may not use: which, not a traceback
         print(f"collie {args.command}: error: {refusal_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a read-only or full file system under --out (PermissionError is above)
+        line = unwritable_line(exc)
+        if line is None:
+            raise
+        print(f"collie {args.command}: error: {line}", file=sys.stderr)
         return 2
 
 

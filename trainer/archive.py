@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from collie.stack_folder import STACK_LOCK, STACK_RUN
-from trainer.run_files import RunFolderError, copy_whole, read_json_object
+from trainer.run_files import RunFolderError, copy_whole, read_json_object, writing_into
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
@@ -158,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
     refused: list[Path] = []
     for source, relative in jobs:  # one refused run does not keep the others out of the archive
         try:
-            out = archive(source, out_root, relative)
+            with writing_into(out_root):
+                out = archive(source, out_root, relative)
         except ArchiveError as exc:
             print(f"collie archive: error: {exc}", file=sys.stderr)
             refused.append(source)

@@ -45,7 +45,7 @@ import numpy as np
 from collie.tasks import Task
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
-from trainer.run_files import RunFolderError, read_arrays, read_json_object
+from trainer.run_files import RunFolderError, read_arrays, read_json_object, writing_into
 from trainer.same_run import PLACED, comparable, preset_defaults
 from trainer.task_choice import judged_by
 
@@ -529,7 +529,8 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         print(f"collie report: error: --out {out} is a file, not a folder", file=sys.stderr)
         return 2
-    paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
+    with writing_into(out):
+        paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
     print((out / "report.md").read_text())
     print(f"written: {', '.join(str(p) for p in paths.values())}")
     return 0

@@ -28,7 +28,7 @@ from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
 from trainer.report import load_run
-from trainer.run_files import RunFolderError, read_arrays, read_json_object, write_json
+from trainer.run_files import RunFolderError, read_arrays, read_json_object, write_json, writing_into
 from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
@@ -96,20 +96,21 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     figures = coverage_metrics(
         xy, pitch, rule, bin_size=env.metric_bin_size, position_dims=env.position_dims, bin_rule=config.bin_rule
     )
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(saved, out / "eval_latest.npz")
-    if (source / CHECKPOINT).exists():
-        shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
-    write_json(out / "config.json", cfg)
-    if (source / "downstream.json").exists():
-        done = read_json_object(source / "downstream.json")
-        kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
-        if kept_results:
-            write_json(out / "downstream.json", kept_results)
-    write_json(out / TASK_JSON, choose_rule(config).to_json())
-    kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
-    rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
-    write_json(out / "summary.json", rescored)
+    with writing_into(out):
+        out.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(saved, out / "eval_latest.npz")
+        if (source / CHECKPOINT).exists():
+            shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
+        write_json(out / "config.json", cfg)
+        if (source / "downstream.json").exists():
+            done = read_json_object(source / "downstream.json")
+            kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
+            if kept_results:
+                write_json(out / "downstream.json", kept_results)
+        write_json(out / TASK_JSON, choose_rule(config).to_json())
+        kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
+        rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
+        write_json(out / "summary.json", rescored)
     return out
 
 

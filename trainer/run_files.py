@@ -4,10 +4,13 @@ writing its JSON files whole (a kill mid-write leaves the old file, never half o
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import shutil
 import zipfile
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -63,3 +66,15 @@ def read_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     if missing:
         raise RunFolderError(f"{path}: no {', '.join(missing)} in it")
     return found
+
+
+@contextlib.contextmanager
+def writing_into(folder: Path) -> Iterator[None]:
+    """A full disk's (or quota's) refusal of a write names no file: raised again naming `folder`, so
+    that `collie` says which path could not be written (collie/cli.py's line)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is None and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise OSError(exc.errno, exc.strerror, str(folder)) from None
+        raise

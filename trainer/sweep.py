@@ -30,6 +30,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -42,7 +43,7 @@ from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
-from trainer.run_files import RunFolderError, read_json_object, write_json
+from trainer.run_files import RunFolderError, read_json_object, write_json, writing_into
 from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
@@ -616,6 +617,19 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
     return None
 
 
+def check_writable(folder: Path) -> None:
+    """OSError naming `folder` if no file can be made in it (a read-only file system, a full disk):
+    else every run would fail in turn, a FAILED line each, before the report's write said why
+    (collie/cli.py turns the error into its line)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        with tempfile.TemporaryFile(dir=folder) as f:  # a byte: a full disk makes an empty file
+            f.write(b"?")
+            f.flush()
+    except OSError as exc:  # its name is a random file's: the folder's is the one to say
+        raise OSError(exc.errno, exc.strerror, str(folder)) from None
+
+
 def say_what_finished_runs_get(specs: list[RunSpec]) -> None:
     """A line for each finished run the sweep extends to more epochs, and a warning for each that
     another configuration would not be rerun."""
@@ -660,6 +674,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
     todo = sum(to_train(s) for s in specs)
+    if todo or args.downstream or not args.no_report:  # something will be written under --out
+        check_writable(Path(args.out))
     say_what_finished_runs_get(specs)
     print(
         f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
@@ -704,6 +720,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_report:
         from trainer.report import write_report
 
-        paths = write_report([Path(args.out)], Path(args.out) / "report", bin_rule=args.bin_rule)
+        with writing_into(Path(args.out) / "report"):
+            paths = write_report([Path(args.out)], Path(args.out) / "report", bin_rule=args.bin_rule)
         print(f"report: {paths['markdown']}")
     return 1 if failed else 0

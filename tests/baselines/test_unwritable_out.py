@@ -1,0 +1,70 @@
+"""`collie report / archive / rescore / sweep` with an --out that cannot be written: a read-only or
+full file system, or a path through a file, is one line naming the path (exit 2), not a traceback."""
+
+import contextlib
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from collie.cli import main
+
+from .test_report import fake_run
+from .test_rescore import finished_run
+
+
+@contextlib.contextmanager
+def small_file_system(where: Path, how: str) -> Iterator[Path]:
+    """A 1 MB tmpfs at `where`, read-only or full; skipped where this process may not mount one
+    (not root, or a container without CAP_SYS_ADMIN)."""
+    where.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(where)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
+    try:
+        if how == "read-only":
+            subprocess.run(["mount", "-o", "remount,ro", str(where)], check=True)
+        else:
+            with open(where / "filler", "wb") as f, contextlib.suppress(OSError):  # until the disk is full
+                while True:
+                    f.write(b"\0" * 65536)
+                    f.flush()
+        yield where
+    finally:
+        subprocess.run(["umount", str(where)], check=True)
+
+
+def commands(tmp_path: Path, out: Path) -> list[list[str]]:
+    """Each command with `out` (or a folder in it) as its --out, on tiny finished runs."""
+    fake_run(tmp_path / "runs", "point", "north", "metra", 0, 3.0)
+    ant, _ = finished_run(tmp_path / "ants")
+    return [
+        ["report", str(tmp_path / "runs"), "--out", str(out / "report")],
+        ["archive", str(tmp_path / "runs"), "--out", str(out / "archive")],
+        ["rescore", "--task", "range", str(ant), "--out", str(out / "rescored")],
+        # refused before any run trains: nothing is started, so this takes no time
+        ["sweep", "--tasks", "north", "--methods", "metra", "--seeds", "1", "--out", str(out / "sweep")],
+    ]
+
+
+@pytest.mark.parametrize(("how", "said"), [("read-only", "Read-only file system"), ("full", "No space left on device")])
+def test_an_out_on_a_read_only_or_full_file_system_is_one_line_naming_it(tmp_path, capsys, how, said):
+    with small_file_system(tmp_path / "fs", how) as fs:
+        for argv in commands(tmp_path, fs):
+            assert main(argv) == 2, argv
+            err = capsys.readouterr().err
+            assert "FAILED" not in err and "Traceback" not in err, err  # sweep: before any run, not run by run
+            line = err.strip().splitlines()[-1]
+            assert line.startswith(f"collie {argv[0]}: error: cannot write {argv[-1]}"), err
+            assert line.endswith(f": {said}"), err
+
+
+def test_an_out_through_a_file_is_one_line_naming_it(tmp_path, capsys):
+    (tmp_path / "a-file").write_text("kept")
+    for argv in commands(tmp_path, tmp_path / "a-file"):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith(f"collie {argv[0]}: error: cannot use {argv[-1]}"), err  # archive: its run's folder
+        assert err.endswith(": Not a directory\n") and len(err.splitlines()) == 1, err
+    assert (tmp_path / "a-file").read_text() == "kept"
