@@ -84,6 +84,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     if task == cfg["task"]:
         raise RescoreError(f"{source} is judged by {task} already (its summary.json holds those figures)")
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
+    if out.exists() and not out.is_dir():  # else mkdir's FileExistsError, a traceback
+        raise RescoreError(f"{out} is a file, not a folder")
     if (out / "summary.json").exists():
         held = read_json_object(out / "summary.json")  # RunFolderError, a ValueError, names a broken one
         if keep_existing and same_run(held.get("rescored_from"), source):
@@ -129,6 +131,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.out and len(args.runs) > 1:
         print("collie rescore: error: --out takes one run", file=sys.stderr)
+        return 2
+    if args.out and Path(args.out).exists() and not Path(args.out).is_dir():  # as archive and report say it
+        print(f"collie rescore: error: --out {args.out} is a file, not a folder", file=sys.stderr)
         return 2
     for source in args.runs:
         try:

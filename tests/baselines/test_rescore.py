@@ -76,6 +76,17 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     assert "already holds a run" in capsys.readouterr().err
 
 
+def test_an_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
+    source, _ = finished_run(tmp_path)
+    (tmp_path / "a-file").write_text("kept")
+    assert main(["rescore", "--task", "range", str(source), "--out", str(tmp_path / "a-file")]) == 2  # was: a traceback
+    assert capsys.readouterr().err == f"collie rescore: error: --out {tmp_path / 'a-file'} is a file, not a folder\n"
+    (tmp_path / "ant-range-metra-s0").write_text("kept")  # where it goes by default
+    with pytest.raises(RescoreError, match="ant-range-metra-s0 is a file, not a folder"):
+        rescore(source, "range")
+    assert (tmp_path / "a-file").read_text() == (tmp_path / "ant-range-metra-s0").read_text() == "kept"
+
+
 @pytest.mark.slow
 def test_a_trained_run_rescored_twice_with_its_downstream_task_judged_by_the_new_rule(tmp_path, capsys, monkeypatch):
     source = tmp_path / "point-north-metra-s0"
