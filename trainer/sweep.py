@@ -191,18 +191,25 @@ def intended_config(spec: RunSpec) -> dict[str, Any] | None:
         return None
 
 
-def config_change(spec: RunSpec) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+def config_change(spec: RunSpec, besides: tuple[str, ...] = ()) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     """The keys in which the run in `spec.out` differs from what `spec`'s command would make (where
-    and how it ran aside: trainer.same_run.NOT_THE_RUN), and both configs, comparable; no keys if
-    either config is unknown."""
-    try:
-        made = run_config(Path(spec.out))
+    and how it ran aside: trainer.same_run.NOT_THE_RUN, and `besides`), and both configs,
+    comparable; no keys if either config is unknown."""
+    folder = Path(spec.out)
+    try:  # a run killed before its first summary.json has its config.json alone
+        made = run_config(folder) if (folder / "summary.json").exists() else read_json_object(folder / "config.json")
     except RunFolderError:
         return [], {}, {}
     asked = intended_config(spec)
     if not made or asked is None:
         return [], {}, {}
-    return differing_keys(made, asked), comparable(made), comparable(asked)
+    return differing_keys(made, asked, besides), comparable(made), comparable(asked)
+
+
+def shown_values(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> str:
+    """ "--hidden 32, not 48; …": each differing key's value in the run, then in the command."""
+    values = "; ".join(f"{flag(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
+    return values + (f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else "")
 
 
 def extension(spec: RunSpec) -> tuple[int, int] | None:
@@ -227,8 +234,7 @@ def made_otherwise(spec: RunSpec) -> str | None:
     keys, made, asked = config_change(spec)
     if not keys or extension(spec) is not None:
         return None
-    values = "; ".join(f"{flag(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
-    values += f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
+    values = shown_values(keys, made, asked)
     grew = keys == ["epochs"] and asked["epochs"] > made["epochs"]
     return f"{recorded(spec)} ({values}{'; no checkpoint.pt to extend it from' if grew else ''})"
 
@@ -630,10 +636,30 @@ def check_writable(folder: Path) -> None:
         raise OSError(exc.errno, exc.strerror, str(folder)) from None
 
 
+def resumed_otherwise(spec: RunSpec) -> str | None:
+    """How an unfinished run the sweep resumes from its checkpoint differs from what `spec`'s
+    command would make (its epochs aside: a resume takes the command's), as made_otherwise says it;
+    None if it does not or starts anew. `collie train --resume` keeps the checkpoint's config, so
+    the new flags would apply to the runs begun now and not to it, said only in its .log."""
+    if is_finished(spec.out) or not (Path(spec.out) / "checkpoint.pt").exists():
+        return None
+    keys, made, asked = config_change(spec, besides=("epochs",))
+    return f"{recorded(spec)} ({shown_values(keys, made, asked)})" if keys else None
+
+
 def say_what_finished_runs_get(specs: list[RunSpec]) -> None:
     """A line for each finished run the sweep extends to more epochs, and a warning for each that
-    another configuration would not be rerun."""
-    for spec in (s for s in specs if is_finished(s.out)):
+    another configuration would not be rerun, or (an interrupted run) resumes with its own."""
+    for spec in specs:
+        if not is_finished(spec.out):
+            resumed = resumed_otherwise(spec)
+            if resumed:
+                print(
+                    f"warning: {spec.out} resumes from its checkpoint with {resumed}; the new flags do not "
+                    "apply to it (remove it to start it anew)",
+                    file=sys.stderr,
+                )
+            continue
         grows = extension(spec)
         differs = made_otherwise(spec)
         if grows:

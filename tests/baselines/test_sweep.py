@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -372,3 +373,29 @@ def test_a_task_file_joins_the_tasks_given_and_only_its_runs_read_it(tmp_path):
     assert "--task-file" not in sweep.train_argv(specs[0])
     assert sweep.train_argv(specs[1])[3:7] == ["charger", "--task-file", str(tmp_path / "charger.toml"), "--method"]
     assert sweep.train_flags_problem(specs) is None  # `collie train` takes both commands
+
+
+def test_a_rerun_with_other_train_flags_warns_of_each_interrupted_run_that_resumes_with_its_own(tmp_path, capsys):
+    """Was: "4 runs, 0 already finished" alone; the resumed runs kept their flags, said only in their .log."""
+    old = grid(tmp_path, "point", ["north"], ["metra", "lsd"], [0], flags=("--epochs", "4", "--hidden", "32"))
+    for spec, kept_in in zip(old, ("summary.json", "config.json"), strict=True):  # lsd: killed before its summary
+        folder = Path(spec.out)
+        folder.mkdir()
+        config = sweep.intended_config(spec)  # what `collie train` made of the first sweep's command
+        saved = {"status": "interrupted", "config": config} if kept_in == "summary.json" else config
+        (folder / kept_in).write_text(json.dumps(saved))
+        (folder / "sweep_run.json").write_text(json.dumps({"preset": spec.preset, "flags": list(spec.flags)}))
+        (folder / "checkpoint.pt").write_bytes(b"")
+    sweep.say_what_finished_runs_get(
+        grid(tmp_path, "point", ["north"], ["metra", "lsd"], [0], flags=("--epochs", "8", "--hidden", "32"))
+    )
+    assert capsys.readouterr().err == ""  # more epochs: a resume takes them
+    new = grid(tmp_path, "point", ["north"], ["metra", "lsd"], [0], flags=("--epochs", "4", "--hidden", "48"))
+    sweep.say_what_finished_runs_get(new)
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        f"warning: {spec.out} resumes from its checkpoint with --preset cpu -- --epochs 4 --hidden 32, not "
+        "--preset cpu -- --epochs 4 --hidden 48 (--hidden 32, not 48); the new flags do not apply to it "
+        "(remove it to start it anew)"
+        for spec in new
+    ]
