@@ -427,10 +427,11 @@ class _Refusal(Exception):
 
 
 class _TrainParser(argparse.ArgumentParser):
-    """`collie train`'s parser, raising instead of exiting; no abbreviated flags, as collie/cli.py builds it."""
+    """`collie train`'s parser, raising instead of exiting; no abbreviated flags, as collie/cli.py
+    builds it (`python -m trainer.downstream`'s takes them: allow_abbrev)."""
 
-    def __init__(self, prog: str) -> None:
-        super().__init__(prog=prog, allow_abbrev=False)
+    def __init__(self, prog: str, allow_abbrev: bool = False) -> None:
+        super().__init__(prog=prog, allow_abbrev=allow_abbrev)
 
     def error(self, message: str) -> NoReturn:
         raise _Refusal(message)
@@ -617,10 +618,26 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
     if args.ray is not None and (wrong_ray := ray_address_problem(args.ray)):
         return wrong_ray
     try:
-        shlex.split(args.downstream_flags)
+        downstream_flags = shlex.split(args.downstream_flags)
     except ValueError as exc:  # an unclosed quote
         return f"--downstream-flags {args.downstream_flags!r}: {exc}"
+    if downstream_flags:  # else every run trains first, then each downstream task refuses them
+        return downstream_flags_problem(args.downstream_flags, downstream_flags)
     return None
+
+
+def downstream_flags_problem(given: str, flags: list[str]) -> str | None:
+    """What `python -m trainer.downstream RUN FLAGS` would refuse in `flags`, split from --downstream-flags
+    `given` (None if nothing)."""
+    from trainer.downstream import __main__ as downstream
+
+    parser = _TrainParser(prog="python -m trainer.downstream", allow_abbrev=True)
+    downstream.add_arguments(parser)
+    try:
+        why = downstream.refusal(parser.parse_args(["RUN", *flags]))
+    except _Refusal as exc:
+        why = str(exc)
+    return f"--downstream-flags {given!r}: python -m trainer.downstream would refuse them: {why}" if why else None
 
 
 def check_writable(folder: Path) -> None:

@@ -150,6 +150,14 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
         (["--methods", ""], "--methods '': entry 1 of 1 is empty"),
         (["--downstream-flags", "'oops"], '--downstream-flags "\'oops": No closing quotation'),
         (["--out", "{file}"], "--out {file} is a file, not a folder"),
+        (  # was: every run trained first, then each downstream task failed
+            ["--downstream", "--downstream-flags", "--bogus 1"],
+            "--downstream-flags '--bogus 1': python -m trainer.downstream would refuse them: unrecognized arguments",
+        ),
+        (
+            ["--downstream", "--downstream-flags", "--trajectories 0"],
+            "--downstream-flags '--trajectories 0': python -m trainer.downstream would refuse them: --trajectories",
+        ),
         (["--jobs", "0"], "--jobs must be ≥ 1"),
         (
             ["--methods", "lsd", "--tasks", "north", "--", "--epochs", "-5"],

@@ -89,10 +89,8 @@ def run_downstream(
     return {kind: result}
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python -m trainer.downstream", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The command's flags; also how `collie sweep --downstream-flags` checks its flags up front."""
     p.add_argument("run_dir")
     p.add_argument("--kind", default="auto", choices=KINDS)
     p.add_argument("--trajectories", type=int, default=160, help="zero-shot: skills sampled")
@@ -106,9 +104,21 @@ def main(argv: list[str] | None = None) -> int:
             type=type(f.default),
             help=f"PPO {f.name} (default: by the run's preset)",
         )
+
+
+def refusal(a: argparse.Namespace) -> str | None:
+    """What is wrong with parsed flags that parsing lets through."""
+    return f"--trajectories must be ≥ 1, got {a.trajectories}" if a.trajectories < 1 else None
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m trainer.downstream", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_arguments(p)
     a = p.parse_args(argv)
-    if a.trajectories < 1:
-        p.error(f"--trajectories must be ≥ 1, got {a.trajectories}")
+    if refusal(a):
+        p.error(str(refusal(a)))
     torch.set_num_threads(a.threads)
     overrides = {
         f.name: getattr(a, f"ppo_{f.name}")
