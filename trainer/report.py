@@ -529,6 +529,10 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         print(f"collie report: error: --out {out} is a file, not a folder", file=sys.stderr)
         return 2
+    held = [name for name in ("summary.json", "config.json") if (out / name).exists()]
+    if held:  # its report files would be written into the run, and a run's report.md read as its own
+        print(f"collie report: error: --out {out} is a run folder (it holds {held[0]}); give another", file=sys.stderr)
+        return 2
     with writing_into(out):
         paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
     print((out / "report.md").read_text())

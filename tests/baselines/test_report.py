@@ -329,3 +329,14 @@ def test_a_run_folder_without_its_final_skills_is_in_the_tables_not_the_figures(
     text = paths["markdown"].read_text()
     assert "| Oracle | 9.00 |" in text and "| METRA | 3.00 |" in text
     assert (tmp_path / "report" / "figures" / "skills_point_north.png").exists()
+
+
+def test_an_out_that_is_a_run_folder_is_a_one_line_error(tmp_path, capsys):
+    from collie.cli import main
+
+    run = fake_run(tmp_path / "runs", "point", "north", "metra", 0, 3.0)
+    before = sorted(p.name for p in run.iterdir())
+    assert main(["report", str(tmp_path / "runs"), "--out", str(run), "--no-figures"]) == 2  # was: written into it
+    err = capsys.readouterr().err
+    assert err == f"collie report: error: --out {run} is a run folder (it holds summary.json); give another\n"
+    assert sorted(p.name for p in run.iterdir()) == before
