@@ -49,7 +49,9 @@ def commands(tmp_path: Path, out: Path) -> list[list[str]]:
 
 
 @pytest.mark.parametrize(("how", "said"), [("read-only", "Read-only file system"), ("full", "No space left on device")])
-def test_an_out_on_a_read_only_or_full_file_system_is_one_line_naming_it(tmp_path, capsys, how, said):
+def test_an_out_on_a_read_only_or_full_file_system_is_one_line_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], how: str, said: str
+) -> None:
     with small_file_system(tmp_path / "fs", how) as fs:
         for argv in commands(tmp_path, fs):
             assert main(argv) == 2, argv
@@ -60,7 +62,7 @@ def test_an_out_on_a_read_only_or_full_file_system_is_one_line_naming_it(tmp_pat
             assert line.endswith(f": {said}"), err
 
 
-def test_an_out_through_a_file_is_one_line_naming_it(tmp_path, capsys):
+def test_an_out_through_a_file_is_one_line_naming_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "a-file").write_text("kept")
     for argv in commands(tmp_path, tmp_path / "a-file"):
         assert main(argv) == 2, argv
