@@ -7,8 +7,10 @@ labels or ran its epoch-0 evaluation), stops at once, checkpointed."""
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
+from collections.abc import Iterator
 
 # Noted, not raised: a KeyboardInterrupt raised where the signal lands may be inside a finalizer
 # (GC), where Python prints it as "Exception ignored" and goes on; the start ends before training.
@@ -19,5 +21,25 @@ def _note(_signum: int, _frame: object) -> None:
     ASKED.set()
 
 
+def _note_and_raise(_signum: int, _frame: object) -> None:
+    ASKED.set()  # kept if the raise lands in a finalizer: the waiter's own check ends it then
+    raise KeyboardInterrupt
+
+
 def note_sigterm() -> None:
     signal.signal(signal.SIGTERM, _note)
+
+
+@contextlib.contextmanager
+def raising() -> Iterator[None]:
+    """While waiting on something outside (the labeling service, up to minutes, in a connect or a
+    sleep that a noted signal does not cut short): SIGTERM raises KeyboardInterrupt at once, as
+    Ctrl-C does, so `docker stop` or systemd get `collie train: interrupted` before their SIGKILL.
+    Main thread only (signal.signal)."""
+    if ASKED.is_set():
+        raise KeyboardInterrupt
+    previous = signal.signal(signal.SIGTERM, _note_and_raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -526,3 +526,22 @@ def test_sigterm_after_the_start_before_the_first_epoch_stops_the_run_checkpoint
     assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["status"], summary["epochs_done"]) == ("interrupted", 0) and (out / "checkpoint.pt").exists()
+
+
+def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -> None:
+    """Was noted and ignored: the wait went on its 120 s (docker stop and systemd then SIGKILL)."""
+    cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--api", "http://127.0.0.1:9", "--token", TOKENS["trainer"]]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            if "waiting for the labeling service" in line:
+                break
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        err = proc.stderr.read()
+        proc.wait(timeout=60)
+    finally:
+        proc.kill()
+    assert time.monotonic() - sent < 5, err
+    assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err

@@ -187,12 +187,14 @@ def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
     from collie.client import Backoff, CollieClient, Unavailable
 
     deadline = time.monotonic() + timeout_s
-    with CollieClient(api, token) as client:
+    with early_term.raising(), CollieClient(api, token) as client:  # SIGTERM (docker stop) ends the wait at once
         for delay in Backoff(0.1, 1.0).delays():
             try:
                 client.health()
                 return
             except Unavailable:
+                if early_term.ASKED.is_set():  # its KeyboardInterrupt was lost in a finalizer
+                    raise KeyboardInterrupt from None
                 if delay == 0.1:  # the first miss: say what we wait for
                     print(f"collie train: waiting for the labeling service at {api}", file=sys.stderr, flush=True)
                 if time.monotonic() + delay > deadline:
