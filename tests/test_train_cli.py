@@ -545,3 +545,16 @@ def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -
         proc.kill()
     assert time.monotonic() - sent < 5, err
     assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err
+
+
+def test_a_wrong_token_for_an_existing_run_is_one_line(service: str, service_run: Path, tmp_path: Path) -> None:
+    """Was a SourceRefused traceback, exit 1: held_run()'s refusal escaped the start's ApiError check."""
+    mine = json.loads((service_run / "service_run.json").read_text())["run_id"]
+    run = Path(shutil.copytree(service_run, tmp_path / "run"))
+    before = digest(run / "checkpoint.pt")
+    wrong = ("--api", service, "--token", "wrong-" + "x" * 30)
+    words = (f"refused the trainer's token for run {mine}", "401: unknown or revoked token", service)
+    refused(train("--method", "metra", *wrong, "--out", str(run), "--resume", "--epochs", "3"), *words)
+    assert digest(run / "checkpoint.pt") == before
+    refused(train("--method", "metra", *wrong, "--out", str(tmp_path / "new"), "--run-id", str(mine)), *words)
+    assert not (tmp_path / "new").exists()

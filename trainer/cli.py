@@ -528,11 +528,14 @@ def run(args: argparse.Namespace) -> int:
         feedback = None
         if args.api:
             from collie.client import ApiError
+            from trainer.feedback import SourceRefused
 
             try:
                 feedback, rule = http_feedback(args, cfg, rule)
             except ApiError as exc:  # a wrong token or run id: the service's answer, as `collie teacher` prints it
                 raise ValueError(f"the labeling service at {args.api} answered {exc}") from None
+            except SourceRefused as exc:  # the same for an existing run (--run-id, --resume): its held_run()
+                raise ValueError(f"{exc} at {args.api}") from None
             mark("run created")
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
