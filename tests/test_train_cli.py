@@ -3,6 +3,7 @@ and no run folder overwritten or created by a refused command."""
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -558,3 +559,32 @@ def test_a_wrong_token_for_an_existing_run_is_one_line(service: str, service_run
     assert digest(run / "checkpoint.pt") == before
     refused(train("--method", "metra", *wrong, "--out", str(tmp_path / "new"), "--run-id", str(mine)), *words)
     assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_during_the_run_is_one_line_and_the_run_resumes(run_copy: Path) -> None:
+    """Was an OSError traceback (No space left on device), exit 1. /dev/full fails every write with
+    ENOSPC, as a full disk does."""
+    before = digest(run_copy / "checkpoint.pt")
+    (run_copy / "skills_latest.png").unlink()
+    (run_copy / "skills_latest.png").symlink_to("/dev/full")
+    line = refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "the disk is full", str(run_copy))
+    assert line.endswith("continue it with --resume once there is space"), line
+    (run_copy / "skills_latest.png").unlink()  # space again: it goes on from the kept checkpoint
+    assert digest(run_copy / "checkpoint.pt") == before
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
+
+
+def test_a_file_system_turned_read_only_is_named(tmp_path: Path) -> None:
+    from trainer.cli import write_failure
+
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    said = write_failure(OSError(errno.EROFS, os.strerror(errno.EROFS), str(tmp_path / "m")), tmp_path)
+    assert said == (
+        f"the run stopped: the file system is read-only now (read-only file system) writing {tmp_path / 'm'}: "
+        "continue it with --resume once it is writable"
+    )
+    said = write_failure(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)), tmp_path / "new")
+    assert said.endswith(f"writing {tmp_path / 'new'}: start it again once there is space"), said

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import json
 import os
 import re
@@ -456,6 +457,21 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
+def write_failure(exc: OSError, out: Path) -> str:
+    """Why the run stopped writing, where, and how it goes on: checkpoints are written whole
+    (write_whole), so the last one stays as it was and `--resume` continues from it."""
+    said = (exc.strerror or str(exc)).lower()
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        said, when = f"the disk is full ({said})", "once there is space"
+    elif exc.errno == errno.EROFS:
+        said, when = f"the file system is read-only now ({said})", "once it is writable"
+    else:
+        when = "once it can be written"
+    where = exc.filename or out
+    how = f"continue it with --resume {when}" if (out / "checkpoint.pt").is_file() else f"start it again {when}"
+    return f"the run stopped: {said} writing {where}: {how}"
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
@@ -561,6 +577,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie train: error: the labeling service at {args.api} answered {exc}", file=sys.stderr)
                 return 2
         summary = trainer.run(resume=args.resume)
+    except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
+        print(f"collie train: error: {write_failure(exc, Path(cfg.out))}", file=sys.stderr)
+        return 2
     except TrainingDiverged as exc:  # summary.json says "failed"; the last good checkpoint is kept
         print(f"collie train: error: the run failed: {exc}", file=sys.stderr)
         return 2
