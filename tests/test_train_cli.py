@@ -274,6 +274,7 @@ def test_the_car_runs_its_own_task_by_default_and_a_plane_task_is_refused_naming
         ("--run-id", "abc"),
         ("--episode-steps", "0"),
         ("--threads", "-2"),
+        ("--threads", "100000"),  # was: OpenMP's "thread constructor failed", then a segfault (exit 139)
         ("--seed", "99999999999999999999"),  # was: "Overflow when unpacking long long"
         ("--hidden", "100000000"),  # was: an allocation traceback
         ("--batch-size", "99999999999999999999"),
@@ -588,3 +589,11 @@ def test_a_file_system_turned_read_only_is_named(tmp_path: Path) -> None:
     )
     said = write_failure(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)), tmp_path / "new")
     assert said.endswith(f"writing {tmp_path / 'new'}: start it again once there is space"), said
+
+
+def test_more_threads_than_cores_is_a_warning(tmp_path: Path) -> None:
+    more = (os.cpu_count() or 1) + 1
+    proc = train("--epochs", "1", "--out", str(tmp_path / "run"), "--threads", str(more))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    said = f"collie train: warning: --threads {more} is more than this machine's {more - 1} cores"
+    assert said in proc.stderr, proc.stderr[-3000:]

@@ -118,6 +118,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 MAX_HIDDEN = 65_536  # units per layer: one layer this wide already holds 17 GB of weights (hidden² float32)
+# intra-op threads: OpenMP starts them all at torch's import; 100000 failed there and then crashed (SIGSEGV)
+MAX_THREADS = 1024
 
 
 def int_type(name: str) -> Callable[[str], int]:
@@ -128,6 +130,8 @@ def int_type(name: str) -> Callable[[str], int]:
 
     if name == "hidden":
         return int_in(None, MAX_HIDDEN, "units per layer; a layer's weights grow with its square")
+    if name == "threads":
+        return int_in(None, MAX_THREADS, "intra-op threads; more than the cores only slows a run")
     if name == "epochs":
         return int_in(None, MAX_INT, "the most a run's epochs on the labeling service may be")
     return int_in(None, MAX_INT)
@@ -529,6 +533,12 @@ def run(args: argparse.Namespace) -> int:
                 )
         from trainer.threads import apply_openmp_env, resolve_threads
 
+        cores = os.cpu_count() or 1
+        if cfg.threads > cores:  # allowed (a shared machine's count may be low), but likely a slip
+            print(
+                f"collie train: warning: --threads {cfg.threads} is more than this machine's {cores} cores",
+                file=sys.stderr,
+            )
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer, TrainingDiverged, pick_device
         from trainer.networks import fast_ops_pay
