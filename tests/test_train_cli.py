@@ -597,3 +597,20 @@ def test_more_threads_than_cores_is_a_warning(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
     said = f"collie train: warning: --threads {more} is more than this machine's {more - 1} cores"
     assert said in proc.stderr, proc.stderr[-3000:]
+
+
+def at_most_16_gib() -> None:
+    """The child's address space: an allocation beyond it fails on any machine, however large."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (16 << 30, 16 << 30))
+
+
+@pytest.mark.parametrize("flag", ["--replay-capacity", "--eval-trajectories"])
+def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: str) -> None:
+    """Were numpy's _ArrayMemoryError and MuJoCo's "Could not allocate memory" tracebacks, and a run
+    folder left holding only train.lock."""
+    cmd = [*TRAIN, "--epochs", "1", "--out", str(tmp_path / "run"), flag, "2000000000"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=at_most_16_gib)
+    refused(proc, "not enough memory", f"{flag} 2000000000")
+    assert not (tmp_path / "run").exists()

@@ -476,6 +476,21 @@ def write_failure(exc: OSError, out: Path) -> str:
     return f"the run stopped: {said} writing {where}: {how}"
 
 
+# what a run allocates by (replay, evaluation envs, networks, batches, rollouts): named when memory runs out
+SIZE_KEYS = ("replay_capacity", "eval_trajectories", "hidden", "batch_size", "episodes_per_epoch", "episode_steps")
+
+
+def short_of_memory(exc: BaseException, args: argparse.Namespace) -> str | None:
+    """The line for an allocation that failed (numpy's MemoryError, MuJoCo's FatalError "Could not
+    allocate memory"), naming the sizes given; None for any other error."""
+    if not (isinstance(exc, MemoryError) or "Could not allocate memory" in str(exc)):  # MuJoCo's, in any wrapper
+        return None
+    sizes = ", ".join(f"{flag(k)} {getattr(args, k)}" for k in SIZE_KEYS if k in args.given)
+    if not sizes:
+        sizes = "its config.json's" if args.resume else f"--preset {args.preset}'s"
+    return f"this machine has not enough memory for the run's sizes ({sizes}): give smaller ones"
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer.envs import ENV_NAMES
 
@@ -566,11 +581,14 @@ def run(args: argparse.Namespace) -> int:
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
         mark("trainer built")  # envs, observation statistics, networks, replay
-    except (ValueError, FileNotFoundError) as exc:
+    except Exception as exc:
+        refusal = short_of_memory(exc, args) or (str(exc) if isinstance(exc, (ValueError, FileNotFoundError)) else None)
+        if refusal is None:
+            raise
         if made and locked:  # a refused start leaves no empty run folder behind (another's lock stays)
             (Path(cfg.out) / LOCK_FILE).unlink(missing_ok=True)
         remove_if_empty(made)
-        print(f"collie train: error: {exc}", file=sys.stderr)
+        print(f"collie train: error: {refusal}", file=sys.stderr)
         return 2
     if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
@@ -602,6 +620,12 @@ def run(args: argparse.Namespace) -> int:
             "token acts only on the runs its own principal created)",
             file=sys.stderr,
         )
+        return 2
+    except Exception as exc:  # an allocation that failed (e.g. the evaluation's envs); any other: raised
+        refusal = short_of_memory(exc, args)
+        if refusal is None:
+            raise
+        print(f"collie train: error: {refusal}", file=sys.stderr)
         return 2
     keys = (  # as summary.json: the last evaluation's epoch and metrics, the run's epochs and wall time
         "epochs_done",
