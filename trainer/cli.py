@@ -467,10 +467,8 @@ def write_failure(exc: OSError, out: Path) -> str:
     said = (exc.strerror or str(exc)).lower()
     if exc.errno in (errno.ENOSPC, errno.EDQUOT):
         said, when = f"the disk is full ({said})", "once there is space"
-    elif exc.errno == errno.EROFS:
+    else:  # EROFS
         said, when = f"the file system is read-only now ({said})", "once it is writable"
-    else:
-        when = "once it can be written"
     where = exc.filename or out
     how = f"continue it with --resume {when}" if (out / "checkpoint.pt").is_file() else f"start it again {when}"
     return f"the run stopped: {said} writing {where}: {how}"
@@ -606,6 +604,8 @@ def run(args: argparse.Namespace) -> int:
                 return 2
         summary = trainer.run(resume=args.resume)
     except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):  # any other is a fault to show whole
+            raise
         print(f"collie train: error: {write_failure(exc, Path(cfg.out))}", file=sys.stderr)
         return 2
     except TrainingDiverged as exc:  # summary.json says "failed"; the last good checkpoint is kept
