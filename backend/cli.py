@@ -16,6 +16,7 @@ import signal
 import socket
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from pydantic import SecretStr
 
@@ -136,10 +137,40 @@ def listening(host: str, port: int) -> tuple[socket.socket, str]:
         raise SystemExit(2) from None  # a usage error, as argparse's
 
 
+def refuse_foreign(path: Path, shown: str) -> None:
+    """A usage error unless the SQLite file at `path` is new, empty or collie's: serving another
+    program's database would add collie's tables to it (and switch it to WAL mode). Looked at
+    read-only, so a refused file is left exactly as it was."""
+    from sqlalchemy import inspect
+
+    from backend.db import read_only_engine
+
+    if not path.is_file() or path.stat().st_size == 0:
+        return
+    engine = read_only_engine(path)
+    try:
+        with engine.connect() as conn:
+            tables = sorted(inspect(conn).get_table_names())
+    finally:
+        engine.dispose()
+    if tables and "alembic_version" not in tables:
+        named = ", ".join(tables[:5]) + (f" and {len(tables) - 5} more" if len(tables) > 5 else "")
+        shown = f"{shown} is not a collie database (no schema version; its tables: {named})"
+        refuse(f"{shown}: give a new file or a collie one")
+
+
+def refuse(why: str) -> NoReturn:
+    """A refusal no restart mends, as argparse reports its own: one line, exit status 2 (the
+    supervisor of `collie up` stops restarting on it)."""
+    print(f"collie serve: error: {why}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def run(args: argparse.Namespace) -> int:
+    from sqlalchemy.engine import make_url
     from sqlalchemy.exc import DBAPIError
 
-    from backend.db import UnusableDatabaseUrl, describe
+    from backend.db import UnusableDatabaseUrl, check_url, describe, is_sqlite
     from backend.main import create_app
     from backend.migrate import UnknownRevision
     from backend.server import uvicorn_server
@@ -149,6 +180,16 @@ def run(args: argparse.Namespace) -> int:
 
     if args.db is not None and args.db.is_dir():
         raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
+    url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
+    try:
+        check_url(url)
+        where = str(args.db) if args.db is not None else describe(url)
+        if is_sqlite(url) and make_url(url).database not in (None, "", ":memory:"):
+            refuse_foreign(Path(make_url(url).database or ""), where)
+    except UnusableDatabaseUrl as exc:
+        raise SystemExit(f"collie serve: error: {exc}") from None
+    except DBAPIError as exc:  # e.g. a file that is not SQLite
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     # Bound before the database is opened: a start that cannot listen must not create the database
     # and its tokens, which it would never print (the next start finds them "kept": a lockout).
     sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)

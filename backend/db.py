@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import re
+import sqlite3
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, Literal
+from urllib.parse import quote
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import make_url
@@ -73,6 +77,33 @@ def _sqlite_connect(
 
 def _sqlite_begin(conn: Connection) -> None:
     conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("write") else "BEGIN")
+
+
+def _open_read_only(path: Path) -> sqlite3.Connection:
+    """The SQLite file at `path`, read-only (mode=ro: nothing is written or created, and a missing
+    file is an error). A WAL database closed cleanly in a read-only folder cannot be read so (SQLite
+    wants to create its -shm file there): with no write-ahead log, the file alone is the whole
+    database, and immutable=1 reads it without one."""
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    conn = sqlite3.connect(uri, uri=True, check_same_thread=False)
+    try:
+        conn.execute("SELECT count(*) FROM sqlite_master").fetchall()  # opening is lazy: this reads the file
+    except sqlite3.OperationalError:
+        conn.close()
+        wal = path.with_name(path.name + "-wal")
+        if os.access(path.parent, os.W_OK) or (wal.exists() and wal.stat().st_size > 0):
+            raise
+        conn = sqlite3.connect(uri + "&immutable=1", uri=True, check_same_thread=False)
+    conn.isolation_level = None  # we issue BEGIN ourselves: one snapshot per transaction
+    return conn
+
+
+def read_only_engine(path: Path) -> Engine:
+    """An engine that reads the SQLite file at `path` and never writes to it: no WAL switch, no
+    migration (`collie export`, and `collie serve`'s look at a file before it is used)."""
+    engine = create_engine("sqlite://", creator=functools.partial(_open_read_only, path), poolclass=StaticPool)
+    event.listen(engine, "begin", _sqlite_begin)
+    return engine
 
 
 def make_engine(url: str, background_checkpoints: bool = False, synchronous: Synchronous = "FULL") -> Engine:

@@ -363,3 +363,25 @@ def test_a_revoked_built_in_token_is_never_presented_as_valid(tmp_path: Path) ->
         said = "".join(lines) + server.stderr.read()  # type: ignore[union-attr]
         assert "labeler token: revoked" in said and "kept" not in said.split("labeler token:")[1].split("\n")[0]
         assert "labeler" not in json.loads(tokens_file.read_text())["tokens"]
+
+
+def test_serve_refuses_another_program_s_database_and_leaves_it_as_it_was(tmp_path: Path) -> None:
+    """Was: `collie serve --db photos.db` added collie's tables to it (and switched it to WAL mode).
+    An empty file is a new database, as a missing one is."""
+    other = tmp_path / "photos.db"
+    with closing(sqlite3.connect(other)) as conn:
+        conn.execute("CREATE TABLE photos (path TEXT)")
+        conn.commit()
+    before = other.read_bytes()
+    out = collie("serve", "--port", "0", "--db", str(other))
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert out.stderr.strip() == (
+        f"collie serve: error: {other} is not a collie database (no schema version; its tables: photos): "
+        "give a new file or a collie one"
+    )
+    assert other.read_bytes() == before and not other.with_name(other.name + "-wal").exists()
+    empty = tmp_path / "empty.db"
+    empty.touch()
+    server, lines = start_serve(empty, None, {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")})
+    stop(server)
+    assert lines[0].startswith("collie service listening on ")
