@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
 
     from backend.db import UnusableDatabaseUrl, check_url, describe, is_sqlite
     from backend.main import create_app
-    from backend.migrate import UnknownRevision
+    from backend.migrate import Damaged, UnknownRevision
     from backend.server import uvicorn_server
     from collie.startup import mark
 
@@ -196,6 +196,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         settings, tokens, generated, revoked = settings_from(args)
         app = create_app(settings)
+    except Damaged as exc:  # a table dropped: every request touching it would fail, and no restart mends it
+        refuse(str(exc))
     except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us

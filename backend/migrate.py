@@ -9,9 +9,10 @@ from alembic.config import Config
 from alembic.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from alembic.util.exc import CommandError
-from sqlalchemy import Engine
+from sqlalchemy import Engine, inspect
 
 from backend.db import describe
+from backend.models import Base
 
 MIGRATIONS = Path(__file__).parent / "migrations"
 
@@ -19,6 +20,11 @@ MIGRATIONS = Path(__file__).parent / "migrations"
 class UnknownRevision(Exception):
     """The database's schema cannot be brought up to date: a revision this code does not know (a
     newer collie made it), or an upgrade that failed."""
+
+
+class Damaged(UnknownRevision):
+    """A database at collie's schema revision that lacks some of that schema's tables (dropped by
+    hand, a partial restore): every request touching them would fail with "no such table"."""
 
 
 def alembic_config(url: str) -> Config:
@@ -40,6 +46,7 @@ def bring_up_to_date(engine: Engine) -> str | None:
     it was at when that was an older one (None for a new or current database)."""
     found = current(engine)
     if found == head():
+        check_complete(engine)
         return None
     try:
         upgrade(engine)
@@ -51,7 +58,20 @@ def bring_up_to_date(engine: Engine) -> str | None:
                 "a newer collie made it (upgrade collie)"
             ) from None
         raise UnknownRevision(f"database {where}: upgrading its schema from {found} failed: {exc}") from None
+    check_complete(engine)
     return found
+
+
+def check_complete(engine: Engine, where: str | None = None) -> None:
+    """Damaged, in one line naming the missing tables, unless the database (at head) has every
+    table of collie's schema (Base's: test_migrations_build_exactly_the_models). One query: cheap
+    enough for every start and export. `where` names the database (default: the engine's URL)."""
+    with engine.connect() as conn:
+        missing = sorted(set(Base.metadata.tables) - set(inspect(conn).get_table_names()))
+    if missing:
+        where = where or describe(engine.url.render_as_string(hide_password=False))
+        tables = f"table {missing[0]} is" if len(missing) == 1 else f"tables {', '.join(missing)} are"
+        raise Damaged(f"database {where} is damaged: its {tables} missing (restore it from a backup)")
 
 
 def upgraded(url: str, older: str) -> str:

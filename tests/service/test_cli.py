@@ -385,3 +385,16 @@ def test_serve_refuses_another_program_s_database_and_leaves_it_as_it_was(tmp_pa
     server, lines = start_serve(empty, None, {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")})
     stop(server)
     assert lines[0].startswith("collie service listening on ")
+
+
+def test_a_damaged_database_is_a_one_line_error(tmp_path: Path) -> None:
+    """Was: export's traceback "no such table: label_events", and serve started on it (every
+    request touching the table then failed)."""
+    db = migrated(tmp_path / "damaged.db", "head")
+    with closing(sqlite3.connect(db)) as conn:
+        conn.execute("DROP TABLE label_events")
+        conn.commit()
+    said = f"database {db} is damaged: its table label_events is missing (restore it from a backup)"
+    for flags in (["export", "--run", "1"], ["export", "--run", "1", "--effective"], ["serve", "--port", "0"]):
+        out = collie(*flags, "--db", str(db))
+        assert out.returncode == 2 and out.stderr == f"collie {flags[0]}: error: {said}\n", out.stderr
