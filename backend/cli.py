@@ -137,14 +137,16 @@ def listening(host: str, port: int) -> tuple[socket.socket, str]:
         raise SystemExit(2) from None  # a usage error, as argparse's
 
 
-def refuse_foreign(path: Path, shown: str) -> None:
-    """A usage error unless the SQLite file at `path` is new, empty or collie's: serving another
-    program's database would add collie's tables to it (and switch it to WAL mode). Looked at
-    read-only, so a refused file is left exactly as it was."""
+def check_sqlite_file(path: Path, shown: str) -> None:
+    """A usage error unless the SQLite file at `path` is new (in a folder that exists), empty or
+    collie's: serving another program's database would add collie's tables to it (and switch it to
+    WAL mode). Looked at read-only, so a refused file is left exactly as it was."""
     from sqlalchemy import inspect
 
     from backend.db import read_only_engine
 
+    if not path.parent.is_dir():  # SQLite would say only "unable to open database file"
+        refuse(f"{shown}: the folder {path.parent} does not exist (make it first)")
     if not path.is_file() or path.stat().st_size == 0:
         return
     engine = read_only_engine(path)
@@ -185,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
         check_url(url)
         where = str(args.db) if args.db is not None else describe(url)
         if is_sqlite(url) and make_url(url).database not in (None, "", ":memory:"):
-            refuse_foreign(Path(make_url(url).database or ""), where)
+            check_sqlite_file(Path(make_url(url).database or ""), where)
     except UnusableDatabaseUrl as exc:
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite

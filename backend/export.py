@@ -7,12 +7,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from sqlalchemy import create_engine
-from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.engine import make_url
 from sqlalchemy.exc import DBAPIError
 
 from backend import migrate
-from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sqlite
+from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sqlite, read_only_engine
 from backend.services import export
 from backend.services.errors import ServiceError, first_line
 from backend.settings import Settings
@@ -28,15 +27,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effective", action="store_true", help="one effective label per query, not every event")
 
 
-def looking(url: str, db: Database) -> Engine:
-    """An engine to read the schema version with before anything is written: a SQLite file opened
-    read-only (the service's connections set WAL mode, which writes into the file, 4 KB into an
-    empty one, before it could be refused); a server's database through `db`."""
-    if not is_sqlite(url):
-        return db.engine
-    return create_engine(f"sqlite:///file:{Path(make_url(url).database or '').resolve()}?mode=ro&uri=true")
-
-
 def run(args: argparse.Namespace) -> int:
     url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
     try:
@@ -45,35 +35,53 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie export: error: {exc}", file=sys.stderr)
         return 2
     where = describe(url) if args.db is None else str(args.db)
-    if is_sqlite(url) and not Path(make_url(url).database or "").is_file():  # never create an empty one by mistake
+    path = Path(make_url(url).database or "") if is_sqlite(url) else None
+    if path is not None and not path.is_file():  # never create an empty one by mistake
         print(f"collie export: error: no database at {where}", file=sys.stderr)
         return 2
     db = Database(url)  # connects only when used
-    probe = looking(url, db)
+    # A SQLite file is read read-only: nothing written (the service's connections set WAL mode,
+    # 4 KB into an empty file, before it could be refused), and a file on a read-only mount or in a
+    # read-only folder is readable. Only an older schema needs a writable file, to be upgraded.
+    reader = read_only_engine(path) if path is not None else db.engine
     try:
         try:
-            found = migrate.current(probe)
+            found = migrate.current(reader)
         except DBAPIError as exc:  # a file that is no SQLite database, a server that refuses us
-            fault = "is not a collie database" if is_sqlite(url) else "cannot be read"
+            fault = "is not a collie database" if path is not None else "cannot be read"
             print(f"collie export: error: {where} {fault} ({first_line(exc.orig)})", file=sys.stderr)
             return 2
         if found is None:
             print(f"collie export: error: {where} is not a collie database (no schema version)", file=sys.stderr)
             return 2
-        try:  # as `collie serve` does on start: older databases stay readable
-            older = migrate.bring_up_to_date(db.engine)
-        except migrate.UnknownRevision as exc:
+        try:
+            if found == migrate.head():
+                migrate.check_complete(reader, where)
+            elif not migrate.known(found):
+                raise migrate.newer(where, found)
+            else:  # as `collie serve` does on start: older databases stay readable
+                try:
+                    older = migrate.bring_up_to_date(db.engine)
+                except DBAPIError as exc:  # a read-only file, a read-only server
+                    print(
+                        f"collie export: error: {where} is at schema {found}, older than this collie's "
+                        f"{migrate.head()}, and cannot be upgraded here ({first_line(exc.orig)}): "
+                        "export a writable copy of it",
+                        file=sys.stderr,
+                    )
+                    return 2
+                reader = db.engine
+                print(f"collie export: {migrate.upgraded(url, older or found)}", file=sys.stderr)
+        except migrate.UnknownRevision as exc:  # Damaged too
             print(f"collie export: error: {exc}", file=sys.stderr)
             return 2
-        if older is not None:
-            print(f"collie export: {migrate.upgraded(url, older)}", file=sys.stderr)
-        with db.read() as conn:
+        with reader.connect() as conn, conn.begin():
             text = export.render(export.rows(conn, args.run, args.effective), args.format, args.effective)
     except ServiceError as exc:
         print(f"collie export: error: {exc.detail}", file=sys.stderr)
         return 1
     finally:
-        probe.dispose()
+        reader.dispose()
         db.dispose()
     sys.stdout.write(text if text.endswith("\n") else text + "\n")
     return 0

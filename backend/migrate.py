@@ -53,13 +53,18 @@ def bring_up_to_date(engine: Engine) -> str | None:
     except CommandError as exc:  # a one-line error for `collie serve` and `collie export`, not alembic's traceback
         where = describe(engine.url.render_as_string(hide_password=False))
         if found is not None and not known(found):
-            raise UnknownRevision(
-                f"database {where} is at schema revision {found}, which this collie does not know: "
-                "a newer collie made it (upgrade collie)"
-            ) from None
+            raise newer(where, found) from None
         raise UnknownRevision(f"database {where}: upgrading its schema from {found} failed: {exc}") from None
     check_complete(engine)
     return found
+
+
+def newer(where: str, found: str) -> UnknownRevision:
+    """The error for a database a newer collie made (at a revision this code does not know)."""
+    return UnknownRevision(
+        f"database {where} is at schema revision {found}, which this collie does not know: "
+        "a newer collie made it (upgrade collie)"
+    )
 
 
 def check_complete(engine: Engine, where: str | None = None) -> None:

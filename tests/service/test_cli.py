@@ -7,12 +7,14 @@ import csv
 import io
 import json
 import os
+import shutil
 import signal
 import socket
 import sqlite3
 import subprocess
 import sys
-from contextlib import closing
+from collections.abc import Iterator
+from contextlib import closing, contextmanager
 from pathlib import Path
 
 import pytest
@@ -398,3 +400,37 @@ def test_a_damaged_database_is_a_one_line_error(tmp_path: Path) -> None:
     for flags in (["export", "--run", "1"], ["export", "--run", "1", "--effective"], ["serve", "--port", "0"]):
         out = collie(*flags, "--db", str(db))
         assert out.returncode == 2 and out.stderr == f"collie {flags[0]}: error: {said}\n", out.stderr
+
+
+@contextmanager
+def read_only_mount(folder: Path) -> Iterator[Path]:
+    """`folder` as a read-only file system (a tmpfs, remounted read-only: root writes to no file
+    there, unlike in a chmod'ed folder), filled first by the caller through the yielded path."""
+    folder.mkdir()
+    tried = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", folder], capture_output=True, text=True)
+    if tried.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here (it needs root or CAP_SYS_ADMIN): {tried.stderr.strip()}")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", folder], check=True)
+
+
+def test_export_reads_a_read_only_database_and_serve_names_a_missing_folder(tmp_path: Path) -> None:
+    """Was: "is not a collie database (unable to open database file)" for a collie database on a
+    read-only file system (SQLite cannot make the -shm file a WAL database wants there), and
+    serve's "unable to open database file" for a --db in a folder that does not exist."""
+    with read_only_mount(tmp_path / "ro") as ro:
+        shutil.copy(migrated(tmp_path / "good.db", "head"), ro / "good.db")
+        shutil.copy(migrated(tmp_path / "old.db", "0008"), ro / "old.db")
+        subprocess.run(["mount", "-o", "remount,ro", ro], check=True)
+        out = collie("export", "--db", str(ro / "good.db"), "--run", "1")
+        assert out.returncode == 1 and out.stderr == "collie export: error: no run 1\n", out.stderr  # read it
+        out = collie("export", "--db", str(ro / "old.db"), "--run", "1")
+        assert out.returncode == 2 and out.stderr.startswith(f"collie export: error: {ro / 'old.db'} is at schema 0008")
+        assert "cannot be upgraded here (unable to open database file): export a writable copy of it" in out.stderr
+    out = collie("serve", "--port", "0", "--db", "nope/x.db", cwd=tmp_path)
+    assert out.returncode == 2 and not (tmp_path / "nope").exists()
+    assert (
+        out.stderr == f"collie serve: error: nope/x.db: the folder {tmp_path / 'nope'} does not exist (make it first)\n"
+    )
