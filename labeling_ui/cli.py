@@ -10,6 +10,7 @@ import sys
 import threading
 from pathlib import Path
 from typing import NoReturn
+from urllib.parse import urlsplit
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco loads: offscreen, no X display (as collie up sets it)
 
@@ -24,6 +25,7 @@ from labeling_ui.app import LabelingApp
 from labeling_ui.session import UiConfig
 
 MAX_FPS = 1000  # far above any screen's: more only skips frames
+PROBE_S = 3.0  # the look at the service as the UI starts: no longer, so a silent host delays nothing much
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,6 +61,57 @@ def refuse(why: str) -> NoReturn:
     raise SystemExit(2)
 
 
+def warn(why: str) -> None:
+    print(f"collie label-ui: warning: {why}", file=sys.stderr, flush=True)
+
+
+def unreachable_why(exc: Exception) -> str:
+    """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
+    import httpx
+
+    cause = exc.__cause__
+    if isinstance(cause, httpx.TimeoutException):
+        return f"no answer within {PROBE_S:g} s"
+    text = str(cause or exc)
+    return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
+
+
+def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
+    """What is wrong with the service at `api` as this UI will use it, one line each: nothing
+    answers, it is not a collie service, --token is refused, --run names no run. Warnings, not
+    refusals: the service may come up (or the run appear) after the UI starts, as under compose."""
+    from pydantic import ValidationError
+
+    from collie.client import ApiError, CollieClient, Unauthorized, Unreachable
+
+    where = f"the labeling service at {api}"
+    # /api/health needs no token; the client sends one always, and an empty one is no legal header
+    with CollieClient(api, token or "none", timeout_s=PROBE_S) as client:
+        try:
+            client.health()
+        except Unreachable as exc:
+            return [f"{where} does not answer ({unreachable_why(exc)}); the UI starts, and labels once it does"]
+        except (ApiError, ValidationError) as exc:  # a 503 is collie's own: its database, said on the page
+            status = getattr(exc, "status", 200)
+            if status != 503:
+                shown = f"{status}" if status != 200 else "200 with another body"
+                path = f"{urlsplit(api).path.rstrip('/')}/api/health"
+                return [f"{api} is not a collie service ({shown} on {path}); check --api"]
+        if not token:
+            return []
+        try:
+            client.me()
+            if run_id is not None:
+                client.run(run_id)
+        except Unauthorized as exc:
+            return [f"{where} refused --token ({exc}): the labeler URL will not sign in"]
+        except ApiError as exc:
+            return [f"{where} has no run {run_id}" if exc.status == 404 else f"{where} answered {exc}"]
+        except Unreachable as exc:
+            return [f"{where} does not answer ({unreachable_why(exc)})"]
+    return []
+
+
 def info_folder(path: Path) -> None:
     """--info-json's folder, made as `collie up` and `collie serve --tokens-json` make theirs; a
     folder given as the file, or one that cannot be made, is refused before the UI starts."""
@@ -86,10 +139,17 @@ def run(args: argparse.Namespace) -> int:
         refuse(f"--host {args.host} is not an address of this machine ({why})")
     if args.info_json is not None:
         info_folder(args.info_json)
+    # Looked at while the UI starts (in a thread: a silent host costs its timeout there, not here).
+    warnings: list[str] = []
+    looking = threading.Thread(target=lambda: warnings.extend(probe(args.api, token, args.run)), daemon=True)
+    looking.start()
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
     mark("serving")  # viser's server is up; models compile in the background
     if args.port and app.port != args.port:  # viser moves on from a port in use: say so, not only the URL
         print(f"collie labeling UI: port {args.port} is in use; serving on port {app.port} instead", flush=True)
+    looking.join(PROBE_S * 3)  # health, me, the run: each within PROBE_S
+    for said in warnings:
+        warn(said)
     print(f"collie labeling UI: {app.url}  (service {args.api})", flush=True)
     if token:  # asked for by the person who started it: their terminal, not a log
         print(f"labeler URL: {app.labeler_url(token)}", flush=True)

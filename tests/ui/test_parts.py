@@ -271,6 +271,45 @@ def test_a_port_in_use_is_said_with_the_port_served_instead(stack: Stack, tmp_pa
     assert f"port {taken} is in use; serving on port {served} instead" in out
 
 
+def ui_start_warnings(api: str, *flags: str) -> list[str]:
+    """The warnings a real `collie label-ui` says as it starts (it starts all the same)."""
+    cmd = [sys.executable, "-m", "collie.cli", "label-ui", "--api", api, "--port", "0", "--warm", "", *flags]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stdout:  # type: ignore[union-attr]  # viser's box, then ours
+            if line.startswith("collie labeling UI: http://"):
+                break
+        else:
+            pytest.fail("collie label-ui ended before it served")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+    assert "Traceback" not in err, err  # stopped by SIGTERM, perhaps before its handler is in place
+    return [line for line in err.splitlines() if line.startswith("collie label-ui: warning: ")]
+
+
+def test_the_ui_warns_at_start_of_a_service_it_cannot_use(stack: Stack) -> None:
+    """Was: the UI started and printed its URL without a word for any of these."""
+    with socket.socket() as gone:
+        gone.bind(("127.0.0.1", 0))
+        nobody = f"http://127.0.0.1:{gone.getsockname()[1]}"  # bound, never listening: refused
+        said = ui_start_warnings(nobody)
+    assert said == [
+        f"collie label-ui: warning: the labeling service at {nobody} does not answer (connection refused); "
+        "the UI starts, and labels once it does"
+    ]
+    where = f"collie label-ui: warning: the labeling service at {stack.api}"
+    assert ui_start_warnings(stack.api, "--token", "wrong-token-0123456789") == [
+        f"{where} refused --token (401: unknown or revoked token): the labeler URL will not sign in"
+    ]
+    assert ui_start_warnings(stack.api, "--token", stack.new_labeler("probe"), "--run", "77") == [
+        f"{where} has no run 77"
+    ]
+    assert ui_start_warnings(f"{stack.api}/zzz") == [
+        f"collie label-ui: warning: {stack.api}/zzz is not a collie service (404 on /zzz/api/health); check --api"
+    ]
+
+
 def test_fits_the_collie_command(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     from collie import cli
 
