@@ -7,9 +7,12 @@ import logging
 import signal
 import sys
 import time
+from urllib.parse import urlsplit
+
+from pydantic import ValidationError
 
 from collie.argtypes import float_in, http_url, record_id, seed
-from collie.client import ApiError, CollieClient, Unreachable
+from collie.client import ApiError, CollieClient, Unauthorized, Unreachable
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
@@ -49,6 +52,35 @@ def wait_for_run(client: CollieClient, run_id: int, patience_s: float) -> None:
         time.sleep(1.0)
 
 
+def unreachable_why(exc: Unreachable) -> str:
+    """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
+    import httpx
+
+    cause = exc.__cause__
+    if isinstance(cause, httpx.TimeoutException):
+        return "no answer in time"
+    text = str(cause or exc)
+    return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
+
+
+def service_fault(client: CollieClient, exc: ApiError | Unreachable, run_id: int) -> str:
+    """What went wrong, naming the service: no answer, not a collie service (a 404 where the run
+    should be, and on /api/health too), a refused token, no such run, or what it answered."""
+    where = f"the labeling service at {client.api}"
+    if isinstance(exc, Unreachable):
+        return f"{where} does not answer ({unreachable_why(exc)})"
+    if isinstance(exc, Unauthorized):
+        return f"{where} refused the token ({exc})"
+    if exc.status == 404:  # no such run, or no collie there at all: its health says which
+        try:
+            client.health()
+        except (ApiError, Unreachable, ValidationError):
+            path = f"{urlsplit(client.api).path}/api/runs/{run_id}"
+            return f"{client.api} is not a collie service (404 on {path}); check --api"
+        return f"{where} has no run {run_id}"
+    return f"{where} answered {exc}"
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         token = resolve_token(args, "labeler")
@@ -57,18 +89,21 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if not token:
         print(
-            "collie teacher: give --token-file, set COLLIE_TOKEN (or COLLIE_LABELER_TOKEN), or --token", file=sys.stderr
+            "collie teacher: error: give --token-file, set COLLIE_TOKEN (or COLLIE_LABELER_TOKEN), or --token",
+            file=sys.stderr,
         )
         return 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
     with CollieClient(args.api, token) as client:
         try:
             wait_for_run(client, args.run, args.wait)
-        except (ApiError, Unreachable) as exc:
-            print(f"collie teacher: {exc}", file=sys.stderr)
-            return 1
-        try:
             oracle = oracle_for(client, args.run, args.noise_band, args.seed)
+        except (ApiError, Unreachable) as exc:  # a usage error, as argparse's: the same --api and token fail again
+            print(f"collie teacher: error: {service_fault(client, exc, args.run)}", file=sys.stderr)
+            return 2
+        except ValidationError:  # an answer, but not a run's: some other web service
+            print(f"collie teacher: error: {args.api} is not a collie service (no run in its answer)", file=sys.stderr)
+            return 2
         except ValueError as exc:  # NoRule, or a stored rule this version cannot read
             print(f"collie teacher: error: {exc}", file=sys.stderr)
             return 2
@@ -86,10 +121,8 @@ def run(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             n = loop.labelled
         except ApiError as exc:  # e.g. a trainer's token, or one revoked meanwhile
-            print(
-                f"collie teacher: error: the labeling service answered {exc} (after {loop.labelled} labels)",
-                file=sys.stderr,
-            )
+            said = service_fault(client, exc, args.run)
+            print(f"collie teacher: error: {said} (after {loop.labelled} labels)", file=sys.stderr)
             return 2
     print(f"collie teacher: labelled {n} queries of run {args.run}", flush=True)
     return 0

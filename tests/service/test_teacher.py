@@ -52,9 +52,32 @@ def test_a_token_the_service_refuses_to_label_with_is_one_line(live: BackgroundS
     out = subprocess.run([*command, "--token", TOKENS["trainer"]], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert (
-        out.stderr.startswith("collie teacher: error: the labeling service answered 403")
+        out.stderr.startswith(f"collie teacher: error: the labeling service at {live.url} refused the token (403")
         and "(after 0 labels)" in out.stderr
     )
+
+
+def test_what_keeps_the_teacher_from_the_service_is_one_line_naming_it(live: BackgroundServer) -> None:
+    """Was: "GET /runs/1: ConnectError('[Errno 111] Connection refused')", "404: Not Found", and
+    a refused token's "401: …" with status 1 and no "error:"."""
+    with socket.socket() as gone:
+        gone.bind(("127.0.0.1", 0))
+        nobody = f"http://127.0.0.1:{gone.getsockname()[1]}"  # bound, never listening: refused
+        cases = [
+            (nobody, TOKENS["labeler"], f"the labeling service at {nobody} does not answer (connection refused)"),
+            (
+                f"{live.url}/zzz",
+                TOKENS["labeler"],
+                f"{live.url}/zzz is not a collie service (404 on /zzz/api/runs/999999)",
+            ),
+            (live.url, "wrong-token-0123456789", f"the labeling service at {live.url} refused the token (401: unknown"),
+            (live.url, TOKENS["labeler"], f"the labeling service at {live.url} has no run 999999"),
+        ]
+        for api, token, said in cases:
+            command = [sys.executable, "-m", "collie.cli", "teacher", "--api", api, "--run", "999999", "--token", token]
+            out = subprocess.run(command, capture_output=True, text=True, timeout=60)
+            assert out.returncode == 2 and out.stderr.startswith(f"collie teacher: error: {said}"), out.stderr
+            assert len(out.stderr.splitlines()) == 1
 
 
 @pytest.mark.parametrize(
