@@ -98,9 +98,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             wait_for_run(client, args.run, args.wait)
             oracle = oracle_for(client, args.run, args.noise_band, args.seed)
-        except (ApiError, Unreachable) as exc:  # a usage error, as argparse's: the same --api and token fail again
+        except (ApiError, Unreachable) as exc:
             print(f"collie teacher: error: {service_fault(client, exc, args.run)}", file=sys.stderr)
-            return 2
+            # a refusal (token, path, run) fails again: a usage error, as argparse's (2); a service
+            # that does not answer may be restarting: 1, which `collie up` restarts the teacher after
+            return 1 if isinstance(exc, Unreachable) else 2
         except ValidationError:  # an answer, but not a run's: some other web service
             print(f"collie teacher: error: {args.api} is not a collie service (no run in its answer)", file=sys.stderr)
             return 2
