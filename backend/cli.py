@@ -65,21 +65,24 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     return {role: tokens[role] for role in ROLES if role in tokens}
 
 
-def kept_in_file(path: Path, tokens: dict[str, str], revoked: set[str]) -> dict[str, str]:
+def kept_in_file(path: Path, tokens: dict[str, str], alive: set[str]) -> dict[str, str]:
     """With --no-generate-tokens: the tokens file's entries for the roles the environment does not
     set, which an earlier start generated and wrote only there. Rewriting the file without them
-    would lose the one copy of tokens the database still accepts. An unreadable file has none."""
+    would lose the one copy of tokens the database still accepts. Only roles the database has,
+    unrevoked (`alive`): a new database's file keeps no token of an old one. An unreadable file has
+    none."""
     try:
         written = written_tokens(path)
     except SystemExit:
         return {}
-    return {role: t for role, t in written.items() if role not in tokens and role not in revoked}
+    return {role: t for role, t in written.items() if role not in tokens and role in alive}
 
 
-def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str], set[str]]:
+def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], set[str], set[str], set[str]]:
     """Settings from the environment, with --db and the bootstrap tokens filled in; the tokens
-    known (from the environment, the tokens file or new), the roles whose token is new, and the
-    built-in principals an operator revoked (their tokens are left out: revoking is final)."""
+    known (from the environment, the tokens file or new), the roles whose token is new, the
+    built-in principals an operator revoked (their tokens are left out: revoking is final), and
+    those the database already had, unrevoked."""
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
@@ -109,7 +112,8 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
             "COLLIE_LABELER_TOKEN set, on a new database: nobody could sign in (set them, or drop --no-generate-tokens)"
         )
     revoked = {role for role, gone in known.items() if gone}
-    return Settings(**overrides), tokens, new, revoked  # type: ignore[arg-type]  # as above
+    alive = {role for role, gone in known.items() if not gone}
+    return Settings(**overrides), tokens, new, revoked, alive  # type: ignore[arg-type]  # as above
 
 
 def inherited(fd: int) -> tuple[socket.socket, str]:
@@ -196,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
     # and its tokens, which it would never print (the next start finds them "kept": a lockout).
     sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)
     try:
-        settings, tokens, generated, revoked = settings_from(args)
+        settings, tokens, generated, revoked, alive = settings_from(args)
         app = create_app(settings)
     except Damaged as exc:  # a table dropped: every request touching it would fail, and no restart mends it
         refuse(str(exc))
@@ -207,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
     if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
-        written = kept_in_file(args.tokens_json, tokens, revoked) if args.no_generate_tokens else {}
+        written = kept_in_file(args.tokens_json, tokens, alive) if args.no_generate_tokens else {}
         write_secret(args.tokens_json, json.dumps({"api": url, "tokens": written | tokens}, indent=1))
     server = uvicorn_server(app, args.log_level)
     # Ctrl-C (or SIGTERM) is the way to stop, at any moment from here on: the handler only sets

@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
                         file=sys.stderr,
                     )
                     return 2
+                reader.dispose()  # its read-only connection: the upgraded file is read through db's
                 reader = db.engine
                 print(f"collie export: {migrate.upgraded(url, older or found)}", file=sys.stderr)
         except migrate.UnknownRevision as exc:  # Damaged too

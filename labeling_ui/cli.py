@@ -71,7 +71,7 @@ def unreachable_why(exc: Exception) -> str:
 
     cause = exc.__cause__
     if isinstance(cause, httpx.TimeoutException):
-        return f"no answer within {PROBE_S:g} s"
+        return "no answer in time"
     text = str(cause or exc)
     return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
 
@@ -109,7 +109,18 @@ def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
             return [f"{where} has no run {run_id}" if exc.status == 404 else f"{where} answered {exc}"]
         except Unreachable as exc:
             return [f"{where} does not answer ({unreachable_why(exc)})"]
+        except ValidationError:  # e.g. a newer collie's run: the page says what it cannot show
+            return [f"{where} answered with a run this collie cannot read (a newer collie's?)"]
     return []
+
+
+def probed(api: str, token: str | None, run_id: int | None) -> list[str]:
+    """`probe`, in the start's background thread: an error it did not foresee is one more warning,
+    not a thread's traceback (the UI starts either way)."""
+    try:
+        return probe(api, token, run_id)
+    except Exception as exc:
+        return [f"could not check the labeling service at {api}: {exc!r}"]
 
 
 def info_folder(path: Path) -> None:
@@ -141,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         info_folder(args.info_json)
     # Looked at while the UI starts (in a thread: a silent host costs its timeout there, not here).
     warnings: list[str] = []
-    looking = threading.Thread(target=lambda: warnings.extend(probe(args.api, token, args.run)), daemon=True)
+    looking = threading.Thread(target=lambda: warnings.extend(probed(args.api, token, args.run)), daemon=True)
     looking.start()
     app = LabelingApp(config, host=args.host, port=args.port, warm=warm)
     mark("serving")  # viser's server is up; models compile in the background

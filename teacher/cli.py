@@ -12,7 +12,7 @@ from urllib.parse import urlsplit
 from pydantic import ValidationError
 
 from collie.argtypes import float_in, http_url, record_id, seed
-from collie.client import ApiError, CollieClient, Unauthorized, Unreachable
+from collie.client import ApiError, CollieClient, Unauthorized, Unavailable, Unreachable
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
@@ -71,10 +71,14 @@ def service_fault(client: CollieClient, exc: ApiError | Unreachable, run_id: int
         return f"{where} does not answer ({unreachable_why(exc)})"
     if isinstance(exc, Unauthorized):
         return f"{where} refused the token ({exc})"
+    if isinstance(exc, Unavailable):  # 5xx, 429
+        return f"{where} is busy or failing now ({exc})"
     if exc.status == 404:  # no such run, or no collie there at all: its health says which
         try:
             client.health()
-        except (ApiError, Unreachable, ValidationError):
+        except Unavailable:
+            return f"{where} has no run {run_id}, or is busy now (its health check failed too)"
+        except (ApiError, ValidationError):
             path = f"{urlsplit(client.api).path}/api/runs/{run_id}"
             return f"{client.api} is not a collie service (404 on {path}); check --api"
         return f"{where} has no run {run_id}"
@@ -101,10 +105,22 @@ def run(args: argparse.Namespace) -> int:
         except (ApiError, Unreachable) as exc:
             print(f"collie teacher: error: {service_fault(client, exc, args.run)}", file=sys.stderr)
             # a refusal (token, path, run) fails again: a usage error, as argparse's (2); a service
-            # that does not answer may be restarting: 1, which `collie up` restarts the teacher after
-            return 1 if isinstance(exc, Unreachable) else 2
-        except ValidationError:  # an answer, but not a run's: some other web service
-            print(f"collie teacher: error: {args.api} is not a collie service (no run in its answer)", file=sys.stderr)
+            # that does not answer or is busy (5xx, 429) may be restarting: 1, after which `collie
+            # up` restarts the teacher (two 2s in a row end the stack)
+            return 1 if isinstance(exc, Unavailable) else 2
+        except ValidationError:  # an answer, but not a run's: another web service, or a newer collie's run
+            try:
+                client.health()
+            except (ApiError, Unavailable, ValidationError):
+                print(
+                    f"collie teacher: error: {args.api} is not a collie service (no run in its answer)", file=sys.stderr
+                )
+                return 2
+            print(
+                f"collie teacher: error: the labeling service at {args.api} answered with a run this collie cannot "
+                "read (a newer collie's?)",
+                file=sys.stderr,
+            )
             return 2
         except ValueError as exc:  # NoRule, or a stored rule this version cannot read
             print(f"collie teacher: error: {exc}", file=sys.stderr)

@@ -545,7 +545,7 @@ def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -
         proc.wait(timeout=60)
     finally:
         proc.kill()
-    assert time.monotonic() - sent < 5, err
+    assert time.monotonic() - sent < 30, err  # the wait it cut short is 120 s
     assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err
 
 
@@ -610,7 +610,7 @@ def at_most_16_gib() -> None:
 def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: str) -> None:
     """Were numpy's _ArrayMemoryError and MuJoCo's "Could not allocate memory" tracebacks, and a run
     folder left holding only train.lock."""
-    cmd = [*TRAIN, "--epochs", "1", "--out", str(tmp_path / "run"), flag, "2000000000"]
+    cmd = [*TRAIN, "--device", "cpu", "--epochs", "1", "--out", str(tmp_path / "run"), flag, "2000000000"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=at_most_16_gib)
     refused(proc, "not enough memory", f"{flag} 2000000000")
     assert not (tmp_path / "run").exists()

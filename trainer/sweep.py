@@ -621,7 +621,7 @@ def problem(args: argparse.Namespace, methods: list[str], tasks: list[str], from
         downstream_flags = shlex.split(args.downstream_flags)
     except ValueError as exc:  # an unclosed quote
         return f"--downstream-flags {args.downstream_flags!r}: {exc}"
-    if downstream_flags:  # else every run trains first, then each downstream task refuses them
+    if downstream_flags and args.downstream:  # else every run trains first, then each downstream task refuses them
         return downstream_flags_problem(args.downstream_flags, downstream_flags)
     return None
 

@@ -15,9 +15,11 @@ from collie.schemas import ErrorBody, Health
 router = APIRouter(tags=["health"])
 
 
-@router.api_route(  # HEAD too: `curl -I` and load balancers' probes
+# HEAD too (`curl -I`, load balancers' probes), out of the schema: one route for both methods would
+# give the two one operation id, whose suffix then changes from process to process
+@router.head("/health", include_in_schema=False)
+@router.get(
     "/health",
-    methods=["GET", "HEAD"],
     responses={503: {"model": ErrorBody, "description": "the database is unreachable, busy or cannot be written"}},
 )
 def health(db: DB) -> Health:

@@ -9,6 +9,7 @@ import threading
 import time
 from collections.abc import Callable
 
+import httpx
 import pytest
 from sqlalchemy import update
 
@@ -29,6 +30,9 @@ def database_url(both_databases: str) -> str:
 def test_health_needs_no_token(live: object) -> None:
     with CollieClient(live.url, "nobody") as anonymous:  # type: ignore[attr-defined]
         assert anonymous.health().status == "ok"
+    head = httpx.head(f"{live.url}/api/health")  # type: ignore[attr-defined]  # `curl -I`, load balancers
+    assert head.status_code == 200 and head.content == b""
+    assert "head" not in live.app.openapi()["paths"]["/api/health"]  # type: ignore[attr-defined]  # one operation id
 
 
 def test_create_read_and_list_runs(trainer: CollieClient, labeler: CollieClient) -> None:

@@ -24,7 +24,6 @@ PUBLIC, ANY, TRAINER, LABELER, OPERATOR = "public", "any", "trainer", "labeler",
 
 POLICY: dict[tuple[str, str], str] = {
     ("GET", "/api/health"): PUBLIC,
-    ("HEAD", "/api/health"): PUBLIC,  # `curl -I`, load balancers
     ("GET", "/api/me"): ANY,
     ("POST", "/api/labelers"): OPERATOR,
     ("GET", "/api/labelers"): OPERATOR,
