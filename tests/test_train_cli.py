@@ -547,6 +547,15 @@ def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -
         proc.kill()
     assert time.monotonic() - sent < 30, err  # the wait it cut short is 120 s
     assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err
+    assert not (tmp_path / "run").exists()  # was left holding only train.lock
+
+
+def test_a_task_file_that_exits_is_one_line_and_leaves_no_run_folder(tmp_path: Path) -> None:
+    """Was: exit 3 without a word, and a new run folder holding only train.lock."""
+    quits = tmp_path / "quits.py"
+    quits.write_text("import sys\n\nsys.exit(3)\n")
+    refused(train("--task-file", str(quits), "--out", str(tmp_path / "new" / "run")), "exit status 3", str(quits))
+    assert not (tmp_path / "new").exists()
 
 
 def test_a_wrong_token_for_an_existing_run_is_one_line(service: str, service_run: Path, tmp_path: Path) -> None:

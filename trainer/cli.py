@@ -579,13 +579,25 @@ def run(args: argparse.Namespace) -> int:
         reporter = feedback.reporter if feedback is not None else None  # the same run's telemetry
         trainer = Trainer(cfg, feedback=feedback, progress=not args.no_progress, reporter=reporter, rule=rule)
         mark("trainer built")  # envs, observation statistics, networks, replay
-    except Exception as exc:
-        refusal = short_of_memory(exc, args) or (str(exc) if isinstance(exc, (ValueError, FileNotFoundError)) else None)
-        if refusal is None:
-            raise
-        if made and locked:  # a refused start leaves no empty run folder behind (another's lock stays)
+    except BaseException as exc:  # Ctrl-C and SIGTERM too: a failed start leaves no empty run folder behind
+        refusal = None
+        if isinstance(exc, Exception):
+            refusal = short_of_memory(exc, args) or (
+                str(exc) if isinstance(exc, ValueError | FileNotFoundError) else None
+            )
+        if made and locked:  # a folder this start made holds nothing of a run yet (another's lock stays)
             (Path(cfg.out) / LOCK_FILE).unlink(missing_ok=True)
         remove_if_empty(made)
+        if (
+            refusal is None
+            and isinstance(exc, SystemExit)
+            and isinstance(exc.code, int)
+            and exc.code
+            and args.task_file
+        ):
+            refusal = f"the start ended with exit status {exc.code} while the task file {args.task_file} was read"
+        if refusal is None:
+            raise
         print(f"collie train: error: {refusal}", file=sys.stderr)
         return 2
     if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
