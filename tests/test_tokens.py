@@ -88,7 +88,10 @@ def test_a_new_token_never_starts_with_a_dash() -> None:
 @pytest.mark.parametrize(
     ("command", "said"),
     [
-        (["teacher", "--run", "1", "--api", "http://127.0.0.1:9"], "Connection refused"),  # it called the service
+        (
+            ["teacher", "--run", "1", "--api", "http://127.0.0.1:9"],
+            "does not answer (connection refused)",
+        ),  # it called the service
         (["train", "--preset", "smoke", "--epochs", "0", "--api", "http://127.0.0.1:9"], "--epochs must be ≥ 1"),
     ],
 )
