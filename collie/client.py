@@ -131,6 +131,15 @@ class Unreachable(Unavailable):
     """No answer from the service (down, restarting, or the network dropped)."""
 
 
+def unreachable_why(exc: Unreachable) -> str:
+    """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
+    cause = exc.__cause__
+    if isinstance(cause, httpx.TimeoutException):
+        return "no answer in time"
+    text = str(cause or exc)
+    return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
+
+
 class Overloaded(ApiError, Unavailable):
     """5xx or 429: the service answered that it cannot do it now."""
 

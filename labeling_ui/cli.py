@@ -65,24 +65,13 @@ def warn(why: str) -> None:
     print(f"collie label-ui: warning: {why}", file=sys.stderr, flush=True)
 
 
-def unreachable_why(exc: Exception) -> str:
-    """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
-    import httpx
-
-    cause = exc.__cause__
-    if isinstance(cause, httpx.TimeoutException):
-        return "no answer in time"
-    text = str(cause or exc)
-    return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
-
-
 def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
     """What is wrong with the service at `api` as this UI will use it, one line each: nothing
     answers, it is not a collie service, --token is refused, --run names no run. Warnings, not
     refusals: the service may come up (or the run appear) after the UI starts, as under compose."""
     from pydantic import ValidationError
 
-    from collie.client import ApiError, CollieClient, Unauthorized, Unreachable
+    from collie.client import ApiError, CollieClient, Unauthorized, Unreachable, unreachable_why
 
     where = f"the labeling service at {api}"
     # /api/health needs no token; the client sends one always, and an empty one is no legal header

@@ -12,7 +12,7 @@ from urllib.parse import urlsplit
 from pydantic import ValidationError
 
 from collie.argtypes import float_in, http_url, record_id, seed
-from collie.client import ApiError, CollieClient, Unauthorized, Unavailable, Unreachable
+from collie.client import ApiError, CollieClient, Unauthorized, Unavailable, Unreachable, unreachable_why
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
@@ -50,17 +50,6 @@ def wait_for_run(client: CollieClient, run_id: int, patience_s: float) -> None:
             if (isinstance(exc, ApiError) and exc.status != 404) or time.monotonic() > deadline:
                 raise
         time.sleep(1.0)
-
-
-def unreachable_why(exc: Unreachable) -> str:
-    """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
-    import httpx
-
-    cause = exc.__cause__
-    if isinstance(cause, httpx.TimeoutException):
-        return "no answer in time"
-    text = str(cause or exc)
-    return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
 
 
 def service_fault(client: CollieClient, exc: ApiError | Unreachable, run_id: int) -> str:
