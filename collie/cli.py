@@ -47,11 +47,6 @@ def refusal_line(exc: PermissionError) -> str:
     return f"{said}: {where}" if where else said
 
 
-# What a file system says of a path a command writes that is the machine's state, not a bug: read-only,
-# full, over quota. Reported in a line; any other OSError keeps its traceback.
-UNWRITABLE = (errno.EROFS, errno.ENOSPC, errno.EDQUOT)
-
-
 def unwritable_line(exc: OSError) -> str | None:
     """ "cannot write PATH: Read-only file system" for a file system's refusal (a full disk's write
     names no path: "cannot write: No space left on device"); for a file where a folder must go (a
@@ -59,6 +54,8 @@ def unwritable_line(exc: OSError) -> str | None:
     OSError, which is a bug to show whole."""
     said = exc.strerror or str(exc)
     where = exc.filename2 if exc.filename2 is not None else exc.filename  # a copy's or rename's: its target
+    from collie.whole_files import UNWRITABLE
+
     if exc.errno in UNWRITABLE:
         return f"cannot write {where}: {said}" if where is not None else f"cannot write: {said}"
     if exc.errno == errno.ENOTDIR and exc.filename is not None:

@@ -4,10 +4,15 @@ folders and checkpoints, `collie up`'s children.json and the labeling UI's --inf
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
+
+# What a file system answers a write when the machine, not the program, is at fault: read-only,
+# full, over quota. Commands say it in a line (collie/cli.py, collie train); any other OSError is a bug.
+UNWRITABLE = (errno.EROFS, errno.ENOSPC, errno.EDQUOT)
 
 
 def write_whole(path: Path, write: Callable[[BinaryIO], object], sync: bool = False) -> None:

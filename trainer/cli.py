@@ -21,6 +21,7 @@ from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
+from collie.whole_files import UNWRITABLE
 from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
@@ -547,7 +548,7 @@ def run(args: argparse.Namespace) -> int:
         from trainer.threads import apply_openmp_env, resolve_threads
 
         cores = os.cpu_count() or 1
-        if cfg.threads > cores:  # allowed (a shared machine's count may be low), but likely a slip
+        if "threads" in args.given and cfg.threads > cores:  # allowed (a shared machine's may be low), but a slip?
             print(
                 f"collie train: warning: --threads {cfg.threads} is more than this machine's {cores} cores",
                 file=sys.stderr,
@@ -616,7 +617,7 @@ def run(args: argparse.Namespace) -> int:
                 return 2
         summary = trainer.run(resume=args.resume)
     except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
-        if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):  # any other is a fault to show whole
+        if exc.errno not in UNWRITABLE:  # any other is a fault to show whole
             raise
         print(f"collie train: error: {write_failure(exc, Path(cfg.out))}", file=sys.stderr)
         return 2

@@ -124,23 +124,35 @@ def seen(page: Page, key: str) -> list[str]:
     return page.evaluate(f"window.seen[{key!r}]")
 
 
+def drawing(page: Page, live: BackgroundServer, run_id: int) -> tuple[list[int], Held]:
+    """The run's page opened, its snapshot shown and its charts held (Plotly not yet loaded); the
+    runs whose streams the page opens, as they open."""
+    opened = streams(page)
+    plotly = Held(page, PLOTLY, fetch=False)
+    goto(page, live, run_id)
+    plotly.wait(1)
+    title_is(page, run_id)
+    return opened, plotly
+
+
+def only_stream_after(page: Page, trainer: CollieClient, plotly: Held, opened: list[int], run_id: int) -> None:
+    """Plotly let through: the run shown opens its stream, shows its epochs, and no other opened one."""
+    with page.expect_request(lambda r: f"/api/runs/{run_id}/stream" in r.url):
+        plotly.release(0)
+    shown_epoch(page, trainer, run_id, 3)
+    assert opened == [run_id]
+
+
 def test_a_run_opened_while_another_draws_gets_only_its_own_stream(
     page: Page, live: BackgroundServer, trainer: CollieClient
 ) -> None:
     """A's charts still draw when the operator opens B: A's stream must not start (its events
     would land on B's page, and nothing would ever close it)."""
     a, b = trainer.create_run(make_run_spec()), trainer.create_run(make_run_spec())
-    opened = streams(page)
-    plotly = Held(page, PLOTLY, fetch=False)
-    goto(page, live, a.id)
-    plotly.wait(1)
-    title_is(page, a.id)  # A's snapshot shown; its charts wait for Plotly
+    opened, plotly = drawing(page, live, a.id)
     page.evaluate(f"window.location.hash = '#run={b.id}'")
     title_is(page, b.id)
-    with page.expect_request(lambda r: f"/api/runs/{b.id}/stream" in r.url):
-        plotly.release(0)
-    shown_epoch(page, trainer, b.id, 3)
-    assert opened == [b.id]
+    only_stream_after(page, trainer, plotly, opened, b.id)
 
 
 def test_a_run_opened_again_while_it_draws_has_one_stream(
@@ -149,19 +161,12 @@ def test_a_run_opened_again_while_it_draws_has_one_stream(
     """#run=A, a missing run, A again, all while A's first charts draw: one stream of A, not two
     (each metrics row would be drawn twice)."""
     a = trainer.create_run(make_run_spec())
-    opened = streams(page)
-    plotly = Held(page, PLOTLY, fetch=False)
-    goto(page, live, a.id)
-    plotly.wait(1)
-    title_is(page, a.id)
+    opened, plotly = drawing(page, live, a.id)
     page.evaluate("window.location.hash = '#run=99999'")
     page.wait_for_function("document.querySelector('#run-problem').textContent.startsWith('Run #99999: no such')")
     page.evaluate(f"window.location.hash = '#run={a.id}'")
     page.wait_for_selector("#run:not([hidden])")  # the second open's snapshot shown; its charts wait too
-    with page.expect_request(lambda r: f"/api/runs/{a.id}/stream" in r.url):
-        plotly.release(0)
-    shown_epoch(page, trainer, a.id, 3)
-    assert opened == [a.id]
+    only_stream_after(page, trainer, plotly, opened, a.id)
 
 
 def test_a_failed_open_of_a_run_left_behind_does_not_hide_the_run_opened_since(
