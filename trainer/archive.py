@@ -6,11 +6,13 @@ sweep_run.json, downstream.json, metrics.jsonl and the final evaluation (eval_la
 DIR/<the run folder's name> (a `collie up` stack's, OUT/trainer: its stack's), a folder `collie
 report` reads like the run itself (tables, skill figures, diagnostics). A ROOT (a folder holding run
 folders, as `collie sweep --out` writes) has each finished run below it archived at the same
-relative path under DIR; the unfinished ones, and those whose summary.json cannot be read, are named
-and left out. A run whose name the archive already holds for another configuration is refused naming
-what differs (where and how each ran aside: trainer.same_run.NOT_THE_RUN); the others are archived,
-and the exit code is 2. No checkpoint or replay is copied, so an archived run cannot be resumed or
-given a downstream task; run those before archiving.
+relative path under DIR; the unfinished ones, and those `collie report` would leave out (a file it
+cannot read: summary.json not JSON or with a figure that is no number, eval_latest.npz cut short…;
+trainer.report.checked_run), are named with why and left out; such a run folder given itself is
+refused in one line (exit 2). A run whose name the archive already holds for another configuration
+is refused naming what differs (where and how each ran aside: trainer.same_run.NOT_THE_RUN); the
+others are archived, and the exit code is 2. No checkpoint or replay is copied, so an archived run
+cannot be resumed or given a downstream task; run those before archiving.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import sys
 from pathlib import Path
 
 from collie.stack_folder import STACK_LOCK, STACK_RUN
+from trainer.report import checked_run
 from trainer.run_files import RunFolderError, copy_whole, read_json_object, writing_into
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
@@ -33,8 +36,8 @@ SHOWN_KEYS = 4  # a refusal names at most this many differing keys with their va
 
 
 class ArchiveError(ValueError):
-    """The folder is not a finished run (or its summary.json cannot be read), or the archive already
-    holds another run of its name."""
+    """The folder is not a finished run (or `collie report` would leave it out: a file it cannot
+    read), or the archive already holds another run of its name."""
 
 
 def another_run(held: Path, source: Path) -> str | None:
@@ -62,6 +65,7 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
         summary = read_json_object(source / "summary.json")
         if not is_finished(source):
             raise ArchiveError(f"{source} is not finished (status {summary.get('status')!r})")
+        checked_run(source)  # an archive holds only what the report counts
         out = out_root / (relative or archive_name(source))
         if out.resolve() == source.resolve():
             raise ArchiveError(f"{source} is already in {out_root}")
@@ -79,13 +83,16 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
 
 def runs_below(root: Path) -> tuple[list[Path], list[Path], list[str]]:
     """The finished run folders below `root`, the unfinished ones, each in a stable order, and why
-    each folder whose summary.json cannot be read was left out (naming the file)."""
+    each folder whose summary.json cannot be read, or finished run the report would leave out, was
+    left out (naming the file)."""
     finished: list[Path] = []
     unfinished: list[Path] = []
     unreadable: list[str] = []
     for folder in sorted(summary.parent for summary in root.rglob("summary.json")):
         try:
             read_json_object(folder / "summary.json")
+            if is_finished(folder):
+                checked_run(folder)
         except RunFolderError as exc:
             unreadable.append(str(exc))
             continue

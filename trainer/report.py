@@ -15,7 +15,8 @@ visits, three of which the corner rule judges at a corner outside a wedge whose 
 "share of the skills ending within one unit of their start" counts the skills that stand.
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
-are folders whose files cannot be read, each with why. ± is the sample standard deviation over
+are folders whose files cannot be read or whose env or task this version does not know, each with
+why (`checked_run`, which `collie archive` applies too). ± is the sample standard deviation over
 seeds (as the paper's tables); a single seed shows its value alone. A cell never averages runs
 whose configurations differ (beyond `trainer.same_run.NOT_THE_RUN`: folder, threads, device…):
 each configuration has its own row, named by the keys that differ ("COLLIE (distance=l2)";
@@ -195,10 +196,24 @@ def add_diagnostics(run: RunResult) -> None:
     if not saved.exists():
         return
     xy = list(read_arrays(saved, ("xy",))["xy"])  # a damaged file: RunFolderError naming it
-    dims, task = env_class(run.env).position_dims, run_task(run)
+    try:
+        dims, task = env_class(run.env).position_dims, run_task(run)
+    except RunFolderError:
+        raise
+    except ValueError as exc:  # an env or task this version does not know, a damaged task.json
+        said = str(exc)
+        raise RunFolderError(said if said.startswith(str(run.path)) else f"{run.path}: {said}") from None
     run.metrics["standing_share"] = standing_share([t[:, :dims] for t in xy])
     if task is not None and dims == 2:
         run.metrics["off_start_safe_ratio"] = off_start_safe_ratio(xy, task)
+
+
+def checked_run(folder: Path) -> RunResult:
+    """The run in `folder` with its final evaluation read, as the report counts a finished run;
+    RunFolderError naming the file and why for one it leaves out (`collie archive` refuses those)."""
+    run = load_run(folder)
+    add_diagnostics(run)
+    return run
 
 
 def find_runs(roots: list[Path]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
@@ -521,7 +536,7 @@ def run(args: argparse.Namespace) -> int:
     for root in roots:  # a run folder given itself: a broken one is an error, not a line in the report
         if (root / "summary.json").exists():
             try:
-                add_diagnostics(load_run(root))  # its final evaluation read too
+                checked_run(root)
             except RunFolderError as exc:
                 print(f"collie report: error: {exc}", file=sys.stderr)
                 return 2

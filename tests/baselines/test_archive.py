@@ -2,6 +2,8 @@
 exactly as the run itself."""
 
 import json
+import re
+import shutil
 
 import pytest
 
@@ -11,6 +13,8 @@ from trainer.config import make_config
 from trainer.loop import Trainer
 from trainer.report import write_report
 from trainer.sweep import run_downstream_task
+
+from .test_report import fake_run
 
 
 @pytest.mark.slow
@@ -61,12 +65,9 @@ def test_an_archived_run_reports_as_the_run_itself_without_its_checkpoint_or_rep
     ],
 )
 def test_what_is_not_a_finished_run_is_refused_with_the_reason(tmp_path, files, status, message):
-    source = tmp_path / "ant-north-metra-s0"
-    source.mkdir()
-    if "summary.json" in files:
-        (source / "summary.json").write_text(json.dumps({"status": status, "config": {"env": "ant"}}))
-    if "eval_latest.npz" in files:
-        (source / "eval_latest.npz").write_bytes(b"")
+    source = fake_run(tmp_path, "ant", "north", "metra", 0, 1.0, status=status)
+    for name in {"summary.json", "eval_latest.npz"} - files:
+        (source / name).unlink()
     with pytest.raises(ArchiveError, match=message):
         archive(source, tmp_path / "results")
     assert not (tmp_path / "results").exists()
@@ -74,21 +75,19 @@ def test_what_is_not_a_finished_run_is_refused_with_the_reason(tmp_path, files, 
 
 def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unfinished_runs(tmp_path, capsys):
     sweep = tmp_path / "runs" / "robots"
-    for env, name, status in [
-        ("ant", "ant-north-metra-s0", "finished"),
-        ("ant", "ant-north-collie-s0", "running"),
-        ("half_cheetah", "half_cheetah-right-metra-s0", "finished"),
+    for env, task, method, status in [
+        ("ant", "north", "metra", "finished"),
+        ("ant", "north", "collie", "running"),
+        ("half_cheetah", "right", "metra", "finished"),
     ]:
-        d = sweep / env / name
-        d.mkdir(parents=True)
-        (d / "summary.json").write_text(json.dumps({"status": status, "config": {"env": env}}))
-        (d / "eval_latest.npz").write_bytes(b"saved")
+        fake_run(sweep / env, env, task, method, 0, 1.0, status=status)
     kept = tmp_path / "results" / "robots"
     assert main(["archive", str(sweep), "--out", str(kept)]) == 0
     assert f"left out (not finished): {sweep / 'ant' / 'ant-north-collie-s0'}" in capsys.readouterr().out
     archived = sorted(p.parent.relative_to(kept).as_posix() for p in kept.rglob("summary.json"))
     assert archived == ["ant/ant-north-metra-s0", "half_cheetah/half_cheetah-right-metra-s0"]
-    assert (kept / "ant" / "ant-north-metra-s0" / "eval_latest.npz").read_bytes() == b"saved"
+    saved = sweep / "ant" / "ant-north-metra-s0" / "eval_latest.npz"
+    assert (kept / "ant" / "ant-north-metra-s0" / "eval_latest.npz").read_bytes() == saved.read_bytes()
     assert main(["archive", str(tmp_path / "results"), "--out", str(kept)]) == 0  # nothing archived into itself
     assert main(["archive", str(tmp_path / "nowhere"), "--out", str(kept)]) == 2
     assert "is not a folder" in capsys.readouterr().err
@@ -99,10 +98,7 @@ def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unf
 
 def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_error(tmp_path, capsys):
     sweep = tmp_path / "runs"
-    run = sweep / "ant-north-metra-s0"
-    run.mkdir(parents=True)
-    (run / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": "ant"}}))
-    (run / "eval_latest.npz").write_bytes(b"saved")
+    run = fake_run(sweep, "ant", "north", "metra", 0, 1.0)
     (tmp_path / "a-file").write_text("kept")
     refused = [
         (sweep, tmp_path / "a-file", f"--out {tmp_path / 'a-file'} is a file, not a folder"),
@@ -121,10 +117,8 @@ def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_er
 @pytest.mark.parametrize(("text", "why"), [("{not json", "not JSON"), ("[1]", "not a JSON object")])
 def test_an_unreadable_summary_is_named_and_left_out_and_given_alone_is_a_one_line_error(tmp_path, capsys, text, why):
     sweep = tmp_path / "runs"
-    for name, summary in [("ant-north-metra-s0", json.dumps({"status": "finished"})), ("ant-north-metra-s1", text)]:
-        (sweep / name).mkdir(parents=True)
-        (sweep / name / "summary.json").write_text(summary)
-        (sweep / name / "eval_latest.npz").write_bytes(b"saved")
+    fake_run(sweep, "ant", "north", "metra", 0, 1.0)
+    (fake_run(sweep, "ant", "north", "metra", 1, 1.0) / "summary.json").write_text(text)
     kept = tmp_path / "results"
     assert main(["archive", str(sweep), "--out", str(kept)]) == 0
     broken = sweep / "ant-north-metra-s1" / "summary.json"
@@ -140,11 +134,9 @@ def test_a_run_that_clashes_with_the_archive_is_named_with_what_differs_and_the_
 
     sweep, kept = tmp_path / "runs", tmp_path / "results"
     for seed in (0, 1):
-        d = sweep / f"point-north-metra-s{seed}"
-        d.mkdir(parents=True)
-        cfg = make_config("cpu", "point", method="metra", seed=seed, out=str(d)).to_dict()
-        (d / "summary.json").write_text(json.dumps({"status": "finished", "config": cfg}))
-        (d / "eval_latest.npz").write_bytes(b"saved")
+        out = str(sweep / f"point-north-metra-s{seed}")
+        cfg = make_config("cpu", "point", method="metra", seed=seed, out=out).to_dict()
+        fake_run(sweep, "point", "north", "metra", seed, 1.0, config=cfg)
     held = kept / "point-north-metra-s0"
     held.mkdir(parents=True)
     cfg = make_config("cpu", "point", method="metra", seed=0, epochs=40, hidden=64).to_dict()
@@ -156,7 +148,7 @@ def test_a_run_that_clashes_with_the_archive_is_named_with_what_differs_and_the_
         "(epochs 40 archived, 400 here; hidden 64 archived, 256 here); remove it first"
     ) in err
     assert f"collie archive: 1 of 2 runs not archived: {sweep / 'point-north-metra-s0'}" in err
-    assert (kept / "point-north-metra-s1" / "eval_latest.npz").read_bytes() == b"saved"  # archived all the same
+    assert (kept / "point-north-metra-s1" / "eval_latest.npz").exists()  # archived all the same
     assert not (held / "eval_latest.npz").exists()  # the clash left as it was
 
 
@@ -165,18 +157,50 @@ def test_collie_up_runs_go_by_their_stacks_names(tmp_path, capsys):
     sit side by side (given as the run folder or as the stack's folder), not one refused as a clash."""
     kept = tmp_path / "results"
     for stack, env in (("up-point-north", "point"), ("up-ant-north", "ant")):
-        run = tmp_path / stack / "trainer"
-        run.mkdir(parents=True)
+        (tmp_path / stack).mkdir()
+        shutil.move(fake_run(tmp_path / "made", env, "north", "metra", 0, 1.0), tmp_path / stack / "trainer")
         (tmp_path / stack / "up.lock").write_text("")
-        (run / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": env, "seed": 0}}))
-        (run / "eval_latest.npz").write_bytes(b"saved")
     assert main(["archive", str(tmp_path / "up-point-north" / "trainer"), "--out", str(kept)]) == 0
     assert main(["archive", str(tmp_path / "up-ant-north"), "--out", str(kept)]) == 0
     assert sorted(p.name for p in kept.iterdir()) == ["up-ant-north", "up-point-north"]
     assert json.loads((kept / "up-ant-north" / "summary.json").read_text())["config"]["env"] == "ant"
     plain = tmp_path / "sweep" / "trainer"  # a folder named trainer outside a stack keeps its name
-    plain.mkdir(parents=True)
-    (plain / "summary.json").write_text(json.dumps({"status": "finished", "config": {"env": "point"}}))
-    (plain / "eval_latest.npz").write_bytes(b"saved")
+    plain.parent.mkdir()
+    shutil.move(fake_run(tmp_path / "made", "point", "north", "metra", 1, 1.0), plain)
     assert main(["archive", str(plain), "--out", str(kept)]) == 0
     assert (kept / "trainer" / "summary.json").exists()
+
+
+LEFT_OUT_BY_THE_REPORT = [  # (the file damaged, what it holds then, why the report leaves the run out)
+    ("eval_latest.npz", "cut short", "not a readable .npz"),
+    ("summary.json", {"corner_safe_coverage": "hi"}, "its corner_safe_coverage 'hi' is not a number"),
+    ("downstream.json", {"zero_shot": 5}, "its zero_shot is not a JSON object"),
+    ("summary.json", {"config": {"env": "point", "task": "nowhere", "method": "metra", "seed": 0}}, "unknown task"),
+]
+
+
+@pytest.mark.parametrize(("name", "damage", "why"), LEFT_OUT_BY_THE_REPORT)
+def test_a_run_the_report_leaves_out_is_not_archived_and_named_with_why(tmp_path, capsys, name, damage, why):
+    """Was copied into the archive all the same, where `collie report` then left it out."""
+    runs, kept = tmp_path / "runs", tmp_path / "results"
+    fake_run(runs, "point", "north", "oracle", 0, 9.0)
+    damaged = fake_run(runs, "point", "north", "metra", 0, -5.0)
+    path = damaged / name
+    if damage == "cut short":
+        path.write_bytes(path.read_bytes()[:100])
+    else:
+        held = json.loads(path.read_text()) if path.exists() else {}
+        path.write_text(json.dumps({**held, **damage}))
+    said = f"{damaged if why == 'unknown task' else path}: {why}"  # the file, or for a task the run's folder
+    assert main(["report", str(runs), "--no-figures", "--out", str(tmp_path / "report")]) == 0
+    assert f"`{damaged}` ({said}" in capsys.readouterr().out  # the report leaves it out
+
+    assert main(["archive", str(runs), "--out", str(kept)]) == 0  # as a run whose summary.json is not JSON
+    assert f"left out (unreadable): {said}" in capsys.readouterr().out
+    assert [p.parent.name for p in kept.rglob("summary.json")] == ["point-north-oracle-s0"]
+    assert main(["archive", str(damaged), "--out", str(kept)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie archive: error: {said}") and len(err.strip().splitlines()) == 1, err
+    with pytest.raises(ArchiveError, match=re.escape(why)):
+        archive(damaged, kept)
+    assert not (kept / damaged.name).exists()
