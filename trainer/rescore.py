@@ -9,7 +9,8 @@ Range figures are the North run's final skills judged by the Range rule. This wr
 coverage figures recomputed (both bin rules), config.json naming the new task, `rescored_from`,
 task.json, and the source's eval_latest.npz and checkpoint.pt (so the downstream tasks run with the
 new task's safety rule; the Goal task's result, which reads no task, is copied). Only the final
-evaluation is rescored; metrics.jsonl's history is not copied.
+evaluation is rescored; metrics.jsonl's history is not copied. The folder is written under a
+hidden name beside it and renamed into place whole: a rescore that fails midway leaves nothing.
 """
 
 from __future__ import annotations
@@ -28,7 +29,14 @@ from trainer.envs import env_class
 from trainer.methods import METHODS
 from trainer.metrics import coverage_metrics
 from trainer.report import load_run
-from trainer.run_files import RunFolderError, read_arrays, read_json_object, write_json, writing_into
+from trainer.run_files import (
+    RunFolderError,
+    folder_written_whole,
+    read_arrays,
+    read_json_object,
+    write_json,
+    writing_into,
+)
 from trainer.sweep import downstream_done, run_downstream_task
 from trainer.task_choice import TASK_JSON, choose_rule
 
@@ -91,6 +99,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
         if keep_existing and same_run(held.get("rescored_from"), source):
             return out
         raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
+    if out.is_dir() and any(out.iterdir()):  # the new folder is renamed over it: only an empty one can be
+        raise RescoreError(f"{out} holds files but no run (no summary.json); remove it or give another --out")
     arrays = read_arrays(saved, ("xy", "pitch"))  # RunFolderError, a ValueError, names a damaged one
     xy, pitch = list(arrays["xy"].astype(np.float64)), list(arrays["pitch"].astype(np.float64))
     cfg.update(task=task)
@@ -98,21 +108,20 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     figures = coverage_metrics(
         xy, pitch, rule, bin_size=env.metric_bin_size, position_dims=env.position_dims, bin_rule=config.bin_rule
     )
-    with writing_into(out):
-        out.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(saved, out / "eval_latest.npz")
+    with writing_into(out), folder_written_whole(out) as new:  # a failure midway leaves no half of it
+        shutil.copyfile(saved, new / "eval_latest.npz")
         if (source / CHECKPOINT).exists():
-            shutil.copyfile(source / CHECKPOINT, out / CHECKPOINT)
-        write_json(out / "config.json", cfg)
+            shutil.copyfile(source / CHECKPOINT, new / CHECKPOINT)
+        write_json(new / "config.json", cfg)
         if (source / "downstream.json").exists():
             done = read_json_object(source / "downstream.json")
             kept_results = {k: v for k, v in done.items() if k in TASK_FREE_DOWNSTREAM}
             if kept_results:
-                write_json(out / "downstream.json", kept_results)
-        write_json(out / TASK_JSON, choose_rule(config).to_json())
+                write_json(new / "downstream.json", kept_results)
+        write_json(new / TASK_JSON, choose_rule(config).to_json())
         kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
         rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
-        write_json(out / "summary.json", rescored)
+        write_json(new / "summary.json", rescored)
     return out
 
 

@@ -1,13 +1,17 @@
 """Reading a run folder's files (summary.json, config.json, task.json, eval_latest.npz, …) so that a
 missing or damaged one is an error naming the file, for every command that reads run folders; and
-writing its JSON files whole (a kill mid-write leaves the old file, never half of a new one)."""
+writing its JSON files whole (a kill mid-write leaves the old file, never half of a new one), or a
+whole new run folder at once (`folder_written_whole`)."""
 
 from __future__ import annotations
 
 import contextlib
 import errno
 import json
+import os
 import shutil
+import stat
+import tempfile
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -78,3 +82,39 @@ def writing_into(folder: Path) -> Iterator[None]:
         if exc.filename is None and exc.errno in (errno.ENOSPC, errno.EDQUOT):
             raise OSError(exc.errno, exc.strerror, str(folder)) from None
         raise
+
+
+@contextlib.contextmanager
+def folder_written_whole(out: Path) -> Iterator[Path]:
+    """A new folder beside `out` to write a run folder into, renamed to `out` when the block ends;
+    if it fails (a full disk, Ctrl-C) removed with what it holds, and `out` too where this made it,
+    so that no half-written run is left. `out` must be absent or empty (the rename replaces an empty
+    folder). An error naming a file in the new folder names its place in `out`."""
+    made = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)  # a read-only disk, a path through a file: named as `out`
+    building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    try:
+        os.chmod(building, stat.S_IMODE(out.stat().st_mode))  # mkdtemp's is 0700
+        try:
+            yield building
+        except OSError as exc:
+            raise _naming_out(exc, building, out) from None
+        building.replace(out)
+    except BaseException:
+        shutil.rmtree(building, ignore_errors=True)
+        if made:
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
+
+
+def _naming_out(exc: OSError, building: Path, out: Path) -> OSError:
+    """`exc` with each path inside `building` replaced by the same path inside `out`."""
+
+    def moved(name: str | bytes | None) -> str | None:
+        if name is None:
+            return None
+        path = Path(os.fsdecode(name))
+        return str(out / path.relative_to(building)) if path.is_relative_to(building) else str(path)
+
+    return OSError(exc.errno, exc.strerror, moved(exc.filename), None, moved(exc.filename2))

@@ -74,6 +74,16 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     assert main(["rescore", str(source), "--task", "hole"]) == 0
     assert main(["rescore", str(source), "--task", "hole"]) == 2
     assert "already holds a run" in capsys.readouterr().err
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "todo.txt").write_text("kept")  # the new folder is renamed into place: only over an empty one
+    assert main(["rescore", str(source), "--task", "range", "--out", str(other)]) == 2
+    assert (
+        f"{other} holds files but no run (no summary.json); remove it or give another --out" in capsys.readouterr().err
+    )
+    assert [p.name for p in other.iterdir()] == ["todo.txt"]
+    (other / "todo.txt").unlink()
+    assert main(["rescore", str(source), "--task", "range", "--out", str(other)]) == 0  # an empty one is used
 
 
 def test_an_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):

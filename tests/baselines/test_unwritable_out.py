@@ -2,6 +2,7 @@
 full file system, or a path through a file, is one line naming the path (exit 2), not a traceback."""
 
 import contextlib
+import os
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -71,3 +72,25 @@ def test_an_out_through_a_file_is_one_line_naming_it(tmp_path: Path, capsys: pyt
         assert err.startswith(f"collie {argv[0]}: error: cannot use {argv[-1]}"), err  # archive: its run's folder
         assert err.endswith(": Not a directory\n") and len(err.splitlines()) == 1, err
     assert (tmp_path / "a-file").read_text() == "kept"
+
+
+def test_a_rescore_that_fills_the_disk_midway_leaves_no_half_written_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Was: the output folder left holding eval_latest.npz and part of checkpoint.pt, no summary.json."""
+    ant, _ = finished_run(tmp_path / "ants")
+    (ant / "checkpoint.pt").write_bytes(b"\0" * 400_000)
+    with small_file_system(tmp_path / "fs", "full") as fs:
+        filler = fs / "filler"
+        os.truncate(filler, filler.stat().st_size - 128 * 1024)  # room for the final skills, not the checkpoint
+        out = fs / "rescored"
+        argv = ["rescore", "--task", "range", str(ant), "--out", str(out)]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"collie rescore: error: cannot write {out}"), err
+        assert err.endswith(": No space left on device\n") and len(err.splitlines()) == 1, err
+        assert sorted(p.name for p in fs.iterdir()) == ["filler"]  # neither the folder nor a partial one beside it
+        filler.unlink()
+        assert main(argv) == 0  # nothing left in the way of the rerun
+        assert sorted(p.name for p in fs.iterdir()) == ["rescored"]
+        assert (out / "checkpoint.pt").stat().st_size == 400_000 and (out / "summary.json").exists()

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from collie.whole_files import write_whole
-from trainer.run_files import RunFolderError, copy_whole, read_arrays, read_json_object, write_json
+from trainer.run_files import (
+    RunFolderError,
+    copy_whole,
+    folder_written_whole,
+    read_arrays,
+    read_json_object,
+    write_json,
+)
 
 
 def test_a_write_cut_short_leaves_the_old_file_whole(tmp_path: Path) -> None:
@@ -89,3 +96,24 @@ def test_the_machines_own_files_are_never_renamed_over() -> None:
 
     assert not_replaceable(Path("/dev/stdout")) and not_replaceable(Path("/dev/null"))
     assert not not_replaceable(Path("/tmp/collie-info.json"))  # a link planted there is replaced, not followed
+
+
+def test_a_folder_written_whole_is_there_whole_or_not_at_all(tmp_path: Path) -> None:
+    """A failure in the block leaves neither the folder nor the one it was written in; its error names
+    the file where it was to be."""
+    out = tmp_path / "runs" / "rescored"
+    with pytest.raises(FileNotFoundError) as caught, folder_written_whole(out) as new:
+        write_json(new / "config.json", {})
+        (new / "no" / "summary.json").write_text("{}")
+    assert caught.value.filename == str(out / "no" / "summary.json")
+    assert list((tmp_path / "runs").iterdir()) == []
+    out.mkdir()  # an empty folder given: kept on failure, replaced on success
+    with pytest.raises(KeyboardInterrupt), folder_written_whole(out) as new:
+        write_json(new / "config.json", {})
+        raise KeyboardInterrupt
+    assert [p.name for p in (tmp_path / "runs").iterdir()] == ["rescored"] and list(out.iterdir()) == []
+    mode = out.stat().st_mode
+    with folder_written_whole(out) as new:
+        write_json(new / "summary.json", {"status": "finished"})
+    assert read_json_object(out / "summary.json") == {"status": "finished"}
+    assert [p.name for p in (tmp_path / "runs").iterdir()] == ["rescored"] and out.stat().st_mode == mode
