@@ -5,7 +5,8 @@ CSV) and Fig. 2-style skill figures, in OUT (default RUN_ROOT/report):
                     coverage, wall time per run, zero-shot (Table 3) and hierarchical (Table 4)
                     downstream returns when downstream.json exists; methods in the paper's order
     metrics.csv     one row per (env, task, method, variant, setting, metric): mean, std, n, seeds
-    runs.csv        one row per run folder with its final metrics
+    runs.csv        one row per run folder with its final metrics; `bin_rule` names the rule of its
+                    coverage columns (a run without that rule's figures: its headline's rule, †)
     figures/skills_<env>_<task>.png   one panel per method: its lowest seed's final evaluation
                     skills over the task's shaded regions
 
@@ -44,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from collie.tasks import Task
+from trainer.config import first_version
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.run_files import RunFolderError, read_arrays, read_json_object, writing_into
@@ -268,6 +270,15 @@ def metric_value(r: RunResult, metric: str) -> float:
 
 def has_rule_figure(r: RunResult, metric: str) -> bool:
     return metric in CORNER_METRICS and f"{r.bin_rule}_{metric}" in r.metrics
+
+
+def figures_rule(r: RunResult) -> str:
+    """runs.csv's `bin_rule`: the rule of the run's coverage figures there, the report's; for a run
+    without that rule's figures (one from before `bin_rule`), the rule its headline followed (what
+    it ran with: trainer.config.FIRST_VERSION), marked † as report.md marks its cells."""
+    if all(has_rule_figure(r, m) for m in CORNER_METRICS):
+        return r.bin_rule
+    return f"{(first_version(r.config) | r.config).get('bin_rule')}{HEADLINE_MARK}"
 
 
 def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
@@ -501,6 +512,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True, bin_rule: s
                 "variant": r.variant,
                 "setting": r.setting,
                 "seed": r.seed,
+                "bin_rule": figures_rule(r),
                 **{m: metric_value(r, m) for m, _, _ in METRICS},
                 **{f"visited_{m}": r.metrics.get(f"visited_{m}") for m in CORNER_METRICS},
             }

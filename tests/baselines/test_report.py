@@ -143,6 +143,28 @@ def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
     assert "| METRA | -10.00† |" in table and "coverage by the visited bin rule (--bin-rule)" in visited
 
 
+@pytest.mark.parametrize("rule", ["corner", "visited"])
+def test_runs_csv_names_each_rows_bin_rule_and_marks_an_old_run_as_report_md_does(tmp_path, rule):
+    """runs.csv gave an old run's headline figures (by the rule of then) beside the others' without
+    saying so; report.md marks its cells †."""
+    runs = tmp_path / "runs"
+    fake_run(runs, "ant", "north", "collie", 0, 900.0, corner_cov=950.0)
+    fake_run(runs, "ant", "north", "metra", 0, -10.0, corner=False)  # from before `bin_rule`: its headline
+    fake_run(runs, "ant", "north", "dodont", 0, 3.0, corner=False, config={"bin_rule": "corner"})
+    md = write_report([runs], tmp_path / "report", figures=False, bin_rule=rule)["markdown"].read_text()
+    table = md.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    csv_rows = list(csv.DictReader((tmp_path / "report" / "runs.csv").read_text().splitlines()))
+    said = {r["method"]: (r["bin_rule"], r["safe_coverage"]) for r in csv_rows}
+    assert said == {
+        "collie": (rule, "950.0" if rule == "corner" else "900.0"),
+        "metra": ("visited†", "-10.0"),  # what runs before `bin_rule` binned by (FIRST_VERSION)
+        "dodont": ("corner†", "3.0"),  # its headline, by the rule it ran with
+    }
+    for method, label in (("collie", "COLLIE"), ("metra", "METRA"), ("dodont", "DoDont*")):
+        cell = next(line for line in table.splitlines() if line.startswith(f"| {label} |")).split(" | ")[1]
+        assert cell.endswith("†") == said[method][0].endswith("†"), (method, cell)
+
+
 def test_report_shows_the_safe_ratio_outside_the_start_bins_for_2d_bodies(tmp_path):
     runs = tmp_path / "runs"
     ant = fake_run(runs, "ant", "north", "collie", 0, 1.0)
