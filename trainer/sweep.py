@@ -10,7 +10,8 @@ already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTER
 sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a final
 checkpoint; rerunning the sweep resumes it), on Ray through `ray.cancel` of each run's task. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
-for `collie report`. After the runs, the report of OUT is written to OUT/report/.
+for `collie report`, and the preset and train flags it runs with (a run resumed with its own keeps
+the one it began with). After the runs, the report of OUT is written to OUT/report/.
 
     collie sweep --env point --tasks north,range --methods metra,collie --seeds 3 --out runs/sweep
     collie sweep --methods collie --variant additive --out runs/ablations -- --reward-form additive
@@ -217,9 +218,26 @@ def extension(spec: RunSpec) -> tuple[int, int] | None:
     has the checkpoint to resume from: the sweep extends it, as `collie train --resume --epochs N`
     does exactly; None otherwise."""
     keys, made, asked = config_change(spec)
-    if keys != ["epochs"] or asked["epochs"] <= made["epochs"] or not (Path(spec.out) / "checkpoint.pt").is_file():
+    if not only_more_epochs(keys, made, asked) or not (Path(spec.out) / "checkpoint.pt").is_file():
         return None
     return made["epochs"], asked["epochs"]
+
+
+def only_more_epochs(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> bool:
+    """`config_change`'s answer says the command asks only for more epochs than the run's: what a
+    resume takes from it (the rest of the run's config wins)."""
+    return keys == ["epochs"] and asked["epochs"] > made["epochs"]
+
+
+def keeps_its_record(spec: RunSpec) -> bool:
+    """A run resumed from its checkpoint that `spec`'s command would make otherwise keeps its
+    sweep_run.json: `collie train --resume` keeps the run's config (more epochs aside), and the
+    command's flags written there would name flags it does not run with (the warnings' `recorded`)."""
+    folder = Path(spec.out)
+    if not ((folder / "checkpoint.pt").exists() and (folder / "sweep_run.json").exists()):
+        return False
+    keys, made, asked = config_change(spec)
+    return bool(keys) and not only_more_epochs(keys, made, asked)
 
 
 def to_train(spec: RunSpec) -> bool:
@@ -235,7 +253,7 @@ def made_otherwise(spec: RunSpec) -> str | None:
     if not keys or extension(spec) is not None:
         return None
     values = shown_values(keys, made, asked)
-    grew = keys == ["epochs"] and asked["epochs"] > made["epochs"]
+    grew = only_more_epochs(keys, made, asked)
     return f"{recorded(spec)} ({values}{'; no checkpoint.pt to extend it from' if grew else ''})"
 
 
@@ -317,7 +335,8 @@ def run_one(spec: RunSpec, stop: Stop | None = None) -> dict[str, Any]:
         raise Interrupted("not started: the sweep was interrupted")
     if to_train(spec):
         out.mkdir(parents=True, exist_ok=True)
-        write_json(out / "sweep_run.json", asdict(spec))
+        if not keeps_its_record(spec):
+            write_json(out / "sweep_run.json", asdict(spec))
         _call(train_command(spec), out.with_suffix(".log"), stop)
         if not is_finished(out):  # stopped by SIGINT / SIGTERM: a final checkpoint, not a final policy
             summary = out / "summary.json"

@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import pytest
@@ -383,17 +384,24 @@ def test_a_task_file_joins_the_tasks_given_and_only_its_runs_read_it(tmp_path):
     assert sweep.train_flags_problem(specs) is None  # `collie train` takes both commands
 
 
+def interrupted(spec: RunSpec, kept_in: str = "summary.json") -> None:
+    """`spec.out` as the first sweep's `collie train` of `spec` leaves it when stopped: its config (in
+    summary.json, or config.json alone for one killed before its first summary), a checkpoint and
+    the sweep's sweep_run.json."""
+    folder = Path(spec.out)
+    folder.mkdir(parents=True, exist_ok=True)
+    config = sweep.intended_config(spec)  # what `collie train` made of the first sweep's command
+    saved = {"status": "interrupted", "config": config} if kept_in == "summary.json" else config
+    (folder / kept_in).write_text(json.dumps(saved))
+    (folder / "sweep_run.json").write_text(json.dumps(asdict(spec)))
+    (folder / "checkpoint.pt").write_bytes(b"")
+
+
 def test_a_rerun_with_other_train_flags_warns_of_each_interrupted_run_that_resumes_with_its_own(tmp_path, capsys):
     """Was: "4 runs, 0 already finished" alone; the resumed runs kept their flags, said only in their .log."""
     old = grid(tmp_path, "point", ["north"], ["metra", "lsd"], [0], flags=("--epochs", "4", "--hidden", "32"))
     for spec, kept_in in zip(old, ("summary.json", "config.json"), strict=True):  # lsd: killed before its summary
-        folder = Path(spec.out)
-        folder.mkdir()
-        config = sweep.intended_config(spec)  # what `collie train` made of the first sweep's command
-        saved = {"status": "interrupted", "config": config} if kept_in == "summary.json" else config
-        (folder / kept_in).write_text(json.dumps(saved))
-        (folder / "sweep_run.json").write_text(json.dumps({"preset": spec.preset, "flags": list(spec.flags)}))
-        (folder / "checkpoint.pt").write_bytes(b"")
+        interrupted(spec, kept_in)
     sweep.say_what_finished_runs_get(
         grid(tmp_path, "point", ["north"], ["metra", "lsd"], [0], flags=("--epochs", "8", "--hidden", "32"))
     )
@@ -407,3 +415,25 @@ def test_a_rerun_with_other_train_flags_warns_of_each_interrupted_run_that_resum
         "(remove it to start it anew)"
         for spec in new
     ]
+
+
+def test_an_interrupted_run_resumed_with_its_own_flags_keeps_its_sweep_run_json(tmp_path, monkeypatch):
+    """Was: rewritten with the rerun's flags, which the resumed run does not run with."""
+    first = RunSpec("point", "north", "metra", 0, str(tmp_path / "run"), flags=("--epochs", "4", "--hidden", "32"))
+    record = tmp_path / "run" / "sweep_run.json"
+    launched = []
+
+    def resumed(cmd: list[str]) -> int:  # `collie train --resume` to the run's end, with its own config
+        launched.append(cmd)
+        summary = tmp_path / "run" / "summary.json"
+        summary.write_text(json.dumps({**json.loads(summary.read_text()), "status": "finished"}))
+        return 0
+
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: resumed(cmd))
+    interrupted(first)
+    run_one(replace(first, flags=("--epochs", "4", "--hidden", "48")))  # resumed with --hidden 32, its own
+    assert launched[-1][-1] == "--resume" and json.loads(record.read_text())["flags"] == list(first.flags)
+    interrupted(first)
+    more = replace(first, flags=("--epochs", "8", "--hidden", "32"))  # a resume takes more epochs: the run's now
+    run_one(more)
+    assert len(launched) == 2 and json.loads(record.read_text())["flags"] == list(more.flags)
