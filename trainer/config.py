@@ -100,7 +100,7 @@ class Config:
     reward_form: Literal["multiplicative", "additive"] = "multiplicative"  # Eq. 11, or Δφᵀz + w (ablation)
     obs_noise: float = 0.0  # std of x in the observed ŝ = (1 + x)·s; the paper's ablation is 0.1 (x ~ N(0, 0.01))
     classifier_steps: int = 500  # DoDont*/DDG*: Adam steps fine-tuning ψ each time the labels change
-    projection_dim: int = 8  # DDG*: output width of ψ's encoder, the state projection φ reads
+    projection_dim: int = 8  # DoDont*/DDG*: output width of ψ's encoder (DDG*: the state projection φ reads)
     diayn: Literal["reference", "sphere"] = "reference"  # DIAYN: z ~ N(0, I), α = 0.1, learned std; or ours
     # evaluation, logging, checkpoints
     eval_every: int = 500  # epochs between evaluations (metrics, maps)

@@ -9,6 +9,11 @@ how its w is computed. Adding a method is one row here (and its learner's module
 `--distance l2` swaps METRA's temporal constraint for LSD's Euclidean one in any w-guided method
 (COLLIE-L2 is `--method collie --distance l2`).
 
+Which config keys matter to a method (`reads`) follows from its row: the feedback schedule to
+those that ask for labels, `--w-at` to those with a w to evaluate, `--k-beta` to COLLIE's smoothed
+w, and its learner's own options (`options`: `--diayn`, ψ's `--classifier-steps`); every other key
+matters to every method.
+
 The learners are imported when built, not here: the table is read by light commands too
 (`collie sweep`, the config's validation), which must not load torch.
 """
@@ -34,12 +39,40 @@ Learner = tuple["Metra", "InstructionClassifier | None"]
 Builder = Callable[["Config", "int | tuple[int, ...]", int, "SkillPrior", "torch.device"], Learner]
 
 
+# Config keys only some methods read (trainer/loop.py): the feedback schedule, read only when the
+# loop opens a session (is_feedback_epoch); w's, by the guidance that makes a w (weight_fn)
+FEEDBACK_KEYS = (
+    "warmup",
+    "feedback_every",
+    "queries_per_session",
+    "total_queries",
+    "segment_length",
+    "candidates",
+    "knn_k",
+    "query_strategy",
+    "noise_band",
+)
+GUIDANCE_KEYS: dict[Guidance, tuple[str, ...]] = {
+    "one": (),
+    "task": ("w_at",),
+    "instruction": ("w_at",),
+    "labels": ("w_at", "k_beta"),  # β smooths Eq. 8's w alone
+}
+CLASSIFIER_KEYS = ("classifier_steps", "projection_dim")  # ψ, the instruction classifier (trainer/instruction.py)
+
+
 @dataclass(frozen=True)
 class Method:
     name: str
     asks_labels: bool  # does the loop open feedback sessions (Algorithm 1, lines 4–7)?
     guidance: Guidance
     build: Builder
+    options: tuple[str, ...] = ()  # its learner's own config keys: no learner of a method without them reads them
+
+    @property
+    def reads(self) -> frozenset[str]:
+        """The config keys of those only some methods read that this one reads."""
+        return frozenset((*(FEEDBACK_KEYS if self.asks_labels else ()), *GUIDANCE_KEYS[self.guidance], *self.options))
 
 
 def _metra(
@@ -106,12 +139,14 @@ METHODS: dict[str, Method] = {
         Method("collie", asks_labels=True, guidance="labels", build=_plain),
         Method("metra", asks_labels=False, guidance="one", build=_plain),
         Method("oracle", asks_labels=False, guidance="task", build=_plain),
-        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont),
-        Method("ddg", asks_labels=True, guidance="one", build=_ddg),
+        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont, options=CLASSIFIER_KEYS),
+        Method("ddg", asks_labels=True, guidance="one", build=_ddg, options=CLASSIFIER_KEYS),
         Method("lsd", asks_labels=False, guidance="one", build=_lsd),
-        Method("diayn", asks_labels=False, guidance="one", build=_diayn),
+        Method("diayn", asks_labels=False, guidance="one", build=_diayn, options=("diayn",)),
     )
 }
+# the config keys that matter only to the methods that read them
+METHOD_KEYS = frozenset(key for m in METHODS.values() for key in m.reads)
 
 
 def method(name: str) -> Method:
@@ -120,6 +155,12 @@ def method(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise ValueError(f"unknown method {name!r}; valid: {', '.join(METHODS)}") from None
+
+
+def matters(key: str, name: str) -> bool:
+    """Whether config `key` changes what method `name` learns: a key only other methods read does not
+    (`--diayn` to a METRA run)."""
+    return key not in METHOD_KEYS or key in method(name).reads
 
 
 def build_agent(

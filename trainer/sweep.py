@@ -3,12 +3,13 @@ thread), `--jobs` at a time on this machine, or on a Ray cluster when `--ray ADD
 
 Resumable: a run folder whose summary.json says "finished" is not rerun unless the command asks
 only for more --epochs: then it is extended from its checkpoint as `collie train --resume --epochs N`
-would (one of another configuration is named in a warning with the keys that differ); a run with a
-checkpoint continues from it (`collie train --resume`); a run stopped before its last epoch (SIGINT,
-SIGTERM) is reported as failed and never evaluated; with `--downstream`, a run whose downstream.json
-already holds its task from its final policy is not re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a
-sweep starts no further run and hands each running `collie train` one SIGTERM (it writes a final
-checkpoint; rerunning the sweep resumes it), on Ray through `ray.cancel` of each run's task. Folders:
+would (one of another configuration is named in a warning with the keys that differ, of those that
+matter to its method); a run with a checkpoint continues from it (`collie train --resume`); a run
+stopped before its last epoch (SIGINT, SIGTERM) is reported as failed and never evaluated; with
+`--downstream`, a run whose downstream.json already holds its task from its final policy is not
+re-evaluated. Ctrl-C, SIGTERM or SIGHUP of a sweep starts no further run and hands each running
+`collie train` one SIGTERM (it writes a final checkpoint; rerunning the sweep resumes it), on Ray
+through `ray.cancel` of each run's task. Folders:
 OUT/<env>-<task>-<method>[+<variant>]-s<seed>, each with sweep_run.json naming its method and variant
 for `collie report`, and the preset and train flags it runs with (a run resumed with its own keeps
 the one it began with). After the runs, the report of OUT is written to OUT/report/.
@@ -42,7 +43,7 @@ from typing import Any, NoReturn
 from collie.pass_through import owned_flags
 from collie.processes import end_with_parent
 from trainer.config import PRESETS, flag
-from trainer.methods import METHODS
+from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES
 from trainer.run_files import RunFolderError, read_json_object, write_json, writing_into
 from trainer.same_run import comparable, differing_keys, run_config
@@ -194,8 +195,9 @@ def intended_config(spec: RunSpec) -> dict[str, Any] | None:
 
 def config_change(spec: RunSpec, besides: tuple[str, ...] = ()) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     """The keys in which the run in `spec.out` differs from what `spec`'s command would make (where
-    and how it ran aside: trainer.same_run.NOT_THE_RUN, and `besides`), and both configs,
-    comparable; no keys if either config is unknown."""
+    and how it ran aside: trainer.same_run.NOT_THE_RUN, and `besides`; and keys that do not matter
+    to its method, trainer.methods.matters: `--diayn` to METRA), and both configs, comparable; no
+    keys if either config is unknown."""
     folder = Path(spec.out)
     try:  # a run killed before its first summary.json has its config.json alone
         made = run_config(folder) if (folder / "summary.json").exists() else read_json_object(folder / "config.json")
@@ -204,7 +206,8 @@ def config_change(spec: RunSpec, besides: tuple[str, ...] = ()) -> tuple[list[st
     asked = intended_config(spec)
     if not made or asked is None:
         return [], {}, {}
-    return differing_keys(made, asked, besides), comparable(made), comparable(asked)
+    keys = [k for k in differing_keys(made, asked, besides) if matters(k, spec.method)]
+    return keys, comparable(made), comparable(asked)
 
 
 def shown_values(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> str:

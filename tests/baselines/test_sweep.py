@@ -384,14 +384,14 @@ def test_a_task_file_joins_the_tasks_given_and_only_its_runs_read_it(tmp_path):
     assert sweep.train_flags_problem(specs) is None  # `collie train` takes both commands
 
 
-def interrupted(spec: RunSpec, kept_in: str = "summary.json") -> None:
-    """`spec.out` as the first sweep's `collie train` of `spec` leaves it when stopped: its config (in
-    summary.json, or config.json alone for one killed before its first summary), a checkpoint and
-    the sweep's sweep_run.json."""
+def interrupted(spec: RunSpec, kept_in: str = "summary.json", status: str = "interrupted") -> None:
+    """`spec.out` as the first sweep's `collie train` of `spec` leaves it when stopped (or `status`):
+    its config (in summary.json, or config.json alone for one killed before its first summary), a
+    checkpoint and the sweep's sweep_run.json."""
     folder = Path(spec.out)
     folder.mkdir(parents=True, exist_ok=True)
     config = sweep.intended_config(spec)  # what `collie train` made of the first sweep's command
-    saved = {"status": "interrupted", "config": config} if kept_in == "summary.json" else config
+    saved = {"status": status, "config": config} if kept_in == "summary.json" else config
     (folder / kept_in).write_text(json.dumps(saved))
     (folder / "sweep_run.json").write_text(json.dumps(asdict(spec)))
     (folder / "checkpoint.pt").write_bytes(b"")
@@ -437,3 +437,29 @@ def test_an_interrupted_run_resumed_with_its_own_flags_keeps_its_sweep_run_json(
     more = replace(first, flags=("--epochs", "8", "--hidden", "32"))  # a resume takes more epochs: the run's now
     run_one(more)
     assert len(launched) == 2 and json.loads(record.read_text())["flags"] == list(more.flags)
+
+
+def test_warnings_name_only_the_keys_that_matter_to_the_runs_method(tmp_path, capsys):
+    """Was: a METRA run warned of --diayn, DIAYN's own option, and of COLLIE's label budget."""
+    first = ("--epochs", "4", "--hidden", "32")
+    for spec in grid(tmp_path / "stopped", "point", ["north"], ["metra", "diayn"], [0], flags=first):
+        interrupted(spec)
+    rerun = grid(tmp_path / "stopped", "point", ["north"], ["metra", "diayn"], [0], flags=(*first[:3], "48"))
+    sweep.say_what_finished_runs_get([replace(spec, flags=(*spec.flags, "--diayn", "sphere")) for spec in rerun])
+    metra, diayn = capsys.readouterr().err.splitlines()
+    assert "(--hidden 32, not 48); the new flags do not apply" in metra
+    assert "(--diayn reference, not sphere; --hidden 32, not 48); the new flags do not apply" in diayn
+
+    for spec in grid(tmp_path / "done", "point", ["north"], ["metra", "collie"], [0], flags=first):
+        interrupted(spec, status="finished")
+    longer = grid(tmp_path / "done", "point", ["north"], ["metra", "collie"], [0], flags=("--epochs", "8"))
+    sweep.say_what_finished_runs_get(
+        [replace(s, flags=(*s.flags, "--hidden", "32", "--total-queries", "20")) for s in longer]
+    )
+    said = capsys.readouterr()
+    assert said.out == f"{longer[0].out}: finished at 4 epochs; extended to 8 (resumed from its checkpoint)\n"
+    assert said.err == (  # COLLIE's label budget is METRA's no concern: only the COLLIE run is not rerun
+        f"warning: {longer[1].out} finished with --preset cpu -- --epochs 4 --hidden 32, not --preset cpu -- "
+        "--epochs 8 --hidden 32 --total-queries 20 (--epochs 4, not 8; --total-queries 40, not 20); not rerun "
+        "(remove it to rerun)\n"
+    )
