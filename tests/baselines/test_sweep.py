@@ -463,3 +463,22 @@ def test_warnings_name_only_the_keys_that_matter_to_the_runs_method(tmp_path, ca
         "--epochs 8 --hidden 32 --total-queries 20 (--epochs 4, not 8; --total-queries 40, not 20); not rerun "
         "(remove it to rerun)\n"
     )
+
+
+@pytest.mark.parametrize(
+    ("flags", "named"),
+    [("--bogus 1", "unrecognized arguments: --bogus 1"), ("--trajectories 0", "--trajectories must be ≥ 1")],
+)
+def test_downstream_flags_are_checked_up_front_only_with_downstream(tmp_path, capsys, monkeypatch, flags, named):
+    """Without --downstream no downstream task runs, so its flags are refused by nobody (was: exit 2)."""
+    from collie.cli import main
+
+    monkeypatch.setattr(sweep.Stop, "run", lambda _self, cmd, **kw: pytest.fail(f"launched {cmd}"))
+    finished(tmp_path / "point-north-lsd-s0")  # nothing to train: only the up-front check could refuse
+    argv = ["sweep", "--tasks", "north", "--methods", "lsd", "--seeds", "1", "--out", str(tmp_path), "--no-report"]
+    assert main([*argv, "--downstream", "--downstream-flags", flags]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie sweep: error: --downstream-flags '{flags}': python -m trainer.downstream would ")
+    assert named in err and len(err.splitlines()) == 1, err
+    assert main([*argv, "--downstream-flags", flags]) == 0
+    assert "--downstream-flags" not in capsys.readouterr().err
