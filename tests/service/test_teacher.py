@@ -9,9 +9,12 @@ import sys
 import threading
 import time
 
+import httpx
 import numpy as np
 import pytest
+from canned_http import answering
 
+from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.tasks import get_task
@@ -20,7 +23,8 @@ from teacher import TeacherLoop, oracle_for, segment_label
 from trainer.feedback.http import HttpFeedback
 from trainer.telemetry import StatusReport
 
-from .conftest import TOKENS, make_run_spec, make_session
+from .conftest import TOKENS, make_run_spec, make_session, settings_for
+from .postgres import PostgresServer
 from .test_http_feedback import segments
 
 
@@ -79,6 +83,48 @@ def test_what_keeps_the_teacher_from_the_service_is_one_line_naming_it(live: Bac
             refused = 1 if api == nobody else 2  # no answer: a fault a restart may mend (collie up restarts on 1)
             assert out.returncode == refused and out.stderr.startswith(f"collie teacher: error: {said}"), out.stderr
             assert len(out.stderr.splitlines()) == 1
+
+
+def teacher(api: str, run_id: int) -> subprocess.CompletedProcess[str]:
+    """A real `collie teacher` of run `run_id` at `api`, with the labeler token."""
+    command = [sys.executable, "-m", "collie.cli", "teacher", "--api", api, "--run", str(run_id)]
+    return subprocess.run([*command, "--token", TOKENS["labeler"]], capture_output=True, text=True, timeout=60)
+
+
+def test_a_service_busy_at_the_start_is_exit_1_and_the_same_teacher_labels_once_it_is_back() -> None:
+    """A real service whose database is down (PostgreSQL stopped under it, as in
+    test_database_outage) answers the teacher's first request 503: one line saying it is busy, and
+    exit 1, after which `collie up` restarts the teacher (two 2s in a row would end the stack). Was:
+    exit 2, "answered 503: …", as for a refusal."""
+    pg = PostgresServer().start()  # its own server: the session's one stays up for the others
+    try:
+        app = create_app(settings_for(pg.new_database(), token_cache_s=0.0))
+        with BackgroundServer(app) as server, CollieClient(server.url, TOKENS["trainer"]) as trainer:
+            run = trainer.create_run(make_run_spec(task="north"))
+            trainer.post_session(run.id, make_session(0, 2))
+            pg.halt()
+            out = teacher(server.url, run.id)
+            said = f"the labeling service at {server.url} is busy or failing now (503: the database is unreachable"
+            assert out.returncode == 1 and out.stderr.startswith(f"collie teacher: error: {said}"), out.stderr
+            assert len(out.stderr.splitlines()) == 1
+            pg.start()
+            deadline = time.monotonic() + 60
+            while httpx.get(f"{server.url}/api/health").status_code != 200:
+                assert time.monotonic() < deadline, "the service did not see the database come back"
+                time.sleep(0.1)
+            again = teacher(server.url, run.id)  # what `collie up` does after a 1
+            assert again.returncode == 0 and "labelled 2 queries" in again.stdout, again.stderr
+    finally:
+        pg.stop()
+
+
+def test_a_service_that_answers_429_at_the_start_is_exit_1() -> None:
+    """429 (too many requests) is busy too, not a refusal. A real service answers it only for
+    too many streams, never for a run: a stand-in answers it."""
+    with answering(429, b'{"detail": "slow down"}', {"Retry-After": "1"}) as api:
+        out = teacher(api, 1)
+    said = f"collie teacher: error: the labeling service at {api} is busy or failing now (429: slow down)\n"
+    assert out.returncode == 1 and out.stderr == said, out.stderr
 
 
 @pytest.mark.parametrize(
