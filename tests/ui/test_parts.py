@@ -15,6 +15,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from canned_http import answering
 
 from collie.schemas import MAX_HOLD, MAX_TABS
 from collie.tasks import BAD, NEUTRAL, get_task
@@ -308,6 +309,17 @@ def test_the_ui_warns_at_start_of_a_service_it_cannot_use(stack: Stack) -> None:
     assert ui_start_warnings(f"{stack.api}/zzz") == [
         f"collie label-ui: warning: {stack.api}/zzz is not a collie service (404 on /zzz/api/health); check --api"
     ]
+
+
+def test_an_error_the_start_check_did_not_foresee_is_a_warning_and_the_ui_starts() -> None:
+    """A proxy in front of the service sends a body that is not what its header says (httpx's
+    DecodingError, which the client does not type): one warning naming the service. Was: the check's
+    thread died with a traceback on stderr (the UI served on, without a word of why)."""
+    with answering(200, b"not gzip at all", {"Content-Encoding": "gzip"}) as api:
+        said = ui_start_warnings(api)
+    assert len(said) == 1, said
+    assert said[0].startswith(f"collie label-ui: warning: could not check the labeling service at {api}: ")
+    assert "DecodingError(" in said[0]
 
 
 def test_fits_the_collie_command(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
