@@ -108,6 +108,22 @@ def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -
     assert out.returncode == 2 and "no database at" in out.stderr and list(empty.iterdir()) == []
 
 
+def test_an_export_that_upgrades_leaves_the_upgrade_in_the_database_file(tmp_path: Path) -> None:
+    """The upgraded file stands alone: no write-ahead log left beside it, and the file by itself
+    (copied away, as one copies a database) is at the newest schema. Was: export's read-only
+    connection stayed open, so closing the upgrade's connection was not the file's last close,
+    SQLite neither checkpointed nor removed the log, and the file alone was still at 0008."""
+    (tmp_path / "old").mkdir()  # a folder of its own: what the export leaves beside the file
+    old = migrated(tmp_path / "old" / "collie.db", "0008")
+    out = collie("export", "--db", str(old), "--run", "1")
+    assert out.returncode == 1 and "upgraded" in out.stderr and "no run 1" in out.stderr, out.stderr
+    assert sorted(p.name for p in old.parent.iterdir()) == ["collie.db"]
+    alone = tmp_path / "copy.db"
+    shutil.copy(old, alone)
+    with closing(sqlite3.connect(f"file:{alone}?mode=ro&immutable=1", uri=True)) as conn:
+        assert conn.execute("SELECT version_num FROM alembic_version").fetchall() == [(head(),)]
+
+
 def test_a_refused_export_leaves_the_file_as_it_was(tmp_path: Path) -> None:
     """Was: an empty file got 4 KB (and another program's database WAL mode) before the refusal."""
     empty = tmp_path / "empty.db"
