@@ -21,8 +21,13 @@ def bind(host: str, port: int) -> tuple[socket.socket, str]:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind((host, port))
     sock.listen(128)  # listening before the banner says so: early clients queue until uvicorn serves
+    return sock, url_of(sock)
+
+
+def url_of(sock: socket.socket) -> str:
+    """The URL of a bound socket."""
     bound_host, bound_port = sock.getsockname()[:2]
-    return sock, f"http://{link_host(bound_host)}:{bound_port}"
+    return f"http://{link_host(bound_host)}:{bound_port}"
 
 
 class Server(uvicorn.Server):
@@ -48,11 +53,13 @@ def uvicorn_server(app: FastAPI, log_level: str = "warning") -> uvicorn.Server:
 
 
 class BackgroundServer:
-    """uvicorn in a daemon thread. `with BackgroundServer(app) as server: server.url`."""
+    """uvicorn in a daemon thread. `with BackgroundServer(app) as server: server.url`. `sock`: serve
+    on that listening socket instead of binding one (a `dup()` of one the caller holds keeps the
+    port its across a restart, as `collie up` keeps the service's: no other process can take it)."""
 
-    def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0, sock: socket.socket | None = None) -> None:
         self.app = app
-        self._sock, self.url = bind(host, port)
+        self._sock, self.url = bind(host, port) if sock is None else (sock, url_of(sock))
         self.server = uvicorn_server(app)
         self._thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self._sock]}, daemon=True)
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from backend.main import create_app
-from backend.server import BackgroundServer
+from backend.server import BackgroundServer, bind
 from collie.client import CollieClient
 from collie.schemas import StatusEvent
 from trainer.feedback.base import LabelEvent, Segment, StopRequested
@@ -277,24 +277,28 @@ def test_reposted_session_keeps_the_stored_segments(live: BackgroundServer, feed
 
 def test_service_restart_mid_session(tmp_path: Path) -> None:
     settings = settings_for(tmp_path / "restart.db")
-    server = BackgroundServer(create_app(settings)).start()
-    port = int(server.url.rsplit(":", 1)[1])
-    source = HttpFeedback.create(server.url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=1.0, max_backoff_s=0.2)
-    result: list[list[LabelEvent]] = []
-    waiting = threading.Thread(target=lambda: result.append(source.collect(0, 0, segments(0, 4))), daemon=True)
-    waiting.start()
-    with CollieClient(server.url, TOKENS["labeler"]) as labeler:
-        for _ in range(2):
-            while (claim := labeler.claim(source.run_id)) is None:
-                time.sleep(0.02)
-            labeler.submit(source.run_id, claim.query.query_id, 2)
-    server.stop()
-    time.sleep(0.5)  # the trainer keeps waiting while the service is down
-    server = BackgroundServer(create_app(settings), port=port).start()
-    label_in_background(server.url, source.run_id, 2).join()
-    waiting.join(20)
-    server.stop()
-    source.close()
+    # The port is held across the restart, as `collie up` holds the service's (test_stream's restart)
+    listener, url = bind("127.0.0.1", 0)
+    try:
+        server = BackgroundServer(create_app(settings), sock=listener.dup()).start()
+        source = HttpFeedback.create(url, TOKENS["trainer"], make_run_spec(), wait_chunk_s=1.0, max_backoff_s=0.2)
+        result: list[list[LabelEvent]] = []
+        waiting = threading.Thread(target=lambda: result.append(source.collect(0, 0, segments(0, 4))), daemon=True)
+        waiting.start()
+        with CollieClient(url, TOKENS["labeler"]) as labeler:
+            for _ in range(2):
+                while (claim := labeler.claim(source.run_id)) is None:
+                    time.sleep(0.02)
+                labeler.submit(source.run_id, claim.query.query_id, 2)
+        server.stop()
+        time.sleep(0.5)  # the trainer keeps waiting while the service is down
+        server = BackgroundServer(create_app(settings), sock=listener.dup()).start()
+        label_in_background(url, source.run_id, 2).join()
+        waiting.join(20)
+        server.stop()
+        source.close()
+    finally:
+        listener.close()
     assert as_dict(result[0]) == {"s0-q0": 2, "s0-q1": 2, "s0-q2": 2, "s0-q3": 0}
 
 

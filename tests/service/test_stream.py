@@ -11,7 +11,7 @@ import httpx
 import pytest
 
 from backend.main import create_app
-from backend.server import BackgroundServer
+from backend.server import BackgroundServer, bind
 from collie.client import CollieClient
 from collie.labels import Label
 from collie.schemas import EventData, LabelChangedEvent, MetricsIn, RolloutsIn, RunRead, StreamEvent
@@ -87,28 +87,37 @@ def test_sse_accepts_access_token_for_eventsource(live: BackgroundServer, run: R
 
 def test_sse_consumer_survives_a_service_restart(database_url: str) -> None:
     settings = settings_for(database_url)  # a second service on the module's database
-    server = BackgroundServer(create_app(settings)).start()
-    port = int(server.url.rsplit(":", 1)[1])
-    trainer = CollieClient(server.url, TOKENS["trainer"])
-    labeler = CollieClient(server.url, TOKENS["labeler"])
-    run = trainer.create_run(make_run_spec())
-    trainer.post_session(run.id, make_session(0, 10))
-    stream = CollieClient(server.url, TOKENS["operator"]).stream(run.id, max_backoff_s=0.2)
-    received: list[StreamEvent] = []
-    consumer = threading.Thread(target=lambda: received.extend(stream) or None, daemon=True)
-    consumer.start()
-    for _ in range(5):
-        claim = labeler.claim(run.id)
-        labeler.submit(run.id, claim.query.query_id, 0)
-    server.stop()
-    server = BackgroundServer(create_app(settings), port=port).start()
-    label_all(labeler, run.id)
-    expected = trainer.events(run.id).events
-    deadline = time.monotonic() + 60  # the client reconnects with backoff; a busy machine is slow
-    while len(received) < len(expected) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    stream.close()
-    server.stop()
+    # The clients keep the service's URL, so the restarted service must have its port. The test holds
+    # the port, as `collie up` holds the service's, and each service serves a dup of it: no other
+    # process can take it in between (was: a freed port bound again, now and then taken meanwhile).
+    listener, url = bind("127.0.0.1", 0)
+    port = listener.getsockname()[1]
+    try:
+        server = BackgroundServer(create_app(settings), sock=listener.dup()).start()
+        trainer = CollieClient(url, TOKENS["trainer"])
+        labeler = CollieClient(url, TOKENS["labeler"])
+        run = trainer.create_run(make_run_spec())
+        trainer.post_session(run.id, make_session(0, 10))
+        stream = CollieClient(url, TOKENS["operator"]).stream(run.id, max_backoff_s=0.2)
+        received: list[StreamEvent] = []
+        consumer = threading.Thread(target=lambda: received.extend(stream) or None, daemon=True)
+        consumer.start()
+        for _ in range(5):
+            claim = labeler.claim(run.id)
+            labeler.submit(run.id, claim.query.query_id, 0)
+        server.stop()
+        with pytest.raises(OSError, match="in use"):  # another process binding it as a service does
+            bind("127.0.0.1", port)[0].close()
+        server = BackgroundServer(create_app(settings), sock=listener.dup()).start()
+        label_all(labeler, run.id)
+        expected = trainer.events(run.id).events
+        deadline = time.monotonic() + 60  # the client reconnects with backoff; a busy machine is slow
+        while len(received) < len(expected) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stream.close()
+        server.stop()
+    finally:
+        listener.close()
     assert [e.id for e in received] == [e.id for e in expected] == list(range(1, len(expected) + 1))
     assert stream.reconnects >= 1
     for client in (trainer, labeler, stream.client):
