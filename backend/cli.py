@@ -3,8 +3,10 @@
 Tokens for the three built-in principals (operator, trainer, labeler) come from COLLIE_*_TOKEN,
 else from the --tokens-json file an earlier start wrote; a principal the database already has keeps
 its token; only a missing one gets a new token, printed, and written to --tokens-json when given.
-So a restart never locks out clients that hold the tokens. Port 0 picks a free port; the bound URL
-is printed either way (and written to the tokens file as "api")."""
+So a restart never locks out clients that hold the tokens. COLLIE_TEACHER_TOKEN, when set, is the
+token of the oracle teacher's own labeler, `oracle-teacher` (compose's teacher profile; never made
+here, nor written to --tokens-json). Port 0 picks a free port; the bound URL is printed either way
+(and written to the tokens file as "api")."""
 
 from __future__ import annotations
 
@@ -25,9 +27,11 @@ from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.addresses import link_host
 from collie.argtypes import file_descriptor, port, sqlite_file
+from collie.schemas import TEACHER_PRINCIPAL
 from collie.tokens import read_tokens_file, weakness, write_secret
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
+TEACHER_TOKEN = "COLLIE_TEACHER_TOKEN"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,6 +98,7 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
             variable = f"COLLIE_{role.upper()}_TOKEN"
             source = variable if os.environ.get(variable) else f"the {role} token in {args.tokens_json}"
             raise SystemExit(f"collie serve: error: {source} {why}; {STRONG}")
+    overrides["teacher_token"] = teacher_token()
     settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
     known = builtin_principals(settings.database_url)
     tokens: dict[str, str] = {}
@@ -114,6 +119,15 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
     revoked = {role for role, gone in known.items() if gone}
     alive = {role for role, gone in known.items() if not gone}
     return Settings(**overrides), tokens, new, revoked, alive  # type: ignore[arg-type]  # as above
+
+
+def teacher_token() -> SecretStr | None:
+    """COLLIE_TEACHER_TOKEN, refused as a weak role token is (empty: none, as compose passes it unset)."""
+    token = os.environ.get(TEACHER_TOKEN) or None
+    why = None if token is None else weakness(token)
+    if why is not None:
+        raise SystemExit(f"collie serve: error: {TEACHER_TOKEN} {why}; {STRONG}")
+    return None if token is None else SecretStr(token)
 
 
 def inherited(fd: int) -> tuple[socket.socket, str]:
@@ -238,6 +252,8 @@ def run(args: argparse.Namespace) -> int:
                 "--tokens-json FILE writes tokens to a file)"
             )
         print(f"  {role} token: {shown}", flush=True)
+    if settings.teacher_token is not None:
+        print(f"  {TEACHER_PRINCIPAL} token: (from environment, {TEACHER_TOKEN})", flush=True)
     try:
         if not server.should_exit:  # stopped while the banner printed: nothing to serve
             server.run(sockets=[sock])

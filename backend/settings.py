@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -17,6 +17,9 @@ class Settings(BaseSettings):
     operator_token: SecretStr | None = None
     trainer_token: SecretStr | None = None
     labeler_token: SecretStr | None = None
+    # The oracle teacher's own labeler (compose's teacher profile): a principal apart from `labeler`,
+    # named as `collie up --teacher oracle` names its teacher's. Empty: none (compose's unset value).
+    teacher_token: SecretStr | None = None
 
     lease_s: float = Field(default=120.0, gt=0, description="how long a claim holds a query")
     max_session_bytes: int = Field(default=128 * 1024 * 1024, description="body limit for posting a session")
@@ -30,3 +33,8 @@ class Settings(BaseSettings):
         default="FULL", description="FULL: an acknowledged label survives a power cut (NORMAL: a process crash)"
     )
     web_dir: Path | None = Field(default=None, description="static dashboard to serve at / when present")
+
+    @field_validator("teacher_token", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        return None if value == "" else value

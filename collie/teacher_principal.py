@@ -11,10 +11,10 @@ import json
 from pathlib import Path
 
 from collie.client import ApiError, Backoff, CollieClient, Conflict, NotInScope, Unauthorized, Unavailable, retrying
-from collie.schemas import LabelerCreated
+from collie.schemas import TEACHER_PRINCIPAL, LabelerCreated
 from collie.tokens import write_secret
 
-NAME = "oracle-teacher"
+NAME = TEACHER_PRINCIPAL
 TOKEN_FILE = "teacher_token.json"
 BACKOFF = Backoff(max_s=2.0)
 ATTEMPTS = 8  # about 10 s of a service that does not answer (it answered a moment ago), then an error

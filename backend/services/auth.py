@@ -95,16 +95,17 @@ def builtin_principals(database_url: str) -> dict[str, bool]:
         engine.dispose()
 
 
-def bootstrap(conn: Connection, role: Role, token: str) -> bool:
-    """Make `token` the token of the built-in principal named after `role` (created if missing).
-    A revoked built-in principal stays revoked, token and all; returns False for one."""
+def bootstrap(conn: Connection, role: Role, token: str, name: str | None = None) -> bool:
+    """Make `token` the token of the built-in principal `name` (default: named after `role`; created
+    if missing). A revoked built-in principal stays revoked, token and all; returns False for one."""
+    name = name or role
     digest = hash_token(token)
     holder = conn.execute(select(Principal.id, Principal.name).where(Principal.token_sha256 == digest)).first()
-    if holder is not None and holder.name != role:
-        raise Conflict(f"the {role} bootstrap token is already the token of '{holder.name}'")
-    existing = conn.execute(select(Principal.id, Principal.revoked_at).where(Principal.name == role)).first()
+    if holder is not None and holder.name != name:
+        raise Conflict(f"the {name} bootstrap token is already the token of '{holder.name}'")
+    existing = conn.execute(select(Principal.id, Principal.revoked_at).where(Principal.name == name)).first()
     if existing is None:
-        conn.execute(insert(Principal).values(name=role, role=role, token_sha256=digest, created_at=time.time()))
+        conn.execute(insert(Principal).values(name=name, role=role, token_sha256=digest, created_at=time.time()))
     elif existing.revoked_at is not None:
         return False
     else:
