@@ -10,16 +10,13 @@ from typing import Any
 import torch
 
 from collie.whole_files import write_whole
+from trainer.run_files import ResumeError
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
     """A failed save (a full disk) leaves the last checkpoint as it was, and no partial file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     write_whole(path, lambda f: torch.save(state, f), sync=True)
-
-
-class ResumeError(ValueError):
-    """A run folder that `--resume` cannot continue: a file missing or damaged, named in the message."""
 
 
 def load_checkpoint(path: Path) -> dict[str, Any]:

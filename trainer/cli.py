@@ -22,10 +22,9 @@ from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
 from collie.whole_files import UNWRITABLE
-from trainer.checkpoint import ResumeError
 from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
-from trainer.run_files import RunFolderError, read_json_object, write_json
+from trainer.run_files import ResumeError, RunFolderError, read_json_object, write_json
 from trainer.same_run import differing_keys
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 

@@ -35,7 +35,7 @@ from collie import early_term, startup
 from collie.labels import Label
 from collie.whole_files import write_whole
 from trainer.acting import acting_path
-from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
+from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.denormals import flushing_denormals
 from trainer.device_replay import DeviceBatch, DeviceReplay
@@ -54,7 +54,7 @@ from trainer.query import select_queries
 from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
-from trainer.run_files import write_json
+from trainer.run_files import ResumeError, write_json
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport

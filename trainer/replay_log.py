@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from trainer.checkpoint import ResumeError
 from trainer.replay import FIELDS, TrajectoryReplay
+from trainer.run_files import ResumeError
 
 
 class ReplayLog:

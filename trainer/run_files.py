@@ -27,6 +27,12 @@ class RunFolderError(ValueError):
     """A run folder's file cannot be read as what it should hold; the message names the file."""
 
 
+class ResumeError(ValueError):
+    """A run folder that `--resume` cannot continue: a file missing or damaged, named in the message.
+    Here, not beside the checkpoint code, so that `collie train` loads torch only after it has set
+    OpenMP's variables (trainer/threads.py)."""
+
+
 def read_json_object(path: Path) -> dict[str, Any]:
     """`path`'s JSON object; RunFolderError naming the file and why if it is missing, not JSON or
     not an object (a file cut short by a full disk, or written by hand)."""

@@ -24,3 +24,12 @@ def test_variables_reach_torch_when_set_before_import():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
     assert out.stdout.split() == ["1", "PASSIVE"]
+
+
+def test_collie_train_loads_torch_only_after_it_sets_the_variables():
+    """`collie train` imports its command's module, then sets the variables, then imports the trainer:
+    that module must not load torch (was: ResumeError's module did, so OMP_WAIT_POLICY=PASSIVE never
+    reached OpenMP in a run started by hand, only in one `collie up` started)."""
+    code = "import sys, collie.cli, trainer.cli; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False"]

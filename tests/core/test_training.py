@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.checkpoint import ResumeError, load_checkpoint, save_checkpoint
+from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import make_config
 from trainer.loop import Trainer, TrainingDiverged
+from trainer.run_files import ResumeError
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
