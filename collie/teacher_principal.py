@@ -2,7 +2,8 @@
 in the stack's label link. Sharing one, a person labelling through the link and the teacher took
 each other's segments (a claim without a tab hands back every query its principal holds, the one
 on the person's screen included) and counted as one labeler under redundancy. The token is kept
-in OUT/teacher_token.json, so a resumed stack's teacher is the same labeler."""
+in OUT/teacher_token.json, so a resumed stack's teacher is the same labeler. It is made for the
+stack's run alone: the token each stack leaves on a lab database labels no other run."""
 
 from __future__ import annotations
 
@@ -22,15 +23,16 @@ ATTEMPTS = 8  # about 10 s of a service that does not answer (it answered a mome
 
 def teacher_token(api: str, operator_token: str, out: Path, run_id: int) -> str:
     """The teacher's labeler token: the one `out` keeps while the service takes it for run
-    `run_id`, else a new principal's (made with the operator's token, named `oracle-teacher`, or
-    `oracle-teacher-2`… where the name is taken). RuntimeError when the service refuses."""
+    `run_id`, else a new principal's limited to that run (made with the operator's token, named
+    `oracle-teacher`, or `oracle-teacher-2`… where the name is taken). RuntimeError when the service
+    refuses."""
     path = out / TOKEN_FILE
     try:
         with CollieClient(api, operator_token) as client:
             kept = _kept(path)
             if kept is not None and _takes(api, kept, run_id):
                 return kept
-            created = _create(client)
+            created = _create(client, run_id)
     except (ApiError, Unavailable) as exc:
         raise RuntimeError(f"the oracle teacher's labeler could not be made: {exc}") from None
     write_secret(path, json.dumps({"name": created.name, "token": created.token}))
@@ -60,14 +62,14 @@ def _takes(api: str, token: str, run_id: int) -> bool:
     return True
 
 
-def _create(client: CollieClient) -> LabelerCreated:
+def _create(client: CollieClient, run_id: int) -> LabelerCreated:
     taken = {p.name for p in retrying(client.labelers, BACKOFF, attempts=ATTEMPTS)}
     for i in itertools.count(1):
         name = NAME if i == 1 else f"{NAME}-{i}"
         if name in taken:
             continue
         try:
-            return client.create_labeler(name)  # once: a retry of an unanswered one might make two
+            return client.create_labeler(name, runs=[run_id])  # once: a retry of an unanswered one might make two
         except Conflict:  # taken meanwhile (another stack on the same lab database)
             continue
     raise AssertionError("never: the count has no end")

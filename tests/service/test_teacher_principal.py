@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from backend.server import BackgroundServer
-from collie.client import CollieClient
+from collie.client import CollieClient, NotInScope
 from collie.teacher_principal import TOKEN_FILE, teacher_token
 
 from .conftest import TOKENS, make_run_spec, make_session
@@ -28,8 +28,13 @@ def test_the_teacher_gets_its_own_labeler_kept_across_restarts_and_renewed_once_
     assert json.loads(kept.read_text())["name"] == "oracle-teacher" and kept.stat().st_mode & 0o077 == 0
     assert first not in TOKENS.values()
     assert teacher_token(live.url, TOKENS["operator"], tmp_path, run.id) == first  # a restart: the same labeler
-
     [made] = [p for p in operator.labelers() if p.name == "oracle-teacher"]
+    assert made.runs == [run.id]  # the token a stack leaves on a lab database labels no other run
+    other = trainer.create_run(make_run_spec())
+    trainer.post_session(other.id, make_session(0, 1))
+    with CollieClient(live.url, first) as teacher, pytest.raises(NotInScope):
+        teacher.claim(other.id)
+
     operator.revoke(made.id)  # e.g. from the dashboard's labelers list
     renewed = teacher_token(live.url, TOKENS["operator"], tmp_path, run.id)
     assert renewed != first and json.loads(kept.read_text())["name"] == "oracle-teacher-2"
