@@ -156,7 +156,12 @@ class RunCreate(Wire):
     method: Name
     config: dict[str, Any] = Field(default_factory=dict)
     dims: EnvDims
-    n_total: int | None = Field(default=None, ge=0, le=MAX_INT, description="planned number of labels (budget)")
+    n_total: int | None = Field(
+        default=None,
+        ge=0,
+        le=MAX_INT,
+        description="the most queries the run may ask (its label budget; sessions past it are refused)",
+    )
     epochs_total: int | None = Field(default=None, ge=0, le=MAX_INT)
     feedback_timeout_s: FeedbackTimeout | None = Field(
         default=None, description="seconds the trainer waits for a session's labels; null: every label"

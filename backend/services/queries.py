@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from sqlalchemy import Connection, Select, insert, select, update
+from sqlalchemy import Connection, Select, func, insert, select, update
 
 from backend.models import FeedbackSession, Principal, Query, QueryData
 from backend.services import events, runs
@@ -49,7 +49,7 @@ SUMMARY_COLUMNS = (
 
 
 def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: int) -> SessionPosted:
-    run = runs.row(conn, run_id)
+    run = runs.locked_row(conn, run_id)  # posts to one run one at a time: the budget's count stays true
     if run.status in FINISHED or run.control == "stop":  # a stopped run's queries could never be claimed
         raise Conflict(runs.ended(run_id, run.status, run.control))
     if len(body.queries) > max_queries:
@@ -80,15 +80,17 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
         )
     now = time.time()
     ids = [q.query_id for q in body.queries]
-    conn.execute(  # the unique (run, session) makes a concurrent second post of this position a 409
-        insert(FeedbackSession).values(
-            run_id=run_id, session=body.session, epoch=body.epoch, created_at=now, query_ids=ids
-        )
-    )
     existing = set(
         conn.execute(select(Query.query_id).where(Query.run_id == run_id, Query.query_id.in_(ids))).scalars()
     )
     new = [q for q in body.queries if q.query_id not in existing]
+    if run.n_total is not None:
+        check_budget(conn, run_id, run.n_total, len(new))
+    conn.execute(
+        insert(FeedbackSession).values(
+            run_id=run_id, session=body.session, epoch=body.epoch, created_at=now, query_ids=ids
+        )
+    )
     rows = [
         {
             "run_id": run_id,
@@ -118,6 +120,20 @@ def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: 
         existing=[i for i in ids if i in existing],
         query_ids=ids,
     )
+
+
+def check_budget(conn: Connection, run_id: int, n_total: int, adding: int) -> None:
+    """Refuse new queries past the run's budget. It counts as the trainer's (trainer/loop.py
+    queries_asked) does: every query asked, labelled or not, retired ones too, once per id; gold
+    copies are no query of the run's (services/gold.py)."""
+    stored = conn.execute(
+        select(func.count()).select_from(Query).where(Query.run_id == run_id, Query.gold_of.is_(None))
+    ).scalar_one()
+    if adding and stored + adding > n_total:
+        raise Conflict(
+            f"run {run_id}'s budget is {n_total} queries and {stored} are stored: "
+            f"a new session of {adding} more would pass it"
+        )
 
 
 def retire(conn: Connection, run_id: int, query_ids: list[str]) -> Retired:

@@ -148,6 +148,16 @@ def row(conn: Connection, run_id: int) -> Any:
     return found
 
 
+def locked_row(conn: Connection, run_id: int) -> Any:
+    """The run's row, locked until the transaction ends (PostgreSQL; SQLite's writers take turns
+    already). FOR NO KEY UPDATE is what the event log's UPDATE of the row takes anyway, so it
+    waits for nothing more than that would, and rows that only refer to the run are not held up."""
+    found = conn.execute(select(Run).where(Run.id == run_id).with_for_update(key_share=True)).first()
+    if found is None:
+        raise NotFound(f"no run {run_id}")
+    return found
+
+
 def get(conn: Connection, run_id: int) -> RunRead:
     found = row(conn, run_id)
     return _read(found, _counts(conn, [run_id]).get(run_id, QueueCounts()))

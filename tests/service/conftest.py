@@ -130,9 +130,10 @@ def new_labeler(live: BackgroundServer, operator: CollieClient) -> Iterator[Call
         client.close()
 
 
-def make_run_spec(dims: EnvDims = DIMS, task: str = "range_north") -> RunCreate:
-    """A run whose rule takes all three classes (North never calls a state good: the service refuses a 2)."""
-    return RunCreate(env="point", task=task, method="collie", config={"preset": "smoke"}, dims=dims, n_total=10)
+def make_run_spec(dims: EnvDims = DIMS, task: str = "range_north", n_total: int | None = 10) -> RunCreate:
+    """A run whose rule takes all three classes (North never calls a state good: the service refuses a 2).
+    Its budget (n_total) is 10 queries: a test that posts more gives a larger one, or None (no budget)."""
+    return RunCreate(env="point", task=task, method="collie", config={"preset": "smoke"}, dims=dims, n_total=n_total)
 
 
 def make_query(query_id: str, dims: EnvDims = DIMS, seed: int = 0) -> QueryIn:

@@ -155,7 +155,7 @@ def test_lease_expiry_returns_the_query_to_the_pool(
 def test_two_labelers_never_hold_the_same_query(
     live: object, new_labeler: Callable[[str], CollieClient], trainer: CollieClient
 ) -> None:
-    created = trainer.create_run(make_run_spec())
+    created = trainer.create_run(make_run_spec(n_total=40))
     trainer.post_session(created.id, make_session(0, 40))
     workers = [new_labeler(f"race-{i}") for i in range(8)]
     held: dict[str, list[str]] = {}

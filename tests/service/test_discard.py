@@ -147,7 +147,7 @@ def test_two_discards_at_once_withdraw_each_label_once(
 ) -> None:
     """On PostgreSQL the query rows are locked as they are read: two operators discarding the two
     labelers of the same queries at once withdraw each effective label once, never twice."""
-    run = trainer.create_run(make_run_spec().model_copy(update={"redundancy": 2}))
+    run = trainer.create_run(make_run_spec(n_total=12).model_copy(update={"redundancy": 2}))
     trainer.post_session(run.id, make_session(0, 12))
     a, b = new_labeler("race-a"), new_labeler("race-b")
     label_all(a, run.id, [1] * 12)

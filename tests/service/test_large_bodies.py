@@ -92,7 +92,7 @@ def test_segment_arrays_are_bounded(
 
 def test_a_big_session_is_parsed_in_the_worker_like_a_small_one(live: BackgroundServer, trainer: CollieClient) -> None:
     """Above OFF_LOOP_BYTES the worker process validates the body: the same answers, the same rows."""
-    created = trainer.create_run(make_run_spec())
+    created = trainer.create_run(make_run_spec(n_total=600))
     session = make_session(0, 600)
     assert len(session.model_dump_json()) > OFF_LOOP_BYTES
     posted = trainer.post_session(created.id, session)
@@ -116,7 +116,7 @@ def test_a_big_session_is_parsed_in_the_worker_like_a_small_one(live: Background
 
 def test_a_dead_session_worker_is_replaced(live: BackgroundServer, trainer: CollieClient) -> None:
     """The worker killed (as the kernel's OOM killer would): the next big session still stores."""
-    created = trainer.create_run(make_run_spec())
+    created = trainer.create_run(make_run_spec(n_total=None))
     trainer.post_session(created.id, make_session(0, 600))
     pool = live.app.state.session_parser._pool
     for process in list(pool._processes.values()):

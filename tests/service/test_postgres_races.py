@@ -1,8 +1,8 @@
 """Writes that interleave on PostgreSQL (SQLite serialises its writers, so there they cannot):
-retiring queries while a label for one of them commits, and lowering the redundancy while a label
-is in flight. Each test holds one side's transaction open at the moment that matters (a
-transaction of its own, or a hook pausing a second service process on the same database), so
-the interleaving happens every time."""
+retiring queries while a label for one of them commits, lowering the redundancy while a label
+is in flight, and two feedback sessions posted at once into a run's budget. Each test holds one
+side's transaction open at the moment that matters (a transaction of its own, or a hook pausing a
+second service process on the same database), so the interleaving happens every time."""
 
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from backend.errors import database_fault
 from backend.main import create_app
 from backend.server import BackgroundServer
 from backend.services.errors import DatabaseBusy
-from collie.client import CollieClient
-from collie.schemas import Retired, RunRead
+from collie.client import ApiError, CollieClient
+from collie.schemas import Retired, RunRead, SessionPosted
 
 from .conftest import TOKENS, make_run_spec, make_session, new_database_url, settings_for
 
@@ -194,3 +194,40 @@ def test_a_deadlock_between_service_processes_is_a_busy_database_the_client_may_
         engine.dispose()
     assert len(failed) == 1, failed
     assert isinstance(database_fault(failed[0], "postgresql"), DatabaseBusy)
+
+
+def test_two_sessions_posted_at_once_never_pass_the_budget_together(
+    live: BackgroundServer, database_url: str, trainer: CollieClient
+) -> None:
+    """A post whose transaction is open (its queries inserted, not committed) holds the run's row:
+    a second post waits for it, then counts its queries and is refused. Without the lock it counted
+    only what was committed, and the two together stored 6 queries of a budget of 4."""
+    run = trainer.create_run(make_run_spec(n_total=4))
+    trainer.post_session(run.id, make_session(0, 2))
+    answers: dict[int, SessionPosted | ApiError] = {}
+
+    def post(client: CollieClient, session: int) -> None:
+        try:
+            answers[session] = client.post_session(run.id, make_session(session, 2))
+        except ApiError as exc:
+            answers[session] = exc
+
+    with (
+        lock_waits(database_url) as waiting,
+        paused_after(database_url, "INSERT INTO QUERIES") as (elsewhere, paused, go),
+        CollieClient(elsewhere.url, TOKENS["trainer"]) as trainer_elsewhere,
+    ):
+        first = threading.Thread(target=post, args=(trainer_elsewhere, 1))
+        first.start()
+        assert paused.wait(30), "the first post never reached the database"
+        second = threading.Thread(target=post, args=(trainer, 2))
+        second.start()
+        wait(lambda: waiting() > 0 or not second.is_alive(), "the second post neither waited nor ended")
+        go.set()
+        first.join(30)
+        second.join(30)
+    stored, refused = answers[1], answers[2]
+    assert isinstance(stored, SessionPosted) and stored.created == ["1-0", "1-1"]
+    assert isinstance(refused, ApiError) and refused.status == 409
+    assert "budget is 4 queries and 4 are stored" in str(refused.detail)
+    assert len(trainer.queries(run.id)) == 4

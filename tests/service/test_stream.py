@@ -51,7 +51,7 @@ def test_long_poll_wakes_when_a_label_arrives(trainer: CollieClient, labeler: Co
 
 
 def test_paging_misses_nothing_and_repeats_nothing(trainer: CollieClient, labeler: CollieClient) -> None:
-    created = trainer.create_run(make_run_spec())
+    created = trainer.create_run(make_run_spec(n_total=25))
     trainer.post_session(created.id, make_session(0, 25))
     label_all(labeler, created.id)
     everything = trainer.events(created.id).events

@@ -32,7 +32,7 @@ def refused(call: Callable[[], object]) -> str:
 
 
 def fresh_run(trainer: CollieClient, n: int, redundancy: int = 1) -> RunRead:
-    spec = make_run_spec()
+    spec = make_run_spec(n_total=n)
     created = trainer.create_run(RunCreate(**{**spec.model_dump(), "redundancy": redundancy}))
     trainer.post_session(created.id, make_session(0, n))
     return created
