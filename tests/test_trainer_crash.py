@@ -204,6 +204,33 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path):
             assert operator.run(run_id).status == "finished"
 
 
+def test_a_session_past_the_runs_budget_on_the_service_ends_the_run_in_one_line(tmp_path):
+    """The service refuses a session past the run's n_total (409): the trainer ends with one line
+    naming the budget and a checkpoint, exit 2 (was: the Conflict's traceback, exit 1, which
+    `collie up` would restart into the same refusal)."""
+    from service.conftest import make_session
+
+    from trainer.config import make_config
+    from trainer.envs import make_env
+
+    cfg, env = make_config("smoke", "point"), make_env("point")
+    dims = EnvDims(obs_dim=env.obs_dim, nq=env.nq, nv=env.nv, horizon=cfg.segment_length, skill_dim=cfg.skill_dim)
+    env.close()
+    with running_service(tmp_path) as api, CollieClient(api, TOKENS["trainer"]) as trainer:
+        spec = RunCreate(env="point", task="north", method="collie", dims=dims, n_total=2, epochs_total=cfg.epochs)
+        run_id = trainer.create_run(spec).id
+        trainer.post_session(run_id, make_session(50, 2, dims))  # its whole budget, asked by someone else
+        log = tmp_path / "trainer.log"
+        refused = cli(*train_args(tmp_path / "run", api, "--run-id", str(run_id)), log=log)
+        assert refused.wait(timeout=300) == 2, log.read_text()[-3000:]
+        said = log.read_text()
+        assert "Traceback" not in said, said[-3000:]
+        last = said.strip().splitlines()[-1]
+        assert last.startswith(f"collie train: error: the labeling service refused session 0 of run {run_id}")
+        assert "budget is 2 queries and 2 are stored" in last and "the run is checkpointed at epoch" in last
+        assert "operator's token" not in last  # no token of any kind would be taken
+
+
 def test_more_epochs_reopen_a_finished_run_and_a_stopped_one_stays_stopped(tmp_path):
     """`--resume --epochs` past the end of a run the service holds as finished: the run reopens for the
     epochs added (its sessions are posted, not refused with 409) and finishes at the new end. A run an

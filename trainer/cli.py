@@ -627,11 +627,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie train: error: {exc}", file=sys.stderr)
         return 2
     except SourceRefused as exc:  # e.g. an operator revoked the token mid-run
-        print(
-            f"collie train: error: {exc}: resume it with --resume and an operator's token (a trainer "
-            "token acts only on the runs its own principal created)",
-            file=sys.stderr,
-        )
+        print(f"collie train: error: {exc}" + (f": {exc.advice}" if exc.advice else ""), file=sys.stderr)
         return 2
     except Exception as exc:  # an allocation that failed (e.g. the evaluation's envs); any other: raised
         refusal = short_of_memory(exc, args)

@@ -676,9 +676,10 @@ class Trainer:
         if diverged is not None:
             raise diverged
         if refused is not None:  # the caller says why, now that the run is saved
-            raise SourceRefused(f"{refused}; the run is checkpointed at epoch {self.epoch}")
+            raise SourceRefused(f"{refused}; the run is checkpointed at epoch {self.epoch}", refused.advice)
         if self.feedback.refusal is not None:  # met in the last epoch, after its last control()
-            raise SourceRefused(f"{self.feedback.refusal}; the run finished, but the service was not told")
+            refusal = self.feedback.refusal
+            raise SourceRefused(f"{refusal}; the run finished, but the service was not told", refusal.advice)
         return summary
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:

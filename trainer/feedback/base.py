@@ -21,9 +21,19 @@ class StopRequested(Exception):
     """Raised by a source when an operator stops the run while the trainer waits."""
 
 
+TOKEN_ADVICE = (
+    "resume it with --resume and an operator's token (a trainer token acts only on the runs its own principal created)"
+)
+
+
 class SourceRefused(Exception):
-    """Raised by a source whose service refuses the trainer (a revoked or wrong token): no label
-    can come, so the run ends resumable, checkpointed, as after a signal."""
+    """Raised by a source whose service refuses the trainer (a revoked or wrong token, a session past
+    the run's budget): no label can come, so the run ends resumable, checkpointed, as after a signal.
+    `advice`: what the user can do, said after the message."""
+
+    def __init__(self, message: str, advice: str = TOKEN_ADVICE) -> None:
+        super().__init__(message)
+        self.advice = advice
 
 
 @dataclass

@@ -138,11 +138,14 @@ class HttpFeedback(FeedbackSource):
         body = SessionPost(session=session, epoch=epoch, queries=[to_wire(s) for s in segments])
         try:
             posted = self._retry(lambda: self.client.post_session(self.run_id, body))
-        except Conflict:  # an operator stopped the run since we last looked: it takes no session, we end
+        except Conflict as exc:  # an operator stopped the run since we last looked: it takes no session, we end
             self._pump(0.0)
             if self._control == "stop":
                 raise StopRequested(f"run {self.run_id} was stopped by an operator") from None
-            raise
+            # e.g. past the run's budget (n_total): asking again would be refused again
+            raise SourceRefused(
+                f"the labeling service refused session {session} of run {self.run_id} ({exc})", ""
+            ) from None
         startup.mark("segments posted", epoch)
         startup.done()  # the start is over once a segment is out
         if posted.reused:  # this position was posted before (a resumed trainer): its queries, not new ones
