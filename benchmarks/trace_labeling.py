@@ -110,9 +110,10 @@ def keys(found: dict[str, list[float]], pages: list[Page], apps_sessions: list[A
 
 
 def crowd(stack: Stack, browser: Any, n: int, think_s: float, labelers: int, redundancy: int) -> dict[str, list[float]]:
-    run = stack.post_run("ant", 0, seed=13, redundancy=redundancy)
     wanted = (n + 2) * labelers
-    for session in range(0, (wanted + CHUNK - 1) // CHUNK):  # small posts: a busy machine's timeouts
+    sessions = (wanted + CHUNK - 1) // CHUNK
+    run = stack.post_run("ant", 0, seed=13, redundancy=redundancy, n_total=sessions * CHUNK)  # the service's budget
+    for session in range(sessions):  # small posts: a busy machine's timeouts
         stack.post_session(run.id, "ant", session, CHUNK, seed=13)
     app = stack.ui(run.id, min_dwell_s=0.05, min_played=0.0)
     pages: list[Page] = [

@@ -91,17 +91,22 @@ class Stack:
         seed: int = 0,
         rollout_env: str | None = None,
         redundancy: int | None = None,
+        n_total: int | None = None,
     ) -> RunRead:
         """A run waiting for labels with one session of n_queries segments, rolled out in `env`
         (or in `rollout_env`, to make a run whose model cannot pose its segments); `redundancy`: labels
-        per query, where the service has that run setting (RunCreate.redundancy)."""
+        per query, where the service has that run setting (RunCreate.redundancy); `n_total`: its
+        budget, the most queries the service stores for it (default: 100, or n_queries if more)."""
         rollout_env = rollout_env or env
         extra: dict[str, object] = {}
         if redundancy is not None:
             if "redundancy" not in RunCreate.model_fields:
                 raise ValueError("this service has no redundancy run setting (RunCreate.redundancy)")
             extra["redundancy"] = redundancy
-        spec = RunCreate(env=rollout_env, task=task, method="collie", dims=dims_of(rollout_env), n_total=100, **extra)
+        budget = max(100, n_queries) if n_total is None else n_total
+        spec = RunCreate(
+            env=rollout_env, task=task, method="collie", dims=dims_of(rollout_env), n_total=budget, **extra
+        )
         run = self.trainer.create_run(spec)
         if rollout_env != env:  # the service takes no such run now: one stored before it checked dims
             assert self.db is not None
