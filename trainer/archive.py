@@ -12,7 +12,10 @@ trainer.report.checked_run), are named with why and left out; such a run folder 
 refused in one line (exit 2). A run whose name the archive already holds for another configuration
 is refused naming what differs (where and how each ran aside: trainer.same_run.NOT_THE_RUN); the
 others are archived, and the exit code is 2. No checkpoint or replay is copied, so an archived run
-cannot be resumed or given a downstream task; run those before archiving.
+cannot be resumed or given a downstream task; run those before archiving. Each copy is written
+whole (trainer.run_files.folder_written_whole): one that fails midway (a full disk) leaves no run
+folder, or when refreshing an archived run its older copy as it was; the hidden folders it works in
+are no runs to `collie report` or here, and what a kill -9 left of them the next archive recovers.
 """
 
 from __future__ import annotations
@@ -23,7 +26,15 @@ from pathlib import Path
 
 from collie.stack_folder import STACK_LOCK, STACK_RUN
 from trainer.report import checked_run
-from trainer.run_files import RunFolderError, copy_whole, read_json_object, writing_into
+from trainer.run_files import (
+    RunFolderError,
+    copy_whole,
+    folder_written_whole,
+    read_json_object,
+    recover_beside,
+    run_folders,
+    writing_into,
+)
 from trainer.same_run import comparable, differing_keys, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
@@ -56,8 +67,8 @@ def another_run(held: Path, source: Path) -> str | None:
 def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
     """Copy `source`'s results into `out_root`/<relative, default source's name>; returns that
     folder. Archiving the same run again refreshes it (a downstream task run since, say, or the same
-    run from another folder); another run of the same name (a different configuration) is refused,
-    naming what differs."""
+    run from another folder), swapping the new copy in only once it is whole; another run of the same
+    name (a different configuration) is refused, naming what differs."""
     for name in REQUIRED:
         if not (source / name).exists():
             raise ArchiveError(f"{source} has no {name}: not a run folder, or its final skills were not saved")
@@ -69,15 +80,16 @@ def archive(source: Path, out_root: Path, relative: Path | None = None) -> Path:
         out = out_root / (relative or archive_name(source))
         if out.resolve() == source.resolve():
             raise ArchiveError(f"{source} is already in {out_root}")
+        recover_beside(out)  # an archive killed mid-refresh: its older copy back in place, to compare with
         differs = another_run(out, source) if (out / "summary.json").exists() else None
         if differs:
             raise ArchiveError(f"{out} holds another run of that name ({differs}); remove it first")
     except RunFolderError as exc:  # the message names the file
         raise ArchiveError(str(exc)) from None
-    out.mkdir(parents=True, exist_ok=True)
-    for name in sorted(REQUIRED + OPTIONAL, key=lambda n: n == "summary.json"):  # last: it says "a run is here"
-        if (source / name).exists():
-            copy_whole(source / name, out / name)
+    with folder_written_whole(out, replace=True) as new:  # a failure midway leaves the older copy, or none
+        for name in REQUIRED + OPTIONAL:
+            if (source / name).exists():
+                copy_whole(source / name, new / name)
     return out
 
 
@@ -88,7 +100,7 @@ def runs_below(root: Path) -> tuple[list[Path], list[Path], list[str]]:
     finished: list[Path] = []
     unfinished: list[Path] = []
     unreadable: list[str] = []
-    for folder in sorted(summary.parent for summary in root.rglob("summary.json")):
+    for folder in run_folders(root):  # none in a hidden folder: an archive being written
         try:
             read_json_object(folder / "summary.json")
             if is_finished(folder):

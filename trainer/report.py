@@ -48,7 +48,7 @@ from collie.tasks import Task
 from trainer.config import first_version
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
-from trainer.run_files import RunFolderError, read_arrays, read_json_object, writing_into
+from trainer.run_files import RunFolderError, read_arrays, read_json_object, run_folders, writing_into
 from trainer.same_run import PLACED, comparable, preset_defaults
 from trainer.task_choice import judged_by
 
@@ -221,7 +221,7 @@ def checked_run(folder: Path) -> RunResult:
 def find_runs(roots: list[Path]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
     """Every run folder (one with summary.json) under `roots`, in a stable order, and the folders
     that could not be read, each with why (one broken folder must not hide the others)."""
-    folders = sorted({p.parent for root in roots for p in Path(root).rglob("summary.json")})
+    folders = sorted({f for root in roots for f in run_folders(Path(root))})  # none in a hidden folder
     runs, broken = [], []
     for f in folders:
         try:
@@ -541,7 +541,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         print(f"collie report: error: not a folder: {', '.join(missing)}", file=sys.stderr)
         return 2
-    empty = [str(r) for r in roots if next(r.rglob("summary.json"), None) is None]
+    empty = [str(r) for r in roots if not run_folders(r)]
     if empty:
         print(f"collie report: error: no run folder (none has summary.json) under {', '.join(empty)}", file=sys.stderr)
         return 2

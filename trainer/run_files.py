@@ -9,9 +9,10 @@ import contextlib
 import errno
 import json
 import os
+import re
+import secrets
 import shutil
 import stat
-import tempfile
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -90,28 +91,98 @@ def writing_into(folder: Path) -> Iterator[None]:
         raise
 
 
+# The hidden folders `folder_written_whole` leaves beside OUT while it works, `.OUT.<8 hex>.KIND`:
+# the dot keeps every run-folder search (`run_folders`) from reading them.
+BEING_WRITTEN = ".partial"  # never a whole copy: the new one being built, or the old one being removed
+MOVED_ASIDE = ".old"  # the whole older copy, between the two renames that swap in a new one
+
+
+def run_folders(root: Path) -> list[Path]:
+    """The run folders (those with summary.json) at or below `root`, in a stable order; none in a
+    hidden folder below it (`.NAME.*.partial`, `.NAME.*.old` beside a run being written: not a run)."""
+    found = (summary.parent for summary in root.rglob("summary.json"))
+    return sorted(f for f in found if not any(part.startswith(".") for part in f.relative_to(root).parts))
+
+
 @contextlib.contextmanager
-def folder_written_whole(out: Path) -> Iterator[Path]:
+def folder_written_whole(out: Path, replace: bool = False) -> Iterator[Path]:
     """A new folder beside `out` to write a run folder into, renamed to `out` when the block ends;
-    if it fails (a full disk, Ctrl-C) removed with what it holds, and `out` too where this made it,
-    so that no half-written run is left. `out` must be absent or empty (the rename replaces an empty
-    folder). An error naming a file in the new folder names its place in `out`."""
-    made = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)  # a read-only disk, a path through a file: named as `out`
-    building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    if it fails (a full disk, Ctrl-C) removed with what it holds, and `out` and its parents too
+    where this made them, so that no half-written run is left. `out` must be absent or empty (the
+    rename replaces an empty folder), unless `replace`: then the folder there is swapped for the
+    new one (`_swap_in`), and left as it was if the block fails. What a killed one left beside
+    `out` is recovered first (`recover_beside`). An error naming a file in the new folder names its
+    place in `out`."""
+    recover_beside(out)
+    made = [folder for folder in (out, *out.parents) if not folder.exists()]  # `out` first, then up
+    building: Path | None = None
     try:
-        os.chmod(building, stat.S_IMODE(out.stat().st_mode))  # mkdtemp's is 0700
+        out.mkdir(parents=True, exist_ok=True)  # a read-only disk, a path through a file: named as `out`
+        building = _hidden_beside(out, BEING_WRITTEN)
+        os.chmod(building, stat.S_IMODE(out.stat().st_mode))  # the mode `out` has, or the umask gave it
         try:
             yield building
         except OSError as exc:
             raise _naming_out(exc, building, out) from None
+        if replace and any(out.iterdir()):
+            _swap_in(building, out)
+        else:
+            building.replace(out)
+    except BaseException:
+        if building is not None:
+            shutil.rmtree(building, ignore_errors=True)
+        with contextlib.suppress(OSError):  # stops at the first one not empty
+            for folder in made:
+                folder.rmdir()
+        raise
+
+
+def _hidden_beside(out: Path, kind: str) -> Path:
+    """A new empty hidden folder beside `out`, `.OUT.<8 hex>KIND`."""
+    folder = out.with_name(f".{out.name}.{secrets.token_hex(4)}{kind}")
+    folder.mkdir()
+    return folder
+
+
+def _left_beside(out: Path, kind: str) -> list[Path]:
+    """The hidden `kind` folders `_hidden_beside` made for `out` (not for another name that starts
+    with it: `.run.x.<hex>.partial` is run.x's)."""
+    if not out.parent.is_dir():
+        return []
+    pattern = re.compile(rf"\.{re.escape(out.name)}\.[0-9a-f]{{8}}{re.escape(kind)}")
+    return sorted(p for p in out.parent.iterdir() if pattern.fullmatch(p.name) and p.is_dir())
+
+
+def _swap_in(building: Path, out: Path) -> None:
+    """`building` put in place of the whole folder `out`: that one moved aside (`.OUT.*.old`), the
+    new one renamed in, then the old one removed under `building`'s `.partial` name (a half-removed
+    copy is never taken for a whole one). A failed rename puts the old one back; a kill between the
+    two renames leaves no `out` but both whole copies beside it, and `recover_beside` puts the old
+    one back. Neither copy is ever lost."""
+    aside = _hidden_beside(out, MOVED_ASIDE)
+    out.replace(aside)  # over the empty folder just made: a name no other writer uses
+    try:
         building.replace(out)
     except BaseException:
-        shutil.rmtree(building, ignore_errors=True)
-        if made:
-            with contextlib.suppress(OSError):
-                out.rmdir()
+        aside.replace(out)
         raise
+    with contextlib.suppress(OSError):  # the new one is in: its old copy left is recovered next time
+        aside.replace(building)
+        shutil.rmtree(building, ignore_errors=True)
+
+
+def recover_beside(out: Path) -> None:
+    """Undo what a `folder_written_whole` killed (kill -9, a power cut) left beside `out`: its
+    `.partial` folders removed; a moved-aside whole copy (`.old`) put back if `out` is missing (killed
+    between `_swap_in`'s two renames: the last complete copy is the one the run was refreshing from),
+    else removed (killed after them). Assumes one writer of `out` at a time."""
+    for partial in _left_beside(out, BEING_WRITTEN):
+        shutil.rmtree(partial, ignore_errors=True)
+    for old in _left_beside(out, MOVED_ASIDE):
+        if not out.exists():
+            old.replace(out)
+        else:
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def _naming_out(exc: OSError, building: Path, out: Path) -> OSError:

@@ -4,6 +4,10 @@ exactly as the run itself."""
 import json
 import re
 import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -11,7 +15,7 @@ from collie.cli import main
 from trainer.archive import ArchiveError, archive
 from trainer.config import make_config
 from trainer.loop import Trainer
-from trainer.report import write_report
+from trainer.report import find_runs, write_report
 from trainer.sweep import run_downstream_task
 
 from .test_report import fake_run
@@ -204,3 +208,62 @@ def test_a_run_the_report_leaves_out_is_not_archived_and_named_with_why(tmp_path
     with pytest.raises(ArchiveError, match=re.escape(why)):
         archive(damaged, kept)
     assert not (kept / damaged.name).exists()
+
+
+# `collie archive` killed -9 (os.kill, not an exception: nothing is cleaned up) as it renames a
+# hidden folder whose name ends with argv[1]: `.partial`, the new copy renamed in (between the two
+# renames that swap it for the older one), or `.old`, the older copy on its way out (after them).
+KILLED_AT_A_RENAME = """
+import os, pathlib, signal, sys
+from collie.cli import main
+rename = pathlib.Path.replace
+def dying(self, target):
+    if self.is_dir() and self.name.endswith(sys.argv[1]):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return rename(self, target)
+pathlib.Path.replace = dying
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def files_in(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+@pytest.mark.parametrize("killed_renaming", [".partial", ".old"], ids=["between-the-renames", "after-them"])
+def test_an_archive_killed_mid_refresh_loses_no_copy_and_its_hidden_folders_are_no_runs(
+    tmp_path, capsys, killed_renaming
+):
+    """Killed between the renames, the archive holds no copy in place but both whole beside it: the
+    next archive puts the older one back (and compares with it) before it refreshes. The hidden
+    folders hold summary.json but neither `collie report` nor `collie archive` takes them for runs."""
+    runs, kept = tmp_path / "runs", tmp_path / "results"
+    run = fake_run(runs, "point", "north", "metra", 0, 1.0)
+    fake_run(runs, "point", "north", "metra", 1, 1.0)
+    assert main(["archive", str(runs), "--out", str(kept)]) == 0
+    out, older = kept / run.name, files_in(kept / run.name)
+    (run / "downstream.json").write_text(json.dumps({"zero_shot": {"mean": 1.0, "best": 2.0}}))
+    argv = ["archive", str(run), "--out", str(kept)]
+    killed = subprocess.run([sys.executable, "-c", KILLED_AT_A_RENAME, killed_renaming, *argv], timeout=120)
+    assert killed.returncode == -signal.SIGKILL
+    between = killed_renaming == ".partial"
+    hidden = sorted(p.name.rsplit(".", 1)[1] for p in kept.iterdir() if p.name.startswith("."))
+    assert hidden == (["old", "partial"] if between else ["old"])
+    assert not out.exists() if between else files_in(out) == files_in(run)
+
+    shown = [] if between else [run.name]  # the run in place, if any; never a hidden copy of it
+    found, broken = find_runs([kept])
+    assert [r.path.name for r in found] == [*shown, "point-north-metra-s1"] and broken == []
+    assert main(["archive", str(kept), "--out", str(tmp_path / "copied")]) == 0
+    assert sorted(p.name for p in (tmp_path / "copied").iterdir()) == [*shown, "point-north-metra-s1"]
+
+    clash = fake_run(tmp_path / "other", "point", "north", "metra", 0, 1.0)
+    summary = json.loads((clash / "summary.json").read_text())
+    summary["config"]["seed"] = 7
+    (clash / "summary.json").write_text(json.dumps(summary))
+    assert main(["archive", str(clash), "--out", str(kept)]) == 2  # compared with the copy put back
+    assert "(seed 0 archived, 7 here)" in capsys.readouterr().err
+    assert files_in(out) == (older if between else files_in(run))
+    assert main(argv) == 0
+    assert files_in(out) == files_in(run)
+    assert sorted(p.name for p in kept.iterdir()) == [run.name, "point-north-metra-s1"]  # nothing hidden left

@@ -2,6 +2,7 @@
 full file system, or a path through a file, is one line naming the path (exit 2), not a traceback."""
 
 import contextlib
+import json
 import os
 import subprocess
 from collections.abc import Iterator
@@ -94,3 +95,42 @@ def test_a_rescore_that_fills_the_disk_midway_leaves_no_half_written_folder(
         assert main(argv) == 0  # nothing left in the way of the rerun
         assert sorted(p.name for p in fs.iterdir()) == ["rescored"]
         assert (out / "checkpoint.pt").stat().st_size == 400_000 and (out / "summary.json").exists()
+
+
+def archived_files(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+def test_an_archive_that_fills_the_disk_midway_leaves_no_run_folder_or_its_older_copy_as_it_was(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Was: a first archive left the run's folder without summary.json; a refresh left its older copy
+    holding some of the new files (downstream.json here) beside the old ones."""
+    run = fake_run(tmp_path / "runs", "point", "north", "metra", 0, 3.0)
+    (run / "metrics.jsonl").write_text('{"epoch": 1}\n' * 20)
+    big_metrics = '{"epoch": 1, "loss": 0.123456789}\n' * 12_000  # ≈ 400 kB
+    with small_file_system(tmp_path / "fs", "full") as fs:
+        filler, kept = fs / "filler", fs / "archive"
+        os.truncate(filler, filler.stat().st_size - 128 * 1024)  # room for the small files, not the big log
+        (run / "metrics.jsonl").write_text(big_metrics)
+        argv = ["archive", str(run), "--out", str(kept)]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err == f"collie archive: error: cannot write {kept}: No space left on device\n", err
+        assert sorted(p.name for p in fs.iterdir()) == ["filler"]  # no run folder, no archive, no partial one
+
+        (run / "metrics.jsonl").write_text('{"epoch": 1}\n' * 20)
+        assert main(argv) == 0  # the small log fits
+        out = kept / run.name
+        old = archived_files(out)
+        (run / "downstream.json").write_text(json.dumps({"zero_shot": {"mean": 1.0, "best": 2.0}}))
+        (run / "metrics.jsonl").write_text(big_metrics)  # the same run, refreshed with its full log
+        assert main(argv) == 2
+        assert capsys.readouterr().err.endswith(": No space left on device\n")
+        assert archived_files(out) == old and [p.name for p in kept.iterdir()] == [run.name]  # nothing hidden beside
+        assert main(["report", str(kept), "--no-figures", "--out", str(tmp_path / "report")]) == 0
+        assert f"{out}," in (tmp_path / "report" / "runs.csv").read_text()  # the older copy, read as a run
+
+        filler.unlink()
+        assert main(argv) == 0  # nothing left in the way of the rerun
+        assert archived_files(out) == archived_files(run) and [p.name for p in kept.iterdir()] == [run.name]

@@ -17,6 +17,7 @@ from trainer.run_files import (
     folder_written_whole,
     read_arrays,
     read_json_object,
+    recover_beside,
     write_json,
 )
 
@@ -106,8 +107,8 @@ def test_a_folder_written_whole_is_there_whole_or_not_at_all(tmp_path: Path) -> 
         write_json(new / "config.json", {})
         (new / "no" / "summary.json").write_text("{}")
     assert caught.value.filename == str(out / "no" / "summary.json")
-    assert list((tmp_path / "runs").iterdir()) == []
-    out.mkdir()  # an empty folder given: kept on failure, replaced on success
+    assert list(tmp_path.iterdir()) == []  # nor the folder it made to hold it
+    out.mkdir(parents=True)  # an empty folder given: kept on failure, replaced on success
     with pytest.raises(KeyboardInterrupt), folder_written_whole(out) as new:
         write_json(new / "config.json", {})
         raise KeyboardInterrupt
@@ -117,3 +118,27 @@ def test_a_folder_written_whole_is_there_whole_or_not_at_all(tmp_path: Path) -> 
         write_json(new / "summary.json", {"status": "finished"})
     assert read_json_object(out / "summary.json") == {"status": "finished"}
     assert [p.name for p in (tmp_path / "runs").iterdir()] == ["rescored"] and out.stat().st_mode == mode
+
+
+def test_a_folder_replaced_whole_is_the_old_one_until_the_new_one_is_whole(tmp_path: Path) -> None:
+    """`collie archive` refreshing a run: a failure leaves the older copy exactly as it was; success
+    leaves the new one alone (no file of the old one), and nothing hidden beside it."""
+    out = tmp_path / "run"
+    out.mkdir()
+    write_json(out / "summary.json", {"copy": "old"})
+    (out / "downstream.json").write_text("{}")
+    older = {p.name: p.read_bytes() for p in out.iterdir()}
+    with pytest.raises(KeyboardInterrupt), folder_written_whole(out, replace=True) as new:
+        write_json(new / "summary.json", {"copy": "new"})
+        raise KeyboardInterrupt
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == older and list(tmp_path.iterdir()) == [out]
+    with folder_written_whole(out, replace=True) as new:
+        write_json(new / "summary.json", {"copy": "new"})
+    assert [p.name for p in out.iterdir()] == ["summary.json"] and read_json_object(out / "summary.json")[
+        "copy"
+    ] == "new"
+    assert list(tmp_path.iterdir()) == [out]
+    of_another = tmp_path / ".run.x.0123abcd.partial"  # run.x's folder being written, not run's
+    of_another.mkdir()
+    recover_beside(out)
+    assert of_another.is_dir()
