@@ -5,15 +5,22 @@ method speaks the wire schemas of collie.schemas. HTTP errors raise ApiError (st
 typed by what a caller does about them: Unauthorized (401/403: a token problem; NotInScope when a
 valid token's run is outside its scope, with the typed reason), Conflict (409: the state does not
 allow it; NotHolding when a tab's label was refused, with the typed reason), and
-Unavailable — Unreachable (no answer) or Overloaded (5xx, 429) — the one kind worth retrying, with
-`retrying` and its Backoff: the one retry policy of every client (submissions are idempotent by
-client_request_id, so a retry never labels twice).
+Unavailable — Unreachable (no answer; GarbledAnswer: one damaged on the way) or Overloaded (5xx,
+429) — the one kind worth retrying, with `retrying` and its Backoff: the one retry policy of every
+client (submissions are idempotent by client_request_id, so a retry never labels twice).
+
+Every transport fault httpx raises is one of these (`transport_fault`), never httpx's own: an
+answer this client cannot read (a 2xx or 3xx whose body is not the expected JSON, e.g. a proxy's
+HTML page) is BadAnswer, and a request that cannot be sent as given (a bad URL, a scheme other
+than http(s)) is Unsendable; both are ApiErrors, refusals that asking again does not mend.
+httpx's StreamError family (a body read twice) is this module's own bug, left to show as one.
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import re
 import threading
 import time
 import uuid
@@ -77,12 +84,17 @@ log = logging.getLogger(__name__)
 
 
 class ApiError(Exception):
-    """The service answered with an error status."""
+    """The service answered with an error status (or, for the subclasses below that say so, the
+    call cannot be made or read as it is): a refusal, which the same call meets again."""
 
     def __init__(self, status: int, detail: Any) -> None:
-        super().__init__(f"{status}: {readable(detail)}")
+        super().__init__(self.said(status, detail))
         self.status = status
         self.detail = detail
+
+    @staticmethod
+    def said(status: int, detail: Any) -> str:
+        return f"{status}: {readable(detail)}"
 
 
 def readable(detail: Any) -> Any:
@@ -131,13 +143,70 @@ class Unreachable(Unavailable):
     """No answer from the service (down, restarting, or the network dropped)."""
 
 
+class GarbledAnswer(Unreachable):
+    """An answer damaged on the way: its body is not in the Content-Encoding it declares (a broken
+    proxy between; a body cut short is a plain Unreachable). As transient as no answer: the service
+    may be fine, and every request the clients retry is safe to send again."""
+
+
 def unreachable_why(exc: Unreachable) -> str:
     """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
     cause = exc.__cause__
     if isinstance(cause, httpx.TimeoutException):
         return "no answer in time"
+    if isinstance(exc, GarbledAnswer):
+        return str(exc)
     text = str(cause or exc)
     return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
+
+
+def no_answer(exc: Unreachable) -> str:
+    """What became of a request without a usable answer, as the rest of a sentence naming the
+    service: "does not answer (connection refused)", or that its answer arrived damaged."""
+    if isinstance(exc, GarbledAnswer):
+        return f"sent an answer damaged on the way, a proxy between? ({exc})"
+    return f"does not answer ({unreachable_why(exc)})"
+
+
+class BadAnswer(ApiError):
+    """An answer this client cannot read: a 2xx whose body is not the expected JSON or model (a
+    proxy's or another web service's page, a newer collie's), or a redirect (this client follows
+    none). `status` is the answer's; the message names the request's URL and what was wrong."""
+
+    @staticmethod
+    def said(status: int, detail: Any) -> str:
+        return str(detail)
+
+
+class Unsendable(ApiError):
+    """The request cannot be sent as given (an invalid URL, a scheme other than http or https, a
+    header HTTP does not allow): nothing was asked (`status` 0), and sending it again fails the same."""
+
+    @staticmethod
+    def said(status: int, detail: Any) -> str:
+        return str(detail)
+
+
+# httpx's faults of the request itself, not of the network: every try fails the same way.
+UNSENDABLE = (httpx.InvalidURL, httpx.UnsupportedProtocol, httpx.LocalProtocolError)
+
+
+def transport_fault(exc: httpx.HTTPError | httpx.InvalidURL, method: str, url: str, path: str) -> Exception:
+    """The typed error for an httpx fault of a `method` request of `url` (at `path` under the API):
+    Unsendable, GarbledAnswer, or Unreachable (any other transport fault: refused, timed out, cut
+    off, not HTTP, a proxy that failed); a redirect loop (which a client following no redirects
+    never meets) is a BadAnswer."""
+    if isinstance(exc, UNSENDABLE):
+        return Unsendable(0, f"{method} {url} cannot be sent: {exc}")
+    if isinstance(exc, httpx.DecodingError):
+        return GarbledAnswer(f"{method} {url}: the body is not in its declared Content-Encoding ({exc})")
+    if isinstance(exc, httpx.TooManyRedirects):
+        return BadAnswer(0, f"{method} {url}: {exc}")
+    return Unreachable(f"{method} {path}: {exc!r}")
+
+
+# The httpx faults `transport_fault` types: all that a request (not a misuse of httpx) can raise.
+TRANSPORT_FAULTS = (httpx.HTTPError, httpx.InvalidURL)
 
 
 class Overloaded(ApiError, Unavailable):
@@ -146,13 +215,19 @@ class Overloaded(ApiError, Unavailable):
 
 def answered_error(response: httpx.Response) -> ApiError:
     """The typed error for an error answer; a body with a typed reason (NotHeld, OutOfScope) gives
-    its own error, unless it is not one this client knows (a newer service): then the plain one."""
+    its own error, unless it is not one this client knows (a newer service): then the plain one. A
+    redirect is a BadAnswer naming where to; a body that is not JSON (a proxy's HTML page) is said
+    in one short line."""
+    if response.status_code < 400:
+        where_to = response.headers.get("Location", "nowhere")
+        said = f"{response.status_code}, a redirect to {where_to} (this client follows none: give that address)"
+        return BadAnswer(response.status_code, f"{request_said(response)} answered {said}")
     error: Any
     try:
         error = response.json()
         detail = error.get("detail") if isinstance(error, dict) else error
     except ValueError:
-        error, detail = None, response.text
+        error, detail = None, body_said(response)
     if isinstance(error, dict) and "reason" in error:
         try:
             if response.status_code == 409:
@@ -162,6 +237,35 @@ def answered_error(response: httpx.Response) -> ApiError:
         except ValidationError:
             pass
     return api_error(response.status_code, detail)
+
+
+def request_said(response: httpx.Response) -> str:
+    return f"{response.request.method} {response.request.url}"
+
+
+def body_said(response: httpx.Response, limit: int = 120) -> str:
+    """A body that is not JSON, in one short line: an HTML page by its title (a proxy's "502 Bad
+    Gateway"), other text by its start; an empty one by the status's reason."""
+    text = response.text
+    kind = response.headers.get("Content-Type", "").split(";")[0].strip()
+    if "html" in kind or text.lstrip()[:1] == "<":
+        title = re.search(r"<title[^>]*>(.*?)</title>", text, re.IGNORECASE | re.DOTALL)
+        shown = " ".join((title.group(1) if title else re.sub(r"<[^>]*>", " ", text)).split())[:60]
+        text = f"an HTML page ({shown})"
+    text = " ".join(text.split()) or response.reason_phrase or "an empty body"
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def bad_answer(response: httpx.Response, exc: ValidationError, expected: str) -> BadAnswer:
+    """A 2xx whose body is not the `expected` model: what it was instead, in one line."""
+    first = exc.errors(include_url=False)[:3]
+    if first and first[0]["type"] == "json_invalid":
+        kind = response.headers.get("Content-Type") or "no Content-Type"
+        shown = body_said(response)
+        got = f"{shown}, not JSON" if shown.startswith("an HTML page") else f"a body that is not JSON ({kind}: {shown})"
+    else:
+        got = f"JSON that is not {expected} ({readable(first)})"
+    return BadAnswer(response.status_code, f"{request_said(response)} answered {response.status_code} with {got}")
 
 
 def api_error(status: int, detail: Any) -> ApiError:
@@ -229,37 +333,54 @@ class CollieClient:
         """`part`: sent as PART_HEADER ("trainer": the service notes the run's trainer is alive)."""
         self.api = api.rstrip("/")
         self.token = token
-        self._http = httpx.Client(
-            base_url=f"{self.api}/api",
-            headers={"Authorization": f"Bearer {token}", **({PART_HEADER: part} if part else {})},
-            timeout=httpx.Timeout(timeout_s, connect=5.0),
-        )
+        try:
+            self._http = httpx.Client(
+                base_url=f"{self.api}/api",
+                headers={"Authorization": f"Bearer {token}", **({PART_HEADER: part} if part else {})},
+                timeout=httpx.Timeout(timeout_s, connect=5.0),
+            )
+        except httpx.InvalidURL as exc:
+            raise Unsendable(0, f"{self.api} is no URL a request can be sent to: {exc}") from None
 
     # ---------------------------------------------------------------- plumbing
 
     def _send(self, method: str, path: str, body: BaseModel | None = None, **kwargs: Any) -> httpx.Response:
+        """The answer to `method` `path`, a success (a 2xx); anything else raises its typed error."""
         if body is not None:
             kwargs["content"] = body.model_dump_json()
             kwargs["headers"] = {"Content-Type": "application/json"}
         try:
             response = self._http.request(method, path, **kwargs)
-        except httpx.TransportError as exc:
-            raise Unreachable(f"{method} {path}: {exc!r}") from exc
-        if response.status_code >= 400:
+        except TRANSPORT_FAULTS as exc:
+            raise transport_fault(exc, method, f"{self.api}/api{path}", path) from exc
+        if response.status_code >= 300:  # an error, or a redirect this client does not follow
             raise answered_error(response)
         return response
 
+    def _read(self, model: type[M], response: httpx.Response) -> M:
+        try:
+            return model.model_validate_json(response.content)
+        except ValidationError as exc:
+            raise bad_answer(response, exc, model.__name__) from exc
+
     def _get(self, model: type[M], path: str, **params: Any) -> M:
         clean = {k: v for k, v in params.items() if v is not None}
-        return model.model_validate_json(self._send("GET", path, params=clean).content)
+        return self._read(model, self._send("GET", path, params=clean))
 
     def _list(self, model: type[M], path: str, **params: Any) -> list[M]:
         clean = {k: v for k, v in params.items() if v is not None}
-        return _list_of(model).validate_json(self._send("GET", path, params=clean).content)
+        response = self._send("GET", path, params=clean)
+        try:
+            return _list_of(model).validate_json(response.content)
+        except ValidationError as exc:
+            raise bad_answer(response, exc, f"a list of {model.__name__}") from exc
 
     def _post(self, model: type[M], path: str, body: BaseModel | None = None, **params: Any) -> M:
         clean = {k: v for k, v in params.items() if v is not None}
-        return model.model_validate_json(self._send("POST", path, body, params=clean).content)
+        return self._read(model, self._send("POST", path, body, params=clean))
+
+    def _put(self, model: type[M], path: str, body: BaseModel) -> M:
+        return self._read(model, self._send("PUT", path, body))
 
     def close(self) -> None:
         self._http.close()
@@ -286,12 +407,12 @@ class CollieClient:
         return self._list(LabelerRead, "/labelers")
 
     def revoke(self, labeler_id: int) -> LabelerRead:
-        return LabelerRead.model_validate_json(self._send("DELETE", f"/labelers/{labeler_id}").content)
+        return self._read(LabelerRead, self._send("DELETE", f"/labelers/{labeler_id}"))
 
     def set_labeler_runs(self, labeler_id: int, runs: list[int] | None) -> LabelerRead:
         """Limit a labeler to `runs` from now on; None: every run."""
         body = LabelerScope(runs=runs)
-        return LabelerRead.model_validate_json(self._send("PUT", f"/labelers/{labeler_id}/runs", body).content)
+        return self._put(LabelerRead, f"/labelers/{labeler_id}/runs", body)
 
     # ---------------------------------------------------------------- runs and control
 
@@ -308,12 +429,12 @@ class CollieClient:
         self, run_id: int, status: RunStatus, epoch: int | None = None, message: str | None = None
     ) -> RunRead:
         body = StatusUpdate(status=status, epoch=epoch, message=message)
-        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/status", body).content)
+        return self._put(RunRead, f"/runs/{run_id}/status", body)
 
     def extend(self, run_id: int, epochs_total: int) -> RunRead:
         """More epochs for the run; a finished run reopens (409 for one stopped by an operator or failed)."""
         body = RunExtend(epochs_total=epochs_total)
-        return RunRead.model_validate_json(self._send("POST", f"/runs/{run_id}/extend", body).content)
+        return self._post(RunRead, f"/runs/{run_id}/extend", body)
 
     def pause(self, run_id: int) -> RunRead:
         return self._post(RunRead, f"/runs/{run_id}/pause")
@@ -333,12 +454,12 @@ class CollieClient:
         """Labeler quality control (operator): labels from distinct labelers per query, and the
         share of each labeler's segments that are gold (None: the run's value stays)."""
         body = QualitySettings(redundancy=redundancy, gold_rate=gold_rate)
-        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/quality", body).content)
+        return self._put(RunRead, f"/runs/{run_id}/quality", body)
 
     def set_instructions(self, run_id: int, text: str) -> RunRead:
         """An operator's free-text instructions for the run's labelers ("" clears them)."""
         body = RunInstructions(text=text)
-        return RunRead.model_validate_json(self._send("PUT", f"/runs/{run_id}/instructions", body).content)
+        return self._put(RunRead, f"/runs/{run_id}/instructions", body)
 
     # ---------------------------------------------------------------- queries
 
@@ -384,7 +505,7 @@ class CollieClient:
         if tab is not None:
             params["tab"] = tab
         response = self._send("POST", f"/runs/{run_id}/claim", params=params)
-        return None if response.status_code == 204 else ClaimRead.model_validate_json(response.content)
+        return None if response.status_code == 204 else self._read(ClaimRead, response)
 
     def labelled(self, run_id: int, page_size: int = 200) -> Iterator[LabelledQuery]:
         """Every query with an effective label, with frames (paged)."""
@@ -478,16 +599,19 @@ class CollieClient:
             params={"after": after, "wait_s": wait_s, "limit": limit},
             timeout=timeout,
         )
-        return EventPage.model_validate_json(response.content)
+        return self._read(EventPage, response)
 
     def stream(self, run_id: int, after: int = 0, max_backoff_s: float = 5.0) -> EventStream:
         return EventStream(self, run_id, after, max_backoff_s)
 
 
 class EventStream:
-    """A run's Server-Sent Events as an iterator of StreamEvent. A dropped connection (or a service
-    restart) is retried with the shared Backoff (0.1 s doubling up to max_backoff_s) and resumed
-    from the last id seen, so nothing is missed and nothing is yielded twice. 4xx errors end it."""
+    """A run's Server-Sent Events as an iterator of StreamEvent. A dropped connection, a service
+    restart, a busy service (5xx, 429) or an answer damaged on the way is retried with the shared
+    Backoff (0.1 s doubling up to max_backoff_s) and resumed from the last id seen, so nothing is
+    missed and nothing is yielded twice. A refusal ends it with its typed error: 4xx errors, and a
+    BadAnswer for an answer that is no event stream (another page, an event this client cannot
+    read), which reconnecting would only fetch again."""
 
     def __init__(self, client: CollieClient, run_id: int, after: int = 0, max_backoff_s: float = 5.0) -> None:
         self.client = client
@@ -507,19 +631,29 @@ class EventStream:
             try:
                 yield from self._connection()
                 delays = backoff.delays()  # a clean end (server shutdown): reconnect promptly
-            except httpx.TransportError:  # dropped while reading
-                time.sleep(next(delays))
-            except Unavailable:
+            except Unavailable as exc:  # no answer, dropped or damaged while reading, or busy
+                log.info("event stream of run %s: %s; reconnecting", self.run_id, exc)
                 time.sleep(next(delays))
             self.reconnects += 1
 
     def _connection(self) -> Iterator[StreamEvent]:
+        path = f"/runs/{self.run_id}/stream"
+        try:
+            yield from self._events(path)
+        except TRANSPORT_FAULTS as exc:
+            raise transport_fault(exc, "GET", f"{self.client.api}/api{path}", path) from exc
+
+    def _events(self, path: str) -> Iterator[StreamEvent]:
         headers = {"Last-Event-ID": str(self.last_id), "Accept": "text/event-stream"}
         timeout = httpx.Timeout(5.0, read=45.0)  # the server sends a heartbeat every 15 s
-        with self.client._http.stream("GET", f"/runs/{self.run_id}/stream", headers=headers, timeout=timeout) as r:
-            if r.status_code >= 400:
+        with self.client._http.stream("GET", path, headers=headers, timeout=timeout) as r:
+            if r.status_code >= 300:
                 r.read()
                 raise answered_error(r)
+            if not r.headers.get("Content-Type", "").startswith("text/event-stream"):  # e.g. a proxy's page
+                r.read()
+                said = f"{r.status_code} with {r.headers.get('Content-Type') or 'no Content-Type'}, not an event stream"
+                raise BadAnswer(r.status_code, f"{request_said(r)} answered {said} ({body_said(r)})")
             data: list[str] = []
             for line in r.iter_lines():
                 if self._closed:
@@ -527,8 +661,18 @@ class EventStream:
                 if line.startswith("data:"):
                     data.append(line[5:].lstrip())
                 elif not line and data:
-                    event = STREAM_EVENT.validate_json("\n".join(data))
+                    event = self._event(r, "\n".join(data))
                     data = []
                     if event.id > self.last_id:
                         self.last_id = event.id
                         yield event
+
+    @staticmethod
+    def _event(response: httpx.Response, data: str) -> StreamEvent:
+        try:
+            return STREAM_EVENT.validate_json(data)
+        except ValidationError as exc:
+            said = readable(exc.errors(include_url=False)[:3])
+            raise BadAnswer(
+                response.status_code, f"{request_said(response)} sent an event this client cannot read ({said})"
+            ) from exc

@@ -69,9 +69,7 @@ def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
     """What is wrong with the service at `api` as this UI will use it, one line each: nothing
     answers, it is not a collie service, --token is refused, --run names no run. Warnings, not
     refusals: the service may come up (or the run appear) after the UI starts, as under compose."""
-    from pydantic import ValidationError
-
-    from collie.client import ApiError, CollieClient, Unauthorized, Unreachable, unreachable_why
+    from collie.client import ApiError, BadAnswer, CollieClient, Unauthorized, Unreachable, Unsendable, no_answer
 
     where = f"the labeling service at {api}"
     # /api/health needs no token; the client sends one always, and an empty one is no legal header
@@ -79,13 +77,15 @@ def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
         try:
             client.health()
         except Unreachable as exc:
-            return [f"{where} does not answer ({unreachable_why(exc)}); the UI starts, and labels once it does"]
-        except (ApiError, ValidationError) as exc:  # a 503 is collie's own: its database, said on the page
-            status = getattr(exc, "status", 200)
-            if status != 503:
-                shown = f"{status}" if status != 200 else "200 with another body"
+            return [f"{where} {no_answer(exc)}; the UI starts, and labels once it does"]
+        except Unsendable as exc:
+            return [f"cannot ask {where}: {exc}"]
+        except BadAnswer as exc:  # e.g. a proxy's page, or another web service's
+            return [f"{api} is not a collie service ({exc}); check --api"]
+        except ApiError as exc:  # a 503 is collie's own: its database, said on the page
+            if exc.status != 503:
                 path = f"{urlsplit(api).path.rstrip('/')}/api/health"
-                return [f"{api} is not a collie service ({shown} on {path}); check --api"]
+                return [f"{api} is not a collie service ({exc.status} on {path}); check --api"]
         if not token:
             return []
         try:
@@ -94,12 +94,12 @@ def probe(api: str, token: str | None, run_id: int | None) -> list[str]:
                 client.run(run_id)
         except Unauthorized as exc:
             return [f"{where} refused --token ({exc}): the labeler URL will not sign in"]
+        except BadAnswer as exc:  # e.g. a newer collie's run: the page says what it cannot show
+            return [f"{where} sent an answer this collie cannot read (a newer collie's?): {exc}"]
         except ApiError as exc:
             return [f"{where} has no run {run_id}" if exc.status == 404 else f"{where} answered {exc}"]
         except Unreachable as exc:
-            return [f"{where} does not answer ({unreachable_why(exc)})"]
-        except ValidationError:  # e.g. a newer collie's run: the page says what it cannot show
-            return [f"{where} answered with a run this collie cannot read (a newer collie's?)"]
+            return [f"{where} {no_answer(exc)}"]
     return []
 
 

@@ -1,8 +1,9 @@
 """One labeler's link to the labeling service: which run to label, claims, labels, undo, progress.
 
 Everything goes through collie.client over HTTP. Errors are sorted into what the page must say:
-a refused token (AuthRefused), a service that does not answer (ServiceDown, retried by the
-caller), or a submission the service would not take (Rejected).
+a refused token (AuthRefused), a service that does not answer or whose answer arrived damaged
+(ServiceDown, retried by the caller), or a submission the service would not take (Rejected; also
+an answer this UI cannot read, e.g. a proxy's page, said in one line naming its URL).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from collie.client import (
     ApiError,
     Backoff,
     CollieClient,
+    GarbledAnswer,
     NotHolding,
     NotInScope,
     Overloaded,
@@ -96,6 +98,8 @@ class ServiceLink:
     def _call(self, fn: Callable[[], T]) -> T:
         try:
             return fn()
+        except GarbledAnswer as exc:
+            raise ServiceDown(f"the labeling service at {self.api} sent an answer damaged on the way ({exc})") from exc
         except Unreachable as exc:
             raise ServiceDown(f"the labeling service at {self.api} does not answer") from exc
         except Overloaded as exc:
@@ -107,7 +111,7 @@ class ServiceLink:
         except NotHolding as exc:
             refusal = exc.refusal
             raise Rejected(f"this tab no longer holds segment {refusal.query_id}: {NOT_HELD[refusal.reason]}") from exc
-        except ApiError as exc:
+        except ApiError as exc:  # BadAnswer and Unsendable too: their detail is the whole line
             raise Rejected(str(exc.detail)) from exc
 
     def login(self) -> Me:

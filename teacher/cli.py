@@ -9,10 +9,17 @@ import sys
 import time
 from urllib.parse import urlsplit
 
-from pydantic import ValidationError
-
 from collie.argtypes import float_in, http_url, record_id, seed
-from collie.client import ApiError, CollieClient, Unauthorized, Unavailable, Unreachable, unreachable_why
+from collie.client import (
+    ApiError,
+    BadAnswer,
+    CollieClient,
+    Unauthorized,
+    Unavailable,
+    Unreachable,
+    Unsendable,
+    no_answer,
+)
 from collie.tokens import add_token_arguments, resolve_token
 from teacher import TeacherLoop, oracle_for
 
@@ -53,25 +60,42 @@ def wait_for_run(client: CollieClient, run_id: int, patience_s: float) -> None:
 
 
 def service_fault(client: CollieClient, exc: ApiError | Unreachable, run_id: int) -> str:
-    """What went wrong, naming the service: no answer, not a collie service (a 404 where the run
-    should be, and on /api/health too), a refused token, no such run, or what it answered."""
+    """What went wrong, naming the service: no answer (or one damaged on the way), not a collie
+    service (a 404 where the run should be, and on /api/health too), a refused token, no such run,
+    an answer this collie cannot read, a request it cannot send, or what it answered."""
     where = f"the labeling service at {client.api}"
     if isinstance(exc, Unreachable):
-        return f"{where} does not answer ({unreachable_why(exc)})"
+        return f"{where} {no_answer(exc)}"
     if isinstance(exc, Unauthorized):
         return f"{where} refused the token ({exc})"
     if isinstance(exc, Unavailable):  # 5xx, 429
         return f"{where} is busy or failing now ({exc})"
+    if isinstance(exc, BadAnswer):  # e.g. a proxy's page with a 200
+        return f"{where} sent an answer this collie cannot read: {exc}"
+    if isinstance(exc, Unsendable):
+        return f"cannot ask {where}: {exc}"
     if exc.status == 404:  # no such run, or no collie there at all: its health says which
         try:
             client.health()
         except Unavailable:
             return f"{where} has no run {run_id}, or is busy now (its health check failed too)"
-        except (ApiError, ValidationError):
+        except ApiError:
             path = f"{urlsplit(client.api).path}/api/runs/{run_id}"
             return f"{client.api} is not a collie service (404 on {path}); check --api"
         return f"{where} has no run {run_id}"
     return f"{where} answered {exc}"
+
+
+def unreadable_run(client: CollieClient, exc: BadAnswer) -> str:
+    """An answer where the run should be that is not a run: from something other than a collie
+    service (its health check fails too), or a run this collie cannot read (a newer collie's?)."""
+    try:
+        client.health()
+    except (ApiError, Unavailable):
+        return f"{client.api} is not a collie service (no run in its answer: {exc})"
+    return (
+        f"the labeling service at {client.api} answered with a run this collie cannot read (a newer collie's?): {exc}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,26 +115,15 @@ def run(args: argparse.Namespace) -> int:
         try:
             wait_for_run(client, args.run, args.wait)
             oracle = oracle_for(client, args.run, args.noise_band, args.seed)
+        except BadAnswer as exc:  # an answer, but not a run's: another web service, or a newer collie's run
+            print(f"collie teacher: error: {unreadable_run(client, exc)}", file=sys.stderr)
+            return 2
         except (ApiError, Unreachable) as exc:
             print(f"collie teacher: error: {service_fault(client, exc, args.run)}", file=sys.stderr)
             # a refusal (token, path, run) fails again: a usage error, as argparse's (2); a service
             # that does not answer or is busy (5xx, 429) may be restarting: 1, after which `collie
             # up` restarts the teacher (two 2s in a row end the stack)
             return 1 if isinstance(exc, Unavailable) else 2
-        except ValidationError:  # an answer, but not a run's: another web service, or a newer collie's run
-            try:
-                client.health()
-            except (ApiError, Unavailable, ValidationError):
-                print(
-                    f"collie teacher: error: {args.api} is not a collie service (no run in its answer)", file=sys.stderr
-                )
-                return 2
-            print(
-                f"collie teacher: error: the labeling service at {args.api} answered with a run this collie cannot "
-                "read (a newer collie's?)",
-                file=sys.stderr,
-            )
-            return 2
         except ValueError as exc:  # NoRule, or a stored rule this version cannot read
             print(f"collie teacher: error: {exc}", file=sys.stderr)
             return 2

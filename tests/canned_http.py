@@ -1,9 +1,11 @@
 """A real HTTP server on 127.0.0.1 that gives every request one canned answer: a stand-in for what
 a real collie service cannot be made to answer on demand (a 429 on a run's page, a proxy's broken
-body)."""
+body, its HTML error page); `answering_raw` sends bytes that are not even whole HTTP (a body cut
+short)."""
 
 from __future__ import annotations
 
+import socket
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -39,3 +41,36 @@ def answering(status: int, body: bytes, headers: dict[str, str] | None = None) -
         server.shutdown()
         server.server_close()
         thread.join(10)
+
+
+@contextmanager
+def answering_raw(raw: bytes) -> Iterator[str]:
+    """Answer every connection's first request with the bytes `raw` as they are, then close it; its URL."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(0.2)
+    done = threading.Event()
+
+    def serve() -> None:
+        while not done.is_set():
+            try:
+                conn, _ = listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:  # closed under us
+                return
+            with conn:
+                conn.settimeout(10)
+                try:
+                    conn.recv(65536)  # the request (small: headers only)
+                    conn.sendall(raw)
+                except OSError:  # the client gave up first
+                    pass
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{listener.getsockname()[1]}"
+    finally:
+        done.set()
+        thread.join(10)
+        listener.close()

@@ -127,6 +127,32 @@ def test_a_service_that_answers_429_at_the_start_is_exit_1() -> None:
     assert out.returncode == 1 and out.stderr == said, out.stderr
 
 
+def test_an_answer_damaged_on_the_way_at_the_start_is_one_line_and_exit_1() -> None:
+    """A proxy whose body is not the gzip its header says (httpx's DecodingError): transient, as no
+    answer is, so `collie up` restarts the teacher. Was: DecodingError's traceback."""
+    with answering(200, b"not gzip at all", {"Content-Encoding": "gzip"}) as api:
+        out = teacher(api, 1)
+    said = (
+        f"collie teacher: error: the labeling service at {api} sent an answer damaged on the way, a proxy "
+        f"between? (GET {api}/api/runs/1: the body is not in its declared Content-Encoding ("
+    )
+    assert out.returncode == 1 and out.stderr.startswith(said), out.stderr
+    assert len(out.stderr.splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+def test_a_200_that_is_not_json_at_the_start_is_one_line_and_exit_2() -> None:
+    """A proxy's (or another web service's) page with a 200 where the run should be, and on
+    /api/health too: not a collie service, a refusal. Was: pydantic's multi-line error."""
+    page = b"<html><head><title>Welcome to nginx!</title></head><body>\n</body></html>"
+    with answering(200, page, {"Content-Type": "text/html"}) as api:
+        out = teacher(api, 1)
+    said = (
+        f"collie teacher: error: {api} is not a collie service (no run in its answer: GET {api}/api/runs/1 "
+        "answered 200 with an HTML page (Welcome to nginx!), not JSON)\n"
+    )
+    assert out.returncode == 2 and out.stderr == said, out.stderr
+
+
 @pytest.mark.parametrize(
     ("flags", "said"),
     [

@@ -311,15 +311,26 @@ def test_the_ui_warns_at_start_of_a_service_it_cannot_use(stack: Stack) -> None:
     ]
 
 
-def test_an_error_the_start_check_did_not_foresee_is_a_warning_and_the_ui_starts() -> None:
+def test_an_answer_damaged_on_the_way_is_a_warning_and_the_ui_starts() -> None:
     """A proxy in front of the service sends a body that is not what its header says (httpx's
-    DecodingError, which the client does not type): one warning naming the service. Was: the check's
-    thread died with a traceback on stderr (the UI served on, without a word of why)."""
+    DecodingError, a GarbledAnswer of the client): one warning naming the service and what was wrong.
+    Was: the check's thread died with a traceback on stderr; then "could not check" and httpx's repr."""
     with answering(200, b"not gzip at all", {"Content-Encoding": "gzip"}) as api:
         said = ui_start_warnings(api)
     assert len(said) == 1, said
-    assert said[0].startswith(f"collie label-ui: warning: could not check the labeling service at {api}: ")
-    assert "DecodingError(" in said[0]
+    where = f"collie label-ui: warning: the labeling service at {api} sent an answer damaged on the way"
+    assert said[0].startswith(f"{where}, a proxy between? (GET {api}/api/health: the body is not in its declared ")
+    assert said[0].endswith("; the UI starts, and labels once it does")
+
+
+def test_a_page_that_is_not_the_services_is_a_warning_naming_it() -> None:
+    page = b"<html><head><title>Welcome to nginx!</title></head></html>"
+    with answering(200, page, {"Content-Type": "text/html"}) as api:
+        said = ui_start_warnings(api)
+    assert said == [
+        f"collie label-ui: warning: {api} is not a collie service (GET {api}/api/health answered 200 with an HTML "
+        "page (Welcome to nginx!), not JSON); check --api"
+    ]
 
 
 def test_fits_the_collie_command(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:

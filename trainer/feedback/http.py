@@ -39,7 +39,18 @@ from typing import Any, Literal, TypeVar
 import numpy as np
 
 from collie import startup
-from collie.client import ApiError, Backoff, CollieClient, Conflict, Overloaded, Unauthorized, Unreachable, retrying
+from collie.client import (
+    ApiError,
+    Backoff,
+    BadAnswer,
+    CollieClient,
+    Conflict,
+    Overloaded,
+    Unauthorized,
+    Unreachable,
+    Unsendable,
+    retrying,
+)
 from collie.frames import pack_frames, unpack_frames
 from collie.labels import Label
 from collie.schemas import (
@@ -287,8 +298,10 @@ class HttpFeedback(FeedbackSource):
             self.reporter.status(StatusReport(status, epoch))
 
     def _retry(self, call: Callable[[], T]) -> T:
-        """Call until the service answers: waits out restarts with backoff; 4xx errors raise. Once
-        interrupted (`interrupt`), the next attempt raises StopRequested instead: no session is
+        """Call until the service answers: waits out restarts (and answers damaged on the way) with
+        backoff; 4xx errors raise, a refused token, an answer the client cannot read (BadAnswer: a
+        proxy's page) or a request it cannot send as SourceRefused, which ends the run checkpointed.
+        Once interrupted (`interrupt`), the next attempt raises StopRequested instead: no session is
         posted after a signal, and a wait on an unreachable service ends too."""
 
         def attempt() -> T:
@@ -300,6 +313,8 @@ class HttpFeedback(FeedbackSource):
             return retrying(attempt, Backoff(max_s=self.max_backoff_s))
         except Unauthorized as exc:
             raise self._refusal(exc) from None
+        except (BadAnswer, Unsendable) as exc:  # asking again gets the same: one line, not a traceback
+            raise SourceRefused(f"the labeling service could not be used for run {self.run_id}: {exc}", "") from None
 
     def _refusal(self, exc: Unauthorized) -> SourceRefused:
         return SourceRefused(f"the labeling service refused the trainer's token for run {self.run_id} ({exc})")
