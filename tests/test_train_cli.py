@@ -623,3 +623,40 @@ def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: 
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=at_most_16_gib)
     refused(proc, "not enough memory", f"{flag} 2000000000")
     assert not (tmp_path / "run").exists()
+
+
+def test_a_service_gone_while_the_run_is_created_is_one_line_and_exit_1(tmp_path: Path) -> None:
+    """The service answers its health check, then drops the request that creates the run (which is
+    not sent twice: it might make two runs). Was: the client's Unreachable as a traceback; now one
+    line naming the service, and exit 1 (transient: `collie up` restarts the trainer)."""
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+    from threading import Thread
+
+    from collie.schemas import Health
+
+    class HealthyThenGone(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            body = Health(status="ok", version="0", database="sqlite").model_dump_json().encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "application/json")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def do_POST(self) -> None:
+            self.close_connection = True  # no answer at all: the connection closes
+
+        def log_message(self, *_: object) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), HealthyThenGone)
+    Thread(target=server.serve_forever, daemon=True).start()
+    api = f"http://127.0.0.1:{server.server_address[1]}"
+    try:
+        proc = train("--out", str(tmp_path / "run"), "--api", api, env={**os.environ, "COLLIE_TOKEN": "tr-" + "t" * 30})
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert proc.stderr.strip().splitlines()[-1].startswith(f"collie train: error: the labeling service at {api} ")

@@ -596,6 +596,12 @@ def run(args: argparse.Namespace) -> int:
             and args.task_file
         ):
             refusal = f"the start ended with exit status {exc.code} while the task file {args.task_file} was read"
+        if refusal is None and args.api and isinstance(exc, Exception):
+            from collie.client import Unreachable, no_answer
+
+            if isinstance(exc, Unreachable):  # e.g. gone while it created the run (not sent twice): transient, 1
+                print(f"collie train: error: the labeling service at {args.api} {no_answer(exc)}", file=sys.stderr)
+                return 1
         if refusal is None:
             raise
         print(f"collie train: error: {refusal}", file=sys.stderr)
