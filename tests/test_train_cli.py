@@ -625,10 +625,12 @@ def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: 
     assert not (tmp_path / "run").exists()
 
 
-def test_a_service_gone_while_the_run_is_created_is_one_line_and_exit_1(tmp_path: Path) -> None:
+@pytest.mark.parametrize("answer", ["none", "a page"])
+def test_a_service_gone_or_not_itself_while_the_run_is_created_is_one_line(tmp_path: Path, answer: str) -> None:
     """The service answers its health check, then drops the request that creates the run (which is
-    not sent twice: it might make two runs). Was: the client's Unreachable as a traceback; now one
-    line naming the service, and exit 1 (transient: `collie up` restarts the trainer)."""
+    not sent twice: it might make two runs), or answers it with a proxy's page. Was: the client's
+    Unreachable as a traceback; now one line naming the service, and exit 1 (transient: `collie up`
+    restarts the trainer); a page: exit 2, said once (was: "answered POST … answered 200 …")."""
     from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
     from threading import Thread
 
@@ -645,6 +647,13 @@ def test_a_service_gone_while_the_run_is_created_is_one_line_and_exit_1(tmp_path
 
         def do_POST(self) -> None:
             self.close_connection = True  # no answer at all: the connection closes
+            if answer == "a page":
+                page = b"<html><title>Sign in to the proxy</title></html>"
+                self.send_response(200)
+                self.send_header("Content-Type", "text/html")
+                self.send_header("Content-Length", str(len(page)))
+                self.end_headers()
+                self.wfile.write(page)
 
         def log_message(self, *_: object) -> None:
             pass
@@ -657,6 +666,8 @@ def test_a_service_gone_while_the_run_is_created_is_one_line_and_exit_1(tmp_path
     finally:
         server.shutdown()
         server.server_close()
-    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert proc.returncode == (1 if answer == "none" else 2), proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
-    assert proc.stderr.strip().splitlines()[-1].startswith(f"collie train: error: the labeling service at {api} ")
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line.startswith(f"collie train: error: the labeling service at {api} "), line
+    assert answer == "none" or ("Sign in to the proxy" in line and line.count("answered") == 1), line

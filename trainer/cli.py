@@ -29,6 +29,7 @@ from trainer.same_run import differing_keys
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
 if TYPE_CHECKING:
+    from collie.client import ApiError
     from collie.env_names import EnvName
     from collie.schemas import RunRead
     from trainer.feedback.http import HttpFeedback
@@ -308,6 +309,16 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     return source, rule
 
 
+def service_answered(api: str, exc: ApiError) -> str:
+    """The service's refusal in one line; an answer the client could not read, or a request it could
+    not send, says so itself (its own words name the request)."""
+    from collie.client import BadAnswer, Unsendable
+
+    if isinstance(exc, BadAnswer | Unsendable):
+        return f"the labeling service at {api} could not be used: {exc}"
+    return f"the labeling service at {api} answered {exc}"
+
+
 def service_moved_unlike(held: dict[str, Any], cfg: Config) -> list[str]:
     """The config keys in which the run a moved service holds differs from this folder's, among
     those it holds (a run made by hand may hold few or none), epochs aside (more extend a run)."""
@@ -572,7 +583,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 feedback, rule = http_feedback(args, cfg, rule)
             except ApiError as exc:  # a wrong token or run id: the service's answer, as `collie teacher` prints it
-                raise ValueError(f"the labeling service at {args.api} answered {exc}") from None
+                raise ValueError(service_answered(args.api, exc)) from None
             except SourceRefused as exc:  # the same for an existing run (--run-id, --resume): its held_run()
                 raise ValueError(f"{exc} at {args.api}") from None
             mark("run created")
@@ -618,7 +629,7 @@ def run(args: argparse.Namespace) -> int:
                 if kept:
                     print(f"collie train: warning: {kept}", file=sys.stderr)
             except ApiError as exc:
-                print(f"collie train: error: the labeling service at {args.api} answered {exc}", file=sys.stderr)
+                print(f"collie train: error: {service_answered(args.api, exc)}", file=sys.stderr)
                 return 2
         summary = trainer.run(resume=args.resume)
     except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
