@@ -49,7 +49,8 @@ SUMMARY_COLUMNS = (
 
 
 def post_session(conn: Connection, run_id: int, body: SessionPost, max_queries: int) -> SessionPosted:
-    run = runs.locked_row(conn, run_id)  # posts to one run one at a time: the budget's count stays true
+    runs.posting(conn, run_id)  # posts to one run one at a time: the budget's count stays true
+    run = runs.row(conn, run_id)
     if run.status in FINISHED or run.control == "stop":  # a stopped run's queries could never be claimed
         raise Conflict(runs.ended(run_id, run.status, run.control))
     if len(body.queries) > max_queries:

@@ -148,14 +148,16 @@ def row(conn: Connection, run_id: int) -> Any:
     return found
 
 
-def locked_row(conn: Connection, run_id: int) -> Any:
-    """The run's row, locked until the transaction ends (PostgreSQL; SQLite's writers take turns
-    already). FOR NO KEY UPDATE is what the event log's UPDATE of the row takes anyway, so it
-    waits for nothing more than that would, and rows that only refer to the run are not held up."""
-    found = conn.execute(select(Run).where(Run.id == run_id).with_for_update(key_share=True)).first()
-    if found is None:
-        raise NotFound(f"no run {run_id}")
-    return found
+# pg_advisory_xact_lock's first key for session posts ("coll"): a namespace apart from any other lock
+POSTS_LOCK = 0x636F6C6C
+
+
+def posting(conn: Connection, run_id: int) -> None:
+    """Posts of feedback sessions to one run take turns until the transaction ends, so the budget's
+    count stays true: an advisory lock on PostgreSQL, which, unlike a lock on the run's row, does not
+    hold up the label submissions' updates of that row; SQLite's writers take turns already."""
+    if conn.dialect.name == "postgresql":
+        conn.execute(select(func.pg_advisory_xact_lock(POSTS_LOCK, run_id)))
 
 
 def get(conn: Connection, run_id: int) -> RunRead:

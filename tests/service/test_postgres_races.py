@@ -199,8 +199,8 @@ def test_a_deadlock_between_service_processes_is_a_busy_database_the_client_may_
 def test_two_sessions_posted_at_once_never_pass_the_budget_together(
     live: BackgroundServer, database_url: str, trainer: CollieClient
 ) -> None:
-    """A post whose transaction is open (its queries inserted, not committed) holds the run's row:
-    a second post waits for it, then counts its queries and is refused. Without the lock it counted
+    """A post whose transaction is open (its queries inserted, not committed) holds the run's posting
+    lock: a second post waits for it, then counts its queries and is refused. Without the lock it counted
     only what was committed, and the two together stored 6 queries of a budget of 4."""
     run = trainer.create_run(make_run_spec(n_total=4))
     trainer.post_session(run.id, make_session(0, 2))
@@ -230,4 +230,31 @@ def test_two_sessions_posted_at_once_never_pass_the_budget_together(
     assert isinstance(stored, SessionPosted) and stored.created == ["1-0", "1-1"]
     assert isinstance(refused, ApiError) and refused.status == 409
     assert "budget is 4 queries and 4 are stored" in str(refused.detail)
+    assert len(trainer.queries(run.id)) == 4
+
+
+def test_a_label_is_not_held_up_by_a_session_being_posted_to_its_run(
+    live: BackgroundServer, database_url: str, trainer: CollieClient, operator: CollieClient
+) -> None:
+    """Posts take turns on a lock of their own: a label given while a post's transaction is open
+    (up to 128 MiB of frames) is stored at once. A lock on the run's row would hold it (the label
+    updates that row for its event) until the post committed."""
+    run = trainer.create_run(make_run_spec(n_total=4))
+    trainer.post_session(run.id, make_session(0, 2))
+    ann = CollieClient(live.url, operator.create_labeler(f"ann-posting-{run.id}").token)
+    claimed = ann.claim(run.id).query.query_id
+    labelled = threading.Event()
+    with (
+        paused_after(database_url, "INSERT INTO QUERIES") as (elsewhere, paused, go),
+        CollieClient(elsewhere.url, TOKENS["trainer"]) as trainer_elsewhere,
+    ):
+        posting = threading.Thread(target=trainer_elsewhere.post_session, args=(run.id, make_session(1, 2)))
+        posting.start()
+        assert paused.wait(30), "the post never reached the database"
+        labelling = threading.Thread(target=lambda: (ann.submit(run.id, claimed, 0), labelled.set()))
+        labelling.start()
+        labelling.join(20)
+        assert labelled.is_set(), "the label waited for the post"
+        go.set()
+        posting.join(30)
     assert len(trainer.queries(run.id)) == 4

@@ -67,14 +67,11 @@ def test_a_2xx_body_that_is_not_json_is_a_bad_answer_naming_the_url() -> None:
 
 
 def test_json_that_is_not_the_expected_model_is_a_bad_answer_naming_the_field() -> None:
-    with (
-        answering(200, b'{"hello": "world"}') as api,
-        CollieClient(api, TOKENS["operator"]) as client,
-        pytest.raises(BadAnswer) as bad,
-    ):
-        client.health()
+    with answering(200, b'{"hello": "world"}') as api, CollieClient(api, TOKENS["operator"]) as client:
+        with pytest.raises(BadAnswer) as bad:
+            client.health()
         assert str(bad.value).startswith(f"GET {api}/api/health answered 200 with JSON that is not Health (")
-        with pytest.raises(BadAnswer, match=r"with JSON that is not a list of RunRead \(Input should be a valid list"):
+        with pytest.raises(BadAnswer, match=r"with JSON that is not a list of RunRead \(Input should be a valid array"):
             client.runs()
 
 
