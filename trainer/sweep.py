@@ -193,10 +193,12 @@ def intended_config(spec: RunSpec) -> dict[str, Any] | None:
         return None
 
 
-def config_change(spec: RunSpec, besides: tuple[str, ...] = ()) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+def config_change(
+    spec: RunSpec, besides: tuple[str, ...] = (), every_key: bool = False
+) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     """The keys in which the run in `spec.out` differs from what `spec`'s command would make (where
-    and how it ran aside: trainer.same_run.NOT_THE_RUN, and `besides`; and keys that do not matter
-    to its method, trainer.methods.matters: `--diayn` to METRA), and both configs, comparable; no
+    and how it ran aside: trainer.same_run.NOT_THE_RUN, and `besides`; and, unless `every_key`, keys
+    that do not matter to its method, trainer.methods.matters: `--diayn` to METRA), and both configs, comparable; no
     keys if either config is unknown."""
     folder = Path(spec.out)
     try:  # a run killed before its first summary.json has its config.json alone
@@ -206,7 +208,7 @@ def config_change(spec: RunSpec, besides: tuple[str, ...] = ()) -> tuple[list[st
     asked = intended_config(spec)
     if not made or asked is None:
         return [], {}, {}
-    keys = [k for k in differing_keys(made, asked, besides) if matters(k, spec.method)]
+    keys = [k for k in differing_keys(made, asked, besides) if every_key or matters(k, spec.method)]
     return keys, comparable(made), comparable(asked)
 
 
@@ -239,7 +241,7 @@ def keeps_its_record(spec: RunSpec) -> bool:
     folder = Path(spec.out)
     if not ((folder / "checkpoint.pt").exists() and (folder / "sweep_run.json").exists()):
         return False
-    keys, made, asked = config_change(spec)
+    keys, made, asked = config_change(spec, every_key=True)  # a flag it does not read is one it does not run with
     return bool(keys) and not only_more_epochs(keys, made, asked)
 
 

@@ -437,6 +437,10 @@ def test_an_interrupted_run_resumed_with_its_own_flags_keeps_its_sweep_run_json(
     more = replace(first, flags=("--epochs", "8", "--hidden", "32"))  # a resume takes more epochs: the run's now
     run_one(more)
     assert len(launched) == 2 and json.loads(record.read_text())["flags"] == list(more.flags)
+    interrupted(more)
+    unread = replace(more, flags=(*more.flags, "--total-queries", "20"))  # a key METRA does not read: kept too
+    run_one(unread)
+    assert len(launched) == 3 and json.loads(record.read_text())["flags"] == list(more.flags)
 
 
 def test_warnings_name_only_the_keys_that_matter_to_the_runs_method(tmp_path, capsys):
