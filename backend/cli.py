@@ -4,7 +4,7 @@ Tokens for the three built-in principals (operator, trainer, labeler) come from 
 else from the --tokens-json file an earlier start wrote; a principal the database already has keeps
 its token; only a missing one gets a new token, printed, and written to --tokens-json when given.
 So a restart never locks out clients that hold the tokens. COLLIE_TEACHER_TOKEN, when set, is the
-token of the oracle teacher's own labeler, `oracle-teacher` (compose's teacher profile; never made
+token of the oracle teacher's own labeler, `teacher` (compose's teacher profile; never made
 here, nor written to --tokens-json). Port 0 picks a free port; the bound URL is printed either way
 (and written to the tokens file as "api")."""
 
@@ -27,7 +27,7 @@ from backend.services.errors import Conflict, first_line
 from backend.settings import Settings
 from collie.addresses import link_host
 from collie.argtypes import file_descriptor, port, sqlite_file
-from collie.schemas import TEACHER_PRINCIPAL
+from collie.schemas import SERVED_TEACHER_PRINCIPAL
 from collie.tokens import read_tokens_file, weakness, write_secret
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
@@ -253,7 +253,7 @@ def run(args: argparse.Namespace) -> int:
             )
         print(f"  {role} token: {shown}", flush=True)
     if settings.teacher_token is not None:
-        print(f"  {TEACHER_PRINCIPAL} token: (from environment, {TEACHER_TOKEN})", flush=True)
+        print(f"  {SERVED_TEACHER_PRINCIPAL} token: (from environment, {TEACHER_TOKEN})", flush=True)
     try:
         if not server.should_exit:  # stopped while the banner printed: nothing to serve
             server.run(sockets=[sock])

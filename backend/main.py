@@ -26,7 +26,7 @@ from backend.services.fanout import StreamFeed
 from backend.services.trainer_contact import TrainerContact
 from backend.settings import Settings
 from collie.schemas import (
-    TEACHER_PRINCIPAL,
+    SERVED_TEACHER_PRINCIPAL,
     FeedbackPolicy,
     LabelerCreate,
     LabelerScope,
@@ -98,8 +98,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             if token is not None and not auth.bootstrap(conn, role, token.get_secret_value()):
                 log.warning("the built-in %s principal is revoked: its token stays refused", role)
         teacher = settings.teacher_token
-        if teacher is not None and not auth.bootstrap(conn, "labeler", teacher.get_secret_value(), TEACHER_PRINCIPAL):
-            log.warning("the %s principal is revoked: COLLIE_TEACHER_TOKEN stays refused", TEACHER_PRINCIPAL)
+        if teacher is not None and not auth.bootstrap(
+            conn, "labeler", teacher.get_secret_value(), SERVED_TEACHER_PRINCIPAL
+        ):
+            log.warning("the %s principal is revoked: COLLIE_TEACHER_TOKEN stays refused", SERVED_TEACHER_PRINCIPAL)
 
     async def checkpoints() -> None:
         # A checkpoint writes the database file: while it cannot be written (full disk, read-only

@@ -67,9 +67,11 @@ NotHeldReason = Literal["other_tab", "other_labeler", "labelled_by_you", "labell
 OutOfScopeReason = Literal["other_runs", "other_trainer"]  # a token limited to other runs; another trainer's run
 
 
-# The oracle teacher's own labeler: `collie up --teacher oracle` makes it (collie/teacher_principal.py),
-# `collie serve` registers COLLIE_TEACHER_TOKEN as its token (compose's teacher profile)
+# The oracle teacher's own labeler that `collie up --teacher oracle` makes (collie/teacher_principal.py:
+# oracle-teacher, -2, …, each limited to its stack's run), and the one `collie serve` installs for
+# COLLIE_TEACHER_TOKEN (compose's teacher profile), named apart: it never takes over a stack's
 TEACHER_PRINCIPAL = "oracle-teacher"
+SERVED_TEACHER_PRINCIPAL = "teacher"
 MAX_INT = 2**31 - 1  # fits every database's INTEGER column (PostgreSQL's is 32 bits) and JSON numbers
 Count = Annotated[int, Field(ge=0, le=MAX_INT)]
 Vector = list[FiniteFloat]

@@ -11,7 +11,7 @@ import itertools
 import json
 from pathlib import Path
 
-from collie.client import ApiError, Backoff, CollieClient, Conflict, NotInScope, Unauthorized, Unavailable, retrying
+from collie.client import ApiError, Backoff, CollieClient, Conflict, Unauthorized, Unavailable, retrying
 from collie.schemas import TEACHER_PRINCIPAL, LabelerCreated
 from collie.tokens import write_secret
 
@@ -47,17 +47,13 @@ def _kept(path: Path) -> str | None:
 
 
 def _takes(api: str, token: str, run_id: int) -> bool:
-    """Whether the service takes `token` (not revoked, not from another database). One an operator
-    limited to other runs is an error to settle, not a reason to make an unlimited one."""
+    """Whether the service takes `token` for run `run_id`: not revoked, not from another database,
+    not limited to other runs (the stack's earlier run, or an operator's choice: either way a new
+    labeler limited to this run is made, which labels nothing else)."""
     with CollieClient(api, token) as teacher:
         try:
             retrying(lambda: teacher.run(run_id), BACKOFF, attempts=ATTEMPTS)
-        except NotInScope:
-            raise RuntimeError(
-                f"the oracle teacher's labeler is limited to other runs than run {run_id}: give it this "
-                f"run (dashboard, Labelers) or remove {TOKEN_FILE} from the stack's folder for a new one"
-            ) from None
-        except Unauthorized:
+        except Unauthorized:  # NotInScope too (a kind of it)
             return False
     return True
 

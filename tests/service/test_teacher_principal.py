@@ -45,9 +45,13 @@ def test_the_teacher_gets_its_own_labeler_kept_across_restarts_and_renewed_once_
     assert teacher_token(live.url, TOKENS["operator"], tmp_path, run.id) not in (first, renewed)
 
     [newest] = [p for p in operator.labelers() if p.name == json.loads(kept.read_text())["name"]]
-    operator.set_labeler_runs(newest.id, [trainer.create_run(make_run_spec()).id])  # an operator limits it
-    with pytest.raises(RuntimeError, match=f"limited to other runs than run {run.id}"):
-        teacher_token(live.url, TOKENS["operator"], tmp_path, run.id)  # said, not undone by a new labeler
+    elsewhere = trainer.create_run(make_run_spec()).id
+    operator.set_labeler_runs(newest.id, [elsewhere])  # limited to another run (the stack's earlier one, say)
+    limited = json.loads(kept.read_text())["token"]
+    made_anew = teacher_token(live.url, TOKENS["operator"], tmp_path, run.id)  # one for this run, this run alone
+    assert made_anew != limited and [p.runs for p in operator.labelers() if p.name == newest.name] == [[elsewhere]]
+    [latest] = [p for p in operator.labelers() if p.name == json.loads(kept.read_text())["name"]]
+    assert latest.runs == [run.id]
 
     with pytest.raises(RuntimeError, match="the oracle teacher's labeler could not be made"):
         teacher_token(live.url, "not-a-token", tmp_path / "elsewhere", run.id)
@@ -64,7 +68,7 @@ def compose_env(**tokens: str) -> dict[str, str]:
 
 def test_compose_teachers_token_is_a_labeler_of_its_own(tmp_path: Path) -> None:
     """docker-compose.yml hands COLLIE_TEACHER_TOKEN to the service and (as COLLIE_TOKEN) to the
-    teacher: `collie serve` installs it as the labeler `oracle-teacher`, so under redundancy 2 the
+    teacher: `collie serve` installs it as the labeler `teacher`, so under redundancy 2 the
     teacher labels the queries a person labelled with COLLIE_LABELER_TOKEN, as a second labeler.
     Was: compose gave the teacher COLLIE_LABELER_TOKEN, and the two were one labeler."""
     server, lines = start_serve(tmp_path / "compose.db", None, compose_env(COLLIE_TEACHER_TOKEN=TEACHER_TOKEN))
@@ -72,7 +76,7 @@ def test_compose_teachers_token_is_a_labeler_of_its_own(tmp_path: Path) -> None:
         api = lines[0].split()[4]
         with CollieClient(api, TEACHER_TOKEN) as teacher:
             me = teacher.me()
-        assert (me.name, me.role) == ("oracle-teacher", "labeler")
+        assert (me.name, me.role) == ("teacher", "labeler")
         with CollieClient(api, TOKENS["trainer"]) as trainer, CollieClient(api, TOKENS["labeler"]) as person:
             run = trainer.create_run(make_run_spec(task="north").model_copy(update={"redundancy": 2}))
             trainer.post_session(run.id, make_session(0, 2))
@@ -84,11 +88,11 @@ def test_compose_teachers_token_is_a_labeler_of_its_own(tmp_path: Path) -> None:
             env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
             out = subprocess.run(command, env={**env, "COLLIE_TOKEN": TEACHER_TOKEN}, capture_output=True, text=True)
             assert out.returncode == 0 and "labelled 2 queries" in out.stdout, out.stderr  # one labeler: 0
-            assert sorted(e.labeler for e in trainer.label_events(run.id)) == ["labeler"] * 2 + ["oracle-teacher"] * 2
+            assert sorted(e.labeler for e in trainer.label_events(run.id)) == ["labeler"] * 2 + ["teacher"] * 2
     finally:
         stop(server)
     banner = server.stdout.read()  # type: ignore[union-attr]  # the lines after the roles'
-    assert banner.startswith("  oracle-teacher token: (from environment, COLLIE_TEACHER_TOKEN)\n"), banner
+    assert banner.startswith("  teacher token: (from environment, COLLIE_TEACHER_TOKEN)\n"), banner
 
 
 def test_a_compose_teacher_token_that_is_unset_weak_or_another_principals_is_said(tmp_path: Path) -> None:
@@ -97,13 +101,13 @@ def test_a_compose_teacher_token_that_is_unset_weak_or_another_principals_is_sai
     server, lines = start_serve(tmp_path / "none.db", None, compose_env(COLLIE_TEACHER_TOKEN=""))
     try:
         with CollieClient(lines[0].split()[4], TOKENS["operator"]) as operator:
-            assert "oracle-teacher" not in {p.name for p in operator.labelers()}
+            assert "teacher" not in {p.name for p in operator.labelers()}
     finally:
         stop(server)
-    assert "oracle-teacher" not in server.stdout.read()  # type: ignore[union-attr]
+    assert "teacher" not in server.stdout.read()  # type: ignore[union-attr]
     for token, said in [
         ("change-me-teacher", "COLLIE_TEACHER_TOKEN is a placeholder (it holds 'change-me'); use a long random one"),
-        (TOKENS["labeler"], "the oracle-teacher bootstrap token is already the token of 'labeler'"),
+        (TOKENS["labeler"], "the teacher bootstrap token is already the token of 'labeler'"),
     ]:
         db = tmp_path / f"refused-{len(token)}.db"
         out = collie("serve", "--port", "0", "--db", str(db), env=compose_env(COLLIE_TEACHER_TOKEN=token))
