@@ -55,7 +55,7 @@ def uvicorn_server(app: FastAPI, log_level: str = "warning") -> uvicorn.Server:
 class BackgroundServer:
     """uvicorn in a daemon thread. `with BackgroundServer(app) as server: server.url`. `sock`: serve
     on that listening socket instead of binding one (a `dup()` of one the caller holds keeps the
-    port its across a restart, as `collie up` keeps the service's: no other process can take it)."""
+    port across a restart, as `collie up` keeps the service's: no other process can take it)."""
 
     def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0, sock: socket.socket | None = None) -> None:
         self.app = app

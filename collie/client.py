@@ -268,6 +268,12 @@ def bad_answer(response: httpx.Response, exc: ValidationError, expected: str) ->
     return BadAnswer(response.status_code, f"{request_said(response)} answered {response.status_code} with {got}")
 
 
+def answered(exc: ApiError) -> str:
+    """What the service did, after "the service …": "answered 409: …", or for an answer this client
+    cannot read or a request it cannot send, "could not be used: …" (their words name the request)."""
+    return f"could not be used: {exc}" if isinstance(exc, BadAnswer | Unsendable) else f"answered {exc}"
+
+
 def api_error(status: int, detail: Any) -> ApiError:
     """The typed error for an error status."""
     if status in (401, 403):

@@ -516,7 +516,7 @@ def wait_healthy(
 def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | None) -> None:
     """The run OUT/trainer belongs to is in the database, else RuntimeError saying so: a trainer
     resumed on a database without it would only ever be refused (404) and restarted."""
-    from collie.client import ApiError, Unavailable
+    from collie.client import ApiError, Unavailable, answered
 
     try:
         client.run(run_id)
@@ -524,7 +524,7 @@ def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | N
         raise RuntimeError(f"the service did not answer when asked for run {run_id}: {exc}") from None
     except ApiError as exc:
         if exc.status != 404:
-            raise RuntimeError(f"the service answered {exc} when asked for run {run_id}") from None
+            raise RuntimeError(f"the service {answered(exc)} when asked for run {run_id}") from None
         where = db if db is not None else DATABASE_ENV
         raise RuntimeError(
             f"{memo} belongs to run {run_id}, which the database ({where}) does not hold (was it deleted or "

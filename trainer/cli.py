@@ -310,13 +310,10 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
 
 
 def service_answered(api: str, exc: ApiError) -> str:
-    """The service's refusal in one line; an answer the client could not read, or a request it could
-    not send, says so itself (its own words name the request)."""
-    from collie.client import BadAnswer, Unsendable
+    """The service's refusal in one line (an unreadable answer said once: collie.client.answered)."""
+    from collie.client import answered
 
-    if isinstance(exc, BadAnswer | Unsendable):
-        return f"the labeling service at {api} could not be used: {exc}"
-    return f"the labeling service at {api} answered {exc}"
+    return f"the labeling service at {api} {answered(exc)}"
 
 
 def service_moved_unlike(held: dict[str, Any], cfg: Config) -> list[str]:
