@@ -25,6 +25,7 @@ import sys
 from pathlib import Path
 
 from collie.stack_folder import STACK_LOCK, STACK_RUN
+from trainer.methods import METHODS, matters
 from trainer.report import checked_run
 from trainer.run_files import (
     RunFolderError,
@@ -53,9 +54,11 @@ class ArchiveError(ValueError):
 
 def another_run(held: Path, source: Path) -> str | None:
     """How the run archived at `held` differs from `source`'s ("seed 0 archived, 7 here"), None if
-    it is the same run (where and how each ran aside: trainer.same_run.NOT_THE_RUN)."""
+    it is the same run (where and how each ran aside: trainer.same_run.NOT_THE_RUN; and keys its
+    method does not read, trainer.methods.matters: `--diayn` to COLLIE)."""
     old, new = run_config(held), run_config(source)
-    keys = differing_keys(old, new)
+    method = new.get("method")
+    keys = [k for k in differing_keys(old, new) if method not in METHODS or matters(k, str(method))]
     if not keys:
         return None
     a, b = comparable(old), comparable(new)

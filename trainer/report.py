@@ -46,6 +46,7 @@ import numpy as np
 
 from collie.tasks import Task
 from trainer.config import first_version
+from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
 from trainer.run_files import RunFolderError, read_arrays, read_json_object, run_folders, writing_into
@@ -104,8 +105,14 @@ class RunResult:
 
     @property
     def settings(self) -> dict[str, Any]:
-        """Its configuration but for where and how it ran and what its row and column say."""
-        return {k: v for k, v in comparable(self.config).items() if k not in PLACED}
+        """Its configuration but for where and how it ran, what its row and column say, and the keys
+        its method does not read (trainer.methods.matters: `--total-queries` to METRA)."""
+        known = self.method in METHODS
+        return {
+            k: v
+            for k, v in comparable(self.config).items()
+            if k not in PLACED and (not known or matters(k, self.method))
+        }
 
     @property
     def column(self) -> str:

@@ -49,7 +49,8 @@ def test_an_archived_run_reports_as_the_run_itself_without_its_checkpoint_or_rep
     for name in ("summary.json", "eval_latest.npz"):
         (other / name).write_bytes((source / name).read_bytes())
     summary = json.loads((other / "summary.json").read_text())
-    summary["config"] |= {"out": str(other), "threads": 2}  # the same run, from another folder
+    summary["config"] |= {"out": str(other), "threads": 2, "diayn": "sphere"}  # the same run, from another folder
+    # (DIAYN's option: no COLLIE run's concern)
     (other / "summary.json").write_text(json.dumps(summary))
     assert main(["archive", str(other), "--out", str(kept)]) == 0
     assert json.loads((out / "summary.json").read_text())["config"]["out"] == str(other)
