@@ -154,8 +154,6 @@ def unreachable_why(exc: Unreachable) -> str:
     cause = exc.__cause__
     if isinstance(cause, httpx.TimeoutException):
         return "no answer in time"
-    if isinstance(exc, GarbledAnswer):
-        return str(exc)
     text = str(cause or exc)
     return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
 

@@ -9,9 +9,9 @@ how its w is computed. Adding a method is one row here (and its learner's module
 `--distance l2` swaps METRA's temporal constraint for LSD's Euclidean one in any w-guided method
 (COLLIE-L2 is `--method collie --distance l2`).
 
-Which config keys matter to a method (`reads`) follows from its row: the feedback schedule to
+Which config keys matter to a method (`specific_keys`) follows from its row: the feedback schedule to
 those that ask for labels, `--w-at` to those with a w to evaluate, `--k-beta` to COLLIE's smoothed
-w, and its learner's own options (`options`: `--diayn`, ψ's `--classifier-steps`); every other key
+w, and its learner's own options (`learner_keys`: `--diayn`, ψ's `--classifier-steps`); every other key
 matters to every method.
 
 The learners are imported when built, not here: the table is read by light commands too
@@ -67,12 +67,14 @@ class Method:
     asks_labels: bool  # does the loop open feedback sessions (Algorithm 1, lines 4–7)?
     guidance: Guidance
     build: Builder
-    options: tuple[str, ...] = ()  # its learner's own config keys: no learner of a method without them reads them
+    learner_keys: tuple[str, ...] = ()  # its learner's own config keys: no learner of a method without them reads them
 
     @property
-    def reads(self) -> frozenset[str]:
-        """The config keys of those only some methods read that this one reads."""
-        return frozenset((*(FEEDBACK_KEYS if self.asks_labels else ()), *GUIDANCE_KEYS[self.guidance], *self.options))
+    def specific_keys(self) -> frozenset[str]:
+        """Of the config keys only some methods read, those this one reads (every other key, all do)."""
+        return frozenset(
+            (*(FEEDBACK_KEYS if self.asks_labels else ()), *GUIDANCE_KEYS[self.guidance], *self.learner_keys)
+        )
 
 
 def _metra(
@@ -139,14 +141,14 @@ METHODS: dict[str, Method] = {
         Method("collie", asks_labels=True, guidance="labels", build=_plain),
         Method("metra", asks_labels=False, guidance="one", build=_plain),
         Method("oracle", asks_labels=False, guidance="task", build=_plain),
-        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont, options=CLASSIFIER_KEYS),
-        Method("ddg", asks_labels=True, guidance="one", build=_ddg, options=CLASSIFIER_KEYS),
+        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont, learner_keys=CLASSIFIER_KEYS),
+        Method("ddg", asks_labels=True, guidance="one", build=_ddg, learner_keys=CLASSIFIER_KEYS),
         Method("lsd", asks_labels=False, guidance="one", build=_lsd),
-        Method("diayn", asks_labels=False, guidance="one", build=_diayn, options=("diayn",)),
+        Method("diayn", asks_labels=False, guidance="one", build=_diayn, learner_keys=("diayn",)),
     )
 }
 # the config keys that matter only to the methods that read them
-METHOD_KEYS = frozenset(key for m in METHODS.values() for key in m.reads)
+METHOD_SPECIFIC_KEYS = frozenset(key for m in METHODS.values() for key in m.specific_keys)
 
 
 def method(name: str) -> Method:
@@ -160,7 +162,7 @@ def method(name: str) -> Method:
 def matters(key: str, name: str) -> bool:
     """Whether config `key` changes what method `name` learns: a key only other methods read does not
     (`--diayn` to a METRA run)."""
-    return key not in METHOD_KEYS or key in method(name).reads
+    return key not in METHOD_SPECIFIC_KEYS or key in method(name).specific_keys
 
 
 def build_agent(
