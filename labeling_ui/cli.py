@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import NoReturn
 from urllib.parse import urlsplit
@@ -161,13 +162,15 @@ def run(args: argparse.Namespace) -> int:
             app.stop()
             said = f"cannot write --info-json {args.info_json}: {exc.strerror or exc}"
             refuse(said)
-    stop = threading.Event()
+    stopping: list[int] = []
     for sig in (signal.SIGINT, signal.SIGTERM):  # either way, tabs hand their claims back first
-        signal.signal(sig, lambda *_: stop.set())
+        # No lock in the handler: it runs in the main thread wherever that is, and was stop.set() on
+        # an Event whose lock the main thread held inside stop.wait(); the UI then hung for good.
+        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
     # Wait in short steps: a signal the kernel hands to one of viser's threads runs our handler only
-    # when the main thread next runs Python, which a plain wait() never does.
-    while not stop.wait(0.2):
-        pass
+    # when the main thread next runs Python.
+    while not stopping:
+        time.sleep(0.2)
     app.stop()
     return 0
 
