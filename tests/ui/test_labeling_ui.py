@@ -96,13 +96,14 @@ def test_a_key_as_a_segment_appears_is_ignored_and_counts_once_it_has_been_watch
     assert (label.query_id, label.label) == (first, 0)
     assert label.seconds is not None and label.seconds >= dwell
 
+    # The next segment's dwell starts afresh: the last taps above, and a key as it appears, label
+    # nothing. (Waiting out its dwell to label it too would only repeat the first segment's check;
+    # test_label_five_by_keys_then_undo checks which label each key gives.)
     second = wait_segment(page, first)
-    tap_until_labelled("3", 2)  # its last tap or two land on the third segment as it appears
-    third = wait_segment(page, second)
     press(page, "3")
     time.sleep(1.0)
-    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {first: 0, second: 2}
-    assert segment_id(page) == third
+    assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {first: 0}
+    assert segment_id(page) == second
     page.context.close()
 
 
@@ -276,6 +277,7 @@ def test_unbuildable_model_can_be_skipped(stack: Stack, browser: Browser, artifa
     wait_segment(page, first)
     events = stack.trainer.label_events(broken.id)
     assert [(e.query_id, e.kind) for e in events] == [(first, "skip")]
+    page.context.close()
 
 
 def test_unreachable_service_is_reported(stack: Stack, browser: Browser) -> None:
@@ -363,10 +365,15 @@ def test_label_keys_work_after_a_click_on_a_replay_control(stack: Stack, browser
 
 
 def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, browser: Browser) -> None:
-    run = stack.post_run("point", 2)
+    # Two segments per tab (the one shown and the one preloaded): a tab never waits for the claims of
+    # the one closed before it, which the UI holds release_grace_s for a reload of that tab.
+    run = stack.post_run("point", 4)
     url = stack.ui(run.id).labeler_url(stack.new_labeler("narrow"))
     description = get_task("north", "point").description
-    for width, shown in ((800, False), (800, False), (800, False), (VIEWPORT["width"], True)):  # once flaky: 3 tries
+    # One load per width: the UI reads the width the page reports as it opens (window.innerWidth in
+    # the tab's handoff, labeling_ui/browser.py), before it shows anything; no race is left to repeat
+    # for (the camera's first report decided it once, and 3 of 7 loads at 800 px kept the column).
+    for width, shown in ((800, False), (VIEWPORT["width"], True)):
         context = browser.new_context(viewport={"width": width, "height": 600})
         context.set_default_timeout(TIMEOUT_S * 1000)
         page = context.new_page()
