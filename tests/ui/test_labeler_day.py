@@ -169,8 +169,9 @@ def test_a_tab_whose_segment_another_tab_took_over_moves_on(stack: Stack, browse
 
 def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Browser) -> None:
     run = stack.post_run("point", 2, seed=2)
-    # 20 frames at 1 fps: 19 s before it counts as seen. The service's player runs on its own clock,
-    # and under load the browser may show the segment's id seconds after its first frame was sent.
+    # 20 frames at 1 fps: 19 s before it counts as seen, a margin for the first key. The service's
+    # player runs on its own clock, and under load the browser may show the segment's id seconds
+    # after its first frame was sent.
     app = stack.ui(run.id, min_dwell_s=NO_DWELL, fps=1.0)
     context = profile(browser)
     page = tab(context, app.labeler_url(stack.new_labeler("fay")))
@@ -178,6 +179,9 @@ def test_a_label_counts_only_after_the_segment_played(stack: Stack, browser: Bro
     press(page, "2")
     wait_text(page, "Watch it first")
     assert segment_id(page) == first and stack.trainer.label_events(run.id) == []
+    # the key was refused: the rest plays at 4x (the labeler's own speed control), not 19 s at 1x
+    page.get_by_role("button", name="4×").click()
+    wait_text(page, "Speed 4×")
     (session,) = app.sessions.values()
     deadline = time.monotonic() + 60
     while not session.state.shown.seen(1.0) and time.monotonic() < deadline:  # type: ignore[union-attr]
