@@ -5,6 +5,7 @@ restarted so the run still finishes."""
 import contextlib
 import json
 import os
+import shutil
 import signal
 import socket
 import sqlite3
@@ -47,11 +48,38 @@ def up_command(out: Path, *more: str) -> list[str]:
     ]
 
 
+# A whole run, shorter than the smoke preset's (8 epochs, 3 sessions of 2 queries): two sessions, at
+# epochs 2 and 4, so there is still a middle of the run (some labels given, more to come) to act in.
+SHORT_RUN = "--train-args=--epochs 4 --total-queries 4"
+
+
 def children(out: Path) -> dict[str, int]:
     try:
         return json.loads((out / "children.json").read_text())["children"]
     except (FileNotFoundError, json.JSONDecodeError):
         return {}
+
+
+@pytest.fixture(scope="module")
+def finished_stack(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A stack run to its end once (no labeling UI, 2 epochs: the session at epoch 2, labelled by the
+    teacher), for the tests that start from a finished run folder; each takes a copy of its own."""
+    out = tmp_path_factory.mktemp("finished") / "o"
+    first = subprocess.run(
+        up_command(out, "--no-label-ui", "--train-args=--epochs 2"), capture_output=True, text=True, timeout=300
+    )
+    assert first.returncode == 0, first.stderr[-2000:]
+    summary = json.loads((out / "trainer" / "summary.json").read_text())
+    assert (summary["status"], summary["epochs_done"], summary["n_labels"]) == ("finished", 2, 2)
+    return out
+
+
+def copy_of(finished: Path, tmp_path: Path) -> Path:
+    """A copy of the finished stack's OUT (its database, tokens, trainer folder and logs), stopped as
+    it was: copy2 keeps the secrets' 0600."""
+    out = tmp_path / "o"
+    shutil.copytree(finished, out)
+    return out
 
 
 def cmdlines() -> list[bytes]:
@@ -63,23 +91,22 @@ def cmdlines() -> list[bytes]:
     return lines
 
 
-def test_a_finished_stack_resumed_with_more_epochs_has_them_labelled_by_its_teacher(tmp_path):
+def test_a_finished_stack_resumed_with_more_epochs_has_them_labelled_by_its_teacher(finished_stack, tmp_path):
     """The teacher starts while the run is still finished, before the trainer reopens it: it must
     start again and label the added epochs' session (it used to end at once, and the run waited)."""
-    up = up_command(tmp_path, "--no-label-ui")
-    first = subprocess.run([*up, "--train-args", "--epochs 4"], capture_output=True, text=True, timeout=300)
-    assert first.returncode == 0, first.stderr[-2000:]
-    assert json.loads((tmp_path / "trainer" / "summary.json").read_text())["n_labels"] == 4  # sessions at 2, 4
-    more = subprocess.run([*up, "--train-args", "--epochs 8"], capture_output=True, text=True, timeout=300)
+    out = copy_of(finished_stack, tmp_path)  # finished at epoch 2, its session labelled
+    more = subprocess.run(
+        [*up_command(out, "--no-label-ui"), "--train-args", "--epochs 4"], capture_output=True, text=True, timeout=300
+    )
     assert more.returncode == 0, more.stderr[-2000:]
-    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
-    assert (summary["status"], summary["epochs_done"], summary["n_labels"]) == ("finished", 8, 6)  # and at 6
+    summary = json.loads((out / "trainer" / "summary.json").read_text())
+    assert (summary["status"], summary["epochs_done"], summary["n_labels"]) == ("finished", 4, 4)  # and at 4
 
 
 def test_tokens_starting_with_a_dash_stay_out_of_argv_logs_and_open_files(tmp_path):
     tokens = {"operator": "-op" + "o" * 40, "trainer": "-tr" + "t" * 40, "labeler": "--lb" + "l" * 40}
     (tmp_path / "tokens.json").write_text(json.dumps({"tokens": tokens}))  # a saved stack, reused as is
-    proc = subprocess.Popen(up_command(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(up_command(tmp_path, SHORT_RUN), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     seen_children: set[str] = set()
     leaked: list[bytes] = []
     while proc.poll() is None:  # watch every process's command line while the stack runs
@@ -105,7 +132,7 @@ def test_parts_killed_or_terminated_mid_run_are_restarted_and_the_run_finishes(t
     """kill -9 of the teacher and the labeling UI, and SIGTERM of the trainer (which checkpoints and
     exits 0, "interrupted": not the end of the run)."""
     proc = subprocess.Popen(
-        up_command(tmp_path, "--teacher-rate", "2"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        up_command(tmp_path, "--teacher-rate", "2", SHORT_RUN), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
     )
     killed: dict[str, int] = {}
     try:
@@ -144,7 +171,7 @@ def test_a_killed_service_comes_back_on_the_same_address_and_the_run_finishes(tm
     """`collie up` holds the service's listening socket: a restarted service serves it again, and
     the others' requests wait in its queue instead of being refused."""
     proc = subprocess.Popen(
-        up_command(tmp_path, "--teacher-rate", "2"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        up_command(tmp_path, "--teacher-rate", "2", SHORT_RUN), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
     )
     killed = None
     try:
@@ -181,10 +208,8 @@ def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
     assert f"cannot listen on 127.0.0.1:{port}" in proc.stderr
 
 
-def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(tmp_path):
-    out = tmp_path / "o"
-    first = subprocess.run([*up_command(out), "--no-label-ui"], capture_output=True, text=True, timeout=300)
-    assert first.returncode == 0, first.stderr[-3000:]
+def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(finished_stack, tmp_path):
+    out = copy_of(finished_stack, tmp_path)
     (out / "collie.db").unlink()
     again = subprocess.run([*up_command(out), "--no-label-ui"], capture_output=True, text=True, timeout=300)
     assert again.returncode == 1 and "Traceback" not in again.stderr
@@ -195,7 +220,7 @@ def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(tmp
 
 def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
     proc = subprocess.Popen(
-        up_command(tmp_path, "--teacher-rate", "1", "--max-restarts", "1"),
+        up_command(tmp_path, "--no-label-ui", "--teacher-rate", "1", "--max-restarts", "1"),  # the teacher's end only
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -218,22 +243,19 @@ def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
     assert "giving up" in (tmp_path / "logs" / "up.log").read_text()
 
 
-def test_a_part_that_refuses_to_run_ends_the_stack_at_once_saying_why(tmp_path):
+def test_a_part_that_refuses_to_run_ends_the_stack_at_once_saying_why(finished_stack, tmp_path):
     """A damaged checkpoint (or a revoked token) is refused the same way at every start: after one
     retry the stack ends with the trainer's own words, not six starts and "see the logs"."""
-    first = subprocess.run(
-        up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 2"), capture_output=True, text=True, timeout=300
-    )
-    assert first.returncode == 0, first.stderr[-2000:]
-    checkpoint = tmp_path / "trainer" / "checkpoint.pt"
+    out = copy_of(finished_stack, tmp_path)  # finished at epoch 2
+    checkpoint = out / "trainer" / "checkpoint.pt"
     checkpoint.write_bytes(checkpoint.read_bytes()[:100])
     again = subprocess.run(
-        up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300
+        up_command(out, "--no-label-ui", "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300
     )
     assert again.returncode == 1 and "Traceback" not in again.stderr
     assert "collie up: error: the trainer refused to run again (code 2: collie train: error: " in again.stderr
     assert "checkpoint.pt" in again.stderr.splitlines()[-1]  # what it refused, in the error line itself
-    log = (tmp_path / "logs" / "up.log").read_text()
+    log = (out / "logs" / "up.log").read_text()
     assert log.count("started trainer") == 3  # the first stack's, then one start and one retry
 
 
@@ -324,7 +346,9 @@ def test_a_stack_that_crashed_before_its_first_checkpoint_resumes_its_run_not_a_
         if proc.poll() is None:
             proc.kill()
     assert not (tmp_path / "trainer" / "checkpoint.pt").exists()
-    again = subprocess.run(up_command(tmp_path, "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300)
+    again = subprocess.run(  # its labeling UI has no part in what is checked here
+        up_command(tmp_path, "--no-label-ui", "--train-args=--epochs 4"), capture_output=True, text=True, timeout=300
+    )
     assert again.returncode == 0, again.stderr[-2000:]
     assert f"collie up: run {meta['run_id']} " in again.stdout
     with contextlib.closing(sqlite3.connect(tmp_path / "collie.db")) as db:
