@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -115,13 +116,21 @@ def test_a_missing_replay_chunk_is_named(run_copy: Path) -> None:
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "missing")
 
 
-def test_a_torn_last_metrics_line_is_dropped_on_resume(run_copy: Path) -> None:
+def test_a_torn_last_metrics_line_is_dropped_and_a_missing_config_json_is_the_checkpoints_on_resume(
+    run_copy: Path,
+) -> None:
+    """Two damages that each let the run resume (one resume shows both): the torn last line of a
+    crash while appending is dropped, and a run without its config.json resumes with its
+    checkpoint's config."""
     metrics = run_copy / "metrics.jsonl"
     whole = metrics.read_text()
     metrics.write_text(whole + '{"epoch": 3, "safe_cov')  # a crash while appending
-    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
+    (run_copy / "config.json").unlink()
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--preset", "cpu")  # cpu: other net sizes
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert [json.loads(ln)["epoch"] for ln in metrics.read_text().splitlines()] == [0, 2, 3]
+    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
+    assert json.loads((run_copy / "config.json").read_text())["hidden"] == 64  # smoke's, from the checkpoint
 
 
 def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None:
@@ -209,22 +218,38 @@ def api_train(service: str, *args: str) -> subprocess.CompletedProcess[str]:
     return train("--method", "metra", "--api", service, "--token", TOKENS["trainer"], *args)
 
 
+@dataclass(frozen=True)
+class Trained:
+    out: Path  # the run folder
+    proc: subprocess.CompletedProcess[str]  # the `collie train` that made it, ended with exit 0
+
+
 @pytest.fixture(scope="module")
-def service_run(service: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A finished 2-epoch run the service holds; its folder's service_run.json names it."""
+def metra_run(service: str, tmp_path_factory: pytest.TempPathFactory) -> Trained:
+    """A finished 2-epoch METRA run the service holds; its folder's service_run.json names it."""
     out = tmp_path_factory.mktemp("service_run") / "run"
     proc = api_train(service, "--epochs", "2", "--out", str(out))
     assert proc.returncode == 0, proc.stderr[-3000:]
-    return out
+    return Trained(out, proc)
+
+
+@pytest.fixture(scope="module")
+def service_run(metra_run: Trained) -> Path:
+    return metra_run.out
 
 
 def test_resume_with_another_run_than_the_folders_is_refused(service: str, service_run: Path, tmp_path: Path) -> None:
     """Was resumed silently into run N: the checkpoint went on with another run's task and labels."""
+    from collie.client import CollieClient
+    from collie.schemas import RunCreate
+
     run = Path(shutil.copytree(service_run, tmp_path / "run"))
     mine = json.loads((run / "service_run.json").read_text())["run_id"]
-    other = tmp_path / "other"  # another run on the service, of other config (seed 1)
-    assert api_train(service, "--epochs", "1", "--seed", "1", "--out", str(other)).returncode == 0
-    theirs = json.loads((other / "service_run.json").read_text())["run_id"]
+    with CollieClient(service, TOKENS["trainer"]) as client:  # another run on the service, of other config
+        held = client.run(mine)  # (seed 1): as `collie train --seed 1 --epochs 1` would create it
+        config = held.config | {"seed": 1, "epochs": 1}
+        made = {k: getattr(held, k) for k in ("env", "task", "method", "dims", "n_total", "task_definition")}
+        theirs = client.create_run(RunCreate(**made, config=config, epochs_total=1)).id
     proc = api_train(service, "--out", str(run), "--resume", "--epochs", "3", "--run-id", str(theirs))
     refused(proc, f"{run} belongs to run {mine} on {service}", f"not run {theirs}", f"--run-id {mine}")
     # the folder's run on another address: refused unless the service there holds this very run
@@ -338,15 +363,32 @@ def test_a_damaged_replay_chunk_is_named(run_copy: Path, how: str) -> None:
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), str(chunk), "damaged")
 
 
-def test_a_checkpoint_of_another_run_of_the_same_shapes_is_refused(run_copy: Path, tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def seed_one(tmp_path_factory: pytest.TempPathFactory) -> Trained:
+    """A fresh 1-epoch run like `finished` but of seed 1, given more threads than this machine has
+    cores (a runtime setting, no part of what makes the run: trainer/same_run.py)."""
+    out = tmp_path_factory.mktemp("seed_one") / "run"
+    proc = train("--epochs", "1", "--out", str(out), "--seed", "1", "--threads", str((os.cpu_count() or 1) + 1))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return Trained(out, proc)
+
+
+def test_a_checkpoint_of_another_run_of_the_same_shapes_is_refused(run_copy: Path, seed_one: Trained) -> None:
     """Was resumed silently: the other seed's networks and replay continued under this run's name."""
-    other = tmp_path / "other"
-    assert train("--epochs", "1", "--out", str(other), "--seed", "1").returncode == 0
-    shutil.copyfile(other / "checkpoint.pt", run_copy / "checkpoint.pt")
+    shutil.copyfile(seed_one.out / "checkpoint.pt", run_copy / "checkpoint.pt")
     refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "copied from another run", "seed (1 there")
 
 
-def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
+def test_resume_warns_about_the_flags_it_ignores_and_what_a_run_saved_before_some_options_assumed(
+    run_copy: Path,
+) -> None:
+    """--resume keeps the run's config: one warning names the flags it ignores. A run saved by an
+    older collie lacks the keys of options added since: it resumes with what it ran with
+    (FIRST_VERSION), and says so once, as config.json is rewritten with them."""
+    saved = json.loads((run_copy / "config.json").read_text())
+    for key in ("fused_adam", "fast_ops", "flush_denormal"):
+        del saved[key]
+    (run_copy / "config.json").write_text(json.dumps(saved))
     # TRAIN gives --env point and --preset smoke again (as `collie up` and `collie sweep` do): not warned
     proc = train(
         "--out", str(run_copy), "--resume", "--epochs", "3", "--env", "ant", "--method", "metra", "--hidden", "64",
@@ -360,9 +402,13 @@ def test_resume_warns_about_the_flags_it_ignores(run_copy: Path) -> None:
     assert json.loads((run_copy / "summary.json").read_text())["config"]["env"] == "point"
     assert "--threads" not in warnings[0]  # a runtime setting: the resumed run uses what it is given
     assert json.loads((run_copy / "config.json").read_text())["threads"] == 2
+    said = f"collie train: {run_copy / 'config.json'} predates some options; it resumes as it ran: "
+    assert said + "--fused-adam false, --fast-ops false, --flush-denormal false" in proc.stderr, proc.stderr[-2000:]
+    assert json.loads((run_copy / "config.json").read_text())["fused_adam"] is False
     fewer = train("--out", str(run_copy), "--resume", "--epochs", "1")  # epochs may only be extended
     assert fewer.returncode == 0 and "ignored: --epochs 1 (the run's: 3)" in fewer.stderr, fewer.stderr[-3000:]
     assert "finished all its 3 epochs: nothing to train (--epochs above 3 extends it)" in fewer.stderr
+    assert "predates" not in fewer.stderr  # said once: the keys are written now
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:
@@ -414,9 +460,8 @@ def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Pat
     refused(train("--task-file", str(bad), "--print-config"), f"task file {bad}")  # as a run would refuse it
 
 
-def test_the_end_of_run_line_lists_only_what_was_written(tmp_path: Path) -> None:
-    out = tmp_path / "run"
-    proc = train("--epochs", "1", "--method", "metra", "--out", str(out))  # no guidance: no w(s) map
+def test_the_end_of_run_line_lists_only_what_was_written(metra_run: Trained) -> None:
+    out, proc = metra_run.out, metra_run.proc  # METRA: no guidance, no w(s) map
     assert proc.returncode == 0, proc.stderr[-3000:]
     line = proc.stdout.strip().splitlines()[-1]
     assert line.startswith(f"run folder: {out}") and "summary.json" in line and "checkpoint.pt" in line
@@ -452,18 +497,9 @@ def test_a_second_trainer_in_a_run_folder_in_use_is_refused(tmp_path: Path) -> N
     assert train("--out", str(out), "--epochs", "1").returncode == 0  # its lock ends with it
 
 
-def test_a_run_without_its_config_json_resumes_with_its_checkpoints_config(run_copy: Path) -> None:
-    (run_copy / "config.json").unlink()
-    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--preset", "cpu")  # cpu: other net sizes
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
-    assert json.loads((run_copy / "config.json").read_text())["hidden"] == 64  # smoke's, from the checkpoint
-
-
-def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, tmp_path: Path) -> None:
-    other = tmp_path / "other"
-    assert train("--epochs", "1", "--out", str(other), "--method", "diayn").returncode == 0
-    shutil.copyfile(other / "checkpoint.pt", run_copy / "checkpoint.pt")
+def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, service_run: Path) -> None:
+    """Another method's checkpoint (METRA's networks, not COLLIE's) in this run's folder."""
+    shutil.copyfile(service_run / "checkpoint.pt", run_copy / "checkpoint.pt")
     refused(
         train("--out", str(run_copy), "--resume"),
         f"{run_copy / 'checkpoint.pt'} does not fit this run's config.json (copied from another run?)",
@@ -493,22 +529,6 @@ def test_an_abbreviated_flag_is_not_taken_for_the_flag(tmp_path: Path) -> None:
     last = proc.stderr.strip().splitlines()[-1]  # the command named: `collie up --train-args` quotes it (was "collie:")
     assert proc.returncode == 2 and last.startswith("collie train: error: unrecognized arguments: --ou"), last
     assert not (tmp_path / "run").exists()
-
-
-def test_a_resumed_run_saved_before_some_options_says_what_it_assumed(run_copy: Path) -> None:
-    """A run saved by an older collie lacks the keys of options added since: it resumes with what it
-    ran with (FIRST_VERSION), and says so once, as config.json is rewritten with them."""
-    saved = json.loads((run_copy / "config.json").read_text())
-    for key in ("fused_adam", "fast_ops", "flush_denormal"):
-        del saved[key]
-    (run_copy / "config.json").write_text(json.dumps(saved))
-    proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    said = f"collie train: {run_copy / 'config.json'} predates some options; it resumes as it ran: "
-    assert said + "--fused-adam false, --fast-ops false, --flush-denormal false" in proc.stderr, proc.stderr[-2000:]
-    assert json.loads((run_copy / "config.json").read_text())["fused_adam"] is False
-    again = train("--out", str(run_copy), "--resume", "--epochs", "4")
-    assert again.returncode == 0 and "predates" not in again.stderr  # said once: the keys are written now
 
 
 def test_sigterm_after_the_start_before_the_first_epoch_stops_the_run_checkpointed(tmp_path: Path) -> None:
@@ -600,9 +620,8 @@ def test_a_file_system_turned_read_only_is_named(tmp_path: Path) -> None:
     assert said.endswith(f"writing {tmp_path / 'new'}: start it again once there is space"), said
 
 
-def test_more_threads_than_cores_is_a_warning(tmp_path: Path) -> None:
-    more = (os.cpu_count() or 1) + 1
-    proc = train("--epochs", "1", "--out", str(tmp_path / "run"), "--threads", str(more))
+def test_more_threads_than_cores_is_a_warning(seed_one: Trained) -> None:
+    more, proc = (os.cpu_count() or 1) + 1, seed_one.proc  # a 1-epoch run given --threads {more}
     assert proc.returncode == 0, proc.stderr[-3000:]
     said = f"collie train: warning: --threads {more} is more than this machine's {more - 1} cores"
     assert said in proc.stderr, proc.stderr[-3000:]
