@@ -233,17 +233,12 @@ def metra_run(service: str, tmp_path_factory: pytest.TempPathFactory) -> Trained
     return Trained(out, proc)
 
 
-@pytest.fixture(scope="module")
-def service_run(metra_run: Trained) -> Path:
-    return metra_run.out
-
-
-def test_resume_with_another_run_than_the_folders_is_refused(service: str, service_run: Path, tmp_path: Path) -> None:
+def test_resume_with_another_run_than_the_folders_is_refused(service: str, metra_run: Trained, tmp_path: Path) -> None:
     """Was resumed silently into run N: the checkpoint went on with another run's task and labels."""
     from collie.client import CollieClient
     from collie.schemas import RunCreate
 
-    run = Path(shutil.copytree(service_run, tmp_path / "run"))
+    run = Path(shutil.copytree(metra_run.out, tmp_path / "run"))
     mine = json.loads((run / "service_run.json").read_text())["run_id"]
     with CollieClient(service, TOKENS["trainer"]) as client:  # another run on the service, of other config
         held = client.run(mine)  # (seed 1): as `collie train --seed 1 --epochs 1` would create it
@@ -497,9 +492,9 @@ def test_a_second_trainer_in_a_run_folder_in_use_is_refused(tmp_path: Path) -> N
     assert train("--out", str(out), "--epochs", "1").returncode == 0  # its lock ends with it
 
 
-def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, service_run: Path) -> None:
+def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, metra_run: Trained) -> None:
     """Another method's checkpoint (METRA's networks, not COLLIE's) in this run's folder."""
-    shutil.copyfile(service_run / "checkpoint.pt", run_copy / "checkpoint.pt")
+    shutil.copyfile(metra_run.out / "checkpoint.pt", run_copy / "checkpoint.pt")
     refused(
         train("--out", str(run_copy), "--resume"),
         f"{run_copy / 'checkpoint.pt'} does not fit this run's config.json (copied from another run?)",
@@ -578,10 +573,10 @@ def test_a_task_file_that_exits_is_one_line_and_leaves_no_run_folder(tmp_path: P
     assert not (tmp_path / "new").exists()
 
 
-def test_a_wrong_token_for_an_existing_run_is_one_line(service: str, service_run: Path, tmp_path: Path) -> None:
+def test_a_wrong_token_for_an_existing_run_is_one_line(service: str, metra_run: Trained, tmp_path: Path) -> None:
     """Was a SourceRefused traceback, exit 1: held_run()'s refusal escaped the start's ApiError check."""
-    mine = json.loads((service_run / "service_run.json").read_text())["run_id"]
-    run = Path(shutil.copytree(service_run, tmp_path / "run"))
+    mine = json.loads((metra_run.out / "service_run.json").read_text())["run_id"]
+    run = Path(shutil.copytree(metra_run.out, tmp_path / "run"))
     before = digest(run / "checkpoint.pt")
     wrong = ("--api", service, "--token", "wrong-" + "x" * 30)
     words = (f"refused the trainer's token for run {mine}", "401: unknown or revoked token", service)
