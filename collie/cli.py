@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import gc
 import importlib
 import sys
 
@@ -108,5 +109,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def entry() -> None:
+    """The `collie` command (and `python -m collie.cli`): `main`, then an exit that leaves the objects it
+    is about to free to the OS. Python's shutdown collection walks every object still alive, which in a
+    process that imported torch costs about a second of CPU at the end of each `collie train`."""
+    try:
+        code = main()
+    finally:  # also after argparse's exits and a traceback
+        gc.freeze()  # moves every tracked object out of the collector's reach; little is allocated after it
+    raise SystemExit(code)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    entry()
