@@ -31,8 +31,16 @@ def mark(what: str, epoch: int | None = None) -> None:
         return
     line = {"t": time.time(), "cpu": time.process_time(), "part": os.environ.get(PART_ENV, "up"), "pid": os.getpid()}
     line |= {"what": what, **({"epoch": epoch} if epoch is not None else {})}
-    with open(path, "a") as f:  # one short write per line: the parts' lines never interleave
-        f.write(json.dumps(line) + "\n")
+    text = json.dumps(line) + "\n"
+    for _ in range(2):  # a FIFO's reader (the tests' paced marks) may close just as this opened it: once more
+        try:
+            with open(path, "a") as f:  # one short write per line: the parts' lines never interleave
+                f.write(text)
+            return
+        except BrokenPipeError:
+            continue
+        except OSError:  # a full or read-only disk: the timeline is a measurement, never a reason to stop
+            return
 
 
 def done() -> None:

@@ -3,7 +3,10 @@ startup log (COLLIE_STARTUP_LOG, collie/startup.py) is a FIFO, so each mark it w
 open() until this side reads it. The signal goes out right after the chosen mark is read and
 before the next open() is answered, so the child's Python handler runs before its next mark
 returns. (Reading goes on after the signal: the kernel may hand it to another of the child's
-threads, and then only the main thread's return from that open() runs the handler.)"""
+threads, and then only the main thread's return from that open() runs the handler.) A mark that
+opens the FIFO in the instant between this side's end of a read and its close meets EPIPE and
+opens it again (collie.startup.mark); only one that opened, wrote and closed all within that instant
+would be lost, and then the signal would not go out (`sent` stays unset)."""
 
 from __future__ import annotations
 
@@ -32,8 +35,12 @@ class PacedMarks:
 
         def pace() -> None:
             while proc.poll() is None:
-                with open(self.path) as f:  # one writer's open: one mark
-                    marks = [StartupMark.model_validate_json(line) for line in f.read().splitlines()]
+                fd = os.open(self.path, os.O_RDONLY)  # one writer's open: one mark
+                chunks = [b""]
+                while chunks[-1] or len(chunks) == 1:
+                    chunks.append(os.read(fd, 65536))
+                os.close(fd)  # at once after the end: a mark that opens before this may meet EPIPE and open again
+                marks = [StartupMark.model_validate_json(line) for line in b"".join(chunks).splitlines()]
                 self.seen += marks
                 if not self.sent.is_set() and any(at(m) for m in marks):
                     proc.send_signal(sig)

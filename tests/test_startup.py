@@ -66,3 +66,36 @@ def test_the_split_charges_each_piece_the_time_since_its_process_s_previous_mark
     assert (
         r["first_feedback_epoch"] == 2 and r["last_epoch"] == 2 and r["trainer_spawn_s"] == 1.0 and r["posted_s"] == 9.7
     )
+
+
+def test_a_mark_that_cannot_be_written_does_not_stop_the_process(tmp_path, monkeypatch):
+    """A timeline is a measurement: a full or read-only disk under it ends no part of the stack."""
+    monkeypatch.setenv(LOG_ENV, str(tmp_path))  # a folder: open() fails as on an unwritable file system
+    mark("imports")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_mark_refused_by_a_closing_reader_is_written_again(tmp_path, monkeypatch):
+    """A FIFO's reader that closed just as the mark opened it (tests/paced_marks.py): the mark's
+    write meets EPIPE, and a second open waits for the next reader."""
+    log = tmp_path / "startup.jsonl"
+    monkeypatch.setenv(LOG_ENV, str(log))
+    opened: list[str] = []
+
+    class ClosedReader:  # what open() gives when the only reader closes between the open and the write
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def write(self, _text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    def open_once_refused(path, mode="r"):
+        opened.append(path)
+        return ClosedReader() if len(opened) == 1 else open(path, mode)
+
+    monkeypatch.setattr(startup, "open", open_once_refused, raising=False)
+    mark("collect", epoch=5)
+    assert len(opened) == 2 and [(m.what, m.epoch) for m in read_marks(log)] == [("collect", 5)]
