@@ -55,7 +55,7 @@ lint: $(STAMP)
 TEST_WORKERS ?= 2
 test: $(STAMP) lint
 	OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 OMP_WAIT_POLICY=PASSIVE \
-	  $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=15
+	  $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
 # `--compile`'s networks equal the eager ones (pyproject's `compile` marker; inductor takes minutes here).
 test-compile: $(STAMP)
