@@ -639,6 +639,24 @@ def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: 
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize(
+    ("sizes", "said"),
+    [
+        (["--eval-trajectories", "100000"], "(100000 point envs: at least"),  # was minutes of envs, then exit 137
+        (["--replay-capacity", "50000000", "--batch-size", "50000000"], "(the replay and a gradient step: at least"),
+    ],
+)
+def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Path, sizes, said: str) -> None:
+    """Sizes each allocation of which Linux lends at once: the pages are taken as the run touches
+    them, until the kernel kills it without a word. (The address-space limit only keeps a failure of
+    this test from taking the machine's memory.)"""
+    cmd = [*TRAIN, "--device", "cpu", "--epochs", "1", "--out", str(tmp_path / "run"), *sizes]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=at_most_16_gib)
+    line = refused(proc, "not enough memory", " ".join(sizes[:2]), said, "GiB free): give smaller ones")
+    assert float(line.split("at least ")[1].split(" GiB")[0]) > 16  # a lower bound, and still more than the limit
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("answer", ["none", "a page"])
 def test_a_service_gone_or_not_itself_while_the_run_is_created_is_one_line(tmp_path: Path, answer: str) -> None:
     """The service answers its health check, then drops the request that creates the run (which is

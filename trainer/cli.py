@@ -494,7 +494,10 @@ def short_of_memory(exc: BaseException, args: argparse.Namespace) -> str | None:
     sizes = ", ".join(f"{flag(k)} {getattr(args, k)}" for k in SIZE_KEYS if k in args.given)
     if not sizes:
         sizes = "its config.json's" if args.resume else f"--preset {args.preset}'s"
-    return f"this machine has not enough memory for the run's sizes ({sizes}): give smaller ones"
+    from trainer.memory_plan import NotEnoughMemory
+
+    measured = f" ({exc})" if isinstance(exc, NotEnoughMemory) else ""  # checked before allocating: the figures
+    return f"this machine has not enough memory for the run's sizes ({sizes}){measured}: give smaller ones"
 
 
 def run(args: argparse.Namespace) -> int:

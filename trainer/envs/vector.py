@@ -27,6 +27,7 @@ import numpy as np
 from trainer.envs.base import SkillEnv
 from trainer.envs.batched import BatchedPhysics
 from trainer.envs.registry import make_env
+from trainer.memory_plan import ENVS_MEASURED, check, resident_bytes
 
 
 @dataclass
@@ -56,6 +57,20 @@ class StepBatch:
 DEFAULT_BATCH_THREADS = 2
 
 
+def make_envs(name: str, num_envs: int, episode_steps: int, layout_seed: int | None) -> list[SkillEnv]:
+    """`num_envs` envs (each its own MuJoCo model and data). The rest are projected from the memory
+    the first few took, and refused (NotEnoughMemory) where they would not fit: the kernel would
+    kill the process only once it had made them, which for 100 000 envs takes minutes."""
+    envs = [make_env(name, episode_steps=episode_steps, layout_seed=layout_seed)]
+    before = resident_bytes()  # after the first: its one-time costs (e.g. a GL context) are not projected
+    for i in range(1, num_envs):
+        envs.append(make_env(name, episode_steps=episode_steps, layout_seed=layout_seed))
+        now = resident_bytes() if i == ENVS_MEASURED and i + 1 < num_envs else None
+        if before is not None and now is not None:
+            check(f"{num_envs} {name} envs", max(0, now - before) // ENVS_MEASURED * (num_envs - i - 1))
+    return envs
+
+
 def default_batch_threads(num_envs: int) -> int:
     return max(1, min(DEFAULT_BATCH_THREADS, os.cpu_count() or 1, num_envs))
 
@@ -82,9 +97,7 @@ class VectorEnv:
             batch_threads = default_batch_threads(num_envs) if (physics_threads or 1) == 1 else 1
         if batch_threads < 1:
             raise ValueError(f"batch_threads must be >= 1, got {batch_threads}")
-        self.envs: list[SkillEnv] = [
-            make_env(name, episode_steps=episode_steps, layout_seed=layout_seed) for _ in range(num_envs)
-        ]
+        self.envs = make_envs(name, num_envs, episode_steps, layout_seed)
         first = self.envs[0]
         self.name = name
         self.num_envs = num_envs
