@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 
 MEMINFO = Path("/proc/meminfo")
+CGROUP = Path("/sys/fs/cgroup")  # this process's memory cgroup, as a container mounts it
+MEMBERSHIP = Path("/proc/self/cgroup")  # which cgroups this process is in
+UNLIMITED = 2**60  # cgroup v1 writes "no limit" as a page-rounded 2^63
 GIB = 2**30
 ENVS_MEASURED = 4  # envs made before the rest are projected from their cost
 
@@ -26,14 +29,62 @@ class NotEnoughMemory(MemoryError):
         super().__init__(f"{what}: at least {needed / GIB:.1f} GiB, {available / GIB:.1f} GiB free")
 
 
-def available_bytes(meminfo: Path = MEMINFO) -> int | None:
-    """Memory a process can still take: MemAvailable + SwapFree (None where there is no
-    /proc/meminfo, e.g. macOS: then nothing is checked)."""
+def available_bytes(meminfo: Path = MEMINFO, cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -> int | None:
+    """Memory a process can still take: MemAvailable + SwapFree, or less where its container's
+    limit leaves less (None where there is no /proc/meminfo, e.g. macOS: then nothing is checked)."""
     try:
         fields = dict(line.split(":", 1) for line in meminfo.read_text().splitlines() if ":" in line)
-        return (int(fields["MemAvailable"].split()[0]) + int(fields.get("SwapFree", "0 kB").split()[0])) * 1024
+        free = (int(fields["MemAvailable"].split()[0]) + int(fields.get("SwapFree", "0 kB").split()[0])) * 1024
     except (OSError, KeyError, ValueError):
         return None
+    limited = container_free_bytes(cgroup, membership)
+    return free if limited is None else min(free, limited)
+
+
+def container_free_bytes(cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -> int | None:
+    """What the memory cgroups' limits leave this process (a container's `--memory`, a pod's
+    limit), whose excess the kernel kills as it would at the machine's end: the least, over its
+    cgroup and those above it, of limit − (usage − reclaimable page cache). cgroup v2 and v1; None
+    without a limit. (/proc/meminfo shows the host's memory.)"""
+    try:
+        lines = [line.split(":", 2) for line in membership.read_text().splitlines() if line.count(":") >= 2]
+    except OSError:
+        lines = []
+    where = {"v2": "/", "v1": "/"}  # in a container with its own cgroup namespace: its root
+    for hierarchy, controllers, path in lines:
+        if hierarchy == "0" and not controllers:
+            where["v2"] = path
+        elif "memory" in controllers.split(","):
+            where["v1"] = path
+    levels = [  # (folder, limit file, usage file, reclaimable key in memory.stat)
+        *((cgroup / p, "memory.max", "memory.current", "inactive_file") for p in up_from(where["v2"])),
+        *(
+            (cgroup / "memory" / p, "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file")
+            for p in up_from(where["v1"])
+        ),
+    ]
+    left = [free for level in levels if (free := cgroup_free(*level)) is not None]
+    return min(left) if left else None
+
+
+def up_from(path: str) -> list[str]:
+    """A cgroup's path and its ancestors', relative to the mount: "/a/b" → ["a/b", "a", ""]."""
+    parts = [p for p in path.split("/") if p]
+    return ["/".join(parts[:n]) for n in range(len(parts), -1, -1)]
+
+
+def cgroup_free(folder: Path, limit_file: str, usage_file: str, reclaimable: str) -> int | None:
+    try:
+        limit, usage = int((folder / limit_file).read_text()), int((folder / usage_file).read_text())
+    except (OSError, ValueError):  # absent, or v2's "max": no limit here
+        return None
+    if limit >= UNLIMITED:
+        return None
+    try:
+        cache = int(dict(line.split() for line in (folder / "memory.stat").read_text().splitlines())[reclaimable])
+    except (OSError, ValueError, KeyError):
+        cache = 0
+    return max(0, limit - usage + cache)
 
 
 def resident_bytes() -> int | None:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trainer.memory_plan import GIB, NotEnoughMemory, available_bytes, check, replay_fill_bytes
+from trainer.memory_plan import GIB, NotEnoughMemory, available_bytes, check, container_free_bytes, replay_fill_bytes
 from trainer.replay import TrajectoryReplay
 
 
@@ -20,11 +20,45 @@ def test_the_replay_s_figure_is_a_close_lower_bound_of_its_arrays(obs_shape, dty
 
 
 def test_free_memory_is_what_is_available_and_the_free_swap(tmp_path: Path) -> None:
-    meminfo = tmp_path / "meminfo"
+    meminfo, no_cgroup = tmp_path / "meminfo", tmp_path / "no-cgroup"
     meminfo.write_text("MemTotal: 24000000 kB\nMemFree: 100 kB\nMemAvailable: 2097152 kB\nSwapFree: 1048576 kB\n")
-    assert available_bytes(meminfo) == 3 * GIB
+    assert available_bytes(meminfo, no_cgroup, no_cgroup) == 3 * GIB
     meminfo.write_text("MemTotal: 24000000 kB\n")  # a kernel before 3.14: no MemAvailable, nothing checked
-    assert available_bytes(meminfo) is None and available_bytes(tmp_path / "absent") is None
+    assert available_bytes(meminfo, no_cgroup, no_cgroup) is None
+    assert available_bytes(tmp_path / "absent", no_cgroup, no_cgroup) is None
+
+
+def limit(folder: Path, files: tuple[str, str], limit: int | str, usage: int, stat: str) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / files[0]).write_text(f"{limit}\n")
+    (folder / files[1]).write_text(f"{usage}\n")
+    (folder / "memory.stat").write_text(stat)
+
+
+V2, V1 = ("memory.max", "memory.current"), ("memory.limit_in_bytes", "memory.usage_in_bytes")
+
+
+def test_a_container_s_limit_leaves_less_than_the_host_shows(tmp_path: Path) -> None:
+    """/proc/meminfo shows the host: a container limited to 2 GiB that holds 1.5 GiB, 0.25 GiB of it
+    page cache the kernel can drop, has 0.75 GiB left, however much the host has free."""
+    meminfo, member = tmp_path / "meminfo", tmp_path / "cgroup-of-self"
+    meminfo.write_text("MemAvailable: 20971520 kB\n")  # the host: 20 GiB
+    member.write_text("0::/\n")  # cgroup v2, in the container's own namespace
+    v2 = tmp_path / "v2"
+    limit(v2, V2, 2 * GIB, GIB + GIB // 2, f"anon 1\ninactive_file {GIB // 4}\nactive_file 7\n")
+    assert available_bytes(meminfo, v2, member) == container_free_bytes(v2, member) == GIB * 3 // 4
+    limit(v2, V2, "max", GIB, "")  # no limit: the host's figure
+    assert container_free_bytes(v2, member) is None and available_bytes(meminfo, v2, member) == 20 * GIB
+
+
+def test_a_limit_on_a_cgroup_above_this_process_s_counts_too(tmp_path: Path) -> None:
+    """cgroup v1 without a namespace (a pod's limit on its parent cgroup): the process's own cgroup
+    is unlimited (v1 writes that as 2^63 rounded to a page), its parent leaves 1.5 GiB."""
+    member, v1 = tmp_path / "cgroup-of-self", tmp_path / "v1"
+    member.write_text("12:pids:/pod/ctr\n4:memory,hugetlb:/pod/ctr\n0::/\n")
+    limit(v1 / "memory" / "pod" / "ctr", V1, 9223372036854771712, GIB, "total_inactive_file 0\n")
+    limit(v1 / "memory" / "pod", V1, 2 * GIB, GIB, f"cache 5\ntotal_inactive_file {GIB // 2}\n")
+    assert container_free_bytes(v1, member) == GIB * 3 // 2
 
 
 def test_a_size_beyond_free_memory_is_refused_with_both_figures() -> None:
