@@ -153,9 +153,23 @@ def unreachable_why(exc: Unreachable) -> str:
     """Why a request got no answer, in a person's words ("connection refused", not httpx's repr)."""
     cause = exc.__cause__
     if isinstance(cause, httpx.TimeoutException):
-        return "no answer in time"
+        limit = timeout_of(cause)
+        return f"nothing within {limit:g} s" if limit is not None else "nothing in time"
     text = str(cause or exc)
     return "connection refused" if "Connection refused" in text else text.split("] ", 1)[-1]
+
+
+TIMEOUT_KINDS = {httpx.ConnectTimeout: "connect", httpx.ReadTimeout: "read", httpx.WriteTimeout: "write"}
+
+
+def timeout_of(exc: httpx.TimeoutException) -> float | None:
+    """The limit that ran out (the client's connect or read timeout, as its request carried it)."""
+    try:
+        limits = exc.request.extensions.get("timeout", {})
+    except RuntimeError:  # an exception raised without its request
+        return None
+    limit = limits.get(TIMEOUT_KINDS.get(type(exc), ""))
+    return float(limit) if isinstance(limit, int | float) else None
 
 
 def no_answer(exc: Unreachable) -> str:

@@ -6,6 +6,7 @@ Content-Encoding, a proxy's HTML page, a body cut short."""
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 
@@ -23,6 +24,7 @@ from collie.client import (
     Unavailable,
     Unreachable,
     Unsendable,
+    no_answer,
     retrying,
 )
 from collie.schemas import StreamEvent
@@ -112,6 +114,16 @@ def test_a_body_cut_short_is_unreachable() -> None:
         pytest.raises(Unreachable, match="incomplete chunked read"),
     ):
         client.health()
+
+
+def test_a_service_that_takes_the_connection_and_never_answers_is_said_with_the_time_waited() -> None:
+    """A host that accepts and stays silent (a hung service, a proxy waiting on it): the line says how
+    long was waited. Was "does not answer (no answer in time)"."""
+    with socket.create_server(("127.0.0.1", 0)) as silent:  # the kernel accepts; nobody reads or writes
+        api = f"http://127.0.0.1:{silent.getsockname()[1]}"
+        with CollieClient(api, TOKENS["operator"], timeout_s=0.5) as client, pytest.raises(Unreachable) as lost:
+            client.health()
+    assert no_answer(lost.value) == "does not answer (nothing within 0.5 s)"
 
 
 def test_a_request_that_cannot_be_sent_is_unsendable_not_unreachable() -> None:
