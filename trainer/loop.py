@@ -43,7 +43,7 @@ from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
-from trainer.memory_plan import check, replay_fill_bytes, update_floor_bytes
+from trainer.memory_plan import check, run_floor_bytes
 from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
@@ -142,13 +142,8 @@ class Trainer:
         self.agent, self.instruction = build_agent(
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
-        stored = min(max(1, cfg.replay_capacity // cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
-        obs_shape, dims = self.env.obs_shape, (self.env.action_dim, self.env.nq, self.env.nv)
-        check(  # before np.zeros lends it all: the kernel would kill the run once the replay filled
-            "the replay and a gradient step",
-            replay_fill_bytes(stored, cfg.episode_steps, obs_shape, self.env.obs_dtype, *dims)
-            + update_floor_bytes(cfg.batch_size, cfg.hidden, obs_shape),
-        )
+        # before np.zeros lends it all: the kernel would kill the run once the replay filled
+        check("the replay and a gradient step", run_floor_bytes(cfg, self.env))
         self.replay = TrajectoryReplay(
             cfg.replay_capacity,
             cfg.episode_steps,

@@ -10,8 +10,12 @@ a lower bound does not fit: a run that could fit is never refused.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from trainer.config import Config
 
 MEMINFO = Path("/proc/meminfo")
 CGROUP = Path("/sys/fs/cgroup")  # this process's memory cgroup, as a container mounts it
@@ -117,3 +121,21 @@ def update_floor_bytes(batch_size: int, hidden: int, obs_shape: tuple[int, ...])
     """A lower bound on one gradient step: the batch's s and s′ as float32, and one hidden
     activation of each layer (two) for the policy and two critics (the step holds far more)."""
     return batch_size * (2 * 4 * int(np.prod(obs_shape)) + 3 * 2 * 4 * hidden)
+
+
+class EnvShapes(Protocol):  # a SkillEnv's or a VectorEnv's
+    obs_shape: tuple[int, ...]
+    obs_dtype: np.dtype
+    action_dim: int
+    nq: int
+    nv: int
+
+
+def run_floor_bytes(cfg: Config, env: EnvShapes) -> int:
+    """A lower bound on what a run of `cfg` on `env` touches besides its envs: the replay as far as
+    the run fills it (its capacity, or every trajectory of its epochs if fewer) and a gradient step."""
+    stored = min(max(1, cfg.replay_capacity // cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
+    shapes = (env.obs_shape, env.obs_dtype, env.action_dim, env.nq, env.nv)
+    return replay_fill_bytes(stored, cfg.episode_steps, *shapes) + update_floor_bytes(
+        cfg.batch_size, cfg.hidden, env.obs_shape
+    )

@@ -6,7 +6,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trainer.memory_plan import GIB, NotEnoughMemory, available_bytes, check, container_free_bytes, replay_fill_bytes
+from trainer.config import PRESETS, make_config
+from trainer.envs.registry import ENV_NAMES, make_env
+from trainer.memory_plan import (
+    GIB,
+    NotEnoughMemory,
+    available_bytes,
+    check,
+    container_free_bytes,
+    replay_fill_bytes,
+    run_floor_bytes,
+)
 from trainer.replay import TrajectoryReplay
 
 
@@ -66,3 +76,13 @@ def test_a_size_beyond_free_memory_is_refused_with_both_figures() -> None:
     with pytest.raises(NotEnoughMemory, match=r"^the replay: at least 4\.0 GiB, 3\.0 GiB free$") as caught:
         check("the replay", 4 * GIB, available=3 * GIB)
     assert isinstance(caught.value, MemoryError)  # `collie train` names the sizes given for any MemoryError
+
+
+def test_every_preset_passes_on_a_16_gib_machine() -> None:
+    """The check refuses only sizes beyond the machine: each env's presets, the pixel `paper` runs'
+    replay of uint8 frames the largest, fit a 16 GiB laptop by its count."""
+    for env_name in ENV_NAMES:
+        env = make_env(env_name)
+        for preset in PRESETS:
+            needed = run_floor_bytes(make_config(preset, env_name), env)
+            assert 0 < needed < 16 * GIB, (env_name, preset, needed / GIB)
