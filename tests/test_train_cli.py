@@ -642,8 +642,9 @@ def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: 
 @pytest.mark.parametrize(
     ("sizes", "said"),
     [
-        (["--eval-trajectories", "100000"], "(100000 point envs: at least"),  # was minutes of envs, then exit 137
-        (["--replay-capacity", "50000000", "--batch-size", "50000000"], "(the replay and a gradient step: at least"),
+        # more than any machine has free (≈ 13 TiB, ≈ 11 PiB); 100000 envs were minutes of envs, then exit 137
+        (["--eval-trajectories", "10000000"], "(10000000 point envs: at least"),
+        (["--replay-capacity", "2000000000", "--batch-size", "2000000000"], "(the replay and a gradient step:"),
     ],
 )
 def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Path, sizes, said: str) -> None:

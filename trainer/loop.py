@@ -143,7 +143,8 @@ class Trainer:
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
         # before np.zeros lends it all: the kernel would kill the run once the replay filled
-        check("the replay and a gradient step", run_floor_bytes(cfg, self.env))
+        on_cpu = self.device.type == "cpu"
+        check("the replay and a gradient step" if on_cpu else "the replay", run_floor_bytes(cfg, self.env, on_cpu))
         self.replay = TrajectoryReplay(
             cfg.replay_capacity,
             cfg.episode_steps,

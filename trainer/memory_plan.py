@@ -9,6 +9,7 @@ a lower bound does not fit: a run that could fit is never refused.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -22,7 +23,8 @@ CGROUP = Path("/sys/fs/cgroup")  # this process's memory cgroup, as a container 
 MEMBERSHIP = Path("/proc/self/cgroup")  # which cgroups this process is in
 UNLIMITED = 2**60  # cgroup v1 writes "no limit" as a page-rounded 2^63
 GIB = 2**30
-ENVS_MEASURED = 4  # envs made before the rest are projected from their cost
+ENVS_MEASURED = 16  # envs made (≈ 10 ms each) before the rest are projected from their cost
+PROJECTED_SHARE = 0.85  # of that cost: the first envs take ≈ 10 % more each than later ones (point, here)
 
 
 class NotEnoughMemory(MemoryError):
@@ -38,18 +40,20 @@ def available_bytes(meminfo: Path = MEMINFO, cgroup: Path = CGROUP, membership: 
     limit leaves less (None where there is no /proc/meminfo, e.g. macOS: then nothing is checked)."""
     try:
         fields = dict(line.split(":", 1) for line in meminfo.read_text().splitlines() if ":" in line)
-        free = (int(fields["MemAvailable"].split()[0]) + int(fields.get("SwapFree", "0 kB").split()[0])) * 1024
+        swap = int(fields.get("SwapFree", "0 kB").split()[0]) * 1024
+        free = int(fields["MemAvailable"].split()[0]) * 1024 + swap
     except (OSError, KeyError, ValueError):
         return None
-    limited = container_free_bytes(cgroup, membership)
+    limited = container_free_bytes(cgroup, membership, swap)
     return free if limited is None else min(free, limited)
 
 
-def container_free_bytes(cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -> int | None:
+def container_free_bytes(cgroup: Path = CGROUP, membership: Path = MEMBERSHIP, swap_free: int = 0) -> int | None:
     """What the memory cgroups' limits leave this process (a container's `--memory`, a pod's
     limit), whose excess the kernel kills as it would at the machine's end: the least, over its
-    cgroup and those above it, of limit − (usage − reclaimable page cache). cgroup v2 and v1; None
-    without a limit. (/proc/meminfo shows the host's memory.)"""
+    cgroup and those above it, of limit − (usage − page cache), plus the swap the cgroup may still
+    use (at most `swap_free`, the host's). cgroup v2 and v1; None without a limit. (/proc/meminfo
+    shows the host's memory.)"""
     try:
         lines = [line.split(":", 2) for line in membership.read_text().splitlines() if line.count(":") >= 2]
     except OSError:
@@ -60,15 +64,12 @@ def container_free_bytes(cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -
             where["v2"] = path
         elif "memory" in controllers.split(","):
             where["v1"] = path
-    levels = [  # (folder, limit file, usage file, reclaimable key in memory.stat)
-        *((cgroup / p, "memory.max", "memory.current", "inactive_file") for p in up_from(where["v2"])),
-        *(
-            (cgroup / "memory" / p, "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file")
-            for p in up_from(where["v1"])
-        ),
+    left = [
+        *(v2_free(cgroup / p, swap_free) for p in up_from(where["v2"])),
+        *(v1_free(cgroup / "memory" / p, swap_free) for p in up_from(where["v1"])),
     ]
-    left = [free for level in levels if (free := cgroup_free(*level)) is not None]
-    return min(left) if left else None
+    limited = [free for free in left if free is not None]
+    return min(limited) if limited else None
 
 
 def up_from(path: str) -> list[str]:
@@ -77,24 +78,52 @@ def up_from(path: str) -> list[str]:
     return ["/".join(parts[:n]) for n in range(len(parts), -1, -1)]
 
 
-def cgroup_free(folder: Path, limit_file: str, usage_file: str, reclaimable: str) -> int | None:
-    try:
-        limit, usage = int((folder / limit_file).read_text()), int((folder / usage_file).read_text())
-    except (OSError, ValueError):  # absent, or v2's "max": no limit here
+def v2_free(folder: Path, swap_free: int) -> int | None:
+    """memory.max − memory.current + page cache, and memory.swap.max − memory.swap.current."""
+    limit, usage = number(folder / "memory.max"), number(folder / "memory.current")
+    if limit is None or usage is None:  # absent, or "max": no limit here
         return None
-    if limit >= UNLIMITED:
+    swap_limit, swap_used = number(folder / "memory.swap.max"), number(folder / "memory.swap.current")
+    swap = swap_free if swap_limit is None or swap_used is None else min(swap_free, max(0, swap_limit - swap_used))
+    return max(0, limit - usage + page_cache(folder, "")) + swap
+
+
+def v1_free(folder: Path, swap_free: int) -> int | None:
+    """As v2, from memory.limit_in_bytes; memory.memsw.* (memory and swap together) where the
+    kernel accounts swap to cgroups."""
+    limit, usage = number(folder / "memory.limit_in_bytes"), number(folder / "memory.usage_in_bytes")
+    if limit is None or usage is None:
         return None
+    both, both_used = number(folder / "memory.memsw.limit_in_bytes"), number(folder / "memory.memsw.usage_in_bytes")
+    cache = page_cache(folder, "total_")
+    if both is not None and both_used is not None:  # swap within the same limit
+        return max(0, min(limit - usage + cache + swap_free, both - both_used + cache))
+    return max(0, limit - usage + cache) + swap_free
+
+
+def number(path: Path) -> int | None:
+    """A cgroup file's number; None if absent, unreadable, or no limit ("max", v1's ~2^63)."""
     try:
-        cache = int(dict(line.split() for line in (folder / "memory.stat").read_text().splitlines())[reclaimable])
-    except (OSError, ValueError, KeyError):
-        cache = 0
-    return max(0, limit - usage + cache)
+        value = int(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return value if value < UNLIMITED else None
+
+
+def page_cache(folder: Path, prefix: str) -> int:
+    """The file pages memory.stat counts in the cgroup's usage, which the kernel drops before it
+    kills (as MemAvailable counts them)."""
+    try:
+        stat = dict(line.split() for line in (folder / "memory.stat").read_text().splitlines())
+        return int(stat.get(f"{prefix}inactive_file", 0)) + int(stat.get(f"{prefix}active_file", 0))
+    except (OSError, ValueError):
+        return 0
 
 
 def resident_bytes() -> int | None:
     """This process's resident set (None without /proc)."""
     try:
-        return int(Path("/proc/self/statm").read_text().split()[1]) * 4096
+        return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
     except (OSError, IndexError, ValueError):
         return None
 
@@ -117,10 +146,10 @@ def replay_fill_bytes(
     return trajectories * (obs + 4 * floats)
 
 
-def update_floor_bytes(batch_size: int, hidden: int, obs_shape: tuple[int, ...]) -> int:
-    """A lower bound on one gradient step: the batch's s and s′ as float32, and one hidden
-    activation of each layer (two) for the policy and two critics (the step holds far more)."""
-    return batch_size * (2 * 4 * int(np.prod(obs_shape)) + 3 * 2 * 4 * hidden)
+def update_floor_bytes(batch_size: int, hidden: int, layers: int, obs_shape: tuple[int, ...]) -> int:
+    """A lower bound on one gradient step on the CPU: the batch's s and s′ as float32, and one
+    hidden activation of each layer for the policy and two critics (the step holds far more)."""
+    return batch_size * (2 * 4 * int(np.prod(obs_shape)) + 3 * layers * 4 * hidden)
 
 
 class EnvShapes(Protocol):  # a SkillEnv's or a VectorEnv's
@@ -131,11 +160,10 @@ class EnvShapes(Protocol):  # a SkillEnv's or a VectorEnv's
     nv: int
 
 
-def run_floor_bytes(cfg: Config, env: EnvShapes) -> int:
-    """A lower bound on what a run of `cfg` on `env` touches besides its envs: the replay as far as
-    the run fills it (its capacity, or every trajectory of its epochs if fewer) and a gradient step."""
+def run_floor_bytes(cfg: Config, env: EnvShapes, on_cpu: bool = True) -> int:
+    """A lower bound on the host memory a run of `cfg` on `env` touches besides its envs: the replay
+    as far as the run fills it (its capacity, or every trajectory of its epochs if fewer) and, on
+    the CPU, a gradient step (on a GPU, the batch and activations are in the GPU's memory)."""
     stored = min(max(1, cfg.replay_capacity // cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
-    shapes = (env.obs_shape, env.obs_dtype, env.action_dim, env.nq, env.nv)
-    return replay_fill_bytes(stored, cfg.episode_steps, *shapes) + update_floor_bytes(
-        cfg.batch_size, cfg.hidden, env.obs_shape
-    )
+    replay = replay_fill_bytes(stored, cfg.episode_steps, env.obs_shape, env.obs_dtype, env.action_dim, env.nq, env.nv)
+    return replay + (update_floor_bytes(cfg.batch_size, cfg.hidden, cfg.layers, env.obs_shape) if on_cpu else 0)

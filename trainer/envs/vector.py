@@ -27,7 +27,7 @@ import numpy as np
 from trainer.envs.base import SkillEnv
 from trainer.envs.batched import BatchedPhysics
 from trainer.envs.registry import make_env
-from trainer.memory_plan import ENVS_MEASURED, check, resident_bytes
+from trainer.memory_plan import ENVS_MEASURED, PROJECTED_SHARE, check, resident_bytes
 
 
 @dataclass
@@ -67,7 +67,8 @@ def make_envs(name: str, num_envs: int, episode_steps: int, layout_seed: int | N
         envs.append(make_env(name, episode_steps=episode_steps, layout_seed=layout_seed))
         now = resident_bytes() if i == ENVS_MEASURED and i + 1 < num_envs else None
         if before is not None and now is not None:
-            check(f"{num_envs} {name} envs", max(0, now - before) // ENVS_MEASURED * (num_envs - i - 1))
+            each = PROJECTED_SHARE * max(0, now - before) / ENVS_MEASURED
+            check(f"{num_envs} {name} envs", int(each * (num_envs - i - 1)))
     return envs
 
 
