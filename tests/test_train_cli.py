@@ -3,6 +3,7 @@ and no run folder overwritten or created by a refused command."""
 
 from __future__ import annotations
 
+import argparse
 import errno
 import hashlib
 import json
@@ -22,6 +23,8 @@ import pytest
 import torch
 from paced_marks import PacedMarks
 from unprivileged import as_nobody, closed_folder
+
+from trainer.cli import short_of_memory
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -644,7 +647,8 @@ def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: 
     [
         # more than any machine has free (≈ 13 TiB, ≈ 11 PiB); 100000 envs were minutes of envs, then exit 137
         (["--eval-trajectories", "10000000"], "(10000000 point envs: at least"),
-        (["--replay-capacity", "2000000000", "--batch-size", "2000000000"], "(the replay and a gradient step:"),
+        (["--replay-capacity", "2000000000", "--batch-size", "2000000000"], "(the networks, a gradient step and"),
+        (["--hidden", "65536"], "(the networks, a gradient step and"),  # was 54 s, 17 GB, then torch's traceback
     ],
 )
 def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Path, sizes, said: str) -> None:
@@ -656,6 +660,17 @@ def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Pa
     line = refused(proc, "not enough memory", " ".join(sizes[:2]), said, "GiB free): give smaller ones")
     assert float(line.split("at least ")[1].split(" GiB")[0]) > 16  # a lower bound, and still more than the limit
     assert not (tmp_path / "run").exists()
+
+
+def test_torch_s_failed_allocation_is_said_as_short_of_memory() -> None:
+    """torch raises a RuntimeError (CPU) or torch.OutOfMemoryError (a GPU) where numpy raises
+    MemoryError: in the run (e.g. a batch no check foresaw) it was a traceback."""
+    with pytest.raises(RuntimeError) as failed:
+        torch.empty(2**62, dtype=torch.uint8)  # beyond any address space: refused at once
+    args = argparse.Namespace(given={"batch_size"}, batch_size=4096, resume=False, preset="cpu")
+    line = short_of_memory(failed.value, args)
+    assert line == "this machine has not enough memory for the run's sizes (--batch-size 4096): give smaller ones"
+    assert short_of_memory(RuntimeError("mat1 and mat2 shapes cannot be multiplied"), args) is None
 
 
 @pytest.mark.parametrize("answer", ["none", "a page"])

@@ -483,13 +483,27 @@ def write_failure(exc: OSError, out: Path) -> str:
 
 
 # what a run allocates by (replay, evaluation envs, networks, batches, rollouts): named when memory runs out
-SIZE_KEYS = ("replay_capacity", "eval_trajectories", "hidden", "batch_size", "episodes_per_epoch", "episode_steps")
+SIZE_KEYS = (
+    "replay_capacity",
+    "eval_trajectories",
+    "hidden",
+    "layers",
+    "batch_size",
+    "episodes_per_epoch",
+    "episode_steps",
+)
+
+
+ALLOCATION_FAILED = ("Could not allocate memory", "DefaultCPUAllocator: can't allocate memory", "CUDA out of memory")
 
 
 def short_of_memory(exc: BaseException, args: argparse.Namespace) -> str | None:
-    """The line for an allocation that failed (numpy's MemoryError, MuJoCo's FatalError "Could not
-    allocate memory"), naming the sizes given; None for any other error."""
-    if not (isinstance(exc, MemoryError) or "Could not allocate memory" in str(exc)):  # MuJoCo's, in any wrapper
+    """The line for an allocation that failed (the memory plan's refusal, numpy's MemoryError,
+    MuJoCo's FatalError, torch's RuntimeError or OutOfMemoryError), naming the sizes given; None for
+    any other error."""
+    said = str(exc)
+    # MuJoCo's, in any wrapper; torch's on the CPU (a RuntimeError) and on a GPU (torch.OutOfMemoryError)
+    if not (isinstance(exc, MemoryError) or any(words in said for words in ALLOCATION_FAILED)):
         return None
     sizes = ", ".join(f"{flag(k)} {getattr(args, k)}" for k in SIZE_KEYS if k in args.given)
     if not sizes:

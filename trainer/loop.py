@@ -139,12 +139,15 @@ class Trainer:
         self.normalise = Normaliser(*observation_stats(cfg.env, self.env.obs_mean, self.env.obs_std, cfg.obs_norm))
         self.prior = SkillPrior.for_config(cfg)
         self.method = method(cfg.method)
+        # before torch and np.zeros lend it all: the kernel would kill the run once it was touched
+        on_cpu = self.device.type == "cpu"
+        check(
+            "the networks, a gradient step and the replay" if on_cpu else "the replay",
+            run_floor_bytes(cfg, self.env, on_cpu),
+        )
         self.agent, self.instruction = build_agent(
             cfg, self.env.obs_shape, self.env.action_dim, self.prior, self.device
         )  # the method's learner (+ ψ for DoDont*/DDG*)
-        # before np.zeros lends it all: the kernel would kill the run once the replay filled
-        on_cpu = self.device.type == "cpu"
-        check("the replay and a gradient step" if on_cpu else "the replay", run_floor_bytes(cfg, self.env, on_cpu))
         self.replay = TrajectoryReplay(
             cfg.replay_capacity,
             cfg.episode_steps,

@@ -146,10 +146,12 @@ def replay_fill_bytes(
     return trajectories * (obs + 4 * floats)
 
 
-def update_floor_bytes(batch_size: int, hidden: int, layers: int, obs_shape: tuple[int, ...]) -> int:
-    """A lower bound on one gradient step on the CPU: the batch's s and s′ as float32, and one
-    hidden activation of each layer for the policy and two critics (the step holds far more)."""
-    return batch_size * (2 * 4 * int(np.prod(obs_shape)) + 3 * layers * 4 * hidden)
+def learner_floor_bytes(batch_size: int, hidden: int, layers: int, obs_shape: tuple[int, ...]) -> int:
+    """A lower bound on the learner on the CPU: the hidden-to-hidden weights of the policy, two
+    critics and φ with Adam's two moments each, and for one gradient step the batch's s and s′ as
+    float32 and one activation of each layer of the policy and two critics (it holds far more)."""
+    weights = 4 * (layers - 1) * hidden * hidden * 4 * 3
+    return weights + batch_size * (2 * 4 * int(np.prod(obs_shape)) + 3 * layers * 4 * hidden)
 
 
 class EnvShapes(Protocol):  # a SkillEnv's or a VectorEnv's
@@ -163,7 +165,7 @@ class EnvShapes(Protocol):  # a SkillEnv's or a VectorEnv's
 def run_floor_bytes(cfg: Config, env: EnvShapes, on_cpu: bool = True) -> int:
     """A lower bound on the host memory a run of `cfg` on `env` touches besides its envs: the replay
     as far as the run fills it (its capacity, or every trajectory of its epochs if fewer) and, on
-    the CPU, a gradient step (on a GPU, the batch and activations are in the GPU's memory)."""
+    the CPU, the learner (on a GPU, its networks, batch and activations are in the GPU's memory)."""
     stored = min(max(1, cfg.replay_capacity // cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
     replay = replay_fill_bytes(stored, cfg.episode_steps, env.obs_shape, env.obs_dtype, env.action_dim, env.nq, env.nv)
-    return replay + (update_floor_bytes(cfg.batch_size, cfg.hidden, cfg.layers, env.obs_shape) if on_cpu else 0)
+    return replay + (learner_floor_bytes(cfg.batch_size, cfg.hidden, cfg.layers, env.obs_shape) if on_cpu else 0)
