@@ -59,8 +59,8 @@ DEFAULT_BATCH_THREADS = 2
 
 def make_envs(name: str, num_envs: int, episode_steps: int, layout_seed: int | None) -> list[SkillEnv]:
     """`num_envs` envs (each its own MuJoCo model and data). The rest are projected from the memory
-    the first few took, and refused (NotEnoughMemory) where they would not fit: the kernel would
-    kill the process only once it had made them, which for 100 000 envs takes minutes."""
+    the ENVS_MEASURED after the first took, and refused (NotEnoughMemory) where they would not fit:
+    the kernel would kill the process only once it had made them, which for 100 000 takes minutes."""
     envs = [make_env(name, episode_steps=episode_steps, layout_seed=layout_seed)]
     before = resident_bytes()  # after the first: its one-time costs (e.g. a GL context) are not projected
     for i in range(1, num_envs):
