@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -635,7 +636,8 @@ def at_most_16_gib() -> None:
 @pytest.mark.parametrize("flag", ["--replay-capacity", "--eval-trajectories"])
 def test_sizes_beyond_memory_are_one_line_naming_the_flag(tmp_path: Path, flag: str) -> None:
     """Were numpy's _ArrayMemoryError and MuJoCo's "Could not allocate memory" tracebacks, and a run
-    folder left holding only train.lock."""
+    folder left holding only train.lock. (The replay's arrays still fail in numpy under the limit:
+    the memory plan counts only what a 1-epoch run fills. The envs are refused by the plan now.)"""
     cmd = [*TRAIN, "--device", "cpu", "--epochs", "1", "--out", str(tmp_path / "run"), flag, "2000000000"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=at_most_16_gib)
     refused(proc, "not enough memory", f"{flag} 2000000000")
@@ -662,11 +664,26 @@ def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Pa
     assert not (tmp_path / "run").exists()
 
 
-def test_torch_s_failed_allocation_is_said_as_short_of_memory() -> None:
-    """torch raises a RuntimeError (CPU) or torch.OutOfMemoryError (a GPU) where numpy raises
-    MemoryError: in the run (e.g. a batch no check foresaw) it was a traceback."""
-    with pytest.raises(RuntimeError) as failed:
-        torch.empty(2**62, dtype=torch.uint8)  # beyond any address space: refused at once
+HUGE_MODEL = (  # an arena of 4 PB
+    '<mujoco><size memory="4000000G"/><worldbody><body><freejoint/><geom size="1"/></body></worldbody></mujoco>'
+)
+
+
+@pytest.mark.parametrize(
+    "allocate",
+    [
+        lambda: np.empty(2**62, np.uint8),  # numpy: MemoryError
+        lambda: mujoco.MjModel.from_xml_string(HUGE_MODEL),  # MuJoCo: "engine error: Could not allocate memory"
+        lambda: torch.empty(2**62, dtype=torch.uint8),  # torch on the CPU: a RuntimeError (was a traceback)
+    ],
+    ids=["numpy", "mujoco", "torch"],
+)
+def test_each_library_s_failed_allocation_is_said_as_short_of_memory(allocate) -> None:
+    """What the memory plan did not foresee (e.g. a batch in the run) fails in numpy, MuJoCo or
+    torch, each in its own way; all are the one line. (torch.OutOfMemoryError on a GPU says "CUDA
+    out of memory", matched the same way.)"""
+    with pytest.raises(Exception) as failed:  # each beyond any address space: refused at once
+        allocate()
     args = argparse.Namespace(given={"batch_size"}, batch_size=4096, resume=False, preset="cpu")
     line = short_of_memory(failed.value, args)
     assert line == "this machine has not enough memory for the run's sizes (--batch-size 4096): give smaller ones"
