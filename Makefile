@@ -13,7 +13,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-service bench-pixels bench-encoders probe-quadruped-gait bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-exit bench-service bench-pixels bench-encoders probe-quadruped-gait bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -93,6 +93,10 @@ bench-first-segment: $(STAMP)
 # The paper preset on Ant and pixel Quadruped on a CUDA GPU; prints `no CUDA device` without one.
 bench-gpu: $(STAMP)
 	$(PY) benchmarks/bench_gpu.py
+
+# The end of a `collie train`: with collie.cli.entry's gc.freeze() and without it (main alone).
+bench-exit: $(STAMP)
+	$(PY) benchmarks/bench_exit.py
 
 bench-service: $(STAMP)
 	$(PY) benchmarks/bench_service.py
