@@ -3,6 +3,8 @@ request: `collie serve` runs it in the foreground; tests, benchmarks and `collie
 
 from __future__ import annotations
 
+import logging
+import re
 import socket
 import threading
 import time
@@ -46,9 +48,26 @@ class Server(uvicorn.Server):
         await super().shutdown(sockets)
 
 
+class TokensOutOfLog(logging.Filter):
+    """Blanks `access_token=…` in uvicorn's own lines: with the access log off it still logs each
+    refused WebSocket upgrade at info with its path and query string, and the dashboard's streams
+    carry their token there (an EventSource sends no headers)."""
+
+    TOKEN = re.compile(r"(access_token=)[^&\s\"]*")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(self.TOKEN.sub(r"\1…", a) if isinstance(a, str) else a for a in record.args)
+        record.msg = self.TOKEN.sub(r"\1…", str(record.msg))
+        return True
+
+
 def uvicorn_server(app: FastAPI, log_level: str = "warning") -> uvicorn.Server:
     # A short graceful timeout: a request still running after the waits end should not hold the exit.
     config = uvicorn.Config(app, log_level=log_level, access_log=False, timeout_graceful_shutdown=2, lifespan="on")
+    uvicorn_log = logging.getLogger("uvicorn.error")
+    if not any(isinstance(f, TokensOutOfLog) for f in uvicorn_log.filters):
+        uvicorn_log.addFilter(TokensOutOfLog())
     return Server(config, app)
 
 
@@ -57,10 +76,17 @@ class BackgroundServer:
     on that listening socket instead of binding one (a `dup()` of one the caller holds keeps the
     port across a restart, as `collie up` keeps the service's: no other process can take it)."""
 
-    def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0, sock: socket.socket | None = None) -> None:
+    def __init__(
+        self,
+        app: FastAPI,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        sock: socket.socket | None = None,
+        log_level: str = "warning",
+    ) -> None:
         self.app = app
         self._sock, self.url = bind(host, port) if sock is None else (sock, url_of(sock))
-        self.server = uvicorn_server(app)
+        self.server = uvicorn_server(app, log_level)
         self._thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self._sock]}, daemon=True)
 
     def start(self, timeout_s: float = 10.0) -> BackgroundServer:

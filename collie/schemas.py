@@ -125,9 +125,20 @@ def _width(rows: list[list[float]], name: str) -> int:
     return widths.pop() if widths else 0
 
 
+def _holds_nul(value: object) -> bool:
+    if isinstance(value, str):
+        return "\x00" in value
+    if isinstance(value, dict):
+        return any(_holds_nul(k) or _holds_nul(v) for k, v in value.items())
+    return isinstance(value, list) and any(_holds_nul(v) for v in value)
+
+
 def _bounded_json(value: dict[str, Any], limit: int, name: str) -> dict[str, Any]:
     """Free JSON (a run's config, a segment's extra): finite, valid UTF-8 (no lone surrogate from a
-    \\u escape, which would be stored and then break every read of it), at most `limit` bytes."""
+    \\u escape, which would be stored and then break every read of it), no NUL in a key or a
+    string (as in free text: no person means it, and PostgreSQL text cannot hold it), at most `limit` bytes."""
+    if _holds_nul(value):
+        raise ValueError(f"{name}: text must not contain the NUL character (\\u0000)")
     try:
         size = len(json.dumps(value, allow_nan=False, ensure_ascii=False).encode("utf-8"))
     except UnicodeEncodeError:
@@ -694,7 +705,7 @@ class EventPage(Wire):
 
 class MetricsIn(Wire):
     epoch: Count
-    values: dict[Annotated[str, Field(min_length=1, max_length=64)], FiniteFloat] = Field(max_length=MAX_METRICS)
+    values: dict[Annotated[Text, Field(min_length=1, max_length=64)], FiniteFloat] = Field(max_length=MAX_METRICS)
 
 
 class MetricsRead(MetricsIn):

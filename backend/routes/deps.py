@@ -16,7 +16,6 @@ from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
 
 from backend.db import Database
-from backend.limits import declared_length
 from backend.models import Run
 from backend.services.auth import Caller, TokenCache
 from backend.services.errors import RunOutOfScope
@@ -75,21 +74,12 @@ def _validate(model: type[M], raw: bytes | bytearray) -> M:
 
 
 async def read_body(request: Request) -> bytearray:
-    """The body in one buffer, sized up front from Content-Length (BodyLimit has checked it): no
-    list of chunks joined into a second copy."""
-    declared = declared_length(request.headers.get("content-length"))
-    buffer = bytearray(declared or 0)
-    view, filled = memoryview(buffer), 0
+    """The body in one buffer grown as it arrives: no list of chunks joined into a second copy, and
+    nothing reserved from Content-Length, which a client that never sends the body could name to
+    hold that much memory per connection (BodyLimit caps both the header and what arrives)."""
+    buffer = bytearray()
     async for chunk in request.stream():
-        if declared is not None and filled + len(chunk) <= len(buffer):
-            view[filled : filled + len(chunk)] = chunk
-        else:
-            view.release()
-            buffer[filled:] = chunk
-            view = memoryview(buffer)
-        filled += len(chunk)
-    view.release()
-    del buffer[filled:]
+        buffer += chunk
     return buffer
 
 
@@ -127,18 +117,22 @@ def authenticate(request: Request, token: str | None) -> Caller:
 
 
 def path_run_id(request: Request) -> int | None:
-    """The run in the path, if any (a malformed one is left to the route's validation: "²" is a
-    digit to str.isdigit but no int, and a number past MAX_INT no database column holds)."""
-    raw = str(request.path_params.get("run_id", ""))
-    if not (raw.isascii() and raw.isdigit()) or int(raw) > MAX_INT:
+    """The run in the path, if any. Only plain ASCII digits name a run: the route's int would also
+    read "+1", "1.0", " 1" or "1_0" (run 10), and a scope checked on anything but the id the route
+    acts on is no check. Any other form is refused here, before the route (422)."""
+    if "run_id" not in request.path_params:
         return None
+    raw = str(request.path_params["run_id"])
+    if not (raw.isascii() and raw.isdigit()) or not 1 <= int(raw) <= MAX_INT:
+        msg = f"not a run's number: {raw!r} (digits 0-9 only, 1 to {MAX_INT})"
+        raise RequestValidationError([{"type": "run_id", "loc": ("path", "run_id"), "msg": msg, "input": raw}])
     return int(raw)
 
 
 def check_scope(request: Request, caller: Caller, roles: tuple[Role, ...]) -> None:
     """The run in the path must be in the caller's scope: a labeler limited to runs sees only
     those; on a trainer's own routes (sessions, status, telemetry, …) a trainer acts only on the
-    runs it created. An unknown run is left to the route (404)."""
+    runs it created. An unknown run is left to the route (404); a malformed id is refused (422)."""
     run_id = path_run_id(request)
     if run_id is None:
         return

@@ -364,12 +364,13 @@ def undo(conn: Connection, run_id: int, caller: Caller, body: UndoRequest, lease
     elif caller.role == "operator":
         revises = q.label_event_id if q.label_event_id is not None else max(v.event_id for v in votes)
         conn.execute(_DROP_VOTES, {"pk": q.id})
-        # the query returns to the pool (a lease another labeler holds now stands)
-        keep = live_other or q.gold_of is not None  # a gold copy stays its labeler's
-        status = "leased" if live_other else "pending"
-        owner = q.lease_owner_id if keep else None
-        expires = q.lease_expires_at if keep else None
-        tab = q.lease_tab if keep else None
+        if q.gold_of is not None:  # a gold copy is its labeler's alone: done, as a skipped or released one
+            status, owner, expires, tab = "retired", q.lease_owner_id, None, q.lease_tab
+        else:  # the query returns to the pool (a lease another labeler holds now stands)
+            status = "leased" if live_other else "pending"
+            owner = q.lease_owner_id if live_other else None
+            expires = q.lease_expires_at if live_other else None
+            tab = q.lease_tab if live_other else None
     else:
         raise Conflict(f"query '{body.query_id}' was labelled by someone else")
     event, _ = _record(conn, run_id, q, caller, "undo", None, None, body.client_request_id, now, revises)

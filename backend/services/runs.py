@@ -203,6 +203,8 @@ def extend(conn: Connection, run_id: int, body: RunExtend) -> RunRead:
         raise Conflict(f"run {run_id} failed: it is not extended")
     if current.epochs_total is not None and body.epochs_total < current.epochs_total:
         raise Conflict(f"run {run_id} has {current.epochs_total} epochs: extending means more, not {body.epochs_total}")
+    if body.epochs_total < (current.epoch or 0):
+        raise Conflict(f"run {run_id} has done {current.epoch} epochs: extending means more, not {body.epochs_total}")
     reopens = current.status == "finished" and body.epochs_total > (current.epoch or 0)
     if body.epochs_total != current.epochs_total or reopens:
         now = time.time()

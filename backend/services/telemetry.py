@@ -10,7 +10,8 @@ from sqlalchemy import Connection, insert, select
 
 from backend.models import Metrics, Rollouts
 from backend.services import events, runs
-from collie.schemas import MetricsIn, MetricsPosted, MetricsRead, RolloutsIn, RolloutsPosted, RolloutsRead
+from backend.services.errors import Invalid
+from collie.schemas import EnvDims, MetricsIn, MetricsPosted, MetricsRead, RolloutsIn, RolloutsPosted, RolloutsRead
 
 
 def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
@@ -35,7 +36,15 @@ def list_metrics(conn: Connection, run_id: int, after_epoch: int | None, limit: 
 
 
 def post_rollouts(conn: Connection, run_id: int, body: RolloutsIn) -> RolloutsRead:
-    runs.row(conn, run_id)
+    """A rollout's states must be the run's env's (the labeling UI's watch mode replays them)."""
+    nq = EnvDims.model_validate(runs.row(conn, run_id).dims).nq
+    wrong = [
+        f"rollout {i}: qpos width {len(r.qpos[0])}"
+        for i, r in enumerate(body.rollouts)
+        if r.qpos and len(r.qpos[0]) != nq
+    ]
+    if wrong:
+        raise Invalid(f"rollouts do not match the run's env (nq {nq}): " + "; ".join(wrong[:5]))
     now = time.time()
     data = [r.model_dump() for r in body.rollouts]
     row_id = conn.execute(

@@ -19,6 +19,8 @@ from backend.services.auth import Caller
 
 
 class TrainerContact:
+    KEPT = 4096  # past this many (run, caller) turns, those already over are forgotten
+
     def __init__(self, every_s: float = 15.0) -> None:
         self.every_s = every_s
         self._written: dict[tuple[int, int], float] = {}  # (run, caller) → this process's last write
@@ -33,6 +35,8 @@ class TrainerContact:
             if now - self._written.get(key, -self.every_s) < self.every_s:
                 return
             self._written[key] = now
+            if len(self._written) > self.KEPT:  # calls about runs that do not exist must not pile up
+                self._written = {k: t for k, t in self._written.items() if now - t < self.every_s}
         mine = Run.id == run_id if caller.role == "operator" else (Run.id == run_id) & (Run.created_by == caller.id)
         with db.write() as conn:
             conn.execute(update(Run).where(mine).values(trainer_seen_at=time.time()))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import socket
 import sqlite3
 import time
@@ -278,6 +279,46 @@ def test_a_nul_in_a_status_message_is_refused(live: BackgroundServer, trainer: C
     assert trainer.run(created.id).status == "training"
 
 
+@pytest.mark.parametrize(
+    ("path", "body"),
+    [
+        ("metrics", {"epoch": 1, "values": {"loss\x00": 1.0}}),
+        ("rollouts", {"epoch": 1, "rollouts": [{"skill": [1.0], "xy": [[0.0, 0.0]], "extra": {"k": ["a\x00"]}}]}),
+        ("rollouts", {"epoch": 1, "rollouts": [{"skill": [1.0], "xy": [[0.0, 0.0]], "extra": {"k\x00": 1}}]}),
+        ("", {"config": {"notes": {"who": "me\x00"}}}),
+        ("", {"config": {"a\x00": 1}}),
+    ],
+)
+def test_a_nul_in_json_a_run_stores_is_refused(
+    live: BackgroundServer, trainer: CollieClient, path: str, body: dict
+) -> None:
+    """Metric names, a run's config and a rollout's extra are stored as JSON; PostgreSQL's JSON
+    cannot hold \\u0000 either. Was: 201 on SQLite, and a 500 on PostgreSQL."""
+    created = trainer.create_run(make_run_spec())
+    if not path:
+        body = {**make_run_spec().model_dump(mode="json"), **body}
+    response = post(live.url, "trainer", f"/api/runs/{created.id}/{path}" if path else "/api/runs", json=body)
+    assert response.status_code == 422 and "NUL character" in response.text, response.text
+
+
+def test_rollout_states_of_another_width_than_the_runs_env_are_refused(
+    live: BackgroundServer, trainer: CollieClient
+) -> None:
+    """Was 201: the labeling UI's watch mode then replayed states of no joint layout of the run's env."""
+    created = trainer.create_run(make_run_spec())
+    fits = {"skill": [1.0, 0.0], "xy": [[0.0, 0.0]], "qpos": [[0.0] * DIMS.nq]}
+    for qpos in ([[0.0] * (DIMS.nq + 1)], [[]]):
+        body = {"epoch": 1, "rollouts": [fits, {**fits, "qpos": qpos}]}
+        response = post(live.url, "trainer", f"/api/runs/{created.id}/rollouts", json=body)
+        assert response.status_code == 422, response.text
+        assert f"rollout 1: qpos width {len(qpos[0])}" in response.text and f"nq {DIMS.nq}" in response.text
+    assert trainer.rollouts(created.id) == []
+    assert (
+        post(live.url, "trainer", f"/api/runs/{created.id}/rollouts", json={"epoch": 1, "rollouts": [fits]}).status_code
+        == 201
+    )
+
+
 def test_database_stays_consistent(tmp_path: Path) -> None:
     """After a burst of refused requests the effective labels recomputed from the event log equal
     the cached ones."""
@@ -321,6 +362,33 @@ def test_a_body_cut_short_is_no_error_in_the_log(
     assert labeler.run(run.id).id == run.id  # still serving
     time.sleep(0.2)
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
+
+
+def resident_mb() -> float:
+    return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def test_a_body_announced_but_not_sent_holds_no_memory(live: BackgroundServer, run: RunRead) -> None:
+    """30 clients announce 16 MB of rollouts each (the route's limit) and send one byte. Was: the
+    service reserved each announced body up front, 480 MB held by clients that sent nothing (the
+    service runs in this process: its memory is ours)."""
+    host, port = live.url.removeprefix("http://").split(":")
+    head = (
+        f"POST /api/runs/{run.id}/rollouts HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKENS['trainer']}\r\n"
+        "Content-Type: application/json\r\nContent-Length: 16000000\r\n\r\n{"
+    )
+    before = resident_mb()
+    socks = [socket.create_connection((host, int(port)), timeout=10) for _ in range(30)]
+    try:
+        for sock in socks:
+            sock.sendall(head.encode())
+        time.sleep(1.0)  # each request is in its route, reading the body
+        grown = resident_mb() - before
+    finally:
+        for sock in socks:
+            sock.close()
+    assert grown < 100, f"{grown:.0f} MB held for bodies not sent"
+    assert httpx.get(f"{live.url}/api/health", timeout=10).status_code == 200
 
 
 def test_a_database_locked_by_another_process_is_a_503_to_retry(tmp_path: Path) -> None:

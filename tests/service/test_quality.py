@@ -347,6 +347,28 @@ def test_a_released_gold_segment_is_done_as_a_skipped_one(trainer: CollieClient,
     assert me.claim(run.id).query.query_id == "1-0"  # no gold copy of 0-0 again
 
 
+def test_an_operators_undo_of_a_gold_label_retires_the_copy(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    """Was: the copy went back to "pending" with its labeler as owner: no claim ever served it
+    again, nothing retired it, and its labeler could still label it after the operator's undo."""
+    run = trainer.create_run(make_run_spec(task="north").model_copy(update={"gold_rate": 0.5}))
+    trainer.post_session(run.id, north_session(0, [1.0]))
+    first = new_labeler("gold-op-a")
+    first.claim(run.id)
+    first.submit(run.id, "0-0", 1)
+    trainer.post_session(run.id, north_session(1, [1.0]))
+    me = new_labeler("gold-op-b")
+    gold = me.claim(run.id).query.query_id
+    me.submit(run.id, gold, 1)
+    assert operator.undo(run.id, gold).query_status == "retired"
+    with pytest.raises(ApiError) as err:
+        me.submit(run.id, gold, 0)
+    assert err.value.status == 409
+    assert me.claim(run.id).query.query_id == "1-0"  # no gold copy of 0-0 again
+    assert trainer.run(run.id).queue.model_dump() == {"pending": 0, "leased": 1, "labelled": 1, "retired": 0}
+
+
 def test_a_redundancy_change_keeps_what_counted_and_the_replay_agrees(
     trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
 ) -> None:

@@ -178,3 +178,8 @@ def test_a_run_is_extended_only_while_it_may_train_again(trainer: CollieClient, 
     with pytest.raises(ApiError, match="failed: it is not extended"):
         trainer.extend(failed.id, 10)
     assert [trainer.run(r.id).status for r in (stopped, failed)] == ["finished", "failed"]
+    untold = trainer.create_run(make_run_spec())  # no epochs_total: fewer than it has done are still fewer
+    trainer.set_status(untold.id, "finished", epoch=5)
+    with pytest.raises(ApiError, match="has done 5 epochs: extending means more, not 2"):
+        trainer.extend(untold.id, 2)
+    assert (trainer.run(untold.id).status, trainer.run(untold.id).epochs_total) == ("finished", None)

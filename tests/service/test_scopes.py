@@ -101,6 +101,49 @@ def test_a_labeler_limited_to_runs(live: BackgroundServer, trainer: CollieClient
     assert response.status_code == 422 and "only a labeler" in response.text
 
 
+OTHER_SPELLINGS = ("+{}", "{}.0", "%20{}", "{}%20", "{}%09", "%2B0{}", "{}_0")
+
+
+@pytest.mark.parametrize("spelling", OTHER_SPELLINGS)
+def test_a_run_written_another_way_is_refused_not_let_through(
+    live: BackgroundServer,
+    trainer: CollieClient,
+    operator: CollieClient,
+    other_trainer: Callable[[str], CollieClient],
+    spelling: str,
+) -> None:
+    """The route's int reads "+1", "1.0", " 1" and "1_0" (run 10) as a run; the scope check read
+    only plain digits and let every other form through unchecked. Was: a labeler limited to run 2
+    claimed and labelled run 1 at /runs/+1/, and another trainer set its status and posted sessions."""
+    target = trainer.create_run(make_run_spec())
+    trainer.post_session(target.id, make_session(0, 2))
+    mine = trainer.create_run(make_run_spec())
+    n = OTHER_SPELLINGS.index(spelling)
+    scoped = operator.create_labeler(f"scoped-{n}", runs=[mine.id]).token
+    intruder = other_trainer(f"trainer-{n}").token
+    raw = spelling.format(target.id)
+    before = trainer.run(target.id)
+    for token, method, path, body in (
+        (scoped, "GET", "", None),
+        (scoped, "POST", "/claim", None),
+        (scoped, "POST", "/labels", {"query_id": "0-0", "value": 0, "client_request_id": "sc-1"}),
+        (intruder, "PUT", "/status", {"status": "training", "epoch": 7, "message": "hijacked"}),
+        (intruder, "POST", "/sessions", make_session(5, 1).model_dump(mode="json")),
+        (intruder, "GET", "/export", None),
+    ):
+        answer = httpx.request(
+            method, f"{live.url}/api/runs/{raw}{path}", json=body, headers={"Authorization": f"Bearer {token}"}
+        )
+        assert answer.status_code == 422 and "run_id" in answer.text, (raw, method, path, answer.text)
+    after = trainer.run(target.id)
+    assert (after.status, after.epoch, after.queue, after.last_event_id) == (
+        before.status,
+        before.epoch,
+        before.queue,
+        before.last_event_id,
+    )
+
+
 def test_a_revoked_principal_stays_revoked(tmp_path: Path) -> None:
     settings = settings_for(tmp_path / "revoke.db")
     with BackgroundServer(create_app(settings)) as server, CollieClient(server.url, TOKENS["operator"]) as operator:

@@ -3,9 +3,12 @@ also across a service restart."""
 
 from __future__ import annotations
 
+import logging
+import socket
 import threading
 import time
 import typing
+from pathlib import Path
 
 import httpx
 import pytest
@@ -83,6 +86,36 @@ def test_sse_accepts_access_token_for_eventsource(live: BackgroundServer, run: R
     with httpx.stream("GET", url, timeout=5) as response:
         assert response.status_code == 200
     assert httpx.get(f"{live.url}/api/runs/{run.id}/stream?access_token=bad").status_code == 401
+
+
+def test_a_websocket_knock_leaves_no_token_in_the_log(tmp_path: Path) -> None:
+    """uvicorn logs each refused WebSocket upgrade at info with its query string, where the
+    dashboard's streams carry their token (the access log is off; this line is uvicorn's own).
+    Was: `collie serve --log-level info` wrote the operator's token to its log."""
+    lines: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())  # type: ignore[method-assign]
+    uvicorn_log = logging.getLogger("uvicorn.error")
+    with BackgroundServer(create_app(settings_for(tmp_path / "ws.db")), log_level="info") as server:
+        uvicorn_log.addHandler(handler)
+        try:
+            host, port = server.url.removeprefix("http://").split(":")
+            knock = (
+                f"GET /api/runs/1/stream?after=0&access_token={TOKENS['operator']} HTTP/1.1\r\nHost: x\r\n"
+                "Connection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
+                "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
+            )
+            with socket.create_connection((host, int(port)), timeout=10) as sock:
+                sock.sendall(knock.encode())
+                assert b"403" in sock.recv(1000)
+            deadline = time.monotonic() + 5
+            while not any("WebSocket" in line for line in lines) and time.monotonic() < deadline:
+                time.sleep(0.05)
+        finally:
+            uvicorn_log.removeHandler(handler)
+    logged = [line for line in lines if "WebSocket" in line]
+    assert logged and "access_token=…" in logged[0], lines  # the line is still there, its token is not
+    assert not [line for line in lines if TOKENS["operator"] in line], lines
 
 
 def test_sse_consumer_survives_a_service_restart(database_url: str) -> None:

@@ -176,7 +176,7 @@ def test_values_the_teacher_cannot_use_are_refused_by_argparse(
 def test_a_validation_error_reads_as_one_line_naming_the_field(live: BackgroundServer, labeler: CollieClient) -> None:
     with pytest.raises(ApiError) as refused:
         labeler.run(0)
-    assert str(refused.value) == "422: run_id: Input should be greater than or equal to 1"
+    assert str(refused.value) == "422: run_id: not a run's number: '0' (digits 0-9 only, 1 to 2147483647)"
     assert isinstance(refused.value.detail, list)  # the service's own detail, kept for callers that read it
 
 

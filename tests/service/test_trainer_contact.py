@@ -4,7 +4,16 @@ other callers, and the same tokens outside a trainer process, are not."""
 
 from __future__ import annotations
 
+import time
+from pathlib import Path
+
+import pytest
+
+from backend.db import Database
+from backend.migrate import upgrade
 from backend.server import BackgroundServer
+from backend.services.auth import Caller
+from backend.services.trainer_contact import TrainerContact
 from collie.client import CollieClient
 
 from .conftest import TOKENS, make_run_spec
@@ -31,3 +40,18 @@ def test_only_a_trainer_process_of_the_run_counts_as_heard(
     with CollieClient(live.url, TOKENS["operator"], part="trainer") as resumed:  # a trainer resumed by an operator
         resumed.events(again.id)
     assert operator.run(again.id).trainer_seen_at is not None
+
+
+def test_turns_of_runs_that_do_not_exist_do_not_pile_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every GET a trainer process sends about a run noted a turn, kept for good. Was: one entry per
+    run id ever named, so a loop over ids that exist nowhere grew the service without end."""
+    monkeypatch.setattr(TrainerContact, "KEPT", 16, raising=False)
+    db = Database(f"sqlite:///{tmp_path / 'contact.db'}", synchronous="NORMAL")
+    upgrade(db.engine)
+    contact = TrainerContact(every_s=0.05)
+    caller = Caller(id=1, name="t", role="trainer")
+    for run_id in range(1, 200):
+        contact.heard(db, run_id, caller)
+        if run_id % 20 == 0:
+            time.sleep(0.06)  # the turns noted so far are over
+    assert len(contact._written) <= 16 + 20
