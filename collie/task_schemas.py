@@ -31,7 +31,9 @@ def _no_nul(text: str) -> str:
 
 Text = Annotated[str, AfterValidator(_no_nul)]  # free text stored as text: no NUL (collie.schemas uses it too)
 TaskName = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:+-]+$")]
-Point = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2, description="[x, y]")]
+MAX_COORDINATE = 1e6  # metres: every arena is tens across; past this, squares overflow float64 (NaN verdicts)
+Coordinate = Annotated[FiniteFloat, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Point = Annotated[list[Coordinate], Field(min_length=2, max_length=2, description="[x, y]")]
 
 
 def _class_value(v: object) -> object:
@@ -62,13 +64,13 @@ class RegionBase(Spec):
 class DiscSpec(RegionBase):
     kind: Literal["disc"]
     centre: Point
-    radius: FiniteFloat = Field(gt=0)
+    radius: FiniteFloat = Field(gt=0, le=MAX_COORDINATE)
 
 
 class OutsideDiscSpec(RegionBase):
     kind: Literal["outside_disc"]
     centre: Point
-    radius: FiniteFloat = Field(gt=0)
+    radius: FiniteFloat = Field(gt=0, le=MAX_COORDINATE)
 
 
 class WedgeNorthSpec(RegionBase):
@@ -78,7 +80,7 @@ class WedgeNorthSpec(RegionBase):
 
 class HalfPlaneSpec(RegionBase):
     kind: Literal["halfplane_left", "halfplane_right"] = Field(description="x < x0, or x > x0")
-    x0: FiniteFloat = 0.0
+    x0: Coordinate = 0.0
 
 
 class PitchLimitSpec(RegionBase):

@@ -164,6 +164,16 @@ BAD_SPECS = [
         "regions[1] and regions[0] are both named 'pond'",
         "",
     ),
+    (  # past MAX_COORDINATE a rule's squares overflow float64: NaN verdicts (was accepted)
+        'description = "d"\n[[regions]]\nkind = "disc"\ndesirability = 0\ncentre = [1.7e308, 0]\nradius = 1\n',
+        "regions[0].centre[0]",
+        "less than or equal to 1000000",
+    ),
+    (
+        'description = "d"\n[[regions]]\nkind = "disc"\ndesirability = 0\ncentre = [0, 0]\nradius = 1e300\n',
+        "regions[0].radius",
+        "less than or equal to 1000000",
+    ),
     ('name = "north"\ndescription = "d"\nregions = []\n', "name", "already a registered task"),
     ('description = "d"\nregions = [\n  { kind = "disc" \n', "line 3", "not valid TOML"),
 ]
