@@ -17,6 +17,7 @@ import os
 import signal
 import socket
 import sys
+import tempfile
 from pathlib import Path
 from typing import NoReturn
 
@@ -29,6 +30,7 @@ from collie.addresses import link_host
 from collie.argtypes import file_descriptor, port, sqlite_file
 from collie.schemas import SERVED_TEACHER_PRINCIPAL
 from collie.tokens import read_tokens_file, weakness, write_secret
+from collie.whole_files import broken_link, not_replaceable
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
 TEACHER_TOKEN = "COLLIE_TEACHER_TOKEN"
@@ -179,6 +181,21 @@ def check_sqlite_file(path: Path, shown: str) -> None:
         refuse(f"{shown}: give a new file or a collie one")
 
 
+def check_tokens_json(path: Path) -> None:
+    """--tokens-json must take a file before any token is made: one made and stored (as a hash)
+    but neither written there nor printed would lock everybody out (the next start finds it kept)."""
+    if not_replaceable(path):  # /dev/stdout, a FIFO: written in place
+        return
+    if path.is_dir():
+        refuse(f"--tokens-json {path} is a folder; give a file's path")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path.parent):  # root may write where access() would say no
+            pass
+    except OSError as exc:
+        refuse(f"--tokens-json {path}: cannot write a file in {path.parent} ({broken_link(exc) or exc.strerror})")
+
+
 def refuse(why: str) -> NoReturn:
     """A refusal no restart mends, as argparse reports its own: one line, exit status 2 (the
     supervisor of `collie up` stops restarting on it)."""
@@ -210,6 +227,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"collie serve: error: {exc}") from None
     except DBAPIError as exc:  # e.g. a file that is not SQLite
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
+    if args.tokens_json is not None:
+        check_tokens_json(args.tokens_json)
     # Bound before the database is opened: a start that cannot listen must not create the database
     # and its tokens, which it would never print (the next start finds them "kept": a lockout).
     sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)

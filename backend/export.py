@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     where = describe(url) if args.db is None else str(args.db)
     path = Path(make_url(url).database or "") if is_sqlite(url) else None
     if path is not None and not path.is_file():  # never create an empty one by mistake
-        print(f"collie export: error: no database at {where}", file=sys.stderr)
+        what = "is a folder; give a SQLite file's path" if path.is_dir() else "does not exist"
+        print(f"collie export: error: {where} {what}", file=sys.stderr)
         return 2
     db = Database(url)  # connects only when used
     # A SQLite file is read read-only: nothing written (the service's connections set WAL mode,

@@ -12,6 +12,7 @@ import argparse
 import contextlib
 import json
 import os
+import shlex
 import signal
 import socket
 import subprocess
@@ -34,6 +35,7 @@ from collie.supervisor import ChildFailed, Supervisor
 from collie.tasks import default_task
 from collie.teacher_principal import teacher_token
 from collie.tokens import MIN_TOKEN, TOKEN_ENV, random_token, read_tokens_file, weakness, write_secret
+from collie.whole_files import broken_link
 
 if TYPE_CHECKING:  # the HTTP client and schemas load after the children are spawned: they start sooner
     from collie.client import CollieClient
@@ -159,6 +161,30 @@ def run_task_flags(args: argparse.Namespace, resume: bool) -> list[str]:
     return args.task_flags if given or not resume else []
 
 
+def run_flags(args: argparse.Namespace, resume: bool) -> list[str]:
+    """The trainer's flags for the run (where it writes and which service it talks to aside)."""
+    people = ["--people-schedule"] if args.teacher == "none" else []  # the first session earlier
+    return [
+        *("--env", args.env, *run_task_flags(args, resume), "--method", args.method, "--preset", args.preset),
+        *("--seed", str(args.seed), "--noise-band", str(args.noise_band), *people, *args.train_flags),
+    ]
+
+
+def refused_by_trainer(args: argparse.Namespace) -> str | None:
+    """What `collie train` would refuse in the run's flags (an env, task or method misspelt, a typo
+    or a value out of range in --train-args), asked of `collie train --print-config` (a third of a
+    second) before anything starts: else the stack started, made OUT, and its trainer said so."""
+    command = [sys.executable, "-m", "collie.cli", "train", *run_flags(args, resume=False), "--print-config"]
+    try:
+        said = subprocess.run(command, capture_output=True, text=True, env=child_env(), stdin=subprocess.DEVNULL)
+    except OSError:  # no Python to ask (this user may not run it): the started trainer will say what it refuses
+        return None
+    if said.returncode == 0:
+        return None
+    lines = said.stderr.strip().splitlines() or [f"exit status {said.returncode}"]
+    return lines[-1].removeprefix("collie train: error: ")
+
+
 def run_name(args: argparse.Namespace) -> str:
     if args.instruction is not None:
         return "instruction"
@@ -175,7 +201,11 @@ UP_OWNS = ("--out", "--api", "--run-id", "--resume", "--env", "--task", "--task-
 def checked(args: argparse.Namespace) -> Path:
     """OUT, once the arguments are known to make sense together (ValueError naming what does not)."""
     args.task_flags = task_flags(args)
-    owned = owned_flags(args.train_args.split(), UP_OWNS)
+    try:  # as a shell splits it: `--train-args "--instruction 'keep off the east side'"`
+        args.train_flags = shlex.split(args.train_args)
+    except ValueError as exc:  # an unclosed quote
+        raise ValueError(f"--train-args {args.train_args!r}: {exc}") from None
+    owned = owned_flags(args.train_flags, UP_OWNS)
     if owned:
         raise ValueError(f"--train-args may not set {', '.join(owned)}: give it to collie up itself (or not at all)")
     out = args.out or Path(f"runs/up-{args.env}-{run_name(args)}")
@@ -225,7 +255,7 @@ def made(folder: Path, what: str) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ValueError(f"cannot create {what} {folder}: {exc.strerror or exc}") from None
+        raise ValueError(f"cannot create {what} {folder}: {broken_link(exc) or exc.strerror or exc}") from None
 
 
 def locked(out: Path) -> int:
@@ -249,6 +279,9 @@ def locked(out: Path) -> int:
 def run(args: argparse.Namespace) -> int:
     try:
         out = checked(args)
+        why = refused_by_trainer(args)
+        if why is not None:
+            raise ValueError(f"collie train would refuse the run: {why}")
         if args.info_json is not None:
             made(args.info_json.parent, "the folder of --info-json")
         made(out, "--out")
@@ -333,28 +366,7 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     # The service holds the run once the trainer made it: the stack continues it, from the checkpoint if
     # one was written (else from epoch 0, reusing the sessions posted), never a new run beside it.
     resume = memo.exists()
-    people = ["--people-schedule"] if args.teacher == "none" else []  # the first session earlier
-    train = [
-        "train",
-        "--env",
-        args.env,
-        *run_task_flags(args, resume),
-        "--method",
-        args.method,
-        "--preset",
-        args.preset,
-        "--seed",
-        str(args.seed),
-        "--out",
-        str(trainer_out),
-        "--api",
-        api,
-        "--no-progress",
-        "--noise-band",
-        str(args.noise_band),
-        *people,
-        *args.train_args.split(),
-    ]
+    train = ["train", *run_flags(args, resume), "--out", str(trainer_out), "--api", api, "--no-progress"]
 
     def train_args() -> list[str]:
         """A (re)started trainer continues the run it created, from its checkpoint when it wrote one."""

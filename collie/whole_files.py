@@ -44,3 +44,12 @@ def not_replaceable(path: Path) -> bool:
     not turn a write into a write of whatever it points at."""
     in_dev = path.absolute().parts[:2] == ("/", "dev")
     return in_dev or (path.exists() and not path.is_file() and not path.is_dir())
+
+
+def broken_link(exc: OSError) -> str | None:
+    """ "PATH is a link to TARGET, which does not exist" when `exc` is mkdir's refusal of a dangling
+    link on the way (a folder linked to an unmounted disk, say): it says only "File exists"."""
+    name = exc.filename
+    if exc.errno != errno.EEXIST or name is None or not os.path.islink(name) or os.path.exists(name):
+        return None
+    return f"{name}: a link to {os.readlink(name)}, which does not exist"

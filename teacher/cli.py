@@ -30,7 +30,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api", required=True, type=http_url, help="service URL, e.g. http://127.0.0.1:8000")
     add_token_arguments(parser, "labeler")
     parser.add_argument("--run", type=record_id, required=True, help="run id")
-    parser.add_argument("--noise-band", type=float, default=0.0, help="R_error: random labels this close to a boundary")
+    parser.add_argument(
+        "--noise-band",
+        type=float_in(0, low_open=False),
+        default=0.0,
+        help="R_error: random labels this close to a boundary (≥ 0)",
+    )
     parser.add_argument("--seed", type=seed, default=0, help="seed of the noise")
     # > 0, as `collie up --teacher-rate`: a rate of 0 or less would never label
     parser.add_argument("--rate", type=float_in(0), default=None, help="at most this many labels per second (> 0)")

@@ -28,7 +28,7 @@ def test_the_installed_collie_command_runs_entry() -> None:
 @pytest.mark.parametrize(
     ("argv", "code", "said"),
     [
-        (["export", "--db", "{tmp}/absent.db", "--run", "1"], 2, "no database at"),  # a command's own return
+        (["export", "--db", "{tmp}/absent.db", "--run", "1"], 2, "absent.db does not exist"),  # a command's own return
         (["export", "--help"], 0, "usage: collie export"),  # argparse's SystemExit inside main
     ],
 )

@@ -76,6 +76,8 @@ def test_resume_without_a_checkpoint_is_refused_and_creates_nothing(tmp_path: Pa
     out = tmp_path / "never"
     refused(train("--out", str(out), "--resume"), "--resume", "no checkpoint", str(out / "checkpoint.pt"))
     assert not out.exists()
+    (out / "checkpoint.pt").mkdir(parents=True)  # was "no checkpoint at": there is something, and not one
+    refused(train("--out", str(out), "--resume"), f"--resume: {out / 'checkpoint.pt'} is a folder, not a checkpoint")
 
 
 @pytest.mark.parametrize("where", ["file", "under_file"])

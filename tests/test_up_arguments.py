@@ -38,6 +38,14 @@ def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.Completed
         (["--teacher-rate", "-1", "--teacher", "oracle"], "--teacher-rate must be > 0"),
         (["--out", "/proc/nope"], "cannot create --out /proc/nope: No such file or directory"),
         (["--info-json", "afile/info.json"], "cannot create the folder of --info-json afile: File exists"),
+        (["--train-args", "--epochs '3"], '--train-args "--epochs \'3": No closing quotation'),
+        # the trainer's own refusals, asked before anything starts (was: the stack started, made OUT, then failed)
+        (["--env", "pointt"], "collie train would refuse the run: unknown env 'pointt'; valid: point, ant,"),
+        (["--task", "nort"], "collie train would refuse the run: unknown task 'nort'; valid tasks: north,"),
+        (["--method", "colie"], "collie train would refuse the run: unknown method 'colie'; valid: collie,"),
+        (["--train-args", "--bogus 3"], "collie train would refuse the run: unrecognized arguments: --bogus 3"),
+        (["--train-args", "--epochs -3"], "collie train would refuse the run: --epochs must be ≥ 1, got -3"),
+        (["--noise-band", "-1"], "collie train would refuse the run: --noise-band must be ≥ 0, got -1.0"),
     ],
 )
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path: Path, args: list[str], said: str) -> None:
@@ -76,9 +84,15 @@ def test_another_stacks_database_without_its_tokens_is_refused(tmp_path: Path) -
 
 
 def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
-    proc = up(tmp_path, "--env", "nope", "--port", "0", "--out", str(tmp_path / "o"))
+    """A refusal only the started trainer finds (its flags read well: `collie up` asked beforehand)."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA device is here: --device cuda starts")
+    proc = up(tmp_path, "--train-args", "--device cuda", "--port", "0", "--out", str(tmp_path / "o"))
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
-    assert "the trainer exited with code 2 before it was ready: collie train: error: unknown env 'nope'" in proc.stderr
+    said = "the trainer exited with code 2 before it was ready: collie train: error: --device cuda: torch sees no CUDA"
+    assert said in proc.stderr
 
 
 def test_a_service_that_cannot_open_its_database_is_named_with_the_reason(tmp_path: Path) -> None:

@@ -21,7 +21,7 @@ from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
-from collie.whole_files import UNWRITABLE
+from collie.whole_files import UNWRITABLE, broken_link
 from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.run_files import ResumeError, RunFolderError, read_json_object, write_json
@@ -394,6 +394,8 @@ def check_out(out: Path, resume: bool) -> list[Path]:
     try:
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out} is a file, not a folder")
+        if resume and (out / "checkpoint.pt").is_dir():
+            raise ValueError(f"--resume: {out / 'checkpoint.pt'} is a folder, not a checkpoint")
         if resume and not (out / "checkpoint.pt").is_file():
             raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
         source = rescored_from(out) if resume else None
@@ -413,8 +415,8 @@ def check_out(out: Path, resume: bool) -> list[Path]:
     made = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:  # e.g. /sys, read-only for root too
-        raise ValueError(f"--out {out}: cannot create it ({exc.strerror})") from None
+    except OSError as exc:  # e.g. /sys, read-only for root too; a link to an unmounted disk
+        raise ValueError(f"--out {out}: cannot create it ({broken_link(exc) or exc.strerror})") from None
     return made
 
 

@@ -36,6 +36,8 @@ def run_config(run_dir: str | Path) -> Config:
 
 def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
     """Rebuild the run's learner from its checkpoint, on `device`, ready to act."""
+    if not Path(run_dir).is_dir():
+        raise FileNotFoundError(f"{run_dir} is not a folder: give a run folder")
     if not (Path(run_dir) / "checkpoint.pt").exists():
         raise FileNotFoundError(
             f"{run_dir} has no checkpoint.pt: its networks are not kept (an archived run holds results only)"

@@ -69,6 +69,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     name for it, beside `source`); returns the folder. `keep_existing`: a folder already rescored
     from `source` is left as it is (so a bench can be rerun to continue)."""
     summary_path = source / "summary.json"
+    if not source.is_dir():
+        raise RescoreError(f"{source} is not a folder: give a run folder")
     if not summary_path.exists():
         raise RescoreError(f"{source} is not a run folder: it has no summary.json")
     try:  # names the broken file: a summary or config that is not JSON, or a config without a seed

@@ -95,6 +95,8 @@ def test_an_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
     with pytest.raises(RescoreError, match="ant-range-metra-s0 is a file, not a folder"):
         rescore(source, "range")
     assert (tmp_path / "a-file").read_text() == (tmp_path / "ant-range-metra-s0").read_text() == "kept"
+    with pytest.raises(RescoreError, match="no-such-run is not a folder: give a run folder"):  # was "no summary.json"
+        rescore(tmp_path / "no-such-run", "range")
 
 
 @pytest.mark.slow
@@ -159,6 +161,10 @@ def test_the_downstream_command_on_an_archived_run_says_its_networks_are_not_kep
     (source / "config.json").write_text(json.dumps({"env": "ant", "task": "north", "method": "metra", "seed": 0}))
     assert downstream([str(source)]) == 2
     assert f"downstream: error: {source} has no checkpoint.pt: its networks are not kept" in capsys.readouterr().err
+    assert downstream([str(tmp_path / "no-such-run")]) == 2  # was: "has no checkpoint.pt: … an archived run"
+    assert (
+        f"downstream: error: {tmp_path / 'no-such-run'} is not a folder: give a run folder" in capsys.readouterr().err
+    )
     with pytest.raises(SystemExit):
         downstream([str(source), "--trajectories", "0"])
     assert "--trajectories must be ≥ 1, got 0" in capsys.readouterr().err

@@ -75,6 +75,20 @@ def test_an_out_through_a_file_is_one_line_naming_it(tmp_path: Path, capsys: pyt
     assert (tmp_path / "a-file").read_text() == "kept"
 
 
+def test_an_out_through_a_link_to_nowhere_is_one_line_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A folder linked to a disk not mounted now. Was: FileExistsError's traceback ("File exists")."""
+    link = tmp_path / "on-the-usb-disk"
+    link.symlink_to(tmp_path / "mnt" / "usb")
+    for argv in commands(tmp_path, link):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        said = f"collie {argv[0]}: error: cannot use {link}: a link to {tmp_path / 'mnt' / 'usb'}, which does not exist"
+        assert err == said + "\n", err
+    assert not (tmp_path / "mnt").exists()
+
+
 def test_a_rescore_that_fills_the_disk_midway_leaves_no_half_written_folder(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -105,7 +105,11 @@ def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -
     empty.mkdir()
     env = {k: v for k, v in os.environ.items() if k != "COLLIE_DATABASE_URL"}
     out = collie("export", "--run", "1", cwd=empty, env=env)
-    assert out.returncode == 2 and "no database at" in out.stderr and list(empty.iterdir()) == []
+    assert out.returncode == 2 and "collie.db does not exist" in out.stderr and list(empty.iterdir()) == []
+    out = collie("export", "--db", str(empty), "--run", "1")
+    assert (
+        out.returncode == 2 and f"{empty} is a folder; give a SQLite file's path" in out.stderr
+    )  # was "no database at"
 
 
 def test_an_export_that_upgrades_leaves_the_upgrade_in_the_database_file(tmp_path: Path) -> None:
@@ -268,6 +272,32 @@ def test_a_start_that_cannot_listen_is_a_one_line_error_that_makes_no_database(t
     server, _ = start_serve(db, tokens_file, env)  # the next start makes (and writes) every token
     try:
         assert sorted(json.loads(tokens_file.read_text())["tokens"]) == ["labeler", "operator", "trainer"]
+    finally:
+        stop(server)
+
+
+def test_a_tokens_file_that_cannot_be_written_is_refused_before_any_token_is_made(tmp_path: Path) -> None:
+    """Was: the tokens were made and stored (as hashes), then writing --tokens-json failed with a
+    traceback; the next start said they were "kept from the last start, which printed it": a lockout."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db = tmp_path / "c.db"
+    (tmp_path / "unmounted").symlink_to(tmp_path / "gone")
+    (tmp_path / "a-folder").mkdir()
+    refused = [
+        (tmp_path / "unmounted" / "t.json", f"{tmp_path / 'unmounted'}: a link to {tmp_path / 'gone'}, which"),
+        (tmp_path / "a-folder", "is a folder; give a file's path"),
+    ]
+    for path, said in refused:
+        out = collie("serve", "--db", str(db), "--port", "0", "--tokens-json", str(path), env=env)
+        assert out.returncode == 2 and said in out.stderr and "Traceback" not in out.stderr, out.stderr
+        assert not db.exists()
+    server, _ = start_serve(db, tmp_path / "tokens.json", env)  # the next start makes (and writes) every token
+    try:
+        assert sorted(json.loads((tmp_path / "tokens.json").read_text())["tokens"]) == [
+            "labeler",
+            "operator",
+            "trainer",
+        ]
     finally:
         stop(server)
 

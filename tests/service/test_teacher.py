@@ -160,6 +160,7 @@ def test_a_200_that_is_not_json_at_the_start_is_one_line_and_exit_2() -> None:
         (["--rate", "0"], "argument --rate: 0 must be > 0"),  # as `collie up --teacher-rate 0`
         (["--rate", "-1"], "argument --rate: -1 must be > 0"),
         (["--wait", "-1"], "argument --wait: -1 must be ≥ 0"),
+        (["--noise-band", "-1"], "argument --noise-band: -1 must be ≥ 0"),  # was "noise_band must be ≥ 0", later
         (["--seed", "99999999999999999999"], "argument --seed: 99999999999999999999 is more than 4294967295"),
     ],
 )
