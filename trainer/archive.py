@@ -144,6 +144,10 @@ def jobs_in(given: Path, out_root: Path) -> list[tuple[Path, Path | None]]:
     finished, unfinished, unreadable = runs_below(given)
     if not finished and not unfinished and not unreadable:
         raise ArchiveError(f"{given} holds no run folder (none has summary.json)")
+    target = out_root.resolve()
+    holder = next((f for f in (*finished, *unfinished) if f.resolve() in (target, *target.parents)), None)
+    if holder is not None:  # as into_itself refuses it for a run folder given
+        raise ArchiveError(f"--out {out_root} is inside the run folder {holder}; give a folder outside it")
     for left in unfinished:
         print(f"left out (not finished): {left}")
     for why in unreadable:

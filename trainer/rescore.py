@@ -96,6 +96,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
     out = out or source.parent / f"{cfg['env']}-{task}-{cfg['method']}-s{cfg['seed']}"
     if out.exists() and not out.is_dir():  # else mkdir's FileExistsError, a traceback
         raise RescoreError(f"{out} is a file, not a folder")
+    if source.resolve() in out.resolve().parents:  # a run inside the run it was made of (itself: "holds a run")
+        raise RescoreError(f"--out {out} is inside the run folder {source}; give a folder outside it")
     if (out / "summary.json").exists():
         held = read_json_object(out / "summary.json")  # RunFolderError, a ValueError, names a broken one
         if keep_existing and same_run(held.get("rescored_from"), source):

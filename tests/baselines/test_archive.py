@@ -110,6 +110,7 @@ def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_er
         (sweep, sweep, f"--out {sweep} is the folder given to archive; give another folder"),  # was: rc 0, nothing
         (run, run, f"--out {run} is the folder given to archive"),
         (run, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # was: a copy inside itself
+        (sweep, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # a run below the root given
     ]
     for given, out, said in refused:
         assert main(["archive", str(given), "--out", str(out)]) == 2

@@ -97,6 +97,8 @@ def test_an_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
     assert (tmp_path / "a-file").read_text() == (tmp_path / "ant-range-metra-s0").read_text() == "kept"
     with pytest.raises(RescoreError, match="no-such-run is not a folder: give a run folder"):  # was "no summary.json"
         rescore(tmp_path / "no-such-run", "range")
+    with pytest.raises(RescoreError, match="is inside the run folder"):  # was: a run made inside its source
+        rescore(source, "range", source / "x")
 
 
 @pytest.mark.slow
