@@ -72,6 +72,15 @@ def test_an_existing_run_is_not_overwritten_without_resume(run_copy: Path) -> No
     assert {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()} == before
 
 
+def test_service_flags_without_a_service_are_refused_and_create_nothing(tmp_path: Path) -> None:
+    """Was: trained offline, the flags ignored (a forgotten or misspelt --api among them)."""
+    out = tmp_path / "offline"
+    refused(train("--out", str(out), "--run-id", "3"), "--run-id is for a run on a labeling service: give --api")
+    said = "--feedback-timeout, --token-file are for a run on a labeling service: give --api too (or drop them)"
+    refused(train("--out", str(out), "--token-file", "/nonexistent", "--feedback-timeout", "5"), said)
+    assert not out.exists()
+
+
 def test_resume_without_a_checkpoint_is_refused_and_creates_nothing(tmp_path: Path) -> None:
     out = tmp_path / "never"
     refused(train("--out", str(out), "--resume"), "--resume", "no checkpoint", str(out / "checkpoint.pt"))
@@ -159,12 +168,36 @@ def test_a_damaged_metrics_line_before_the_last_is_named(run_copy: Path) -> None
         ("--target-entropy-scale", "nan", ("--target-entropy-scale", "finite")),
         ("--eval-trajectories", "0", ("--eval-trajectories", "≥ 1")),  # was "num_envs must be >= 1" later
         ("--batch-size", "6000", ("--batch-size 6000", "--replay-capacity 5000")),  # was accepted
+        (
+            "--start-transitions",
+            "6000",
+            ("--start-transitions 6000", "--replay-capacity 5000"),
+        ),  # was: no step, "finished"
         ("--instruction", "", ("--instruction is empty",)),  # was "unknown task 'instruction'"
     ],
 )
 def test_bad_values_are_refused_before_training(tmp_path: Path, flag: str, value: str, words: tuple[str, ...]) -> None:
     refused(train("--epochs", "1", "--out", str(tmp_path / "run"), flag, value, timeout=60), *words)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_run_whose_sizes_leave_its_learning_or_its_labels_undone_says_so() -> None:
+    """Was silent: a COLLIE run that asked for no label finished as METRA, and one whose first
+    gradient step lay past its last epoch reported "finished"."""
+    from trainer.cli import idle_parts
+    from trainer.config import make_config
+
+    assert idle_parts(make_config("smoke", "point", method="collie")) == []
+    assert idle_parts(make_config("smoke", "point", method="collie", warmup=8)) == [
+        "collie asks for no label in this run (--warmup 8 ≥ --epochs 8): it learns as METRA does"
+    ]
+    assert idle_parts(make_config("smoke", "point", method="collie", total_queries=0))[0].endswith(
+        "(--total-queries 0): it learns as METRA does"
+    )
+    assert idle_parts(make_config("smoke", "point", method="metra", warmup=8)) == []  # asks for none anyway
+    assert idle_parts(make_config("smoke", "point", method="metra", start_transitions=5000)) == [
+        "no gradient step in this run: --start-transitions 5000 is more than the 1600 transitions its 8 epochs collect"
+    ]
 
 
 def test_device_cuda_without_cuda_is_refused(tmp_path: Path) -> None:

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from collie.schemas import RunRead
     from trainer.feedback.http import HttpFeedback
 
+SERVICE_FLAGS = ("--run-id", "--feedback-timeout", "--token", "--token-file")  # meaningless without --api
 MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
 
 
@@ -186,6 +187,22 @@ def config_from_args(args: argparse.Namespace) -> Config:
     if getattr(args, "people_schedule", False) and all(overrides[k] is None for k in SCHEDULE_KEYS):
         overrides.update(people_schedule(args.preset, args.env))
     return make_config(args.preset, args.env, **overrides)
+
+
+def idle_parts(cfg: Config) -> list[str]:
+    """What the run's sizes leave undone, said before it trains hours for it (not refused: a larger
+    --epochs on --resume may give them room)."""
+    said = []
+    collected = cfg.epochs * cfg.episodes_per_epoch * cfg.episode_steps
+    if cfg.start_transitions > collected:
+        said.append(
+            f"no gradient step in this run: --start-transitions {cfg.start_transitions} is more than the "
+            f"{collected} transitions its {cfg.epochs} epochs collect"
+        )
+    if METHODS[cfg.method].asks_labels and (cfg.warmup >= cfg.epochs or cfg.total_queries == 0):
+        why = "--total-queries 0" if cfg.total_queries == 0 else f"--warmup {cfg.warmup} ≥ --epochs {cfg.epochs}"
+        said.append(f"{cfg.method} asks for no label in this run ({why}): it learns as METRA does")
+    return said
 
 
 def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
@@ -535,6 +552,11 @@ def run(args: argparse.Namespace) -> int:
                 cfg.task = rule.definition.name
             print(json.dumps(cfg.to_dict(), indent=2))
             return 0
+        unused = [flag for flag in SERVICE_FLAGS if getattr(args, flag[2:].replace("-", "_"), None) is not None]
+        if args.api is None and unused:  # a run without a service would ignore them, and a typo'd --api with them
+            one = len(unused) == 1
+            raise ValueError(f"{', '.join(unused)} {'is' if one else 'are'} for a run on a labeling service: "
+                             f"give --api too (or drop {'it' if one else 'them'})")  # fmt: skip
         made = check_out(Path(cfg.out), args.resume)
         lock_run_folder(Path(cfg.out))  # held until this process ends (the descriptor stays open)
         locked = True
@@ -579,6 +601,8 @@ def run(args: argparse.Namespace) -> int:
                 f"collie train: warning: --threads {cfg.threads} is more than this machine's {cores} cores",
                 file=sys.stderr,
             )
+        for said in idle_parts(cfg):
+            print(f"collie train: warning: {said}", file=sys.stderr)
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
         from trainer.loop import Trainer, TrainingDiverged, pick_device
         from trainer.networks import fast_ops_pay

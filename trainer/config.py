@@ -170,6 +170,11 @@ class Config:
             f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
         )
         need(
+            self.start_transitions <= self.replay_capacity,
+            f"--start-transitions {self.start_transitions} must be ≤ --replay-capacity {self.replay_capacity} (the "
+            "buffer never holds more: no gradient step would ever be taken)",
+        )
+        need(
             self.batch_size <= self.replay_capacity,
             f"--batch-size {self.batch_size} must be ≤ --replay-capacity {self.replay_capacity} (the transitions "
             "a batch is drawn from)",
