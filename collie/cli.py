@@ -67,6 +67,15 @@ def unwritable_line(exc: OSError) -> str | None:
     return None
 
 
+def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("collie")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        return "(not installed)"
+
+
 def main(argv: list[str] | None = None) -> int:
     from collie.startup import mark
 
@@ -78,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         early_term.note_sigterm()
     mark("python start")
     parser = argparse.ArgumentParser(prog="collie", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"collie {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     chosen = parser  # the command's own parser once known: its errors read "collie train: error: …"
     for name, (module_name, help_text) in SUBCOMMANDS.items():

@@ -4,7 +4,7 @@ the whole of torch before the OS frees it."""
 
 import subprocess
 import sys
-from importlib.metadata import entry_points
+from importlib.metadata import entry_points, version
 from pathlib import Path
 
 import pytest
@@ -39,3 +39,9 @@ def test_entry_exits_with_main_s_code_and_the_heap_frozen(tmp_path: Path, argv, 
     assert said in done.stdout + done.stderr
     frozen = int(done.stderr.rsplit("frozen ", 1)[1])
     assert frozen > 1000, done.stderr  # every object of the imports, not a handful
+
+
+def test_version_names_the_installed_package() -> None:
+    """Was: "the following arguments are required: COMMAND", exit 2."""
+    done = subprocess.run([sys.executable, "-m", "collie.cli", "--version"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout == f"collie {version('collie')}\n", done.stdout + done.stderr

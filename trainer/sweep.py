@@ -744,9 +744,10 @@ def run(args: argparse.Namespace) -> int:
     if todo or args.downstream or not args.no_report:  # something will be written under --out
         check_writable(Path(args.out))
     say_what_finished_runs_get(specs)
+    processes = "1 local process" if args.jobs == 1 else f"{args.jobs} local processes"
     print(
-        f"{len(specs)} runs, {len(specs) - todo} already finished; engine: "
-        f"{'ray ' + args.ray if args.ray else f'{args.jobs} local processes'}"
+        f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - todo} already finished; engine: "
+        f"{'ray ' + args.ray if args.ray else processes}"
     )
     failed: list[tuple[RunSpec, Exception]] = []
     stop, before = Stop(), {}

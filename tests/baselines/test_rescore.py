@@ -13,6 +13,8 @@ from trainer.metrics import coverage_metrics
 from trainer.report import write_report
 from trainer.rescore import RescoreError, rescore
 
+from .test_report import fake_run
+
 
 def finished_run(root, method="metra", status="finished"):
     d = root / f"ant-north-{method}-s0"
@@ -170,3 +172,14 @@ def test_the_downstream_command_on_an_archived_run_says_its_networks_are_not_kep
     with pytest.raises(SystemExit):
         downstream([str(source), "--trajectories", "0"])
     assert "--trajectories must be ≥ 1, got 0" in capsys.readouterr().err
+
+
+def test_the_downstream_command_on_an_unfinished_run_says_so(tmp_path):
+    """Was silent: an interrupted run's skills were evaluated as if it had finished."""
+    from trainer.downstream.__main__ import not_finished
+
+    stopped = fake_run(tmp_path, "point", "north", "metra", 0, 1.0, status="interrupted")
+    said = not_finished(stopped)
+    assert said is not None and said.startswith(f"{stopped} has not finished (status interrupted, epoch")
+    assert not_finished(fake_run(tmp_path, "point", "north", "metra", 1, 1.0)) is None
+    assert not_finished(tmp_path / "nowhere") is None  # load_skills says what is missing

@@ -24,7 +24,7 @@ from trainer.downstream.goal import GoalOptions
 from trainer.downstream.ppo import PpoConfig, evaluate, greedy, train_ppo
 from trainer.downstream.zero_shot import zero_shot
 from trainer.pretrained import TrainedSkills, load_skills
-from trainer.run_files import write_json
+from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.task_choice import judged_by
 
 PPO_PRESETS: dict[str, dict[str, Any]] = {
@@ -111,6 +111,20 @@ def refusal(a: argparse.Namespace) -> str | None:
     return f"--trajectories must be ≥ 1, got {a.trajectories}" if a.trajectories < 1 else None
 
 
+def not_finished(run_dir: Path) -> str | None:
+    """Words for a run that stopped short (its skills are its last checkpoint's), else None."""
+    try:
+        summary = read_json_object(run_dir / "summary.json")
+    except RunFolderError:  # missing or broken: load_skills names what it needs
+        return None
+    if summary.get("status") == "finished":
+        return None
+    return (
+        f"{run_dir} has not finished (status {summary.get('status')}, epoch {summary.get('epochs_done')}): "
+        "its skills are those of its last checkpoint"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m trainer.downstream", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -119,6 +133,9 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if refusal(a):
         p.error(str(refusal(a)))
+    unfinished = not_finished(Path(a.run_dir))
+    if unfinished:
+        print(f"downstream: warning: {unfinished}", file=sys.stderr)
     torch.set_num_threads(a.threads)
     overrides = {
         f.name: getattr(a, f"ppo_{f.name}")
