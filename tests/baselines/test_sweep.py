@@ -277,7 +277,7 @@ def test_a_name_given_twice_is_one_run(tmp_path):
         text=True,
         timeout=300,
     )
-    assert done.returncode == 0 and done.stdout.startswith("1 runs"), done.stdout + done.stderr
+    assert done.returncode == 0 and done.stdout.startswith("1 run,"), done.stdout + done.stderr
 
 
 def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_other(tmp_path):
@@ -335,7 +335,7 @@ def test_a_sweep_runs_a_task_from_a_file_given_by_a_relative_path(tmp_path):
     (tmp_path / "charger.toml").write_text(CHARGER)
     cmd = sweep_command("runs", "--task-file", "charger.toml", "--methods", "metra", "--seeds", "1", "--jobs", "1")
     done = subprocess.run([*cmd, "--", "--epochs", "1"], capture_output=True, text=True, timeout=300, cwd=tmp_path)
-    assert done.returncode == 0 and done.stdout.startswith("1 runs"), done.stdout + done.stderr
+    assert done.returncode == 0 and done.stdout.startswith("1 run,"), done.stdout + done.stderr
     run = tmp_path / "runs" / "point-charger-metra-s0"
     summary = json.loads((run / "summary.json").read_text())
     assert summary["status"] == "finished" and summary["config"]["task"] == "charger"

@@ -85,7 +85,8 @@ def test_serve_then_export(tmp_path: Path) -> None:
     finally:
         stop(server)
     missing = collie("export", "--db", str(tmp_path / "nope.db"), "--run", "1")
-    assert missing.returncode == 2 and "no database" in missing.stderr and not (tmp_path / "nope.db").exists()
+    assert missing.returncode == 2 and "nope.db does not exist" in missing.stderr
+    assert not (tmp_path / "nope.db").exists()
     unknown = collie("export", "--db", str(db), "--run", "99")
     assert unknown.returncode == 1 and "no run 99" in unknown.stderr
 
