@@ -57,7 +57,9 @@ async def list_runs(
     db: DB,
     limit: RunsLimit = 100,
     after: Annotated[int, Query(ge=0, le=MAX_INT, description="the version last seen")] = 0,
-    wait_s: Annotated[float, Query(ge=0, le=60, description="wait this long for a newer version")] = 0.0,
+    wait_s: Annotated[
+        float, Query(ge=0, le=60, allow_inf_nan=False, description="wait this long for a newer version")
+    ] = 0.0,
 ) -> RunsPage:
     """The newest runs. A long poll: with wait_s, answers as soon as any run's log grows past
     version `after`, else after wait_s (lease counts change without a version)."""

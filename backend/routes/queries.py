@@ -95,7 +95,9 @@ async def claim(
     caller: LabelerCaller,
     db: DB,
     settings: SettingsDep,
-    lease_s: Annotated[float | None, Query(gt=0, le=MAX_LEASE_S, description="lease length; default: settings")] = None,
+    lease_s: Annotated[
+        float | None, Query(gt=0, le=MAX_LEASE_S, allow_inf_nan=False, description="lease length; default: settings")
+    ] = None,
     hold: Annotated[int, Query(ge=1, le=MAX_HOLD, description="hold up to this many (2: preload the next)")] = 1,
     tab: Annotated[TabId | None, Query(description="the browser tab the claim is for: only it may label it")] = None,
 ) -> Response:

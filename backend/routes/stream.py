@@ -57,7 +57,7 @@ async def events_page(
     settings: SettingsDep,
     after: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
     limit: Annotated[int, Query(ge=1, le=events.MAX_PAGE)] = events.MAX_PAGE,
-    wait_s: Annotated[float, Query(ge=0, le=60)] = 0.0,
+    wait_s: Annotated[float, Query(ge=0, le=60, allow_inf_nan=False)] = 0.0,
 ) -> Response:
     loop = asyncio.get_running_loop()
     deadline = loop.time() + wait_s

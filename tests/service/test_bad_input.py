@@ -75,6 +75,19 @@ def test_a_run_id_that_is_no_id_is_a_422(live: BackgroundServer, raw: str, role:
         assert answer.status_code == (403 if refused_role else 422), (method, path, answer.status_code, answer.text)
 
 
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_a_wait_or_lease_that_is_no_number_says_so(live: BackgroundServer, run: RunRead, value: str) -> None:
+    """Was: "Input should be less than or equal to 60" for wait_s=nan."""
+    headers = {"Authorization": f"Bearer {TOKENS['operator']}"}
+    for method, path in (
+        ("GET", f"/api/runs/{run.id}/events?wait_s={value}"),
+        ("GET", f"/api/dashboard/runs?wait_s={value}"),
+        ("POST", f"/api/runs/{run.id}/claim?lease_s={value}"),
+    ):
+        answer = httpx.request(method, live.url + path, headers=headers, timeout=30)
+        assert answer.status_code == 422 and "finite number" in answer.text, (path, answer.text)
+
+
 def test_label_for_another_runs_query(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
     other = trainer.create_run(make_run_spec())
     trainer.post_session(other.id, make_session(7, 1))
