@@ -330,18 +330,24 @@ def test_a_skipped_gold_segment_is_not_served_again(trainer: CollieClient, new_l
     assert trainer.run(run.id).queue.model_dump() == {"pending": 0, "leased": 1, "labelled": 1, "retired": 0}
 
 
-def test_a_released_gold_segment_is_done_as_a_skipped_one(trainer: CollieClient, new_labeler: Labelers) -> None:
-    """Label, undo, release: the gold copy is retired (not left pending with no owner), and its
-    original is not served to the same labeler again."""
+def gold_labelled(trainer: CollieClient, new_labeler: Labelers, name: str) -> tuple[RunRead, CollieClient, str]:
+    """A run whose labeler `name`-b was served a gold copy of 0-0 (labelled by `name`-a) and labelled it."""
     run = trainer.create_run(make_run_spec(task="north").model_copy(update={"gold_rate": 0.5}))
     trainer.post_session(run.id, north_session(0, [1.0]))
-    first = new_labeler("gold-rel-a")
+    first = new_labeler(f"{name}-a")
     first.claim(run.id)
     first.submit(run.id, "0-0", 1)
     trainer.post_session(run.id, north_session(1, [1.0]))
-    me = new_labeler("gold-rel-b")
+    me = new_labeler(f"{name}-b")
     gold = me.claim(run.id).query.query_id
     me.submit(run.id, gold, 1)
+    return run, me, gold
+
+
+def test_a_released_gold_segment_is_done_as_a_skipped_one(trainer: CollieClient, new_labeler: Labelers) -> None:
+    """Label, undo, release: the gold copy is retired (not left pending with no owner), and its
+    original is not served to the same labeler again."""
+    run, me, gold = gold_labelled(trainer, new_labeler, "gold-rel")
     me.undo(run.id, gold)
     assert me.release(run.id, gold).status == "retired"
     assert me.claim(run.id).query.query_id == "1-0"  # no gold copy of 0-0 again
@@ -352,15 +358,7 @@ def test_an_operators_undo_of_a_gold_label_retires_the_copy(
 ) -> None:
     """Was: the copy went back to "pending" with its labeler as owner: no claim ever served it
     again, nothing retired it, and its labeler could still label it after the operator's undo."""
-    run = trainer.create_run(make_run_spec(task="north").model_copy(update={"gold_rate": 0.5}))
-    trainer.post_session(run.id, north_session(0, [1.0]))
-    first = new_labeler("gold-op-a")
-    first.claim(run.id)
-    first.submit(run.id, "0-0", 1)
-    trainer.post_session(run.id, north_session(1, [1.0]))
-    me = new_labeler("gold-op-b")
-    gold = me.claim(run.id).query.query_id
-    me.submit(run.id, gold, 1)
+    run, me, gold = gold_labelled(trainer, new_labeler, "gold-op")
     assert operator.undo(run.id, gold).query_status == "retired"
     with pytest.raises(ApiError) as err:
         me.submit(run.id, gold, 0)
