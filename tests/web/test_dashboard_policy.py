@@ -68,7 +68,12 @@ def test_a_bad_value_is_refused_and_said(page: Any, trainer: CollieClient, run: 
         page.evaluate("document.querySelector('#control-message').textContent = ''")
     sent: list[str] = []
     page.on("request", lambda r: sent.append(r.url) if r.url.endswith("/feedback-policy") else None)
-    for too_long in ("1e9", str(MAX_FEEDBACK_TIMEOUT_S + 0.5)):  # past the service's week: said, not sent
+    for text, said in (("1,5", '"1,5" is not a number of seconds (write 1.5 with a point)'), ("abc", "not a number")):
+        page.fill("#policy-seconds", text)  # was: a number field read "1,5" as 15, and applied it
+        page.click("#policy-apply")
+        page.wait_for_function(f"document.querySelector('#control-message').textContent.includes({said!r})")
+        page.evaluate("document.querySelector('#control-message').textContent = ''")
+    for too_long in ("1e9", "1e400", str(MAX_FEEDBACK_TIMEOUT_S + 0.5)):  # past the service's week: said, not sent
         page.fill("#policy-seconds", too_long)
         page.click("#policy-apply")
         page.wait_for_function(
@@ -79,6 +84,22 @@ def test_a_bad_value_is_refused_and_said(page: Any, trainer: CollieClient, run: 
     assert sent == []  # the service's validator text never reaches the page
     assert trainer.run(run.id).feedback_timeout_s == 2.5
     shown(page, "continue after 2.5 s")
+
+
+def test_a_timeout_set_while_the_trainer_waits_says_it_may_release_the_session(
+    page: Any, trainer: CollieClient, run: RunRead
+) -> None:
+    """The trainer times its waiting session from its start: a shorter timeout lets it go at once."""
+    trainer.set_status(run.id, "waiting_for_labels")
+    page.wait_for_function("document.body.dataset.runStatus === 'waiting_for_labels'")
+    page.fill("#policy-seconds", "2.5")
+    page.click("#policy-apply")
+    page.wait_for_function(
+        "document.querySelector('#control-message').textContent"
+        ".startsWith('the trainer was waiting for labels: if its session has waited 2.5 s already')"
+    )
+    trainer.set_status(run.id, "training")
+    page.wait_for_function("document.body.dataset.runStatus === 'training'")
 
 
 def test_a_labeler_token_may_not_set_it(

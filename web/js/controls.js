@@ -26,6 +26,9 @@ export function feedbackTimeoutMax() {
 // 604800 → "7 days", 7200 → "2 hours": the limit in words an operator can weigh.
 const inWords = (s) => (s >= 86400 ? plural(num(s / 86400, 1), "day") : s >= 3600 ? plural(num(s / 3600, 1), "hour") : plural(num(s / 60, 1), "minute"));
 
+// Seconds as digits with an optional point and exponent ("90", "1.5", "2e3"); "-3" is caught as ≤ 0.
+const SECONDS = /^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$/;
+
 export function policyText(timeoutS) {
   return timeoutS == null ? "wait for every label" : `continue after ${Number(timeoutS.toPrecision(6))} s`;
 }
@@ -50,13 +53,21 @@ export class Controls {
     this.policy.seconds.addEventListener("focus", feedbackTimeoutMax); // known by the time Apply is pressed
     this.policy.form.addEventListener("submit", async (event) => {
       event.preventDefault();
+      // A text field read strictly: a number field in Chromium read "1,5" as 15, and applied it.
       const text = this.policy.seconds.value.trim();
-      if (text === "" || !Number.isFinite(Number(text)) || Number(text) <= 0) {
+      if (!SECONDS.test(text)) {
+        const decimal = /^\d*,\d+$/.test(text) ? ` (write ${text.replace(",", ".")} with a point)` : "";
+        this.message.textContent = text === ""
+          ? "enter the seconds (more than 0) to wait for a session's labels"
+          : `"${text}" is not a number of seconds${decimal}`;
+        return;
+      }
+      if (Number(text) <= 0) {
         this.message.textContent = "enter the seconds (more than 0) to wait for a session's labels";
         return;
       }
       const max = await feedbackTimeoutMax();
-      if (max != null && Number(text) > max) {
+      if (max != null && !(Number(text) <= max)) { // 1e400 reads as Infinity: too long, too
         this.message.textContent = `a session's labels can be waited for at most ${max} s (${inWords(max)}): enter fewer seconds, or Wait for every label`;
         return;
       }
@@ -67,6 +78,7 @@ export class Controls {
 
   show(run) {
     this.runId = run.id;
+    this.waiting = run.status === "waiting_for_labels";
     const over = run.status === "finished" || run.status === "failed";
     this.buttons.pause.disabled = over || run.control !== "run";
     this.buttons.resume.disabled = over || run.control !== "pause";
@@ -108,8 +120,12 @@ export class Controls {
   async setPolicy(timeoutS) {
     this.message.textContent = "";
     try {
+      const waiting = this.waiting;
       this.onChange(await api(`runs/${this.runId}/feedback-policy`, { method: "POST", body: { timeout_s: timeoutS } }));
       this.policy.seconds.value = "";
+      if (waiting && timeoutS != null) {
+        this.message.textContent = `the trainer was waiting for labels: if its session has waited ${timeoutS} s already, it continues now with the labels that arrived`;
+      }
     } catch (error) {
       this.message.textContent = `feedback policy refused (${error.status ?? "network"}): ${error.message}`;
     }
