@@ -1,12 +1,18 @@
 """What the dashboard says when it cannot show what was asked, in Debian's Chromium against a live
-service: a token the service refuses, and a link to a run that does not exist."""
+service: a token the service refuses, a link to a run that does not exist, and a service that stops
+answering."""
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+from pathlib import Path
 from typing import Any
 
 import pytest
 from service.conftest import TOKENS, make_run_spec
+from service.test_cli import start_serve, stop
 
 from backend.server import BackgroundServer
 from collie.client import CollieClient
@@ -65,3 +71,25 @@ def test_a_link_to_a_missing_run_says_so_where_the_run_would_be_shown(
         page.evaluate(f"window.location.hash = '#run={run.id}'")  # a run that exists
         page.wait_for_selector("#run:not([hidden])")
         assert page.is_hidden("#run-problem")
+
+
+def test_a_service_that_stops_answering_is_said_not_responding(browser: Any, tmp_path: Path) -> None:
+    """A frozen service keeps its connections open: the stream sees no error. Was: the badge said
+    "live" through 75 s of a service stopped with SIGSTOP."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    server, _ = start_serve(tmp_path / "frozen.db", tmp_path / "tokens.json", env)
+    try:
+        info = json.loads((tmp_path / "tokens.json").read_text())
+        with CollieClient(info["api"], info["tokens"]["trainer"]) as trainer:
+            run = trainer.create_run(make_run_spec())
+        url = f"{info['api']}/?token={info['tokens']['operator']}#run={run.id}"
+        with operator_page(browser, url, wait_ms=WAIT_MS) as page:
+            page.wait_for_function("document.querySelector('#connection').textContent === 'live'")
+            server.send_signal(signal.SIGSTOP)
+            try:  # a check every 10 s, each given 5 s to answer
+                page.wait_for_function("document.querySelector('#connection').textContent === 'not responding'")
+            finally:
+                server.send_signal(signal.SIGCONT)
+            page.wait_for_function("document.querySelector('#connection').textContent === 'live'")
+    finally:
+        stop(server)

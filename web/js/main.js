@@ -15,10 +15,40 @@ let started = 0; // bumped by a new token: the old poll loop ends
 let missing = null; // a run the service does not know: not asked for again until the runs list has it
 let opening = 0; // bumped by each open: a failure of one the operator has left is not shown
 
+let reported = "no token"; // what the run's stream (or the runs poll) last said of the connection
+let silent = false; // the service keeps its connections open but answers nothing (checkHealth)
+
 function showConnection(state) {
+  reported = state;
+  const shown = silent && (state === "live" || state === "down") ? "silent" : state;
   const pill = $("#connection");
-  pill.className = `pill ${state === "live" ? "live" : "down"}`;
-  pill.textContent = { live: "live", down: "reconnecting…", closed: "disconnected", refused: "token refused" }[state] ?? state;
+  pill.className = `pill ${shown === "live" ? "live" : "down"}`;
+  pill.textContent = {
+    live: "live", down: "reconnecting…", closed: "disconnected", refused: "token refused", silent: "not responding",
+  }[shown] ?? shown;
+}
+
+// A service that stops answering (frozen, its machine swapping hard) keeps its connections open, so
+// the stream hears no error and the badge said "live" throughout: a health check every 10 s that
+// gets no answer within 5 s says "not responding" until one answers. A refused connection is the
+// stream's to say ("reconnecting…").
+const HEALTH_EVERY_MS = 10_000;
+const HEALTH_WITHIN_MS = 5_000;
+async function checkHealth() {
+  const abort = new AbortController();
+  const late = setTimeout(() => abort.abort(), HEALTH_WITHIN_MS);
+  let answered = true;
+  try {
+    await fetch("api/health", { signal: abort.signal, cache: "no-store" });
+  } catch (error) {
+    answered = error.name !== "AbortError";
+  } finally {
+    clearTimeout(late);
+  }
+  if (silent !== !answered) {
+    silent = !answered;
+    showConnection(reported);
+  }
 }
 
 function selectedRun() {
@@ -117,6 +147,7 @@ $("#token-form").addEventListener("submit", (event) => {
   start();
 });
 setInterval(() => tickTimes(), 1000);
+setInterval(checkHealth, HEALTH_EVERY_MS);
 
 if (token()) start();
 else askForToken("");
