@@ -41,7 +41,7 @@ class Identity:
             return
         with self.tab as state:
             state.use_token(token)
-        self.panels.show_message("Checking your token…")
+        self.panels.show_checking("Checking your token…")
         self.link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self.tab_id)
         self.stream_link = ServiceLink(self.config.api, token, self.config.run_id, self.config.lease_s, self.tab_id)
         self.waiter.use(self.stream_link)

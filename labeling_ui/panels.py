@@ -207,6 +207,11 @@ class Panels:
             self._screen(message, login=True)
             self.title.content = "**collie · labeling** — not signed in"
 
+    def show_checking(self, message: str) -> None:
+        """Signing in (the token not yet accepted): no labeling control, not even undo, until the
+        service says whose token it is."""
+        self._screen(message)
+
     def show_message(self, message: str, keep_replay: bool = False) -> None:
         """A state with no segment (connecting, unreachable, waiting): only undo stays offered;
         `keep_replay`: the evaluation's skills keep playing beside it."""

@@ -185,13 +185,15 @@ class Presenter:
         if self.skills is not None:
             self.skills.reload(link)
 
-    def show_outage(self, why: str, retry_s: float) -> None:
+    def show_outage(self, why: str, retry_s: float, signed_in: bool = True) -> None:
+        """`signed_in`: False while the token is being checked (then no labeling control shows)."""
         self.player.pause()
         self.scene.hide()
-        self.panels.show_message(
-            f"⚠️ **The labeling service is unreachable** ({why}).  \n"
-            f"Retrying in {retry_s:.0f} s… nothing you labelled is lost."
-        )
+        said = f"⚠️ **The labeling service is unreachable** ({why}).  \nRetrying in {retry_s:.0f} s… "
+        if signed_in:
+            self.panels.show_message(said + "nothing you labelled is lost.")
+        else:
+            self.panels.show_checking(said + "your token is checked once it answers.")
 
     def clear(self) -> None:
         """Signed out: nothing of the last identity stays on screen."""

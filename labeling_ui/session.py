@@ -243,7 +243,9 @@ class LabelerSession:
                 delay = 0.5
             except ServiceDown as exc:
                 self._down_since = self._down_since or time.perf_counter()
-                self.presenter.show_outage(str(exc), delay)
+                with self.tab as state:
+                    signed_in = state.who is not None
+                self.presenter.show_outage(str(exc), delay, signed_in)
                 self._closed.wait(delay)
                 delay = min(delay * 2, self.config.retry_max_s)
             except AuthRefused as exc:

@@ -290,6 +290,11 @@ def test_unreachable_service_is_reported(stack: Stack, browser: Browser) -> None
     wait_text(page, "unreachable")
     wait_text(page, "at http://127.0.0.1:9 does not answer")  # names the address it tried
     assert segment_id(page) is None and all(s.scene.env is None for s in app.sessions.values())
+    wait_text(page, "your token is checked once it answers")  # not signed in yet: no labeling control
+    assert (
+        page.get_by_text("U · Undo last label").count() == 0
+        or not page.get_by_text("U · Undo last label").first.is_visible()
+    )
     page.context.close()
 
 
