@@ -73,6 +73,17 @@ def test_a_link_to_a_missing_run_says_so_where_the_run_would_be_shown(
         assert page.is_hidden("#run-problem")
 
 
+def test_a_link_that_names_no_run_number_says_so(browser: Any, live: BackgroundServer, run: RunRead) -> None:
+    """Was: "#run=abc" ignored, and the newest run shown as if it had been asked for."""
+    with operator_page(browser, f"{live.url}/?token={TOKENS['operator']}#run=abc", wait_ms=WAIT_MS) as page:
+        page.wait_for_selector("#run-problem:not([hidden])")
+        said = '"#run=abc" names no run (a run is a number, as #run=3) — pick one from the runs above.'
+        assert page.text_content("#run-problem") == said and page.is_hidden("#run")
+        page.click(f'#runs-body tr[data-run-id="{run.id}"]')  # a run picked from the list opens
+        page.wait_for_selector("#run:not([hidden])")
+        assert page.is_hidden("#run-problem")
+
+
 def test_a_service_that_stops_answering_is_said_not_responding(browser: Any, tmp_path: Path) -> None:
     """A frozen service keeps its connections open: the stream sees no error. Was: the badge said
     "live" through 75 s of a service stopped with SIGSTOP."""

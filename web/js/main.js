@@ -73,7 +73,22 @@ function askForToken(message) {
   showConnection(message ? "refused" : "no token");
 }
 
+// "#run=abc": a link that names no run number (was ignored, and the newest run shown as if asked for)
+function unreadableRun() {
+  const asked = /run=([^&]*)/.exec(window.location.hash);
+  return asked && !/^\d+$/.test(asked[1]) ? decodeURIComponent(asked[1]) : null;
+}
+
 async function openSelected() {
+  const unreadable = unreadableRun();
+  if (unreadable != null) {
+    renderRuns(runsBody, runs, null);
+    runPage.close();
+    $("#run").hidden = true;
+    $("#run-problem").textContent = `"#run=${unreadable}" names no run (a run is a number, as #run=3) — pick one from the runs above.`;
+    $("#run-problem").hidden = false;
+    return;
+  }
   const runId = selectedRun() ?? runs[0]?.id ?? null;
   renderRuns(runsBody, runs, runId);
   if (runId == null || runId === runPage.runId) return;
