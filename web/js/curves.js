@@ -7,9 +7,9 @@ import { plot } from "./plotly.js";
 import { CLASS_COLOURS } from "./regions.js";
 
 const PANELS = [
-  { title: "safe coverage", keys: ["safe_coverage"], help: "x-y area the skills reach without entering a bad region (the paper's Table 1)" },
+  { title: "safe coverage", keys: ["safe_coverage"], help: "bins the skills reach outside bad regions minus the bad bins they enter (the paper's Table 1): negative when they enter more bad bins than they reach safe ones" },
   { title: "safe ratio", keys: ["safe_ratio"], help: "share of evaluation states that are not in a bad region" },
-  { title: "composite coverage", keys: ["composite_coverage", "weighted_composite_coverage"], help: "coverage that credits desirable regions (weighted: by their class)" },
+  { title: "composite coverage", keys: ["composite_coverage", "weighted_composite_coverage"], help: "good and neutral bins reached minus bad ones (weighted: good bins count twice); negative when bad bins outnumber the rest" },
   { title: "λ (Lagrange multiplier)", keys: ["lambda"], help: "METRA's multiplier of its distance constraint" },
   { title: "α (entropy)", keys: ["alpha"], log: true, help: "SAC's entropy temperature (log scale)" },
   { title: "losses", keys: ["phi_loss", "qf_loss", "policy_loss"], other: (k) => k.endsWith("_loss"), help: "training losses of the representation φ, the critics and the policy" },
