@@ -209,6 +209,7 @@ def test_a_late_answer_for_older_rollouts_does_not_redraw_them(
     post(8)
     page.wait_for_selector("#map[data-epoch='8']", state="attached")
     assert seen(page, "map") == ["2", "6", "8"]
+    assert page.text_content("#map-title") == "skills · evaluation at epoch 8"  # was "skills": which one, unsaid
 
 
 def test_late_labeling_answers_undo_neither_counts_nor_quality_settings_nor_a_discard(

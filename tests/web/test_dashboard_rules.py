@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
 from service.conftest import TOKENS, make_run_spec
 
 from backend.server import BackgroundServer
@@ -66,8 +67,9 @@ def test_an_instruction_run_shows_the_instruction_no_regions_and_only_rule_free_
     page.close()
 
 
+@pytest.mark.parametrize("viewport", [820, 390])  # 390: a phone, one panel a row (two ran together there)
 def test_curve_titles_and_legends_do_not_overlap_on_a_narrow_screen(
-    live: BackgroundServer, browser: Any, trainer: CollieClient, artifacts: Any
+    live: BackgroundServer, browser: Any, trainer: CollieClient, artifacts: Any, viewport: int
 ) -> None:
     run = trainer.create_run(make_run_spec())
     names = ["safe_coverage", "safe_ratio", "composite_coverage", "weighted_composite_coverage", "lambda", "alpha"]
@@ -75,19 +77,22 @@ def test_curve_titles_and_legends_do_not_overlap_on_a_narrow_screen(
     names += ["n_labels_good", "w_mean", "w_min", "w_max"]
     for epoch in (1, 2):
         trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values=dict.fromkeys(names, float(epoch))))
-    page = open_run(browser, live, run.id, width=820)
+    page = open_run(browser, live, run.id, width=viewport)
     page.wait_for_function("document.querySelector('#curves').dataset.points === '2'")
     boxes = page.eval_on_selector_all(
         "#curves g.annotation",
         "gs => gs.map(g => { const r = g.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; })",
     )
+    page.locator("#curves").screenshot(path=str(artifacts / f"curves-{viewport}px.png"))
+    dashes = page.evaluate("Object.fromEntries(document.querySelector('#curves').data.map(t => [t.name, t.line.dash]))")
+    classes = [dashes[f"n_labels_{c}"] for c in ("bad", "neutral", "good")]
+    assert classes == ["solid", "dash", "dot"]  # was one style: equal counts drew one line over another
     width = page.evaluate("document.querySelector('#curves').getBoundingClientRect().right")
     assert len(boxes) >= 10
     for i, (l1, t1, r1, b1) in enumerate(boxes):
         assert r1 <= width + 1, f"annotation {i} runs off the plot"
         for l2, t2, r2, b2 in boxes[i + 1 :]:
             assert r1 <= l2 or r2 <= l1 or b1 <= t2 or b2 <= t1, "two panels' titles overlap"
-    page.locator("#curves").screenshot(path=str(artifacts / "curves-820px.png"))
     page.close()
 
 

@@ -23,9 +23,14 @@ const PANELS = [
   },
   { title: "guidance w(s) over evaluations", keys: ["w_mean", "w_min", "w_max"], help: "the guidance weight (Eq. 8) along the evaluation rollouts" },
 ];
-const COLUMNS = 2;
+// Two panels a row; one on a phone-wide screen, where two ran each other's titles and legends together.
+const columns = (element) => (element.clientWidth && element.clientWidth < 560 ? 1 : 2);
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
 const colour = (panel, name, i) => panel.colours?.[name] ?? PALETTE[i % PALETTE.length];
+// A panel's second and third series are dashed and dotted: equal series (bad and neutral labels both
+// 0, 2, 3) drew one line over the other, and one class seemed to have none.
+const DASHES = ["solid", "dash", "dot", "dashdot"];
+const GLYPHS = ["━━", "╍╍", "┉┉", "━·"];
 
 // The epoch axis: never below 0, whole epochs as ticks while there are few. Plotly centres a single
 // point in ±1 (epoch 0 ran from −1 to 1): one evaluation gets two epochs around it instead.
@@ -49,6 +54,10 @@ export class Curves {
     this.help = help;
     this.maxPoints = maxPoints;
     this.history = { epochs: [], created_at: [], series: {}, n_stored: 0, stride: 1 };
+    this.columns = columns(element);
+    window.addEventListener("resize", () => {
+      if (columns(this.element) !== this.columns) this.render(); // Plotly resizes the rest itself
+    });
   }
 
   load(history) {
@@ -94,13 +103,14 @@ export class Curves {
       names: [...panel.keys, ...(panel.other ? Object.keys(series).filter((k) => panel.other(k) && !panel.keys.includes(k)) : [])]
         .filter((k) => shown(series[k])),
     })).filter((panel) => panel.names.length); // axes without a trace would be left out of the grid
-    const rows = Math.max(1, Math.ceil(panels.length / COLUMNS));
+    const perRow = (this.columns = columns(this.element));
+    const rows = Math.max(1, Math.ceil(panels.length / perRow));
     const epochAxis = epochRange(h.epochs);
     const traces = [];
     const layout = {
-      grid: { rows, columns: COLUMNS, pattern: "independent", ygap: 0.6, xgap: 0.12 },
+      grid: { rows, columns: perRow, pattern: "independent", ygap: 0.6, xgap: 0.12 },
       margin: { l: 55, r: 10, t: 40, b: 30 }, showlegend: false, annotations: [], uirevision: "curves",
-      height: 50 + 175 * rows,
+      height: 50 + (perRow === 1 ? 205 : 175) * rows, // room for a legend of a line a name
     };
     panels.forEach((panel, p) => {
       const axis = p === 0 ? "" : String(p + 1);
@@ -108,14 +118,16 @@ export class Curves {
         type: "scatter", mode: h.epochs.length > 60 ? "lines" : "lines+markers", x: h.epochs, y: series[name],
         name, xaxis: `x${axis}`, yaxis: `y${axis}`, connectgaps: true, marker: { size: 4 },
         cliponaxis: false, // a point on the axis' end (epoch 0) is drawn whole
-        line: { color: colour(panel, name, i), width: 1.5 },
+        line: { color: colour(panel, name, i), width: 1.5, dash: DASHES[i % DASHES.length] },
         hovertemplate: `${name}<br>epoch %{x}: %{y:.4g}<extra></extra>`,
       }));
-      layout[`xaxis${axis}`] = { title: p >= panels.length - COLUMNS ? { text: "epoch" } : undefined, ...epochAxis };
+      layout[`xaxis${axis}`] = { title: p >= panels.length - perRow ? { text: "epoch" } : undefined, ...epochAxis };
       layout[`yaxis${axis}`] = { type: panel.log ? "log" : "linear", exponentformat: "power" };
       // the panel's legend, under its title (one line would run into the next panel on a narrow
       // screen): each series' name in its line's colour
-      const legend = panel.names.map((n, i) => `<span style="color:${colour(panel, n, i)}">━ ${n}</span>`).join("  ");
+      // one name a line where a panel is phone-wide: three ran off its right edge
+      const legend = panel.names.map((n, i) => `<span style="color:${colour(panel, n, i)}">${GLYPHS[i % GLYPHS.length]} ${n}</span>`)
+        .join(perRow === 1 ? "<br>" : "  ");
       layout.annotations.push({
         text: `<b>${panel.title}</b><br>${legend}`, showarrow: false, align: "left",
         xref: `x${axis} domain`, yref: `y${axis} domain`, x: 0, y: 1.02, xanchor: "left", yanchor: "bottom",

@@ -150,6 +150,10 @@ export class SkillMap {
       notes.push("no w(s) in this evaluation (w ≡ 1 until guidance starts, or the method has none)");
     }
     this.note.textContent = notes.join(" · ");
+    const title = this.element.closest("figure")?.querySelector("#map-title");
+    if (title) { // the evaluation shown is the last one, a few epochs behind the run's counter
+      title.textContent = this.rollouts ? `skills · evaluation at epoch ${this.rollouts.epoch}` : "skills · no evaluation yet";
+    }
     return plot(this.element, traces, layout).then(() => {
       this.element.dataset.epoch = this.rollouts ? String(this.rollouts.epoch) : "";
       this.element.dataset.trajectories = String(rollouts.length);
