@@ -48,6 +48,7 @@ LEGEND = (
 )
 CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns' widths: controls (right), context (left)
 NARROW_WINDOW_PX = 960  # below this the context column starts minimized: the 3D view would be < 300 px
+PHONE_WINDOW_PX = 600  # below this (a phone) viser's controls sheet covers most of the 3D view
 SIGN_IN = "Sign in"  # the button's words, which Enter in the token field presses (keys.py)
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
@@ -188,6 +189,15 @@ class Panels:
         as the tab opens: never against the labeler's own choice later."""
         if width is not None and width < NARROW_WINDOW_PX:
             self.context_panel.minimize()
+        if width is not None and width < PHONE_WINDOW_PX:  # said, not hidden: the page still works
+            self.client.add_notification(
+                "Made for a computer screen",
+                "On a screen this narrow the controls cover the robot and the task's picture: open this "
+                "link on a desktop or laptop browser to label.",
+                with_close_button=True,
+                auto_close_seconds=None,
+                color="yellow",
+            )
 
     # ---------------------------------------------------------------- screens
 

@@ -372,18 +372,24 @@ def test_label_keys_work_after_a_click_on_a_replay_control(stack: Stack, browser
 def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, browser: Browser) -> None:
     # Two segments per tab (the one shown and the one preloaded): a tab never waits for the claims of
     # the one closed before it, which the UI holds release_grace_s for a reload of that tab.
-    run = stack.post_run("point", 4)
+    run = stack.post_run("point", 6)
     url = stack.ui(run.id).labeler_url(stack.new_labeler("narrow"))
     description = get_task("north", "point").description
     # One load per width: the UI reads the width the page reports as it opens (window.innerWidth in
     # the tab's handoff, labeling_ui/browser.py), before it shows anything; no race is left to repeat
     # for (the camera's first report decided it once, and 3 of 7 loads at 800 px kept the column).
-    for width, shown in ((800, False), (VIEWPORT["width"], True)):
+    for width, shown in ((390, False), (800, False), (VIEWPORT["width"], True)):
         context = browser.new_context(viewport={"width": width, "height": 600})
         context.set_default_timeout(TIMEOUT_S * 1000)
         page = context.new_page()
         page.goto(url)
         wait_segment(page)
+        # a phone: said, not hidden (was: the controls covered the robot without a word)
+        phone = page.get_by_text("Made for a computer screen")
+        if width < 600:
+            phone.first.wait_for()
+        else:
+            assert phone.count() == 0
         # the column minimizes as the tab opens (the window width the browser handed over); the task's
         # text is sent before the progress line, so once that is on screen the text is on the page
         # unless its column is minimized (which leaves it out of the page)
