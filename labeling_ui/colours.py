@@ -6,7 +6,7 @@ from __future__ import annotations
 RGB = tuple[int, int, int]
 
 TO_COME_RGB: RGB = (255, 150, 30)  # the segment (in 3D: the part still to play)
-PLAYED_RGB: RGB = (230, 40, 120)  # the part already played (in the inset: where the segment ends)
+PLAYED_RGB: RGB = (230, 40, 120)  # the part already played (3D only: the inset has no playhead)
 EARLIER_RGB: RGB = (90, 90, 90)  # the trajectory before the segment
 NORTH_RGB: RGB = (40, 90, 220)
 

@@ -9,14 +9,15 @@ import numpy as np
 
 from collie.class_colours import PALE, to_rgb
 from collie.tasks import Task
-from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB
+from labeling_ui.colours import EARLIER_RGB, TO_COME_RGB
 
 SIZE = 240  # pixels, square
 CLASS_RGB = {c: to_rgb(colour) for c, colour in PALE.items()}  # as the dashboard's map
 NO_RULE_RGB = (244, 245, 247)  # the background of a run without a rule
 AXIS_RGB = (200, 200, 205)
-SEGMENT_RGB, HEAD_RGB = TO_COME_RGB, PLAYED_RGB  # the 3D view's colours (colours.py)
-START_RGB = (30, 30, 30)
+SEGMENT_RGB = TO_COME_RGB  # the 3D view's colour of the segment (colours.py)
+START_RGB = (30, 30, 30)  # a dark dot where the segment starts, a ring where it ends: the inset has
+END_RGB = (255, 255, 255)  # no playhead, and a pink end dot read as "the robot is here" (pink: played, in 3D)
 MIN_HALF_WIDTH = 4.0  # world units; a short segment still shows its surroundings
 
 
@@ -96,5 +97,6 @@ def render_inset(task: Task | None, segment_xy: np.ndarray, earlier_xy: np.ndarr
     canvas.path(segment_xy, SEGMENT_RGB, 1.8)
     pixels = canvas.to_pixels(np.asarray(segment_xy, float).reshape(-1, 2))
     canvas.dots(pixels[:1], START_RGB, 3.0)
-    canvas.dots(pixels[-1:], HEAD_RGB, 3.5)
+    canvas.dots(pixels[-1:], START_RGB, 4.0)
+    canvas.dots(pixels[-1:], END_RGB, 2.2)
     return canvas.image

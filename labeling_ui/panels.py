@@ -40,7 +40,8 @@ MIXED_RULE = (
 )
 LEGEND = (
     f"**Path colours** (3D and inset): <span style='color:{css(PLAYED_RGB)}'>■</span> played so far "
-    f"(inset: the end) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come · "
+    f"(3D only) · <span style='color:{css(TO_COME_RGB)}'>■</span> to come (the inset: the whole segment, "
+    "● its start, ○ its end) · "
     f"<span style='color:{css(EARLIER_RGB)}'>■</span> the trajectory before the segment. Floor and inset: "
     "red bad area, yellow good area (inset: neutral ground green), as on the dashboard; none in a run "
     "with only an instruction. The "

@@ -20,8 +20,9 @@ from canned_http import answering
 from collie.schemas import MAX_HOLD, MAX_TABS
 from collie.tasks import BAD, NEUTRAL, get_task
 from labeling_ui.claims import Claims
+from labeling_ui.colours import PLAYED_RGB
 from labeling_ui.guarded_tab import GuardedTab
-from labeling_ui.inset import CLASS_RGB, NO_RULE_RGB, SIZE, render_inset, view_box
+from labeling_ui.inset import CLASS_RGB, END_RGB, NO_RULE_RGB, SIZE, render_inset, view_box
 from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
@@ -141,6 +142,9 @@ def test_inset_is_north_up_and_paints_the_task() -> None:
     assert NO_RULE_RGB not in CLASS_RGB.values()
     cx, cy, half = view_box(np.array([[10.0, 10.0]]))
     assert half >= 5 and 0 <= cx <= 10 and 0 <= cy <= 10  # holds the origin and the path
+    # its end is a ring, not the 3D view's "played" pink (was a pink dot, read as where the robot is)
+    colours = {tuple(p) for p in image.reshape(-1, 3)}
+    assert PLAYED_RGB not in colours and END_RGB in colours
 
 
 def test_floor_map_and_region_outlines() -> None:
