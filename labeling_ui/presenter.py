@@ -119,14 +119,17 @@ class Presenter:
         self.show_progress(link)
         return True
 
-    def show_progress(self, link: ServiceLink) -> None:
+    def show_progress(self, link: ServiceLink, mine: bool = True) -> None:
+        """The session's and the run's counts, and the operator's instructions, as they are now;
+        `mine`: the labeler's own labels too (a read and an inset each)."""
         with self.tab as state:
             shown = state.shown
         if shown is not None:
             progress = link.progress(shown.run.id, shown.query.session)
             self.panels.show_progress(progress)
             self.panels.show_instructions(progress.instructions)  # an operator may have changed them
-            self.load_mine(link, shown.run)
+            if mine:
+                self.load_mine(link, shown.run)
 
     def load_mine(self, link: ServiceLink, run: RunRead) -> None:
         self.mine = tuple(link.my_labels(run.id))

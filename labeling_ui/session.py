@@ -350,6 +350,8 @@ class LabelerSession:
     def _renew(self) -> None:
         if self.link is not None and (lost := self.claims.renew(self.link)) is not None:
             self._show_next(lost.run)
+        elif self.link is not None:  # labels from other tabs and labelers meanwhile: the counts follow
+            self.presenter.show_progress(self.link, mine=False)
 
     def _recovered(self) -> None:
         down_since, self._down_since = self._down_since, None

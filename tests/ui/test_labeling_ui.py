@@ -188,6 +188,24 @@ def test_next_segment_is_preloaded_and_a_closed_tab_releases_both(stack: Stack, 
     assert [e.kind for e in stack.trainer.label_events(run.id)] == ["label"]  # a release is no skip
 
 
+def test_the_counts_follow_labels_made_elsewhere_while_a_segment_is_on_screen(stack: Stack, browser: Browser) -> None:
+    """Was: a tab showed "total 0" until its own next label, whatever other tabs and labelers did."""
+    from collie.client import CollieClient
+
+    run = stack.post_run("point", 4)
+    app = stack.ui(run.id, lease_s=3.0)  # its claims renewed every second, and the counts read with them
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("watcher")))
+    wait_segment(page)
+    (session,) = app.sessions.values()
+    wait_until(lambda: "total **0" in session.panels.progress.content)
+    with CollieClient(stack.api, stack.new_labeler("elsewhere")) as other:
+        claim = other.claim(run.id)
+        assert claim is not None
+        other.submit(run.id, claim.query.query_id, 1)
+    wait_until(lambda: "total **1" in session.panels.progress.content)
+    page.context.close()
+
+
 def view(client: viser.ClientHandle) -> np.ndarray | None:
     """The camera as the browser last reported it (orientation and position), None before its first report."""
     try:
