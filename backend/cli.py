@@ -67,7 +67,7 @@ def written_tokens(path: Path | None) -> dict[str, str]:
     try:
         tokens = read_tokens_file(path)
     except ValueError as exc:
-        raise SystemExit(f"collie serve: error: --tokens-json {exc}; move it away") from None
+        raise ValueError(f"--tokens-json {exc}; move it away") from None
     return {role: tokens[role] for role in ROLES if role in tokens}
 
 
@@ -79,7 +79,7 @@ def kept_in_file(path: Path, tokens: dict[str, str], alive: set[str]) -> dict[st
     none."""
     try:
         written = written_tokens(path)
-    except SystemExit:
+    except ValueError:
         return {}
     return {role: t for role, t in written.items() if role not in tokens and role in alive}
 
@@ -92,14 +92,17 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
     overrides: dict[str, object] = {}
     if args.db is not None:
         overrides["database_url"] = f"sqlite:///{args.db.resolve()}"
-    written = {} if args.no_generate_tokens else written_tokens(args.tokens_json)
+    try:
+        written = {} if args.no_generate_tokens else written_tokens(args.tokens_json)
+    except ValueError as exc:
+        refuse(str(exc))
     given = {role: os.environ.get(f"COLLIE_{role.upper()}_TOKEN") or written.get(role) for role in ROLES}
     for role, token in given.items():  # refused before the database is touched
         why = None if token is None else weakness(token)
         if why is not None:
             variable = f"COLLIE_{role.upper()}_TOKEN"
             source = variable if os.environ.get(variable) else f"the {role} token in {args.tokens_json}"
-            raise SystemExit(f"collie serve: error: {source} {why}; {STRONG}")
+            refuse(f"{source} {why}; {STRONG}")
     overrides["teacher_token"] = teacher_token()
     settings = Settings(**overrides)  # type: ignore[arg-type]  # pydantic-settings validates the overrides
     known = builtin_principals(settings.database_url)
@@ -114,8 +117,8 @@ def settings_from(args: argparse.Namespace) -> tuple[Settings, dict[str, str], s
             tokens[role] = token
             overrides[f"{role}_token"] = SecretStr(token)
     if not tokens and not known:  # a new database and no token given or made: no request could ever get in
-        raise SystemExit(
-            "collie serve: error: --no-generate-tokens with no COLLIE_OPERATOR_TOKEN, COLLIE_TRAINER_TOKEN or "
+        refuse(
+            "--no-generate-tokens with no COLLIE_OPERATOR_TOKEN, COLLIE_TRAINER_TOKEN or "
             "COLLIE_LABELER_TOKEN set, on a new database: nobody could sign in (set them, or drop --no-generate-tokens)"
         )
     revoked = {role for role, gone in known.items() if gone}
@@ -128,7 +131,7 @@ def teacher_token() -> SecretStr | None:
     token = os.environ.get(TEACHER_TOKEN) or None
     why = None if token is None else weakness(token)
     if why is not None:
-        raise SystemExit(f"collie serve: error: {TEACHER_TOKEN} {why}; {STRONG}")
+        refuse(f"{TEACHER_TOKEN} {why}; {STRONG}")
     return None if token is None else SecretStr(token)
 
 
@@ -138,7 +141,7 @@ def inherited(fd: int) -> tuple[socket.socket, str]:
     try:
         sock = socket.socket(fileno=fd)
     except OSError as exc:
-        raise SystemExit(f"collie serve: error: --fd {fd} is not an open socket: {exc}") from None
+        refuse(f"--fd {fd} is not an open socket: {exc}")
     host, port = sock.getsockname()[:2]
     return sock, f"http://{link_host(host)}:{port}"
 
@@ -216,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     mark("imports")  # FastAPI, SQLAlchemy, the routes
 
     if args.db is not None and args.db.is_dir():
-        raise SystemExit(f"collie serve: error: --db {args.db} is a folder; give a SQLite file's path")
+        refuse(f"--db {args.db} is a folder; give a SQLite file's path")
     url = f"sqlite:///{args.db.resolve()}" if args.db is not None else Settings().database_url
     try:
         check_url(url)
@@ -224,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
         if is_sqlite(url) and make_url(url).database not in (None, "", ":memory:"):
             check_sqlite_file(Path(make_url(url).database or ""), where)
     except UnusableDatabaseUrl as exc:
-        raise SystemExit(f"collie serve: error: {exc}") from None
+        refuse(str(exc))
     except DBAPIError as exc:  # e.g. a file that is not SQLite
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     if args.tokens_json is not None:
@@ -238,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
     except Damaged as exc:  # a table dropped: every request touching it would fail, and no restart mends it
         refuse(str(exc))
     except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://
-        raise SystemExit(f"collie serve: error: {exc}") from None
+        refuse(str(exc))
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
         where = describe(Settings().database_url) if args.db is None else args.db
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None

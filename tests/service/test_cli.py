@@ -310,14 +310,14 @@ def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
         "COLLIE_LABELER_TOKEN": "same-token-0123456789",
     }
     out = collie("serve", "--port", "0", "--db", str(tmp_path / "same.db"), env=env)
-    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert out.returncode == 2 and "Traceback" not in out.stderr  # no restart mends it (was exit 1)
     assert "already the token of 'operator'" in out.stderr
 
 
 def test_a_new_database_with_no_token_anyone_could_use_is_refused(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
     out = collie("serve", "--port", "0", "--db", str(tmp_path / "none.db"), "--no-generate-tokens", env=env)
-    assert out.returncode != 0 and "Traceback" not in out.stderr
+    assert out.returncode == 2 and "Traceback" not in out.stderr
     assert "on a new database: nobody could sign in (set them, or drop --no-generate-tokens)" in out.stderr
 
 
@@ -369,7 +369,7 @@ def test_a_database_url_collie_cannot_use_is_a_one_line_error(tmp_path: Path, ur
     env = {**os.environ, "COLLIE_DATABASE_URL": url}
     for args in (("serve", "--port", "0"), ("export", "--run", "1")):
         out = collie(*args, env=env, cwd=tmp_path)
-        assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+        assert out.returncode == 2 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
         assert "COLLIE_DATABASE_URL" in out.stderr and "postgresql+psycopg://" in out.stderr
         assert "s3cret" not in out.stderr and url.split(":")[0] in out.stderr
 
@@ -400,7 +400,7 @@ def test_export_bounds_the_run_id_and_takes_no_url_for_a_path(tmp_path: Path) ->
 def test_a_weak_bootstrap_token_is_refused_at_start(tmp_path: Path, variable: str, token: str, why: str) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("COLLIE_")}
     out = collie("serve", "--port", "0", "--db", str(tmp_path / "weak.db"), env={**env, variable: token})
-    assert out.returncode != 0 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert out.returncode == 2 and "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert variable in out.stderr and why in out.stderr and token not in out.stderr
     assert not (tmp_path / "weak.db").exists()  # refused before anything was written
 
