@@ -188,13 +188,16 @@ def test_a_run_whose_sizes_leave_its_learning_or_its_labels_undone_says_so() -> 
     from trainer.config import make_config
 
     assert idle_parts(make_config("smoke", "point", method="collie")) == []
-    assert idle_parts(make_config("smoke", "point", method="collie", warmup=8)) == [
-        "collie asks for no label in this run (--warmup 8 ≥ --epochs 8): it learns as METRA does"
+    assert idle_parts(make_config("smoke", "point", method="collie", warmup=8)) == []  # a session at its last epoch
+    assert idle_parts(make_config("smoke", "point", method="collie", warmup=9)) == [
+        "collie asks for no label in this run (--warmup 9 > --epochs 8): it learns as METRA does"
     ]
     assert idle_parts(make_config("smoke", "point", method="collie", total_queries=0))[0].endswith(
         "(--total-queries 0): it learns as METRA does"
     )
     assert idle_parts(make_config("smoke", "point", method="metra", warmup=8)) == []  # asks for none anyway
+    with pytest.raises(ValueError, match="must be ≤ the 5000 transitions --replay-capacity 5049 holds"):
+        make_config("smoke", "point", start_transitions=5040, replay_capacity=5049)  # whole episodes of 50 only
     assert idle_parts(make_config("smoke", "point", method="metra", start_transitions=5000)) == [
         "no gradient step in this run: --start-transitions 5000 is more than the 1600 transitions its 8 epochs collect"
     ]

@@ -199,8 +199,9 @@ def idle_parts(cfg: Config) -> list[str]:
             f"no gradient step in this run: --start-transitions {cfg.start_transitions} is more than the "
             f"{collected} transitions its {cfg.epochs} epochs collect"
         )
-    if METHODS[cfg.method].asks_labels and (cfg.warmup >= cfg.epochs or cfg.total_queries == 0):
-        why = "--total-queries 0" if cfg.total_queries == 0 else f"--warmup {cfg.warmup} ≥ --epochs {cfg.epochs}"
+    # epochs run 1 … --epochs, and the first session comes at epoch --warmup (an equal one is the last)
+    if METHODS[cfg.method].asks_labels and (cfg.warmup > cfg.epochs or cfg.total_queries == 0):
+        why = "--total-queries 0" if cfg.total_queries == 0 else f"--warmup {cfg.warmup} > --epochs {cfg.epochs}"
         said.append(f"{cfg.method} asks for no label in this run ({why}): it learns as METRA does")
     return said
 

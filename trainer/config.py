@@ -169,10 +169,12 @@ class Config:
             f"--replay-capacity {self.replay_capacity} must hold one epoch of transitions "
             f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
         )
+        held = max(1, self.replay_capacity // self.episode_steps) * self.episode_steps  # whole episodes (replay.py)
         need(
-            self.start_transitions <= self.replay_capacity,
-            f"--start-transitions {self.start_transitions} must be ≤ --replay-capacity {self.replay_capacity} (the "
-            "buffer never holds more: no gradient step would ever be taken)",
+            self.start_transitions <= held,
+            f"--start-transitions {self.start_transitions} must be ≤ the {held} transitions --replay-capacity "
+            f"{self.replay_capacity} holds (whole episodes of {self.episode_steps} steps): no gradient step would "
+            "ever be taken",
         )
         need(
             self.batch_size <= self.replay_capacity,

@@ -123,7 +123,8 @@ def path_run_id(request: Request) -> int | None:
     if "run_id" not in request.path_params:
         return None
     raw = str(request.path_params["run_id"])
-    if not (raw.isascii() and raw.isdigit()) or not 1 <= int(raw) <= MAX_INT:
+    # the length first: int() refuses more than 4300 digits (a ValueError, a 500)
+    if not (raw.isascii() and raw.isdigit()) or len(raw) > len(str(MAX_INT)) or not 1 <= int(raw) <= MAX_INT:
         msg = f"not a run's number: {raw!r} (digits 0-9 only, 1 to {MAX_INT})"
         raise RequestValidationError([{"type": "run_id", "loc": ("path", "run_id"), "msg": msg, "input": raw}])
     return int(raw)

@@ -183,3 +183,7 @@ def test_the_downstream_command_on_an_unfinished_run_says_so(tmp_path):
     assert said is not None and said.startswith(f"{stopped} has not finished (status interrupted, epoch")
     assert not_finished(fake_run(tmp_path, "point", "north", "metra", 1, 1.0)) is None
     assert not_finished(tmp_path / "nowhere") is None  # load_skills says what is missing
+    training = tmp_path / "training"
+    training.mkdir()
+    (training / "checkpoint.pt").write_bytes(b"")  # a run still training (or killed): no summary yet
+    assert "has not finished (no summary.json: still training" in (not_finished(training) or "")

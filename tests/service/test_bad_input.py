@@ -63,7 +63,7 @@ def test_unknown_ids(labeler: CollieClient, run: RunRead) -> None:
         assert err.value.status == 404 and "no " in str(err.value.detail)
 
 
-@pytest.mark.parametrize("raw", ["%C2%B2", "%D9%A3", "99999999999999999999", "-1"])
+@pytest.mark.parametrize("raw", ["%C2%B2", "%D9%A3", "99999999999999999999", "-1", "1" * 5000])  # 5000: past int()
 @pytest.mark.parametrize("role", ["operator", "trainer", "labeler"])
 def test_a_run_id_that_is_no_id_is_a_422(live: BackgroundServer, raw: str, role: str) -> None:
     """Run ids "²" and "٣" are digits to str.isdigit but no int; a number past MAX_INT fits no column. Was:

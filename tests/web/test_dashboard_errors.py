@@ -82,11 +82,18 @@ def test_a_link_that_names_no_run_number_says_so(browser: Any, live: BackgroundS
         page.click(f'#runs-body tr[data-run-id="{run.id}"]')  # a run picked from the list opens
         page.wait_for_selector("#run:not([hidden])")
         assert page.is_hidden("#run-problem")
+        page.evaluate("window.location.hash = 'run=%'")  # no escape at all: was a URIError each poll
+        page.wait_for_function(
+            "document.querySelector('#run-problem').textContent.startsWith('\"#run=%\" names no run')"
+        )
+        page.wait_for_selector(f'#runs-body tr[data-run-id="{run.id}"]')  # the list is still drawn
+        assert page.text_content("#connection") == "live"
 
 
 def test_a_service_that_stops_answering_is_said_not_responding(browser: Any, tmp_path: Path) -> None:
     """A frozen service keeps its connections open: the stream sees no error. Was: the badge said
-    "live" through 75 s of a service stopped with SIGSTOP."""
+    "live" through 75 s of a service stopped with SIGSTOP. Read from the runs list's long poll, not
+    a health check of its own (which would wait for a free connection where tabs hold them all)."""
     env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
     server, _ = start_serve(tmp_path / "frozen.db", tmp_path / "tokens.json", env)
     try:
@@ -97,8 +104,10 @@ def test_a_service_that_stops_answering_is_said_not_responding(browser: Any, tmp
         with operator_page(browser, url, wait_ms=WAIT_MS) as page:
             page.wait_for_function("document.querySelector('#connection').textContent === 'live'")
             server.send_signal(signal.SIGSTOP)
-            try:  # a check every 10 s, each given 5 s to answer
-                page.wait_for_function("document.querySelector('#connection').textContent === 'not responding'")
+            try:  # the runs list's long poll (20 s) is 10 s overdue
+                page.wait_for_function(
+                    "document.querySelector('#connection').textContent === 'not responding'", timeout=45_000
+                )
             finally:
                 server.send_signal(signal.SIGCONT)
             page.wait_for_function("document.querySelector('#connection').textContent === 'live'")

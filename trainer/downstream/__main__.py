@@ -113,6 +113,11 @@ def refusal(a: argparse.Namespace) -> str | None:
 
 def not_finished(run_dir: Path) -> str | None:
     """Words for a run that stopped short (its skills are its last checkpoint's), else None."""
+    if not (run_dir / "summary.json").exists() and (run_dir / "checkpoint.pt").exists():
+        return (
+            f"{run_dir} has not finished (no summary.json: still training, or stopped without one): "
+            "its skills are those of its last checkpoint"
+        )
     try:
         summary = read_json_object(run_dir / "summary.json")
     except RunFolderError:  # missing or broken: load_skills names what it needs

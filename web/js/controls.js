@@ -56,7 +56,8 @@ export class Controls {
       // A text field read strictly: a number field in Chromium read "1,5" as 15, and applied it.
       const text = this.policy.seconds.value.trim();
       if (!SECONDS.test(text)) {
-        const decimal = /^\d*,\d+$/.test(text) ? ` (write ${text.replace(",", ".")} with a point)` : "";
+        // "1,5" is 1.5 written with a comma; "1,500" may be 1500: no guess is offered for it
+        const decimal = /^\d+,\d{1,2}$/.test(text) ? ` (for ${text.replace(",", ".")} s, write it with a point)` : "";
         this.message.textContent = text === ""
           ? "enter the seconds (more than 0) to wait for a session's labels"
           : `"${text}" is not a number of seconds${decimal}`;
@@ -66,8 +67,12 @@ export class Controls {
         this.message.textContent = "enter the seconds (more than 0) to wait for a session's labels";
         return;
       }
+      if (!Number.isFinite(Number(text))) { // 1e400: Infinity, which JSON would send as null (wait for all)
+        this.message.textContent = `"${text}" is more seconds than a number holds: enter fewer`;
+        return;
+      }
       const max = await feedbackTimeoutMax();
-      if (max != null && !(Number(text) <= max)) { // 1e400 reads as Infinity: too long, too
+      if (max != null && Number(text) > max) {
         this.message.textContent = `a session's labels can be waited for at most ${max} s (${inWords(max)}): enter fewer seconds, or Wait for every label`;
         return;
       }

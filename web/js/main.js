@@ -16,7 +16,7 @@ let missing = null; // a run the service does not know: not asked for again unti
 let opening = 0; // bumped by each open: a failure of one the operator has left is not shown
 
 let reported = "no token"; // what the run's stream (or the runs poll) last said of the connection
-let silent = false; // the service keeps its connections open but answers nothing (checkHealth)
+let silent = false; // the service keeps its connections open but answers nothing (stalled)
 
 function showConnection(state) {
   reported = state;
@@ -29,26 +29,23 @@ function showConnection(state) {
 }
 
 // A service that stops answering (frozen, its machine swapping hard) keeps its connections open, so
-// the stream hears no error and the badge said "live" throughout: a health check every 10 s that
-// gets no answer within 5 s says "not responding" until one answers. A refused connection is the
-// stream's to say ("reconnecting…").
-const HEALTH_EVERY_MS = 10_000;
-const HEALTH_WITHIN_MS = 5_000;
-async function checkHealth() {
-  const abort = new AbortController();
-  const late = setTimeout(() => abort.abort(), HEALTH_WITHIN_MS);
-  let answered = true;
-  try {
-    await fetch("api/health", { signal: abort.signal, cache: "no-store" });
-  } catch (error) {
-    answered = error.name !== "AbortError";
-  } finally {
-    clearTimeout(late);
-  }
-  if (silent !== !answered) {
-    silent = !answered;
+// the stream hears no error and the badge said "live" throughout. The runs list's long poll answers
+// within its wait: one that has not within STALL_S more says "not responding" until it does. (A
+// separate health check would wait for a free connection, six per host in HTTP/1.1, which three
+// dashboard tabs hold with their streams and polls: "not responding" of a service that is fine.)
+const STALL_S = 10;
+function stalled(waitS) {
+  const timer = setTimeout(() => {
+    silent = true;
     showConnection(reported);
-  }
+  }, (waitS + STALL_S) * 1000);
+  return () => {
+    clearTimeout(timer);
+    if (silent) {
+      silent = false;
+      showConnection(reported);
+    }
+  };
 }
 
 function selectedRun() {
@@ -76,7 +73,12 @@ function askForToken(message) {
 // "#run=abc": a link that names no run number (was ignored, and the newest run shown as if asked for)
 function unreadableRun() {
   const asked = /run=([^&]*)/.exec(window.location.hash);
-  return asked && !/^\d+$/.test(asked[1]) ? decodeURIComponent(asked[1]) : null;
+  if (!asked || /^\d+$/.test(asked[1])) return null;
+  try {
+    return decodeURIComponent(asked[1]);
+  } catch {
+    return asked[1]; // "%" alone, or a cut escape: shown as written
+  }
 }
 
 async function openSelected() {
@@ -120,7 +122,8 @@ async function followRuns(generation) {
   let wait = 0; // the first answer at once
   while (generation === started) {
     try {
-      const page = await api(`dashboard/runs?after=${version}&wait_s=${wait}`);
+      const answered = stalled(wait);
+      const page = await api(`dashboard/runs?after=${version}&wait_s=${wait}`).finally(answered);
       wait = RUNS_WAIT_S;
       if (generation !== started) return;
       version = page.version;
@@ -162,7 +165,6 @@ $("#token-form").addEventListener("submit", (event) => {
   start();
 });
 setInterval(() => tickTimes(), 1000);
-setInterval(checkHealth, HEALTH_EVERY_MS);
 
 if (token()) start();
 else askForToken("");
