@@ -47,7 +47,7 @@ def not_replaceable(path: Path) -> bool:
 
 
 def broken_link(exc: OSError) -> str | None:
-    """ "PATH is a link to TARGET, which does not exist" when `exc` is mkdir's refusal of a dangling
+    """ "PATH: a link to TARGET, which does not exist" when `exc` is mkdir's refusal of a dangling
     link on the way (a folder linked to an unmounted disk, say): it says only "File exists"."""
     name = exc.filename
     if exc.errno != errno.EEXIST or name is None or not os.path.islink(name) or os.path.exists(name):

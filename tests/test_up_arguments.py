@@ -84,12 +84,12 @@ def test_another_stacks_database_without_its_tokens_is_refused(tmp_path: Path) -
 
 
 def test_a_part_that_fails_at_start_is_named_with_its_own_error(tmp_path: Path) -> None:
-    """A refusal only the started trainer finds (its flags read well: `collie up` asked beforehand)."""
-    import torch
-
-    if torch.cuda.is_available():
-        pytest.skip("a CUDA device is here: --device cuda starts")
-    proc = up(tmp_path, "--train-args", "--device cuda", "--port", "0", "--out", str(tmp_path / "o"))
+    """A refusal only the started trainer finds (its flags read well: `collie up` asked beforehand).
+    No CUDA device is visible to the stack, on any machine."""
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", "--train-args", "--device cuda"]
+    command += ["--port", "0", "--out", str(tmp_path / "o")]
+    hidden = {**os.environ, "CUDA_VISIBLE_DEVICES": ""}
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=tmp_path, env=hidden)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     said = "the trainer exited with code 2 before it was ready: collie train: error: --device cuda: torch sees no CUDA"
     assert said in proc.stderr

@@ -21,6 +21,7 @@ from collie.tasks import default_task
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
 from trainer.obs_stats import OBS_NORMS, REFERENCE_STATS
+from trainer.replay import trajectories_held
 from trainer.run_files import RunFolderError
 
 LABEL_METHODS = tuple(n for n, m in METHODS.items() if m.asks_labels)  # they ask the feedback source for labels
@@ -169,7 +170,7 @@ class Config:
             f"--replay-capacity {self.replay_capacity} must hold one epoch of transitions "
             f"(--episode-steps × --episodes-per-epoch = {self.episode_steps * self.episodes_per_epoch})",
         )
-        held = max(1, self.replay_capacity // self.episode_steps) * self.episode_steps  # whole episodes (replay.py)
+        held = trajectories_held(self.replay_capacity, self.episode_steps) * self.episode_steps
         need(
             self.start_transitions <= held,
             f"--start-transitions {self.start_transitions} must be ≤ the {held} transitions --replay-capacity "

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from trainer.replay import trajectories_held
+
 if TYPE_CHECKING:
     from trainer.config import Config
 
@@ -166,6 +168,6 @@ def run_floor_bytes(cfg: Config, env: EnvShapes, on_cpu: bool = True) -> int:
     """A lower bound on the host memory a run of `cfg` on `env` touches besides its envs: the replay
     as far as the run fills it (its capacity, or every trajectory of its epochs if fewer) and, on
     the CPU, the learner (on a GPU, its networks, batch and activations are in the GPU's memory)."""
-    stored = min(max(1, cfg.replay_capacity // cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
+    stored = min(trajectories_held(cfg.replay_capacity, cfg.episode_steps), cfg.epochs * cfg.episodes_per_epoch)
     replay = replay_fill_bytes(stored, cfg.episode_steps, env.obs_shape, env.obs_dtype, env.action_dim, env.nq, env.nv)
     return replay + (learner_floor_bytes(cfg.batch_size, cfg.hidden, cfg.layers, env.obs_shape) if on_cpu else 0)

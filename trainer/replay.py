@@ -26,6 +26,11 @@ class Batch:
 FIELDS = ("obs", "action", "skill", "xy", "pitch", "qpos", "qvel", "epoch")  # the per-trajectory arrays
 
 
+def trajectories_held(capacity: int, steps: int) -> int:
+    """How many whole trajectories of `steps` transitions a replay of `capacity` keeps (at least one)."""
+    return max(1, capacity // steps)
+
+
 class TrajectoryReplay:
     def __init__(
         self,
@@ -38,7 +43,7 @@ class TrajectoryReplay:
         nv: int,
         obs_dtype: np.dtype | type = np.float32,
     ) -> None:
-        self.size = max(1, capacity // steps)  # trajectories
+        self.size = trajectories_held(capacity, steps)
         self.steps = steps
         n, t = self.size, steps + 1
         shape = (obs_shape,) if isinstance(obs_shape, int) else tuple(obs_shape)

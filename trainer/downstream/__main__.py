@@ -113,21 +113,19 @@ def refusal(a: argparse.Namespace) -> str | None:
 
 def not_finished(run_dir: Path) -> str | None:
     """Words for a run that stopped short (its skills are its last checkpoint's), else None."""
-    if not (run_dir / "summary.json").exists() and (run_dir / "checkpoint.pt").exists():
-        return (
-            f"{run_dir} has not finished (no summary.json: still training, or stopped without one): "
-            "its skills are those of its last checkpoint"
-        )
-    try:
-        summary = read_json_object(run_dir / "summary.json")
-    except RunFolderError:  # missing or broken: load_skills names what it needs
-        return None
-    if summary.get("status") == "finished":
-        return None
-    return (
-        f"{run_dir} has not finished (status {summary.get('status')}, epoch {summary.get('epochs_done')}): "
-        "its skills are those of its last checkpoint"
-    )
+    if not (run_dir / "summary.json").exists():  # still training, or killed: no summary yet
+        why = "no summary.json: still training, or stopped without one"
+        if not (run_dir / "checkpoint.pt").exists():
+            return None  # no run here: load_skills says what is missing
+    else:
+        try:
+            summary = read_json_object(run_dir / "summary.json")
+        except RunFolderError:  # broken: load_skills names what it needs
+            return None
+        if summary.get("status") == "finished":
+            return None
+        why = f"status {summary.get('status')}, epoch {summary.get('epochs_done')}"
+    return f"{run_dir} has not finished ({why}): its skills are those of its last checkpoint"
 
 
 def main(argv: list[str] | None = None) -> int:
