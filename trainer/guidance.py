@@ -85,8 +85,8 @@ def smoothing_beta(epoch: int, first_feedback_epoch: int | None, span: float, k_
     total epochs. That is *not* the same: with its own numbers (k_β = 5, T^e = 10 000, warm-up
     2000) β reaches 0 at e = 2000, the epoch of the first labels, so guidance would start at full
     strength and the smoothing would only act before any label exists, where w ≡ 1 anyway; on a
-    shorter schedule with a proportionally later warm-up it is the same. k_β = ∞ → pure GSD,
-    k_β = 0 → pure USD (as both write).
+    shorter schedule with a proportionally later warm-up it is the same. k_β = ∞ → pure GSD; both
+    write k_β = 0 → pure USD, which the config refuses (k_β > 0): pure USD is `--method metra`.
     """
     if first_feedback_epoch is None or epoch < first_feedback_epoch:
         return 1.0
