@@ -3,8 +3,13 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-# CPU Linux: the pinned CPU wheel (an unpinned torch pulls GBs of CUDA). On a GPU host: make TORCH_SPEC=torch==2.13.0 PIP_TORCH_INDEX=
+# torch is pinned; PyPI's Linux wheel carries GBs of CUDA packages. On a machine without nvidia-smi whose
+# network reaches PyTorch's CPU index, pip also looks there and takes the CPU wheel (2.13.0+cpu ranks
+# above 2.13.0); otherwise pip's own configuration decides (here: a local CPU wheel). A GPU host gets
+# PyPI's CUDA build; `make setup TORCH_INDEX=` skips the CPU index anywhere, TORCH_INDEX=URL names another.
 TORCH_SPEC ?= torch==2.13.0
+TORCH_CPU_INDEX := https://download.pytorch.org/whl/cpu
+TORCH_INDEX ?= $(shell command -v nvidia-smi >/dev/null || { $(PYTHON) -c "import urllib.request as u; u.urlopen('$(TORCH_CPU_INDEX)/torch/', timeout=5)" >/dev/null 2>&1 && echo $(TORCH_CPU_INDEX); })
 STAMP := $(VENV)/.stamp-install
 # Debian packages: Chromium for the browser tests, EGL (Mesa) for MuJoCo's offscreen rendering.
 SYSTEM_PACKAGES := chromium libegl1 libegl-mesa0 libgl1 libgles2 libosmesa6 fonts-liberation postgresql
@@ -26,7 +31,8 @@ $(SYS_STAMP):
 $(STAMP): pyproject.toml Makefile $(SYS_STAMP)
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q "$(TORCH_SPEC)" mujoco==3.17.0
+	$(PY) -m pip install -q $(if $(TORCH_INDEX),--extra-index-url $(TORCH_INDEX)) "$(TORCH_SPEC)"
+	$(PY) -m pip install -q mujoco==3.17.0
 	$(PY) -m pip install -q -e ".[trainer,service,ui,dev,sweep]"
 	@touch $(STAMP)
 

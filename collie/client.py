@@ -545,11 +545,13 @@ class CollieClient:
         next: bool = False,
         tab: str | None = None,
         hold: int = 1,
+        lease_s: float | None = None,
     ) -> LabelAck:
         """Label (0 bad, 1 neutral, 2 good) or "skip". Pass the same client_request_id to retry safely.
         With next=True the answer also carries the labeler's next claimed query (ack.next; with hold=2
-        the second they hold: the one to preload, taken in the label's transaction). With a
-        `tab`, only that tab's claim may be labelled (NotHolding otherwise), and never as a revision."""
+        the second they hold: the one to preload, taken in the label's transaction), its leases
+        renewed for `lease_s` (None: the service's). With a `tab`, only that tab's claim may be
+        labelled (NotHolding otherwise), and never as a revision."""
         body = LabelSubmit(
             query_id=query_id,
             value=value,
@@ -557,7 +559,7 @@ class CollieClient:
             client_request_id=client_request_id or new_request_id(),
             tab=tab,
         )
-        params = {"next": "true", "hold": hold if hold != 1 else None} if next else {}
+        params = {"next": "true", "hold": hold if hold != 1 else None, "lease_s": lease_s} if next else {}
         return self._post(LabelAck, f"/runs/{run_id}/labels", body, **params)
 
     def release(self, run_id: int, query_id: str) -> Released:
@@ -568,11 +570,17 @@ class CollieClient:
         return self.submit(run_id, query_id, "skip", client_request_id=client_request_id)
 
     def undo(
-        self, run_id: int, query_id: str, client_request_id: str | None = None, tab: str | None = None
+        self,
+        run_id: int,
+        query_id: str,
+        client_request_id: str | None = None,
+        tab: str | None = None,
+        lease_s: float | None = None,
     ) -> LabelAck:
-        """Withdraw the caller's label; it comes back to them (to `tab`) under a fresh lease."""
+        """Withdraw the caller's label; it comes back to them (to `tab`) under a fresh lease of
+        `lease_s` (None: the service's)."""
         body = UndoRequest(query_id=query_id, client_request_id=client_request_id or new_request_id(), tab=tab)
-        return self._post(LabelAck, f"/runs/{run_id}/undo", body)
+        return self._post(LabelAck, f"/runs/{run_id}/undo", body, lease_s=lease_s)
 
     def discard_votes(self, run_id: int, labeler_id: int) -> VotesDiscarded:
         """Operator: withdraw every label one labeler gave in the run."""

@@ -155,13 +155,23 @@ class ServiceLink:
         tab, next = (None, False) if revision else (self.tab, preload)
         return self._retrying(
             lambda: self.client.submit(
-                run_id, query_id, value, seconds, request_id, next=next, tab=tab, hold=MAX_HOLD if next else 1
+                run_id,
+                query_id,
+                value,
+                seconds,
+                request_id,
+                next=next,
+                tab=tab,
+                hold=MAX_HOLD if next else 1,
+                lease_s=self.lease_s,
             )
         )
 
     def undo(self, run_id: int, query_id: str, request_id: str) -> LabelAck:
         """Withdraw one's label; the segment comes back to this tab under a fresh claim."""
-        return self._retrying(lambda: self.client.undo(run_id, query_id, client_request_id=request_id, tab=self.tab))
+        return self._retrying(
+            lambda: self.client.undo(run_id, query_id, client_request_id=request_id, tab=self.tab, lease_s=self.lease_s)
+        )
 
     def release(self, run_id: int, query_id: str) -> None:
         """Hand a held query back to the pool (nothing is recorded: it was never judged)."""

@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from typing import Annotated, Any, TypeVar
 
 import anyio
-from fastapi import Depends, HTTPException, Path, Request
+from fastapi import Depends, HTTPException, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import BaseModel, ValidationError
@@ -21,7 +21,7 @@ from backend.services.auth import Caller, TokenCache
 from backend.services.errors import RunOutOfScope
 from backend.services.events import EventHub
 from backend.settings import Settings
-from collie.schemas import MAX_INT, PART_HEADER, Role
+from collie.schemas import MAX_INT, MAX_LEASE_S, PART_HEADER, Role
 
 bearer = HTTPBearer(auto_error=False, description="a role token: operator, trainer or labeler")
 
@@ -183,3 +183,8 @@ AnyCaller = Annotated[Caller, Depends(allow(*ANY))]
 TrainerCaller = Annotated[Caller, Depends(allow(*TRAINER))]
 LabelerCaller = Annotated[Caller, Depends(allow(*LABELER))]
 OperatorCaller = Annotated[Caller, Depends(allow(*OPERATOR))]
+# A claim's lease length, asked for by the client (the labeling UI renews its own every lease/3);
+# none: the service's setting.
+LeaseS = Annotated[
+    float | None, Query(gt=0, le=MAX_LEASE_S, allow_inf_nan=False, description="lease length; default: settings")
+]

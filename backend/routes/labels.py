@@ -10,6 +10,7 @@ from backend.routes.deps import (
     DB,
     AnyCaller,
     LabelerCaller,
+    LeaseS,
     OperatorCaller,
     PrincipalId,
     RunId,
@@ -62,6 +63,7 @@ async def submit_label(
     hold: Annotated[
         int, Query(ge=1, le=MAX_HOLD, description="with next: the held query to return (2: the one to preload)")
     ] = 1,
+    lease_s: LeaseS = None,
 ) -> Response:
     """A label (0 bad, 1 neutral, 2 good) or "skip" for a query you hold (or labelled: a revision).
     A submission naming its `tab` is taken only from the tab holding the lease (409 NotHeld)."""
@@ -71,18 +73,20 @@ async def submit_label(
         if not next:
             return _ack_response(ack)
         try:  # in the same transaction: one commit per labeler round trip
-            following = leases.claim(conn, run_id, caller, settings.lease_s, hold, body.tab)
+            following = leases.claim(conn, run_id, caller, lease_s or settings.lease_s, hold, body.tab)
         except ServiceError:  # e.g. the run is being stopped: the label stands, there is no next
             following = None
     return _ack_response(ack, following)
 
 
 @router.post("/undo", response_model=LabelAck, status_code=201, responses=_REPEAT, openapi_extra=json_body(UndoRequest))
-async def undo(run_id: RunId, request: Request, caller: LabelerCaller, db: DB, settings: SettingsDep) -> Response:
+async def undo(
+    run_id: RunId, request: Request, caller: LabelerCaller, db: DB, settings: SettingsDep, lease_s: LeaseS = None
+) -> Response:
     """Withdraw the effective label; your own comes back to you under a fresh lease to relabel."""
     body = await parse_body(request, UndoRequest)
     with db.write() as conn:
-        return _ack_response(labels.undo(conn, run_id, caller, body, settings.lease_s))
+        return _ack_response(labels.undo(conn, run_id, caller, body, lease_s or settings.lease_s))
 
 
 @router.post("/labelers/{labeler_id}/discard")

@@ -14,6 +14,7 @@ from backend.routes.deps import (
     OFF_LOOP_BYTES,
     AnyCaller,
     LabelerCaller,
+    LeaseS,
     RunId,
     SettingsDep,
     TrainerCaller,
@@ -24,7 +25,6 @@ from backend.services import leases, queries
 from collie.schemas import (
     MAX_HOLD,
     MAX_INT,
-    MAX_LEASE_S,
     ClaimRead,
     LabelledPage,
     QueryId,
@@ -95,9 +95,7 @@ async def claim(
     caller: LabelerCaller,
     db: DB,
     settings: SettingsDep,
-    lease_s: Annotated[
-        float | None, Query(gt=0, le=MAX_LEASE_S, allow_inf_nan=False, description="lease length; default: settings")
-    ] = None,
+    lease_s: LeaseS = None,
     hold: Annotated[int, Query(ge=1, le=MAX_HOLD, description="hold up to this many (2: preload the next)")] = 1,
     tab: Annotated[TabId | None, Query(description="the browser tab the claim is for: only it may label it")] = None,
 ) -> Response:

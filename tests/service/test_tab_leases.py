@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from datetime import UTC, datetime
 
 import pytest
 
@@ -156,3 +157,29 @@ def test_a_label_can_claim_the_tabs_next_preload(
     assert ack.next is not None  # the tab shows `ahead` next; the label's answer brings the one after
     assert ack.next.query.query_id not in (shown.query.query_id, ahead.query.query_id, other.query.query_id)
     assert ack.next.held == [ahead.query.query_id, ack.next.query.query_id]
+
+
+def test_a_label_and_an_undo_lease_for_as_long_as_the_client_asks(
+    new_labeler: Callable[[str], CollieClient], trainer: CollieClient
+) -> None:
+    """The labeling UI leases for 60 s and renews every 20 s; the segment claimed with a label's answer
+    (and one an undo hands back) was leased for the service's default (120 s), so a UI that died just
+    after a label kept it from others twice as long as its docs say."""
+    run = fresh_run(trainer, 4)
+    who = new_labeler("short-leases")
+
+    def expires_in(query_id: str) -> float:
+        (query,) = [q for q in trainer.queries(run.id) if q.query_id == query_id]
+        assert query.lease_expires_at is not None
+        return (query.lease_expires_at - datetime.now(UTC)).total_seconds()
+
+    first = who.claim(run.id, lease_s=30, tab=TAB_A)
+    assert first is not None
+    ack = who.submit(run.id, first.query.query_id, 1, tab=TAB_A, next=True, hold=MAX_HOLD, lease_s=30)
+    assert ack.next is not None
+    for held in ack.next.held:
+        assert 20 < expires_in(held) <= 30, held
+    assert who.undo(run.id, first.query.query_id, tab=TAB_A, lease_s=30).query_status == "leased"
+    assert 20 < expires_in(first.query.query_id) <= 30
+    ack = who.submit(run.id, first.query.query_id, 2, tab=TAB_A, next=True)  # no lease_s: the service's
+    assert ack.next is not None and expires_in(ack.next.query.query_id) > 100
