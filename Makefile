@@ -18,7 +18,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-exit bench-service bench-pixels bench-encoders probe-quadruped-gait bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
+.PHONY: setup demo demo-oracle test test-compile lint bench-guidance bench-update profile-update bench-contention bench-first-segment bench-gpu bench-exit bench-service bench-pixels bench-encoders probe-quadruped-gait probe-car bench-labeling bench-browser-ceiling bench-dashboard bench-baselines bench-robots bench-chaos clean
 
 $(SYS_STAMP):
 	@mkdir -p $(VENV)
@@ -126,6 +126,10 @@ bench-encoders: $(STAMP)
 # How far open-loop gaits carry the pixel Quadruped (seconds; docs/results.md's gait figures).
 probe-quadruped-gait: $(STAMP)
 	$(PY) benchmarks/probe_quadruped_gait.py --seeds 4
+
+# How the car moves: distance and top speed at full throttle, spin rate, veer with and without elliptic cones.
+probe-car: $(STAMP)
+	$(PY) benchmarks/probe_car.py --seeds 8
 
 # kill -9 ×100 over service, trainer, teacher and labeling UI during a 1000-label oracle run under collie up.
 bench-chaos: $(STAMP)
