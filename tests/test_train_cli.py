@@ -702,6 +702,60 @@ def test_sizes_beyond_free_memory_are_refused_before_they_are_taken(tmp_path: Pa
     assert not (tmp_path / "run").exists()
 
 
+def test_two_runs_side_by_side_do_not_both_count_the_same_free_memory(tmp_path: Path) -> None:
+    """Each run's replay fits the memory free now, not both: the first is promised its part (Linux
+    would lend it page by page, and the kernel kill one of the runs hours later), the second is
+    refused with exit 75 naming the first; once the first has ended, the second starts."""
+    from trainer.config import make_config
+    from trainer.envs.registry import make_env
+    from trainer.memory_plan import available_bytes, replay_fill_bytes
+
+    cfg, env = make_config("smoke", "point"), make_env("point")
+    free = available_bytes()
+    assert free is not None
+    each = replay_fill_bytes(
+        1, cfg.episode_steps, env.obs_shape, np.dtype(env.obs_dtype), env.action_dim, env.nq, env.nv
+    )
+    held = int(0.55 * free / each)  # trajectories: the replay's arrays are made as large (numpy refuses more)
+    epochs = held // cfg.episodes_per_epoch + 1  # and the run would fill them
+    sizes = ["--epochs", str(epochs), "--replay-capacity", str(held * cfg.episode_steps)]
+    ledger = {**os.environ, "COLLIE_MEMORY_LEDGER": str(tmp_path / "ledger")}
+
+    def start(name: str) -> subprocess.Popen[bytes]:
+        cmd = [*TRAIN, *sizes, "--out", str(tmp_path / name)]
+        with open(tmp_path / f"{name}.log", "ab") as log:
+            return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=ledger)
+
+    def promised(proc: subprocess.Popen[bytes], name: str) -> None:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "ledger" / f"{proc.pid}.json").exists():
+            assert proc.poll() is None, (tmp_path / f"{name}.log").read_text()[-3000:]
+            assert time.monotonic() < deadline, f"no promise in the ledger from the {name} run"
+            time.sleep(0.1)
+
+    first = start("first")
+    try:
+        promised(first, "first")
+        second = subprocess.run(
+            [*TRAIN, *sizes, "--out", str(tmp_path / "second")], capture_output=True, text=True, env=ledger, timeout=120
+        )
+        assert second.returncode == os.EX_TEMPFAIL, second.stderr[-3000:]
+        line = second.stderr.strip().splitlines()[-1]
+        assert line.startswith("collie train: error: this machine has not enough memory for the run's sizes"), line
+        assert f"GiB of it promised to running runs (pid {first.pid})" in line
+        assert line.endswith(": give smaller ones, or start it once those runs have ended"), line
+        assert not (tmp_path / "second").exists()
+    finally:
+        first.kill()
+        first.wait()
+    again = start("second")  # the first's promise went with its process (killed: no word of its end)
+    try:
+        promised(again, "second")
+    finally:
+        again.kill()
+        again.wait()
+
+
 HUGE_MODEL = (  # an arena of 4 PB
     '<mujoco><size memory="4000000G"/><worldbody><body><freejoint/><geom size="1"/></body></worldbody></mujoco>'
 )

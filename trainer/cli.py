@@ -511,6 +511,7 @@ SIZE_KEYS = (
     "batch_size",
     "episodes_per_epoch",
     "episode_steps",
+    "epochs",  # the replay is counted as far as the run fills it
 )
 
 
@@ -531,7 +532,16 @@ def short_of_memory(exc: BaseException, args: argparse.Namespace) -> str | None:
     from trainer.memory_plan import NotEnoughMemory
 
     measured = f" ({exc})" if isinstance(exc, NotEnoughMemory) else ""  # checked before allocating: the figures
-    return f"this machine has not enough memory for the run's sizes ({sizes}){measured}: give smaller ones"
+    later = ", or start it once those runs have ended" if isinstance(exc, NotEnoughMemory) and exc.fits_alone else ""
+    return f"this machine has not enough memory for the run's sizes ({sizes}){measured}: give smaller ones{later}"
+
+
+def refusal_status(exc: BaseException) -> int:
+    """2, or EX_TEMPFAIL (75) for a run refused only for the memory running runs were promised: a
+    sweep starts it again once one of its own has ended."""
+    from trainer.memory_plan import NotEnoughMemory
+
+    return os.EX_TEMPFAIL if isinstance(exc, NotEnoughMemory) and exc.fits_alone else 2
 
 
 def run(args: argparse.Namespace) -> int:
@@ -657,7 +667,7 @@ def run(args: argparse.Namespace) -> int:
         if refusal is None:
             raise
         print(f"collie train: error: {refusal}", file=sys.stderr)
-        return 2
+        return refusal_status(exc)
     if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
     from collie.client import ApiError

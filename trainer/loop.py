@@ -43,7 +43,8 @@ from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
-from trainer.memory_plan import check, run_floor_bytes
+from trainer.memory_ledger import reserve
+from trainer.memory_plan import run_floor_bytes
 from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
@@ -141,7 +142,7 @@ class Trainer:
         self.method = method(cfg.method)
         # before torch and np.zeros lend it all: the kernel would kill the run once it was touched
         on_cpu = self.device.type == "cpu"
-        check(
+        reserve(  # and promised, so that a run started beside this one does not count it as free
             "the networks, a gradient step and the replay" if on_cpu else "the replay",
             run_floor_bytes(cfg, self.env, on_cpu),
         )

@@ -30,11 +30,22 @@ PROJECTED_SHARE = 0.85  # of that cost: the first envs take ≈ 10 % more each t
 
 
 class NotEnoughMemory(MemoryError):
-    """`needed` bytes (a lower bound) against `available`; `what` names the allocation."""
+    """`needed` bytes (a lower bound) against `available`, of which `held` is promised to the runs
+    `holders` on this machine (trainer/memory_ledger.py); `what` names the allocation."""
 
-    def __init__(self, what: str, needed: int, available: int) -> None:
-        self.what, self.needed, self.available = what, needed, available
-        super().__init__(f"{what}: at least {needed / GIB:.1f} GiB, {available / GIB:.1f} GiB free")
+    def __init__(self, what: str, needed: int, available: int, held: int = 0, holders: tuple[int, ...] = ()) -> None:
+        self.what, self.needed, self.available, self.held, self.holders = what, needed, available, held, holders
+        said = f"{what}: at least {needed / GIB:.1f} GiB, {available / GIB:.1f} GiB free"
+        if self.fits_alone:  # else what others hold is no matter: it would not fit alone either
+            runs = ", ".join(str(pid) for pid in holders)
+            promised = f"{held / GIB:.1f} GiB" if held >= GIB / 10 else f"{held / 2**20:.0f} MiB"
+            said += f", {promised} of it promised to running runs (pid {runs})"
+        super().__init__(said)
+
+    @property
+    def fits_alone(self) -> bool:
+        """Refused only for what running runs were promised: it fits once they end."""
+        return self.held > 0 and self.needed <= self.available
 
 
 def available_bytes(meminfo: Path = MEMINFO, cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -> int | None:
@@ -128,13 +139,6 @@ def resident_bytes() -> int | None:
         return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
     except (OSError, IndexError, ValueError):
         return None
-
-
-def check(what: str, needed: int, available: int | None = None) -> None:
-    """Raise NotEnoughMemory if `needed` bytes exceed what is free (`available`, read now if None)."""
-    free = available_bytes() if available is None else available
-    if free is not None and needed > free:
-        raise NotEnoughMemory(what, needed, free)
 
 
 def replay_fill_bytes(

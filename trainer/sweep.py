@@ -74,6 +74,8 @@ class Stop:
         self.asked = threading.Event()
         self._running: set[subprocess.Popen] = set()
         self._lock = threading.Lock()  # taken by the workers and the handler, never held by the main thread
+        self._ended = threading.Condition(self._lock)  # told as each child ends
+        self._ends = 0
 
     def handle(self, _signum: int, _frame: object) -> None:
         if self.asked.is_set():
@@ -102,8 +104,23 @@ class Stop:
             return self._stop_and_wait(proc)
         finally:
             if proc is not None:
-                with self._lock:
+                with self._ended:
                     self._running.discard(proc)
+                    self._ends += 1
+                    self._ended.notify_all()
+
+    def running(self) -> bool:
+        with self._lock:
+            return bool(self._running)
+
+    def wait_for_an_end(self) -> bool:
+        """Wait until a child running now ends: True then; False at once where none runs, or once
+        the sweep is told to stop. Polled, as `_wait`, for a Ray cancel."""
+        with self._ended:
+            ends = self._ends
+            while self._running and self._ends == ends and not self.asked.is_set():
+                self._ended.wait(POLL_S)
+            return self._ends != ends and not self.asked.is_set()
 
     def _wait(self, proc: subprocess.Popen) -> int:
         """`proc`'s exit code, polled: Ray's cancellation of a task is a KeyboardInterrupt raised
@@ -318,9 +335,23 @@ def downstream_done(out: str | Path) -> bool:
 
 
 def _call(cmd: list[str], log: Path, stop: Stop) -> None:
+    """`cmd`, logged to `log`; RuntimeError naming the log if it fails. A training refused only for
+    the memory this sweep's running runs were promised (exit EX_TEMPFAIL: `collie train`'s memory
+    ledger) starts again once one of them has ended."""
+    from tqdm import tqdm
+
     log.parent.mkdir(parents=True, exist_ok=True)
-    with open(log, "a") as f:
-        code = stop.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    while True:
+        with open(log, "a") as f:
+            code = stop.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        if code != os.EX_TEMPFAIL or not stop.running():
+            break
+        said = f"collie sweep: {log.with_suffix('')} waits for a running run to end: it needs memory promised to them"
+        tqdm.write(said, file=sys.stderr)
+        if not stop.wait_for_an_end():
+            if stop.asked.is_set():
+                raise Interrupted("not started: the sweep was interrupted")
+            break
     if code != 0:
         raise RuntimeError(f"failed ({code}): {shlex.join(cmd)} — see {log}")
 

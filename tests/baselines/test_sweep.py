@@ -6,6 +6,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -486,3 +487,25 @@ def test_downstream_flags_are_checked_up_front_only_with_downstream(tmp_path, ca
     assert named in err and len(err.splitlines()) == 1, err
     assert main([*argv, "--downstream-flags", flags]) == 0
     assert "--downstream-flags" not in capsys.readouterr().err
+
+
+# a training refused for memory the sweep's running runs were promised: exit EX_TEMPFAIL the first
+# time (as `collie train` does), 0 once started again
+REFUSED_ONCE = "import sys, pathlib; m = pathlib.Path(sys.argv[1]); n = m.exists(); m.touch(); sys.exit(0 if n else 75)"
+
+
+def test_a_run_refused_for_memory_its_running_siblings_hold_starts_again_once_one_ends(tmp_path, capsys):
+    stop = sweep.Stop()
+    sibling = threading.Thread(target=stop.run, args=([sys.executable, "-c", "import time; time.sleep(3)"],))
+    sibling.start()
+    while not stop.running():
+        time.sleep(0.05)
+    began = time.monotonic()
+    sweep._call([sys.executable, "-c", REFUSED_ONCE, str(tmp_path / "tried")], tmp_path / "run.log", stop)
+    assert time.monotonic() - began > 2  # it waited for the sibling's end
+    assert not sibling.is_alive()
+    assert "run waits for a running run to end: it needs memory promised to them" in capsys.readouterr().err
+    # with no sibling running it is the run's failure, said once: no wait for memory no run of ours holds
+    (tmp_path / "tried").unlink()
+    with pytest.raises(RuntimeError, match=r"^failed \(75\): .* — see .*run\.log$"):
+        sweep._call([sys.executable, "-c", REFUSED_ONCE, str(tmp_path / "tried")], tmp_path / "run.log", stop)

@@ -8,11 +8,11 @@ import pytest
 
 from trainer.config import PRESETS, make_config
 from trainer.envs.registry import ENV_NAMES, make_env
+from trainer.memory_ledger import LEDGER_ENV, check_beside_others
 from trainer.memory_plan import (
     GIB,
     NotEnoughMemory,
     available_bytes,
-    check,
     container_free_bytes,
     replay_fill_bytes,
     run_floor_bytes,
@@ -91,10 +91,11 @@ def test_a_limit_on_a_cgroup_above_this_process_s_counts_too(tmp_path: Path) -> 
     assert container_free_bytes(v1, member) == GIB * 3 // 2
 
 
-def test_a_size_beyond_free_memory_is_refused_with_both_figures() -> None:
-    check("the replay", 2 * GIB, available=3 * GIB)  # fits: nothing said
+def test_a_size_beyond_free_memory_is_refused_with_both_figures(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv(LEDGER_ENV, str(tmp_path / "ledger"))  # no other run promised anything
+    check_beside_others("the replay", 2 * GIB, available=3 * GIB)  # fits: nothing said
     with pytest.raises(NotEnoughMemory, match=r"^the replay: at least 4\.0 GiB, 3\.0 GiB free$") as caught:
-        check("the replay", 4 * GIB, available=3 * GIB)
+        check_beside_others("the replay", 4 * GIB, available=3 * GIB)
     assert isinstance(caught.value, MemoryError)  # `collie train` names the sizes given for any MemoryError
 
 

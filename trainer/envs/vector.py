@@ -27,7 +27,8 @@ import numpy as np
 from trainer.envs.base import SkillEnv
 from trainer.envs.batched import BatchedPhysics
 from trainer.envs.registry import make_env
-from trainer.memory_plan import ENVS_MEASURED, PROJECTED_SHARE, check, resident_bytes
+from trainer.memory_ledger import check_beside_others
+from trainer.memory_plan import ENVS_MEASURED, PROJECTED_SHARE, resident_bytes
 
 
 @dataclass
@@ -68,7 +69,7 @@ def make_envs(name: str, num_envs: int, episode_steps: int, layout_seed: int | N
         now = resident_bytes() if i == ENVS_MEASURED and i + 1 < num_envs else None
         if before is not None and now is not None:
             each = PROJECTED_SHARE * max(0, now - before) / ENVS_MEASURED
-            check(f"{num_envs} {name} envs", int(each * (num_envs - i - 1)))
+            check_beside_others(f"{num_envs} {name} envs", int(each * (num_envs - i - 1)))
     return envs
 
 
