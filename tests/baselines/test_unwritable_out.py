@@ -75,6 +75,17 @@ def test_an_out_through_a_file_is_one_line_naming_it(tmp_path: Path, capsys: pyt
     assert (tmp_path / "a-file").read_text() == "kept"
 
 
+def test_an_out_where_the_file_system_makes_no_folder_is_one_line_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """/proc makes no folder, for root neither (mkdir: "No such file or directory"). Was a traceback."""
+    for argv in commands(tmp_path, Path("/proc")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith(f"collie {argv[0]}: error: cannot use {argv[-1]}"), err
+        assert err.endswith(": No such file or directory\n") and len(err.splitlines()) == 1, err
+
+
 def test_an_out_through_a_link_to_nowhere_is_one_line_naming_it(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
