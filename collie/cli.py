@@ -52,19 +52,19 @@ def unwritable_line(exc: OSError) -> str | None:
     """ "cannot write PATH: Read-only file system" for a file system's refusal (a full disk's write
     names no path: "cannot write: No space left on device"); for a file where a folder must go (a
     path through a file, --out a-file/x), "cannot use PATH: Not a directory", and "No such file or
-    directory" for one in a file system that makes none (/proc/x); for a link to nowhere on
+    directory" for a folder a file system will not make (/proc/x: `make_folder`); for a link to nowhere on
     the way, "cannot use PATH: a link to TARGET, which does not exist"; None for any other
     OSError, which is a bug to show whole."""
     said = exc.strerror or str(exc)
     where = exc.filename2 if exc.filename2 is not None else exc.filename  # a copy's or rename's: its target
-    from collie.whole_files import UNWRITABLE, broken_link
+    from collie.whole_files import UNWRITABLE, FolderRefused, broken_link
 
     if (dangling := broken_link(exc)) is not None:
         return f"cannot use {dangling}"
     if exc.errno in UNWRITABLE:
         return f"cannot write {where}: {said}" if where is not None else f"cannot write: {said}"
-    # a file where a folder must go; a folder a file system will not make (/proc/x, /sys/x)
-    if exc.errno in (errno.ENOTDIR, errno.ENOENT) and exc.filename is not None:
+    # a file where a folder must go; a folder a file system will not make (/proc/x)
+    if (exc.errno == errno.ENOTDIR or isinstance(exc, FolderRefused)) and exc.filename is not None:
         return f"cannot use {exc.filename}: {said}"
     return None
 

@@ -46,6 +46,19 @@ def not_replaceable(path: Path) -> bool:
     return in_dev or (path.exists() and not path.is_file() and not path.is_dir())
 
 
+class FolderRefused(FileNotFoundError):
+    """mkdir's "No such file or directory" for a folder whose parents are there: a file system
+    that makes no folders (/proc, /sys). Any other FileNotFoundError is a bug to show whole."""
+
+
+def make_folder(path: Path) -> None:
+    """`path` and its parents made where absent (FolderRefused where the file system makes none)."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileNotFoundError as exc:
+        raise FolderRefused(exc.errno, exc.strerror, exc.filename) from None
+
+
 def broken_link(exc: OSError) -> str | None:
     """ "PATH: a link to TARGET, which does not exist" when `exc` is mkdir's refusal of a dangling
     link on the way (a folder linked to an unmounted disk, say): it says only "File exists"."""

@@ -32,6 +32,22 @@ def scratch_cwd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
         os.chdir(before)
 
 
+@pytest.fixture(autouse=True, scope="session")
+def own_memory_ledger(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The runs tests start promise their memory in the session's own ledger
+    (trainer/memory_ledger.py), not in the machine's: a run of the user's beside the suite is not
+    counted by the tests, nor theirs by it."""
+    before = os.environ.get("COLLIE_MEMORY_LEDGER")
+    os.environ["COLLIE_MEMORY_LEDGER"] = str(tmp_path_factory.mktemp("memory-ledger"))
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("COLLIE_MEMORY_LEDGER", None)
+        else:
+            os.environ["COLLIE_MEMORY_LEDGER"] = before
+
+
 # The longest files, longest first (worker-seconds of a quiet `make test` here on 2026-12-07: 135, 118,
 # 110, 103, 93, 74, 59, 54): handed out first, none of them is left to run alone at the end.
 LONGEST_FILES = (

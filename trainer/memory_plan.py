@@ -37,15 +37,21 @@ class NotEnoughMemory(MemoryError):
         self.what, self.needed, self.available, self.held, self.holders = what, needed, available, held, holders
         said = f"{what}: at least {needed / GIB:.1f} GiB, {available / GIB:.1f} GiB free"
         if self.fits_alone:  # else what others hold is no matter: it would not fit alone either
-            runs = ", ".join(str(pid) for pid in holders)
-            promised = f"{held / GIB:.1f} GiB" if held >= GIB / 10 else f"{held / 2**20:.0f} MiB"
-            said += f", {promised} of it promised to running runs (pid {runs})"
+            runs = ("pid " if len(holders) == 1 else "pids ") + ", ".join(str(pid) for pid in holders)
+            said += f", {size(min(held, available))} of it promised to running runs ({runs})"
         super().__init__(said)
 
     @property
     def fits_alone(self) -> bool:
         """Refused only for what running runs were promised: it fits once they end."""
         return self.held > 0 and self.needed <= self.available
+
+
+def size(n: int) -> str:
+    """Bytes as people read them here: GiB to a tenth, MiB below a tenth of a GiB."""
+    if n >= GIB / 10:
+        return f"{n / GIB:.1f} GiB"
+    return f"{n / 2**20:.0f} MiB" if n >= 2**20 else "under 1 MiB"
 
 
 def available_bytes(meminfo: Path = MEMINFO, cgroup: Path = CGROUP, membership: Path = MEMBERSHIP) -> int | None:

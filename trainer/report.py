@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from collie.tasks import Task
+from collie.whole_files import make_folder
 from trainer.config import first_version
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
@@ -501,7 +502,7 @@ def write_report(roots: list[Path], out: Path, figures: bool = True, bin_rule: s
         except RunFolderError as exc:  # its final evaluation is unreadable: left out, with why
             runs.remove(r)
             broken.append((r.path, str(exc)))
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     paths: list[Path] = []
     if figures and runs:
         from trainer.report_figures import skill_figures

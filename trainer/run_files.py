@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from collie.whole_files import write_whole
+from collie.whole_files import make_folder, write_whole
 
 
 class RunFolderError(ValueError):
@@ -117,7 +117,7 @@ def folder_written_whole(out: Path, replace: bool = False) -> Iterator[Path]:
     made = [folder for folder in (out, *out.parents) if not folder.exists()]  # `out` first, then up
     building: Path | None = None
     try:
-        out.mkdir(parents=True, exist_ok=True)  # a read-only disk, a path through a file: named as `out`
+        make_folder(out)  # a read-only disk, a path through a file: named as `out`
         building = _hidden_beside(out, BEING_WRITTEN)
         os.chmod(building, stat.S_IMODE(out.stat().st_mode))  # the mode `out` has, or the umask gave it
         try:

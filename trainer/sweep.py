@@ -42,6 +42,7 @@ from typing import Any, NoReturn
 
 from collie.pass_through import owned_flags
 from collie.processes import end_with_parent
+from collie.whole_files import make_folder
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES
@@ -75,7 +76,7 @@ class Stop:
         self._running: set[subprocess.Popen] = set()
         self._lock = threading.Lock()  # taken by the workers and the handler, never held by the main thread
         self._ended = threading.Condition(self._lock)  # told as each child ends
-        self._ends = 0
+        self._freeing_ends = 0  # children that ended other than refused for memory: each may have freed some
 
     def handle(self, _signum: int, _frame: object) -> None:
         if self.asked.is_set():
@@ -106,21 +107,26 @@ class Stop:
             if proc is not None:
                 with self._ended:
                     self._running.discard(proc)
-                    self._ends += 1
+                    self._freeing_ends += proc.returncode != os.EX_TEMPFAIL
                     self._ended.notify_all()
 
-    def running(self) -> bool:
+    def freeing_ends(self) -> int:
         with self._lock:
-            return bool(self._running)
+            return self._freeing_ends
 
-    def wait_for_an_end(self) -> bool:
-        """Wait until a child running now ends: True then; False at once where none runs, or once
-        the sweep is told to stop. Polled, as `_wait`, for a Ray cancel."""
+    def must_wait(self, seen: int) -> bool:
+        """Whether `wait_for_memory(seen)` would wait now."""
+        with self._lock:
+            return self._freeing_ends == seen and bool(self._running)
+
+    def wait_for_memory(self, seen: int) -> bool:
+        """Wait until more children than `seen` have ended other than refused for memory (at once
+        if they have): True then; False once none runs (the memory is held by no run of this
+        sweep), or once the sweep is told to stop. Polled, as `_wait`, for a Ray cancel."""
         with self._ended:
-            ends = self._ends
-            while self._running and self._ends == ends and not self.asked.is_set():
+            while self._freeing_ends == seen and self._running and not self.asked.is_set():
                 self._ended.wait(POLL_S)
-            return self._ends != ends and not self.asked.is_set()
+            return self._freeing_ends != seen and not self.asked.is_set()
 
     def _wait(self, proc: subprocess.Popen) -> int:
         """`proc`'s exit code, polled: Ray's cancellation of a task is a KeyboardInterrupt raised
@@ -335,20 +341,23 @@ def downstream_done(out: str | Path) -> bool:
 
 
 def _call(cmd: list[str], log: Path, stop: Stop) -> None:
-    """`cmd`, logged to `log`; RuntimeError naming the log if it fails. A training refused only for
-    the memory this sweep's running runs were promised (exit EX_TEMPFAIL: `collie train`'s memory
-    ledger) starts again once one of them has ended."""
+    """`cmd`, logged to `log`; RuntimeError naming the log if it fails. One refused only for the
+    memory running runs were promised (exit EX_TEMPFAIL: trainer/memory_ledger.py) starts again
+    once a run of this sweep has ended since it started (one not refused so itself); where none
+    runs, the memory is held elsewhere, and it fails. (Under Ray a task sees no other run: it fails.)"""
     from tqdm import tqdm
 
     log.parent.mkdir(parents=True, exist_ok=True)
     while True:
+        seen = stop.freeing_ends()  # an end from now on may free what this one is refused for
         with open(log, "a") as f:
             code = stop.run(cmd, stdout=f, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
-        if code != os.EX_TEMPFAIL or not stop.running():
+        if code != os.EX_TEMPFAIL:
             break
-        said = f"collie sweep: {log.with_suffix('')} waits for a running run to end: it needs memory promised to them"
-        tqdm.write(said, file=sys.stderr)
-        if not stop.wait_for_an_end():
+        if stop.must_wait(seen):
+            said = f"collie sweep: {log.with_suffix('')} waits for a run to end: it needs memory promised to them"
+            tqdm.write(said, file=sys.stderr)
+        if not stop.wait_for_memory(seen):
             if stop.asked.is_set():
                 raise Interrupted("not started: the sweep was interrupted")
             break
@@ -699,7 +708,7 @@ def check_writable(folder: Path) -> None:
     """OSError naming `folder` if no file can be made in it (a read-only file system, a full disk):
     else every run would fail in turn, a FAILED line each, before the report's write said why
     (collie/cli.py turns the error into its line)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder)
     try:
         with tempfile.TemporaryFile(dir=folder) as f:  # a byte: a full disk makes an empty file
             f.write(b"?")

@@ -489,23 +489,33 @@ def test_downstream_flags_are_checked_up_front_only_with_downstream(tmp_path, ca
     assert "--downstream-flags" not in capsys.readouterr().err
 
 
-# a training refused for memory the sweep's running runs were promised: exit EX_TEMPFAIL the first
-# time (as `collie train` does), 0 once started again
-REFUSED_ONCE = "import sys, pathlib; m = pathlib.Path(sys.argv[1]); n = m.exists(); m.touch(); sys.exit(0 if n else 75)"
+# a training refused for memory a running run was promised (exit EX_TEMPFAIL, as `collie train`)
+# while argv[1] is absent; each start is a line in argv[2]
+REFUSED_WHILE = (
+    "import sys, pathlib; open(sys.argv[2], 'a').write('x\\n'); "
+    "sys.exit(0 if pathlib.Path(sys.argv[1]).exists() else 75)"
+)
 
 
-def test_a_run_refused_for_memory_its_running_siblings_hold_starts_again_once_one_ends(tmp_path, capsys):
-    stop = sweep.Stop()
-    sibling = threading.Thread(target=stop.run, args=([sys.executable, "-c", "import time; time.sleep(3)"],))
-    sibling.start()
-    while not stop.running():
-        time.sleep(0.05)
+def test_runs_refused_for_memory_a_running_sibling_holds_start_again_once_it_ends(tmp_path, capsys):
+    """Two runs refused while a third holds the memory wait for its end, each started once more
+    then; a refused run's own end frees nothing and wakes no one (they had restarted each other)."""
+    stop, done = sweep.Stop(), tmp_path / "holder-done"
+    holder = [sys.executable, "-c", f"import time, pathlib; time.sleep(3); pathlib.Path({str(done)!r}).touch()"]
+    threads = [threading.Thread(target=stop.run, args=(holder,))]
+    for name in ("a", "b"):
+        cmd = [sys.executable, "-c", REFUSED_WHILE, str(done), str(tmp_path / f"{name}.starts")]
+        threads.append(threading.Thread(target=sweep._call, args=(cmd, tmp_path / f"{name}.log", stop)))
     began = time.monotonic()
-    sweep._call([sys.executable, "-c", REFUSED_ONCE, str(tmp_path / "tried")], tmp_path / "run.log", stop)
-    assert time.monotonic() - began > 2  # it waited for the sibling's end
-    assert not sibling.is_alive()
-    assert "run waits for a running run to end: it needs memory promised to them" in capsys.readouterr().err
-    # with no sibling running it is the run's failure, said once: no wait for memory no run of ours holds
-    (tmp_path / "tried").unlink()
-    with pytest.raises(RuntimeError, match=r"^failed \(75\): .* — see .*run\.log$"):
-        sweep._call([sys.executable, "-c", REFUSED_ONCE, str(tmp_path / "tried")], tmp_path / "run.log", stop)
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert time.monotonic() - began > 2.5  # they waited for the holder's end
+    assert [(tmp_path / f"{n}.starts").read_text().count("x") for n in ("a", "b")] == [2, 2]
+    assert "a waits for a run to end: it needs memory promised to them" in capsys.readouterr().err
+    # with no run of the sweep running it is the run's failure, at once: the memory is held elsewhere
+    with pytest.raises(RuntimeError, match=r"^failed \(75\): .* — see .*c\.log$"):
+        cmd = [sys.executable, "-c", REFUSED_WHILE, str(tmp_path / "never"), str(tmp_path / "c.starts")]
+        sweep._call(cmd, tmp_path / "c.log", stop)
+    assert (tmp_path / "c.starts").read_text() == "x\n"

@@ -59,6 +59,8 @@ def test_what_a_running_run_was_promised_and_has_not_touched_is_not_free(ledger:
         assert said.startswith("the replay: at least 9.0 GiB, 10.0 GiB free, 2.0 GiB of it promised to running runs")
         assert said.endswith(f"(pid {run.pid})") and caught.value.holders == (run.pid,)
         assert caught.value.fits_alone  # alone it would fit: a sweep waits, and starts it again
+        with pytest.raises(NotEnoughMemory, match=r"1\.5 GiB free, 1\.5 GiB of it promised to running runs"):
+            check_beside_others("the replay", GIB, available=3 * GIB // 2)  # promised 2 GiB: said as at most all
         with pytest.raises(NotEnoughMemory, match=r"^the replay: at least 11\.0 GiB, 10\.0 GiB free$"):
             check_beside_others("the replay", 11 * GIB, available=10 * GIB)  # not even alone: no word of others
         before = promised_elsewhere(ledger)[0]
@@ -93,10 +95,48 @@ def test_a_promise_whose_process_is_gone_or_was_another_s_counts_nothing(ledger:
     started = process_start(parent)
     assert started is not None
     for pid, when in ((int(gone.stdout), 1), (parent, started + 1)):
-        promise = Promise(pid=pid, started=when, floor=4 * GIB, resident=0)
+        promise = Promise(pid=pid, started=when, floor=4 * GIB, anonymous=0)
         (ledger / f"{pid}.json").write_text(json.dumps(promise.__dict__))
-    (ledger / "9.json").write_text('{"pid": 9, "sta')  # half a file: a full disk
     assert promised_elsewhere(ledger) == (0, [])
-    assert list(ledger.glob("*.json")) == []  # none of them is read again
+    assert list(ledger.glob("*.json")) == []  # neither is read again
     (ledger / f"{parent}.json").write_text(json.dumps(Promise(parent, started, 4 * GIB, 64 * GIB).__dict__))
     assert promised_elsewhere(ledger) == (4 * GIB, [parent])  # the same process, as promised: counted
+
+
+def test_files_that_are_no_promise_are_passed_over_and_kept(ledger: Path) -> None:
+    """$COLLIE_MEMORY_LEDGER may name a folder that holds other files: none is read as a promise
+    or removed, and a promise of the wrong kind of numbers is no traceback."""
+    ledger.mkdir()
+    parent = os.getppid()
+    others = {
+        "package.json": '{"name": "x"}',
+        f"{parent}.json.partial": "{",
+        "12.json": '{"pid": 9, "sta',  # half a file
+        f"{parent}.json": json.dumps({"pid": parent, "started": process_start(parent), "floor": "1", "anonymous": 0}),
+    }
+    for name, text in others.items():
+        (ledger / name).write_text(text)
+    check_beside_others("the replay", GIB, available=2 * GIB)
+    assert promised_elsewhere(ledger) == (0, [])
+    assert {p.name: p.read_text() for p in ledger.iterdir() if p.name != ".lock"} == others
+
+
+@pytest.mark.parametrize("whose", ["another user's", "writable by the group"])
+def test_a_ledger_folder_others_may_write_in_is_not_used(ledger: Path, whose: str) -> None:
+    """A folder at the ledger's name that another user made (or may write in) could hold a FIFO for
+    its lock, links for its files, or promises that block every run: it is neither read nor written,
+    and the run is checked alone."""
+    ledger.mkdir(mode=0o700)
+    parent = os.getppid()
+    promise = Promise(pid=parent, started=process_start(parent) or 0, floor=4 * GIB, anonymous=64 * GIB)
+    (ledger / f"{parent}.json").write_text(json.dumps(promise.__dict__))
+    if whose == "another user's":
+        if os.getuid() != 0:
+            pytest.skip("only root can give a folder to another user")
+        os.chown(ledger, 65534, 65534)
+    else:
+        ledger.chmod(0o770)
+    run = promising(ledger, 2 * GIB, 3 * GIB)  # with the promise counted it would not fit
+    assert run.stdout is not None and run.stdout.readline() == "promised\n"
+    run.kill()
+    assert sorted(p.name for p in ledger.iterdir()) == [f"{parent}.json"]  # no lock made, no entry written
