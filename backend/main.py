@@ -130,7 +130,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         checkpointer.cancel()
         app.state.feed.stop()
         app.state.session_parser.stop()
-        db.checkpoint()
+        try:  # the last one: on a full disk the log stays, and the next start reads it (nothing lost)
+            db.checkpoint()
+        except DBAPIError as exc:
+            log.warning("the last checkpoint failed; the write-ahead log keeps every write: %s", first_line(exc.orig))
         db.dispose()
 
     app = FastAPI(

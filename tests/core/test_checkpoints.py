@@ -1,6 +1,7 @@
 """Cheap checkpoints: checkpoint.pt without the replay, the replay as append-only chunks that a
 resume rebuilds exactly, and SIGTERM writing a final checkpoint that `--resume` continues exactly."""
 
+import errno
 import json
 import pickle
 import signal
@@ -125,3 +126,22 @@ def test_a_checkpoint_that_cannot_be_written_leaves_the_last_one_and_no_partial_
     with pytest.raises((pickle.PicklingError, AttributeError, TypeError)):
         save_checkpoint(path, {"epoch": 2, "unpicklable": lambda: None})
     assert load_checkpoint(path) == {"epoch": 1} and sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt"]
+
+
+def test_a_checkpoint_larger_than_the_disk_s_room_is_the_file_system_s_refusal(tmp_path):
+    """torch's zip writer raised its own RuntimeError ("unexpected pos …") over the full disk's
+    OSError, which `collie train` shows as a traceback (exit 1; `collie up` restarted it as a crash)."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
+    try:
+        save_checkpoint(disk / "checkpoint.pt", {"epoch": 1})
+        with pytest.raises(OSError) as caught:
+            save_checkpoint(disk / "checkpoint.pt", {"epoch": 2, "weights": torch.zeros(500_000)})  # 2 MB
+        assert caught.value.errno == errno.ENOSPC
+        assert load_checkpoint(disk / "checkpoint.pt") == {"epoch": 1}
+        assert sorted(p.name for p in disk.iterdir()) == ["checkpoint.pt"]
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=True)

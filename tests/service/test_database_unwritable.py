@@ -171,6 +171,34 @@ def test_checkpoints_survive_a_database_file_that_cannot_be_written(
     assert [r for r in logged if r.exc_info] == []
 
 
+def test_a_stop_while_the_database_file_cannot_be_written_keeps_every_write(
+    tmp_path: Path, logged: list[logging.LogRecord]
+) -> None:
+    """The last checkpoint, at shutdown, fails as the background ones do: a line, not a traceback
+    ("Application shutdown failed"), and the next start finds every write in the log."""
+    db = tmp_path / "collie.db"
+    refusal = chattr_refusal(tmp_path)
+    if refusal is not None:
+        pytest.skip(refusal)
+    with contextlib.ExitStack() as serving:
+        server = serving.enter_context(BackgroundServer(create_app(settings_for(db))))
+        trainer = serving.enter_context(CollieClient(server.url, TOKENS["trainer"]))
+        run = trainer.create_run(make_run_spec())
+        with immutable(db):
+            trainer.set_status(run.id, "training", epoch=3)  # in the log, for the last checkpoint to write
+            serving.close()  # the service stops
+        said = [r.getMessage() for r in logged]
+        assert any(
+            line.startswith("the last checkpoint failed; the write-ahead log keeps every write: ") for line in said
+        )
+    assert [r for r in logged if r.exc_info] == []
+    with (
+        BackgroundServer(create_app(settings_for(db))) as server,
+        CollieClient(server.url, TOKENS["trainer"]) as trainer,
+    ):
+        assert trainer.run(run.id).epoch == 3
+
+
 @contextlib.contextmanager
 def read_only(postgres: PostgresServer, url: str) -> Iterator[None]:
     """PostgreSQL's transactions on the service's database read-only, as on a standby: set for the
