@@ -199,6 +199,18 @@ def check_tokens_json(path: Path) -> None:
         refuse(f"--tokens-json {path}: cannot write a file in {path.parent} ({broken_link(exc) or exc.strerror})")
 
 
+def write_tokens_json(path: Path, url: str, tokens: dict[str, str]) -> None:
+    """The tokens file, written whole, then renamed (a watcher never reads half a file); refused in
+    a line where the disk will not take it (full, read-only, an immutable file): no token is stored
+    then, and the next start makes them again. (Tokens written but not stored, should the start
+    fail after, are read back from the file by the next start.)"""
+    try:
+        write_secret(path, json.dumps({"api": url, "tokens": tokens}, indent=1))
+    except OSError as exc:
+        said = (exc.strerror or str(exc)).lower()
+        refuse(f"--tokens-json {path}: cannot write it ({said}); no token was stored, nothing changed")
+
+
 def refuse(why: str) -> NoReturn:
     """A refusal no restart mends, as argparse reports its own: one line, exit status 2 (the
     supervisor of `collie up` stops restarting on it)."""
@@ -237,6 +249,9 @@ def run(args: argparse.Namespace) -> int:
     sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)
     try:
         settings, tokens, generated, revoked, alive = settings_from(args)
+        if args.tokens_json is not None:  # before a new token's hash is stored: one never written locks all out
+            written = kept_in_file(args.tokens_json, tokens, alive) if args.no_generate_tokens else {}
+            write_tokens_json(args.tokens_json, url, written | tokens)
         app = create_app(settings)
     except Damaged as exc:  # a table dropped: every request touching it would fail, and no restart mends it
         refuse(str(exc))
@@ -246,9 +261,6 @@ def run(args: argparse.Namespace) -> int:
         where = describe(Settings().database_url) if args.db is None else args.db
         raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
     mark("app built")  # the database opened and migrated
-    if args.tokens_json is not None:  # written whole, then renamed: a watcher never reads half a file
-        written = kept_in_file(args.tokens_json, tokens, alive) if args.no_generate_tokens else {}
-        write_secret(args.tokens_json, json.dumps({"api": url, "tokens": written | tokens}, indent=1))
     server = uvicorn_server(app, args.log_level)
     # Ctrl-C (or SIGTERM) is the way to stop, at any moment from here on: the handler only sets
     # uvicorn's exit flag, which it reads once it serves (and its own handlers do the same). Not a

@@ -101,9 +101,12 @@ def write_secret(path: Path, text: str) -> None:
     partial = path.with_name(path.name + ".partial")
     partial.unlink(missing_ok=True)
     fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    partial.replace(path)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        partial.replace(path)
+    finally:  # a full disk, an immutable file: no copy of the secrets is left beside it
+        partial.unlink(missing_ok=True)
 
 
 def read_tokens_file(path: Path) -> dict[str, str]:

@@ -303,6 +303,31 @@ def test_a_tokens_file_that_cannot_be_written_is_refused_before_any_token_is_mad
         stop(server)
 
 
+def test_a_tokens_file_the_disk_will_not_take_stores_no_token(tmp_path: Path) -> None:
+    """A file that cannot be replaced (immutable here; a full disk fails the same write): a folder
+    that takes an empty file passed the first check, then the tokens were stored (as hashes) and the
+    write failed, and the next start printed them "kept from the last start, which printed it"."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db, tokens_file = tmp_path / "c.db", tmp_path / "tokens.json"
+    tokens_file.write_text('{"tokens": {}}')
+    if subprocess.run(["chattr", "+i", str(tokens_file)], capture_output=True).returncode != 0:
+        pytest.skip("chattr +i is refused here (not root, or a file system without it)")
+    try:
+        out = collie("serve", "--db", str(db), "--port", "0", "--tokens-json", str(tokens_file), env=env)
+    finally:
+        subprocess.run(["chattr", "-i", str(tokens_file)], check=True)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    said = f"collie serve: error: --tokens-json {tokens_file}: cannot write it (operation not permitted)"
+    assert out.stderr.startswith(said) and out.stderr.endswith("; no token was stored, nothing changed\n"), out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.db", "tokens.json"]  # no copy of the tokens beside
+    server, lines = start_serve(db, tokens_file, env)
+    try:
+        assert not any("kept" in line for line in lines), lines
+        assert sorted(json.loads(tokens_file.read_text())["tokens"]) == ["labeler", "operator", "trainer"]
+    finally:
+        stop(server)
+
+
 def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     env = {
         **os.environ,
