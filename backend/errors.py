@@ -19,6 +19,7 @@ from starlette.requests import ClientDisconnect
 
 from backend.services.errors import (
     DatabaseBusy,
+    DatabaseDamaged,
     DatabaseUnreachable,
     DatabaseUnwritable,
     RunOutOfScope,
@@ -68,8 +69,8 @@ class OutageLog:
     """One warning line about a database fault every `every_s` at most, with the count of answers
     refused since: an outage under load must not bury the log (nor be a traceback each)."""
 
-    def __init__(self, what: str, every_s: float = 10.0) -> None:
-        self.what = what
+    def __init__(self, what: str, every_s: float = 10.0, status: int = 503) -> None:
+        self.what, self.status = what, status
         self.every_s = every_s
         self._lock = threading.Lock()
         self._next = 0.0
@@ -81,12 +82,13 @@ class OutageLog:
             if time.monotonic() < self._next:
                 return
             refused, self._refused, self._next = self._refused, 0, time.monotonic() + self.every_s
-        log.warning("database %s (%d answer(s) refused with 503): %s", self.what, refused, cause)
+        log.warning("database %s (%d answer(s) refused with %d): %s", self.what, refused, self.status, cause)
 
 
 # SQLite's primary result codes (the low byte of an extended one: SQLITE_IOERR_WRITE is 778)
 SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN = 5, 6, 8, 10, 13, 14
 SQLITE_UNWRITABLE = {SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL}
+SQLITE_DAMAGED = {11, 26}  # SQLITE_CORRUPT ("database disk image is malformed"), SQLITE_NOTADB
 # PostgreSQL's: read_only_sql_transaction (a standby, default_transaction_read_only), disk_full, io_error
 PG_UNWRITABLE = {"25006", "53100", "58030"}
 # serialization_failure, deadlock_detected: two transactions of service processes took rows in
@@ -94,14 +96,17 @@ PG_UNWRITABLE = {"25006", "53100", "58030"}
 PG_CONFLICT = {"40001", "40P01"}
 
 
-def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | None:
-    """The database error as a 503 the client may retry, or None for a fault of ours (a 500 and a
-    traceback). Judged by the driver's code, not its words: SQLite's result code, PostgreSQL's
-    SQLSTATE. On a server database every other OperationalError is an outage (the DB-API's "errors
-    related to the database's operation": connection refused, shut down, too many connections);
-    SQLite, a file, only loses a connection it had or cannot open the file."""
+def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | DatabaseDamaged | None:
+    """The database error as a 503 the client may retry, a damaged SQLite file (a 500 that says
+    so), or None for a fault of ours (a 500 and a traceback). Judged by the driver's code, not its
+    words: SQLite's result code, PostgreSQL's SQLSTATE. On a server database every other
+    OperationalError is an outage (the DB-API's "errors related to the database's operation":
+    connection refused, shut down, too many connections); SQLite, a file, only loses a connection
+    it had or cannot open the file."""
     code = getattr(exc.orig, "sqlite_errorcode", None)
     primary = code & 0xFF if isinstance(code, int) else None
+    if primary in SQLITE_DAMAGED:
+        return DatabaseDamaged(exc.orig)
     if primary in SQLITE_UNWRITABLE or getattr(exc.orig, "sqlstate", None) in PG_UNWRITABLE:
         return DatabaseUnwritable(exc.orig)
     if primary in (SQLITE_BUSY, SQLITE_LOCKED) or getattr(exc.orig, "sqlstate", None) in PG_CONFLICT:
@@ -117,6 +122,7 @@ def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | None:
 
 def install(app: FastAPI) -> None:
     outages, unwritable = OutageLog("unreachable"), OutageLog("cannot be written")
+    damaged = OutageLog("file is damaged", status=500)
 
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
@@ -126,6 +132,8 @@ def install(app: FastAPI) -> None:
             outages.note(exc.cause)
         elif isinstance(exc, DatabaseUnwritable):
             unwritable.note(exc.cause)
+        elif isinstance(exc, DatabaseDamaged):
+            damaged.note(exc.cause)
         headers = RETRY_AFTER if isinstance(exc, Unavailable) else None
         return SafeJSONResponse({"detail": clean_text(exc.detail)}, status_code=exc.status, headers=headers)
 

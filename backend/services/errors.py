@@ -67,6 +67,20 @@ class DatabaseUnwritable(Unavailable):
         self.cause = first_line(cause)
 
 
+class DatabaseDamaged(ServiceError):
+    """SQLite found a page of its file damaged (a disk fault, a copy taken mid-write): no retry
+    mends it, and what the damaged pages held is out of reach; the cause goes to the log only."""
+
+    status = 500
+
+    def __init__(self, cause: object) -> None:
+        super().__init__(
+            "the database file is damaged; its operator must stop the service and restore it from a backup "
+            "(sqlite3's .recover may save what it holds)"
+        )
+        self.cause = first_line(cause)
+
+
 class DatabaseBusy(Unavailable):
     """SQLite's busy timeout ran out (another process holds the write lock: one service process per
     SQLite file is supported), or PostgreSQL rolled the transaction back for a concurrent one (a
