@@ -4,6 +4,7 @@ and no run folder overwritten or created by a refused command."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import hashlib
 import json
@@ -70,6 +71,24 @@ def test_an_existing_run_is_not_overwritten_without_resume(run_copy: Path) -> No
     before = {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()}
     refused(train("--epochs", "1", "--out", str(run_copy)), "already holds a run", "--resume", "--out")
     assert {p.name: digest(p) for p in run_copy.iterdir() if p.is_file()} == before
+
+
+def test_a_run_whose_checkpoint_is_gone_is_told_to_start_again_elsewhere(run_copy: Path) -> None:
+    """Was: --resume said "nothing to resume", and without it "add --resume to continue it"."""
+    (run_copy / "checkpoint.pt").unlink()
+    line = refused(train("--epochs", "3", "--out", str(run_copy), "--resume"), "holds a run but no checkpoint.pt")
+    assert line.endswith("start it again in another --out (or remove this one)"), line
+    line = refused(train("--epochs", "3", "--out", str(run_copy)), "already holds a run")
+    assert line.endswith("it has no checkpoint.pt to continue it from: choose another --out (or remove it)"), line
+
+
+def test_a_damaged_summary_does_not_stop_a_resume(run_copy: Path) -> None:
+    """summary.json is the run's report, rewritten as it goes; the checkpoint is what it resumes from
+    (was: "summary.json: not JSON", and no way on but to delete it)."""
+    (run_copy / "summary.json").write_text("garbage")
+    proc = train("--epochs", "3", "--out", str(run_copy), "--resume")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
 
 
 def test_service_flags_without_a_service_are_refused_and_create_nothing(tmp_path: Path) -> None:
@@ -642,6 +661,35 @@ def test_a_full_disk_during_the_run_is_one_line_and_the_run_resumes(run_copy: Pa
     proc = train("--out", str(run_copy), "--resume", "--epochs", "3")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
+
+
+@pytest.mark.parametrize("how", ["full", "read-only"])
+def test_a_new_run_on_a_full_or_read_only_disk_is_one_line_naming_its_folder(tmp_path: Path, how: str) -> None:
+    """Was: a full disk's "cannot write: No space left on device", naming nothing, and OUT/train.lock
+    left behind (its pid was the write refused); a read-only one said "permission denied"."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    options = "size=1m" + (",ro" if how == "read-only" else "")
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(disk)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
+    try:
+        if how == "full":
+            with open(disk / "filler", "wb") as f, contextlib.suppress(OSError):
+                while True:
+                    f.write(b"\0" * 65536)
+                    f.flush()
+        run = disk / "new"
+        said = (
+            f"cannot start the run in {run}: no space left on device"
+            if how == "full"
+            else f"--out {run}: cannot write in {disk} (read-only file system)"
+        )
+        line = refused(train("--epochs", "1", "--out", str(run)), said)
+        assert line == f"collie train: error: {said}"
+        assert not run.exists()
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=True)
 
 
 def test_a_file_system_turned_read_only_is_named(tmp_path: Path) -> None:

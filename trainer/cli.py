@@ -414,20 +414,31 @@ def check_out(out: Path, resume: bool) -> list[Path]:
             raise ValueError(f"--out {out} is a file, not a folder")
         if resume and (out / "checkpoint.pt").is_dir():
             raise ValueError(f"--resume: {out / 'checkpoint.pt'} is a folder, not a checkpoint")
+        holds_a_run = any((out / name).exists() for name in RUN_FILES)
         if resume and not (out / "checkpoint.pt").is_file():
+            if holds_a_run:  # its checkpoint deleted, or a run stopped before its first one
+                raise ValueError(
+                    f"--resume: {out} holds a run but no checkpoint.pt to continue it from: start it again "
+                    "in another --out (or remove this one)"
+                )
             raise ValueError(f"--resume: no checkpoint at {out / 'checkpoint.pt'}: nothing to resume")
         source = rescored_from(out) if resume else None
         if source:
             raise ValueError(f"--resume: {out} is {source} judged by another task (collie rescore): resume {source}")
-        if not resume and any((out / name).exists() for name in RUN_FILES):
-            raise ValueError(
-                f"{out} already holds a run: add --resume to continue it, or choose another --out (or remove it)"
+        if not resume and holds_a_run:
+            continued = (
+                "add --resume to continue it, or choose"
+                if (out / "checkpoint.pt").exists()
+                else "it has no checkpoint.pt to continue it from: choose"
             )
+            raise ValueError(f"{out} already holds a run: {continued} another --out (or remove it)")
         nearest = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())  # the folder or its creator
         if not nearest.is_dir():
             raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
         if not os.access(nearest, os.W_OK | os.X_OK):
-            raise ValueError(f"--out {out}: cannot write in {nearest} (permission denied)")
+            read_only = os.statvfs(nearest).f_flag & os.ST_RDONLY  # access() says no there, for root too
+            why = "read-only file system" if read_only else "permission denied"
+            raise ValueError(f"--out {out}: cannot write in {nearest} ({why})")
     except PermissionError as exc:  # e.g. a file inside that this user may not read
         raise ValueError(f"--out {out}: permission denied ({exc.filename})") from None
     made = [p for p in (out.absolute(), *out.absolute().parents) if not p.exists()]
@@ -442,9 +453,13 @@ LOCK_FILE = "train.lock"
 
 
 def finished_at(out: Path) -> int | None:
-    """The epochs of a run that finished (summary.json), else None."""
+    """The epochs of a run that finished (summary.json), else None (also for a damaged summary.json:
+    the checkpoint, not the summary, is what a resume reads, and the run rewrites it)."""
     path = out / "summary.json"
-    summary = read_json_object(path) if path.exists() else {}
+    try:
+        summary = read_json_object(path) if path.exists() else {}
+    except RunFolderError:
+        return None
     done = summary.get("epochs_done")
     return int(done) if summary.get("status") == "finished" and isinstance(done, int) else None
 
@@ -551,10 +566,12 @@ def run(args: argparse.Namespace) -> int:
 
     made: list[Path] = []
     locked = False
+    out: Path | None = None  # the run's folder, once its config is made
     try:
         if args.env not in ENV_NAMES:
             raise ValueError(f"unknown env {args.env!r}; valid: {', '.join(ENV_NAMES)}")
         cfg = config_from_args(args)
+        out = Path(cfg.out)
         if args.print_config:
             if args.resume:
                 raise ValueError("--print-config shows what flags make; a run's own config is OUT/config.json")
@@ -647,8 +664,13 @@ def run(args: argparse.Namespace) -> int:
             refusal = short_of_memory(exc, args) or (
                 str(exc) if isinstance(exc, ValueError | FileNotFoundError) else None
             )
-        if made and locked:  # a folder this start made holds nothing of a run yet (another's lock stays)
-            (Path(cfg.out) / LOCK_FILE).unlink(missing_ok=True)
+            if isinstance(exc, OSError) and exc.errno in UNWRITABLE and out is not None:  # a full disk names no file
+                refusal = f"cannot start the run in {out}: {(exc.strerror or str(exc)).lower()}"
+        # a folder this start made holds nothing of a run yet (another's lock stays); a lock whose pid
+        # a full disk refused is this start's too
+        lock = out / LOCK_FILE if made and out is not None else None
+        if lock is not None and (locked or (lock.is_file() and lock.stat().st_size == 0)):
+            lock.unlink(missing_ok=True)
         remove_if_empty(made)
         if (
             refusal is None
