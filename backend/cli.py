@@ -19,7 +19,7 @@ import socket
 import sys
 import tempfile
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from pydantic import SecretStr
 
@@ -31,6 +31,9 @@ from collie.argtypes import file_descriptor, port, sqlite_file
 from collie.schemas import SERVED_TEACHER_PRINCIPAL
 from collie.tokens import read_tokens_file, weakness, write_secret
 from collie.whole_files import broken_link, not_replaceable
+
+if TYPE_CHECKING:
+    from sqlalchemy.exc import DBAPIError
 
 STRONG = "use a long random one, e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))'"
 TEACHER_TOKEN = "COLLIE_TEACHER_TOKEN"
@@ -160,6 +163,15 @@ def listening(host: str, port: int) -> tuple[socket.socket, str]:
         raise SystemExit(2) from None  # a usage error, as argparse's
 
 
+def why_not(exc: DBAPIError, db: Path | None) -> str:
+    """The driver's words, and for a SQLite file on a full disk that it is full: SQLite may say only
+    "disk I/O error" (it cannot make the -shm file a WAL database needs)."""
+    said = first_line(exc.orig)
+    if db is not None and "full" not in said and os.statvfs(db.absolute().parent).f_bavail == 0:
+        return f"its disk is full ({said})"
+    return said
+
+
 def check_sqlite_file(path: Path, shown: str) -> None:
     """A usage error unless the SQLite file at `path` is new (in a folder that exists), empty or
     collie's: serving another program's database would add collie's tables to it (and switch it to
@@ -170,6 +182,8 @@ def check_sqlite_file(path: Path, shown: str) -> None:
 
     if not path.parent.is_dir():  # SQLite would say only "unable to open database file"
         refuse(f"{shown}: the folder {path.parent} does not exist (make it first)")
+    if os.statvfs(path.parent).f_flag & os.ST_RDONLY:  # the same words from SQLite, or "attempt to write"
+        refuse(f"{shown} is on a read-only file system: the service writes to it (collie export reads it there)")
     if not path.is_file() or path.stat().st_size == 0:
         return
     engine = read_only_engine(path)
@@ -241,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
     except UnusableDatabaseUrl as exc:
         refuse(str(exc))
     except DBAPIError as exc:  # e.g. a file that is not SQLite
-        raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {why_not(exc, args.db)}") from None
     if args.tokens_json is not None:
         check_tokens_json(args.tokens_json)
     # Bound before the database is opened: a start that cannot listen must not create the database
@@ -259,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
         refuse(str(exc))
     except DBAPIError as exc:  # e.g. a file that is not SQLite, a server that refuses us
         where = describe(Settings().database_url) if args.db is None else args.db
-        raise SystemExit(f"collie serve: error: cannot open the database {where}: {first_line(exc.orig)}") from None
+        raise SystemExit(f"collie serve: error: cannot open the database {where}: {why_not(exc, args.db)}") from None
     mark("app built")  # the database opened and migrated
     server = uvicorn_server(app, args.log_level)
     # Ctrl-C (or SIGTERM) is the way to stop, at any moment from here on: the handler only sets

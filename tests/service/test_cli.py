@@ -3,6 +3,7 @@ migrations build matching the models."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -486,9 +487,9 @@ def test_a_damaged_database_is_a_one_line_error(tmp_path: Path) -> None:
 
 
 @contextmanager
-def read_only_mount(folder: Path) -> Iterator[Path]:
-    """`folder` as a read-only file system (a tmpfs, remounted read-only: root writes to no file
-    there, unlike in a chmod'ed folder), filled first by the caller through the yielded path."""
+def tmpfs_mount(folder: Path) -> Iterator[Path]:
+    """`folder` as a 16 MB file system of its own (a tmpfs), for the caller to fill, or to remount
+    read-only (root writes to no file there, unlike in a chmod'ed folder)."""
     folder.mkdir()
     tried = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", folder], capture_output=True, text=True)
     if tried.returncode != 0:
@@ -500,11 +501,27 @@ def read_only_mount(folder: Path) -> Iterator[Path]:
             subprocess.run(["umount", "-l", folder], check=True)
 
 
+def test_a_database_on_a_full_disk_is_said_to_be_on_a_full_disk(tmp_path: Path) -> None:
+    """SQLite says only "disk I/O error" (it cannot make the -shm file its WAL database needs). Exit 1:
+    the disk may have room again at the next start (`collie up` retries)."""
+    with tmpfs_mount(tmp_path / "disk") as disk:
+        shutil.copy(migrated(tmp_path / "good.db", "head"), disk / "good.db")
+        with open(disk / "filler", "wb") as f, contextlib.suppress(OSError):
+            while True:
+                f.write(b"\0" * 65536)
+                f.flush()
+        out = collie("serve", "--port", "0", "--db", str(disk / "good.db"))
+        assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
+        assert out.stderr.startswith(
+            f"collie serve: error: cannot open the database {disk / 'good.db'}: its disk is full"
+        )
+
+
 def test_export_reads_a_read_only_database_and_serve_names_a_missing_folder(tmp_path: Path) -> None:
     """Was: "is not a collie database (unable to open database file)" for a collie database on a
     read-only file system (SQLite cannot make the -shm file a WAL database wants there), and
     serve's "unable to open database file" for a --db in a folder that does not exist."""
-    with read_only_mount(tmp_path / "ro") as ro:
+    with tmpfs_mount(tmp_path / "ro") as ro:
         shutil.copy(migrated(tmp_path / "good.db", "head"), ro / "good.db")
         shutil.copy(migrated(tmp_path / "old.db", "0008"), ro / "old.db")
         subprocess.run(["mount", "-o", "remount,ro", ro], check=True)
@@ -513,6 +530,13 @@ def test_export_reads_a_read_only_database_and_serve_names_a_missing_folder(tmp_
         out = collie("export", "--db", str(ro / "old.db"), "--run", "1")
         assert out.returncode == 2 and out.stderr.startswith(f"collie export: error: {ro / 'old.db'} is at schema 0008")
         assert "cannot be upgraded here (unable to open database file): export a writable copy of it" in out.stderr
+        for db in (ro / "good.db", ro / "new.db"):  # was "unable to open database file", exit 1 (retried by up)
+            out = collie("serve", "--port", "0", "--db", str(db))
+            assert out.returncode == 2, out.stderr
+            assert out.stderr == (
+                f"collie serve: error: {db} is on a read-only file system: the service writes to it "
+                "(collie export reads it there)\n"
+            )
     out = collie("serve", "--port", "0", "--db", "nope/x.db", cwd=tmp_path)
     assert out.returncode == 2 and not (tmp_path / "nope").exists()
     assert (
