@@ -274,6 +274,33 @@ def test_epochs_beyond_what_the_service_stores_are_refused_before_it_is_asked(tm
     assert not (tmp_path / "run").exists()
 
 
+def test_a_run_made_on_the_service_that_its_folder_cannot_remember_is_marked_failed(
+    tmp_path: Path, service: str
+) -> None:
+    """A disk with room for the lock but not for service_run.json: the run was made on the service,
+    no folder remembered it, and the dashboard showed it "created" for good (the next start made
+    another). It is now marked failed, saying why."""
+    from collie.client import CollieClient
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
+    try:
+        room = os.statvfs(disk)
+        (disk / "filler").write_bytes(b"\0" * (room.f_bavail * room.f_frsize - room.f_frsize))  # one page left
+        proc = api_train(service, "--epochs", "1", "--out", str(disk / "run"))
+        refused(proc, f"cannot start the run in {disk / 'run'}: no space left on device")
+        with CollieClient(service, TOKENS["operator"]) as operator:
+            newest = max(operator.runs(), key=lambda r: r.id)
+            assert newest.status == "failed", newest
+            said = [e.data.message or "" for e in operator.events(newest.id).events if e.kind == "status"]
+            assert any(m.startswith(f"its trainer could not write {disk / 'run' / 'service_run.json'}") for m in said)
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=True)
+
+
 def api_train(service: str, *args: str) -> subprocess.CompletedProcess[str]:
     """A METRA smoke run through the service (it asks no labels: nobody need answer)."""
     return train("--method", "metra", "--api", service, "--token", TOKENS["trainer"], *args)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import errno
 import json
@@ -319,8 +320,15 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
             instruction=rule.instruction,
         )
         source = HttpFeedback.create(args.api, token, spec, **kwargs)
-    memo.parent.mkdir(parents=True, exist_ok=True)
-    write_json(memo, {"api": args.api, "run_id": source.run_id})
+    try:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        write_json(memo, {"api": args.api, "run_id": source.run_id})
+    except OSError as exc:  # a full disk: a run no folder remembers would show "created" on the dashboard for good
+        if run_id is None:
+            with contextlib.suppress(Exception):  # best effort: the start fails with the disk's refusal either way
+                why = f"its trainer could not write {memo} ({(exc.strerror or str(exc)).lower()})"
+                source.client.set_status(source.run_id, "failed", message=why)
+        raise
     # the id a labeler's UI and a teacher are started with (`--run N`)
     made = "continues" if run_id is not None else "created"
     print(f"collie train: {made} run {source.run_id} on {args.api} (remembered in {memo})", file=sys.stderr)
