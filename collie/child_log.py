@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
 EXCEPTION_LINE = re.compile(r"[A-Za-z_][\w.]*(Error|Exception): ")
+NEARLY_FULL = 1 << 20  # bytes free under which a silent log is put down to its disk
 
 
 def last_error(log: Path, since: int = 0) -> str:
@@ -22,4 +24,18 @@ def last_error(log: Path, since: int = 0) -> str:
     ours = [line for line in said if line.startswith("collie ") and ": error:" in line]  # our CLIs' own words
     raised = [line for line in said if EXCEPTION_LINE.match(line)]  # a traceback's last line
     other = [line for line in said if "error" in line.lower() and not line.startswith("(Background on this error")]
-    return (ours or raised or other or said or [""])[-1][:300]
+    if not said:  # nothing: on a full disk the child's own words about it could not be written either
+        return full_disk(log)
+    return (ours or raised or other or said)[-1][:300]
+
+
+def full_disk(log: Path) -> str:
+    """ "nothing in its log: the disk under FOLDER is full (N KB free)", or "" where it is not."""
+    try:
+        room = os.statvfs(log.parent)
+    except OSError:
+        return ""
+    free = room.f_bavail * room.f_frsize
+    if free >= NEARLY_FULL:
+        return ""
+    return f"nothing in its log: the disk under {log.parent} is full ({free // 1024} KB free)"
