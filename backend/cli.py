@@ -11,6 +11,7 @@ here, nor written to --tokens-json). Port 0 picks a free port; the bound URL is 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import json
 import os
@@ -18,6 +19,7 @@ import signal
 import socket
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -165,11 +167,18 @@ def listening(host: str, port: int) -> tuple[socket.socket, str]:
 
 def why_not(exc: DBAPIError, db: Path | None) -> str:
     """The driver's words, and for a SQLite file on a full disk that it is full: SQLite may say only
-    "disk I/O error" (it cannot make the -shm file a WAL database needs)."""
+    "disk I/O error" or "unable to open database file" (it cannot make the -shm file of WAL mode)."""
+    from backend.db import SQLITE_CANTOPEN, SQLITE_IOERR, sqlite_code
+    from collie.child_log import NEARLY_FULL
+
     said = first_line(exc.orig)
-    if db is not None and "full" not in said and os.statvfs(db.absolute().parent).f_bavail == 0:
-        return f"its disk is full ({said})"
-    return said
+    if db is None or "full" in said or sqlite_code(exc) not in (SQLITE_IOERR, SQLITE_CANTOPEN):
+        return said
+    try:
+        room = os.statvfs(db.resolve().parent)
+    except OSError:
+        return said
+    return f"its disk is full ({said})" if room.f_bavail * room.f_frsize < NEARLY_FULL else said
 
 
 def check_sqlite_file(path: Path, shown: str) -> None:
@@ -211,6 +220,35 @@ def check_tokens_json(path: Path) -> None:
             pass
     except OSError as exc:
         refuse(f"--tokens-json {path}: cannot write a file in {path.parent} ({broken_link(exc) or exc.strerror})")
+
+
+@contextlib.contextmanager
+def tokens_written(path: Path | None, url: str, tokens: dict[str, str]) -> Iterator[None]:
+    """--tokens-json written before the block, which stores the tokens' hashes (a token stored but
+    never written locks everybody out), and put back as it was if the block fails: nothing was
+    stored then, and the file may hold the only copy of the tokens that are (a start refused for
+    one token given to two roles must not replace them)."""
+    if path is None:
+        yield
+        return
+    before: str | None = None
+    restorable = not not_replaceable(path)
+    if restorable and path.exists():
+        try:
+            before = path.read_text()
+        except (OSError, ValueError):  # cannot be read back (or not text), then not put back either
+            restorable = False
+    write_tokens_json(path, url, tokens)
+    try:
+        yield
+    except BaseException:
+        if restorable:
+            with contextlib.suppress(OSError):  # the refusal is the error to show
+                if before is None:
+                    path.unlink(missing_ok=True)
+                else:
+                    write_secret(path, before)
+        raise
 
 
 def write_tokens_json(path: Path, url: str, tokens: dict[str, str]) -> None:
@@ -263,10 +301,9 @@ def run(args: argparse.Namespace) -> int:
     sock, url = inherited(args.fd) if args.fd is not None else listening(args.host, args.port)
     try:
         settings, tokens, generated, revoked, alive = settings_from(args)
-        if args.tokens_json is not None:  # before a new token's hash is stored: one never written locks all out
-            written = kept_in_file(args.tokens_json, tokens, alive) if args.no_generate_tokens else {}
-            write_tokens_json(args.tokens_json, url, written | tokens)
-        app = create_app(settings)
+        kept = kept_in_file(args.tokens_json, tokens, alive) if args.no_generate_tokens and args.tokens_json else {}
+        with tokens_written(args.tokens_json, url, kept | tokens):
+            app = create_app(settings)  # stores the tokens' hashes
     except Damaged as exc:  # a table dropped: every request touching it would fail, and no restart mends it
         refuse(str(exc))
     except (Conflict, UnknownRevision, UnusableDatabaseUrl) as exc:  # e.g. one token for two roles, postgres://

@@ -30,6 +30,18 @@ DRIVERS = ("pysqlite", "psycopg")  # the drivers collie installs and is tested o
 ACCEPTED = "a SQLite file (--db PATH, or sqlite:///PATH) or postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
 
 
+# SQLite's primary result codes (the low byte of an extended one: SQLITE_IOERR_WRITE is 778)
+SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN = 5, 6, 8, 10, 13, 14
+SQLITE_UNWRITABLE = {SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL}
+SQLITE_DAMAGED = {11, 26}  # SQLITE_CORRUPT ("database disk image is malformed"), SQLITE_NOTADB
+
+
+def sqlite_code(exc: DBAPIError) -> int | None:
+    """SQLite's primary result code of the driver's error; None for another database's."""
+    code = getattr(exc.orig, "sqlite_errorcode", None)
+    return code & 0xFF if isinstance(code, int) else None
+
+
 class UnusableDatabaseUrl(ValueError):
     """A database URL that names no database collie can open."""
 

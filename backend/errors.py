@@ -17,6 +17,14 @@ from sqlalchemy.exc import DBAPIError, IntegrityError, InterfaceError, Operation
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
+from backend.db import (
+    SQLITE_BUSY,
+    SQLITE_CANTOPEN,
+    SQLITE_DAMAGED,
+    SQLITE_LOCKED,
+    SQLITE_UNWRITABLE,
+    sqlite_code,
+)
 from backend.services.errors import (
     DatabaseBusy,
     DatabaseDamaged,
@@ -85,10 +93,6 @@ class OutageLog:
         log.warning("database %s (%d answer(s) refused with %d): %s", self.what, refused, self.status, cause)
 
 
-# SQLite's primary result codes (the low byte of an extended one: SQLITE_IOERR_WRITE is 778)
-SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN = 5, 6, 8, 10, 13, 14
-SQLITE_UNWRITABLE = {SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL}
-SQLITE_DAMAGED = {11, 26}  # SQLITE_CORRUPT ("database disk image is malformed"), SQLITE_NOTADB
 # PostgreSQL's: read_only_sql_transaction (a standby, default_transaction_read_only), disk_full, io_error
 PG_UNWRITABLE = {"25006", "53100", "58030"}
 # serialization_failure, deadlock_detected: two transactions of service processes took rows in
@@ -103,8 +107,7 @@ def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | DatabaseDamag
     OperationalError is an outage (the DB-API's "errors related to the database's operation":
     connection refused, shut down, too many connections); SQLite, a file, only loses a connection
     it had or cannot open the file."""
-    code = getattr(exc.orig, "sqlite_errorcode", None)
-    primary = code & 0xFF if isinstance(code, int) else None
+    primary = sqlite_code(exc)
     if primary in SQLITE_DAMAGED:
         return DatabaseDamaged(exc.orig)
     if primary in SQLITE_UNWRITABLE or getattr(exc.orig, "sqlstate", None) in PG_UNWRITABLE:

@@ -11,10 +11,18 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import DBAPIError
 
 from backend import migrate
-from backend.db import Database, UnusableDatabaseUrl, check_url, describe, is_sqlite, read_only_engine
-from backend.errors import database_fault
+from backend.db import (
+    SQLITE_DAMAGED,
+    Database,
+    UnusableDatabaseUrl,
+    check_url,
+    describe,
+    is_sqlite,
+    read_only_engine,
+    sqlite_code,
+)
 from backend.services import export
-from backend.services.errors import DatabaseDamaged, ServiceError, first_line
+from backend.services.errors import ServiceError, first_line
 from backend.settings import Settings
 from collie.argtypes import record_id, sqlite_file
 
@@ -81,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         with reader.connect() as conn, conn.begin():
             text = export.render(export.rows(conn, args.run, args.effective), args.format, args.effective)
     except DBAPIError as exc:
-        if not isinstance(database_fault(exc, reader.dialect.name), DatabaseDamaged):
+        if sqlite_code(exc) not in SQLITE_DAMAGED:
             raise
         said = f"{where} is damaged ({first_line(exc.orig)}): restore it from a backup"
         print(f"collie export: error: {said}", file=sys.stderr)

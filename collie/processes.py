@@ -47,6 +47,12 @@ def hold_lock(path: Path) -> int:
         holder = os.read(fd, 32).decode(errors="replace").strip()
         os.close(fd)
         raise LockHeld(holder) from None
-    os.ftruncate(fd, 0)
-    os.write(fd, str(os.getpid()).encode())
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+    except OSError:  # a full disk: the lock is ours, and so is its file's removal (no pid in it)
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        os.close(fd)
+        raise
     return fd

@@ -321,9 +321,16 @@ def stack_tokens(tokens_file: Path) -> dict[str, str]:
     COLLIE_<ROLE>_TOKEN from the environment, else fresh random ones."""
     if tokens_file.exists():
         try:
-            return read_tokens_file(tokens_file)
+            kept = read_tokens_file(tokens_file)
         except ValueError as exc:  # reported as the stack's error, with the logs' folder
             raise RuntimeError(f"{exc}; move it away to start with new tokens") from None
+        gone = [role for role in ROLES if role not in kept]  # the service leaves a revoked role's out
+        if gone:
+            raise RuntimeError(
+                f"{tokens_file} holds no {' or '.join(gone)} token (revoked on the service: final); "
+                "this stack cannot run again: start a new one in another --out"
+            )
+        return kept
     return {r: os.environ.get(f"COLLIE_{r.upper()}_TOKEN") or random_token() for r in ROLES}
 
 

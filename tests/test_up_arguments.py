@@ -235,3 +235,18 @@ def test_flags_a_resumed_run_ignores_are_named_seed_included_and_only_those_give
     assert capsys.readouterr().err == ""  # nothing given differs: nothing said
     what_runs(parser.parse_args(["--env", "ant", "--preset", "cpu"]), stored)
     assert "run; --env ant, --preset cpu ignored" in capsys.readouterr().err
+
+
+def test_a_stack_whose_trainer_token_was_revoked_says_it_cannot_run_again(tmp_path: Path) -> None:
+    """The service leaves a revoked role out of OUT/tokens.json; the next `collie up` on that --out
+    was a KeyError traceback ('trainer')."""
+    from collie.up import stack_tokens
+
+    tokens = tmp_path / "tokens.json"
+    tokens.write_text(json.dumps({"tokens": {"operator": "o" * 32, "labeler": "l" * 32}}))
+    with pytest.raises(RuntimeError) as caught:
+        stack_tokens(tokens)
+    assert str(caught.value) == (
+        f"{tokens} holds no trainer token (revoked on the service: final); this stack cannot run again: "
+        "start a new one in another --out"
+    )

@@ -673,12 +673,10 @@ def run(args: argparse.Namespace) -> int:
                 str(exc) if isinstance(exc, ValueError | FileNotFoundError) else None
             )
             if isinstance(exc, OSError) and exc.errno in UNWRITABLE and out is not None:  # a full disk names no file
-                refusal = f"cannot start the run in {out}: {(exc.strerror or str(exc)).lower()}"
-        # a folder this start made holds nothing of a run yet (another's lock stays); a lock whose pid
-        # a full disk refused is this start's too
-        lock = out / LOCK_FILE if made and out is not None else None
-        if lock is not None and (locked or (lock.is_file() and lock.stat().st_size == 0)):
-            lock.unlink(missing_ok=True)
+                said = (exc.strerror or str(exc)).lower() + (f" (writing {exc.filename})" if exc.filename else "")
+                refusal = f"cannot start the run in {out}: {said}"
+        if made and locked and out is not None:  # a folder this start made holds nothing of a run yet
+            (out / LOCK_FILE).unlink(missing_ok=True)  # (another's lock stays)
         remove_if_empty(made)
         if (
             refusal is None

@@ -20,7 +20,10 @@ router = APIRouter(tags=["health"])
 @router.head("/health", include_in_schema=False)
 @router.get(
     "/health",
-    responses={503: {"model": ErrorBody, "description": "the database is unreachable, busy or cannot be written"}},
+    responses={
+        503: {"model": ErrorBody, "description": "the database is unreachable, busy or cannot be written"},
+        500: {"model": ErrorBody, "description": "the database file is damaged (restore it from a backup)"},
+    },
 )
 def health(db: DB) -> Health:
     try:
@@ -28,7 +31,7 @@ def health(db: DB) -> Health:
             conn.execute(text("SELECT 1"))
         # and a write: a full disk or read-only files answer every read but refuse every write
         refused = db.unwritable()
-    except DBAPIError as exc:  # 503 with Retry-After, the cause in one log line
+    except DBAPIError as exc:  # 503 with Retry-After (500 for a damaged file), the cause in one log line
         raise database_fault(exc, db.engine.dialect.name) or DatabaseUnreachable(exc.orig) from None
     if refused is not None:
         raise DatabaseUnwritable(refused)

@@ -329,6 +329,28 @@ def test_a_tokens_file_the_disk_will_not_take_stores_no_token(tmp_path: Path) ->
         stop(server)
 
 
+def test_a_start_refused_for_one_token_given_to_two_roles_leaves_the_tokens_file_as_it_was(tmp_path: Path) -> None:
+    """The file is written before the tokens are stored; a start refused after (the trainer's token
+    pasted as the operator's) must not leave its tokens there: the file held the only copy of the
+    stored operator token, and every later start read the conflict back from it."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    db, tokens_file = tmp_path / "c.db", tmp_path / "tokens.json"
+    server, _ = start_serve(db, tokens_file, env)
+    stop(server)
+    before = tokens_file.read_bytes()
+    trainer_token = json.loads(before)["tokens"]["trainer"]
+    pasted = {**env, "COLLIE_OPERATOR_TOKEN": trainer_token}
+    out = collie("serve", "--db", str(db), "--port", "0", "--tokens-json", str(tokens_file), env=pasted)
+    assert out.returncode == 2 and "already the token of 'trainer'" in out.stderr, out.stderr
+    assert tokens_file.read_bytes() == before
+    server, lines = start_serve(db, tokens_file, env)  # the mistake undone: a plain start, as before it
+    try:
+        assert lines[0].startswith("collie service listening on "), lines
+        assert json.loads(tokens_file.read_text())["tokens"] == json.loads(before)["tokens"]
+    finally:
+        stop(server)
+
+
 def test_one_token_for_two_roles_is_a_one_line_error(tmp_path: Path) -> None:
     env = {
         **os.environ,
