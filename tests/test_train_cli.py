@@ -4,7 +4,6 @@ and no run folder overwritten or created by a refused command."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import errno
 import hashlib
 import json
@@ -24,6 +23,7 @@ import numpy as np
 import pytest
 import torch
 from paced_marks import PacedMarks
+from small_disk import fill, small_disk
 from unprivileged import as_nobody, closed_folder
 
 from trainer.cli import short_of_memory
@@ -282,12 +282,7 @@ def test_a_run_made_on_the_service_that_its_folder_cannot_remember_is_marked_fai
     another). It is now marked failed, saying why."""
     from collie.client import CollieClient
 
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
-    try:
+    with small_disk(tmp_path / "disk") as disk:
         room = os.statvfs(disk)
         (disk / "filler").write_bytes(b"\0" * (room.f_bavail * room.f_frsize - room.f_frsize))  # one page left
         proc = api_train(service, "--epochs", "1", "--out", str(disk / "run"))
@@ -297,8 +292,6 @@ def test_a_run_made_on_the_service_that_its_folder_cannot_remember_is_marked_fai
             assert newest.status == "failed", newest
             said = [e.data.message or "" for e in operator.events(newest.id).events if e.kind == "status"]
             assert any(m.startswith(f"its trainer could not write {disk / 'run' / 'service_run.json'}") for m in said)
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], check=True)
 
 
 def api_train(service: str, *args: str) -> subprocess.CompletedProcess[str]:
@@ -694,18 +687,9 @@ def test_a_full_disk_during_the_run_is_one_line_and_the_run_resumes(run_copy: Pa
 def test_a_new_run_on_a_full_or_read_only_disk_is_one_line_naming_its_folder(tmp_path: Path, how: str) -> None:
     """Was: a full disk's "cannot write: No space left on device", naming nothing, and OUT/train.lock
     left behind (its pid was the write refused); a read-only one said "permission denied"."""
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    options = "size=1m" + (",ro" if how == "read-only" else "")
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(disk)], capture_output=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
-    try:
+    with small_disk(tmp_path / "disk", read_only=how == "read-only") as disk:
         if how == "full":
-            with open(disk / "filler", "wb") as f, contextlib.suppress(OSError):
-                while True:
-                    f.write(b"\0" * 65536)
-                    f.flush()
+            fill(disk)
         run = disk / "new"
         said = (
             f"cannot start the run in {run}: no space left on device"
@@ -715,8 +699,6 @@ def test_a_new_run_on_a_full_or_read_only_disk_is_one_line_naming_its_folder(tmp
         line = refused(train("--epochs", "1", "--out", str(run)), said)
         assert line == f"collie train: error: {said}"
         assert not run.exists()
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], check=True)
 
 
 def test_a_file_system_turned_read_only_is_named(tmp_path: Path) -> None:

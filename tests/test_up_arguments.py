@@ -4,7 +4,6 @@ error, and leaves a start that never gets ready when asked to stop."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sqlite3
@@ -14,6 +13,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from small_disk import fill, small_disk
 from unprivileged import as_nobody, closed_folder
 
 from collie.child_log import last_error
@@ -132,25 +132,15 @@ def test_the_last_error_line_of_a_log(tmp_path: Path) -> None:
 def test_a_silent_log_on_a_full_disk_is_put_down_to_the_disk(tmp_path: Path) -> None:
     """A part that could not write its own words (`collie up`: "the service exited with code 1",
     nothing more, on a disk with 40 KB free) is said to have a full disk under its log."""
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
-    try:
+    with small_disk(tmp_path / "disk") as disk:
         (disk / "service.log").touch()
         assert last_error(disk / "service.log") == ""  # 1 MB free, nearly all: not full
-        with open(disk / "filler", "wb") as f, contextlib.suppress(OSError):
-            while True:
-                f.write(b"\0" * 65536)
-                f.flush()
+        fill(disk)
         said = last_error(disk / "service.log")
         assert said == f"nothing in its log: the disk under {disk} is full (0 KB free)", said
         (disk / "filler").unlink()
         (disk / "service.log").write_text("collie serve: error: its disk is full\n")  # its own words, when it could
         assert last_error(disk / "service.log") == "collie serve: error: its disk is full"
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], check=True)
 
 
 @pytest.mark.parametrize(

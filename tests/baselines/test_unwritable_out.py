@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from small_disk import fill, small_disk
 
 from collie.cli import main
 
@@ -18,24 +19,13 @@ from .test_rescore import finished_run
 
 @contextlib.contextmanager
 def small_file_system(where: Path, how: str) -> Iterator[Path]:
-    """A 1 MB tmpfs at `where`, read-only or full; skipped where this process may not mount one
-    (not root, or a container without CAP_SYS_ADMIN)."""
-    where.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(where)], capture_output=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
-    try:
+    """A 1 MB tmpfs at `where`, read-only or full."""
+    with small_disk(where) as disk:
         if how == "read-only":
-            subprocess.run(["mount", "-o", "remount,ro", str(where)], check=True)
+            subprocess.run(["mount", "-o", "remount,ro", str(disk)], check=True)
         else:
-            with open(where / "filler", "wb") as f, contextlib.suppress(OSError):  # until the disk is full
-                while True:
-                    f.write(b"\0" * 65536)
-                    f.flush()
-        yield where
-    finally:
-        if subprocess.run(["umount", str(where)]).returncode != 0:  # busy: detach it (lazy), never leave it behind
-            subprocess.run(["umount", "-l", str(where)], check=True)
+            fill(disk)
+        yield disk
 
 
 def commands(tmp_path: Path, out: Path) -> list[list[str]]:

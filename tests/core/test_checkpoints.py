@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 from paced_marks import PacedMarks
+from small_disk import small_disk
 
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import make_config
@@ -131,17 +132,10 @@ def test_a_checkpoint_that_cannot_be_written_leaves_the_last_one_and_no_partial_
 def test_a_checkpoint_larger_than_the_disk_s_room_is_the_file_system_s_refusal(tmp_path):
     """torch's zip writer raised its own RuntimeError ("unexpected pos …") over the full disk's
     OSError, which `collie train` shows as a traceback (exit 1; `collie up` restarted it as a crash)."""
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs: {mounted.stderr.decode().strip()}")
-    try:
+    with small_disk(tmp_path / "disk") as disk:
         save_checkpoint(disk / "checkpoint.pt", {"epoch": 1})
         with pytest.raises(OSError) as caught:
             save_checkpoint(disk / "checkpoint.pt", {"epoch": 2, "weights": torch.zeros(500_000)})  # 2 MB
         assert caught.value.errno == errno.ENOSPC
         assert load_checkpoint(disk / "checkpoint.pt") == {"epoch": 1}
         assert sorted(p.name for p in disk.iterdir()) == ["checkpoint.pt"]
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], check=True)

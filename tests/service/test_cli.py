@@ -3,7 +3,6 @@ migrations build matching the models."""
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
@@ -22,6 +21,7 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
+from small_disk import fill, small_disk
 
 from backend.db import Database
 from backend.migrate import alembic_config, head, upgrade
@@ -510,17 +510,10 @@ def test_a_damaged_database_is_a_one_line_error(tmp_path: Path) -> None:
 
 @contextmanager
 def tmpfs_mount(folder: Path) -> Iterator[Path]:
-    """`folder` as a 16 MB file system of its own (a tmpfs), for the caller to fill, or to remount
-    read-only (root writes to no file there, unlike in a chmod'ed folder)."""
-    folder.mkdir()
-    tried = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", folder], capture_output=True, text=True)
-    if tried.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here (it needs root or CAP_SYS_ADMIN): {tried.stderr.strip()}")
-    try:
-        yield folder
-    finally:
-        if subprocess.run(["umount", folder]).returncode != 0:  # busy: detach it (lazy), never leave it behind
-            subprocess.run(["umount", "-l", folder], check=True)
+    """`folder` as a 16 MB file system of its own, for the caller to fill, or to remount read-only
+    (root writes to no file there, unlike in a chmod'ed folder)."""
+    with small_disk(folder, "16m") as disk:
+        yield disk
 
 
 def test_a_database_on_a_full_disk_is_said_to_be_on_a_full_disk(tmp_path: Path) -> None:
@@ -528,10 +521,7 @@ def test_a_database_on_a_full_disk_is_said_to_be_on_a_full_disk(tmp_path: Path) 
     the disk may have room again at the next start (`collie up` retries)."""
     with tmpfs_mount(tmp_path / "disk") as disk:
         shutil.copy(migrated(tmp_path / "good.db", "head"), disk / "good.db")
-        with open(disk / "filler", "wb") as f, contextlib.suppress(OSError):
-            while True:
-                f.write(b"\0" * 65536)
-                f.flush()
+        fill(disk)
         out = collie("serve", "--port", "0", "--db", str(disk / "good.db"))
         assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
         assert out.stderr.startswith(
