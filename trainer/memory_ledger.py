@@ -4,13 +4,12 @@ by side (a sweep's `--jobs`, two terminals) do not each count the same free memo
 The memory plan (trainer/memory_plan.py) compares a run's floor with what the machine has free. But
 Linux lends lazily: a run that passed a minute ago has taken little of its replay yet, and the next
 run would find that memory still free; both would pass, and the kernel would kill one of them hours
-later. So each run that passes writes LEDGER/<pid>.json: its floor and its resident set then. The next
-run's check takes off, for each entry whose process lives, floor − (resident now − resident then),
-the part of its floor the kernel has not lent it yet. An entry whose process is gone (or whose pid
-another process took) is dropped. One lock orders runs that check at the same instant.
-
-Growth is counted as anonymous memory, resident or swapped (RssAnon + VmSwap): a replay's pages,
-which neither swapping nor reclaim of the libraries' file pages takes back from the count.
+later. So each run that passes writes LEDGER/<pid>.json: its floor and its anonymous memory then
+(RssAnon + VmSwap: a replay's pages, resident or swapped out, which neither swapping nor reclaim of
+the libraries' file pages takes back from the count). The next run's check takes off, for each
+entry whose process lives, floor − (anonymous now − anonymous then), the part of its floor the
+kernel has not lent it yet. An entry whose process is gone (or whose pid another process took) is
+dropped. One lock orders runs that check at the same instant.
 
 The ledger is per user: LEDGER is $COLLIE_MEMORY_LEDGER, or collie-memory-<uid> in the temporary
 folder, used only if it is this user's folder and nobody else may write in it (a folder another
