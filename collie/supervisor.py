@@ -31,6 +31,9 @@ from collie.whole_files import write_whole
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
 REFUSED = 2  # argparse's exit code, which the trainer, the teacher and the labeling UI use for their refusals too
+# a part refused for memory that runs beside the stack were promised (exit EX_TEMPFAIL: the trainer's
+# memory ledger) is no fault: it tries again this often until they have ended
+WAIT_FOR_MEMORY_S = 15.0
 
 
 class Closeable(Protocol):
@@ -159,6 +162,14 @@ class Supervisor:
                 delay = min(child.again_after_s * 2 ** max(child.early_ends - 1, 0), MAX_BACKOFF_S * 3)
                 self.log(f"{child.name} ended (exit 0) before its work was over; again in {delay:g} s unless over")
                 child.restart_at = now + delay
+                continue
+            if code == os.EX_TEMPFAIL:
+                said = last_error(self.out / "logs" / f"{child.name}.log", child.log_from)
+                if child.exit_codes[-2:-1] != [os.EX_TEMPFAIL]:  # once per wait, not every try
+                    again = f"trying again every {WAIT_FOR_MEMORY_S:g} s"
+                    print(f"collie up: the {child.name} waits for memory ({said}); {again}", file=sys.stderr)
+                self.log(f"{child.name} refused for memory other runs were promised; again in {WAIT_FOR_MEMORY_S:g} s")
+                child.restart_at = now + WAIT_FOR_MEMORY_S
                 continue
             if now - child.started_at >= self.stable_s or self._progressed(child):
                 child.failures = 0

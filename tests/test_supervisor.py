@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -119,3 +121,79 @@ def test_a_part_that_ended_early_is_not_restarted_once_its_work_is_over(tmp_path
         stack.stop()
     log = (tmp_path / "logs" / "up.log").read_text()
     assert log.count("started teacher") == 1 and "teacher finished (exit 0)" in log
+
+
+HOLDER = """
+import sys
+from trainer.memory_ledger import reserve
+reserve("a run beside the stack", int(sys.argv[1]))
+print("promised", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_trainer_refused_for_memory_runs_beside_it_hold_waits_for_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Exit 75 (trainer/memory_ledger.py) is no death: the trainer tries again until the run beside
+    the stack has ended, however many tries that takes (was: restarted with the backoff of a crash,
+    then given up after its restarts, within a minute)."""
+    import numpy as np
+
+    import collie.supervisor
+    from trainer.config import make_config
+    from trainer.envs.registry import make_env
+    from trainer.memory_ledger import LEDGER_ENV
+    from trainer.memory_plan import available_bytes, replay_fill_bytes
+
+    monkeypatch.setattr(collie.supervisor, "WAIT_FOR_MEMORY_S", 0.5)
+    cfg, env = make_config("smoke", "point"), make_env("point")
+    free = available_bytes()
+    assert free is not None
+    each = replay_fill_bytes(
+        1, cfg.episode_steps, env.obs_shape, np.dtype(env.obs_dtype), env.action_dim, env.nq, env.nv
+    )
+    held = int(0.55 * free / each)  # trajectories: fits alone, not beside the holder's promise as large
+    sizes = ["--epochs", str(held // cfg.episodes_per_epoch + 1), "--replay-capacity", str(held * cfg.episode_steps)]
+    ledger = tmp_path / "ledger"
+    environ = {**os.environ, LEDGER_ENV: str(ledger)}
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(int(0.55 * free))],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        env=environ,
+    )
+    stack = Supervisor(tmp_path / "up", max_restarts=1)
+    log = tmp_path / "up" / "logs" / "up.log"
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == b"promised\n"
+        train = [
+            "train",
+            "--env",
+            "point",
+            "--preset",
+            "smoke",
+            "--no-progress",
+            *sizes,
+            "--out",
+            str(tmp_path / "run"),
+        ]
+        stack.start("trainer", lambda: train, environ)
+
+        def until(happened, what: str) -> None:
+            deadline = time.monotonic() + 120
+            while not happened():
+                stack.check()  # ChildFailed here if the refusals were counted as deaths (max_restarts 1)
+                assert time.monotonic() < deadline, f"{what}; up.log: {log.read_text()}"
+                time.sleep(0.2)
+
+        until(lambda: log.read_text().count("refused for memory other runs were promised") >= 3, "no third refusal")
+        holder.kill()
+        holder.wait()
+        until(lambda: any(ledger.glob(f"{stack.proc('trainer').pid}.json")), "the trainer never started")
+    finally:
+        holder.kill()
+        stack.stop()
+    said = capsys.readouterr().err
+    assert said.count("collie up: the trainer waits for memory (collie train: error: this machine has not enough") == 1
+    assert "trying again every 0.5 s" in said
