@@ -32,7 +32,7 @@ from collie.addresses import link_host
 from collie.argtypes import file_descriptor, port, sqlite_file
 from collie.schemas import SERVED_TEACHER_PRINCIPAL
 from collie.tokens import read_tokens_file, weakness, write_secret
-from collie.whole_files import broken_link, not_replaceable
+from collie.whole_files import broken_link, nearly_full, not_replaceable, read_only_disk
 
 if TYPE_CHECKING:
     from sqlalchemy.exc import DBAPIError
@@ -169,16 +169,11 @@ def why_not(exc: DBAPIError, db: Path | None) -> str:
     """The driver's words, and for a SQLite file on a full disk that it is full: SQLite may say only
     "disk I/O error" or "unable to open database file" (it cannot make the -shm file of WAL mode)."""
     from backend.db import SQLITE_CANTOPEN, SQLITE_IOERR, sqlite_code
-    from collie.child_log import NEARLY_FULL
 
     said = first_line(exc.orig)
     if db is None or "full" in said or sqlite_code(exc) not in (SQLITE_IOERR, SQLITE_CANTOPEN):
         return said
-    try:
-        room = os.statvfs(db.resolve().parent)
-    except OSError:
-        return said
-    return f"its disk is full ({said})" if room.f_bavail * room.f_frsize < NEARLY_FULL else said
+    return said if nearly_full(db.resolve().parent) is None else f"its disk is full ({said})"
 
 
 def check_sqlite_file(path: Path, shown: str) -> None:
@@ -191,7 +186,7 @@ def check_sqlite_file(path: Path, shown: str) -> None:
 
     if not path.parent.is_dir():  # SQLite would say only "unable to open database file"
         refuse(f"{shown}: the folder {path.parent} does not exist (make it first)")
-    if os.statvfs(path.parent).f_flag & os.ST_RDONLY:  # the same words from SQLite, or "attempt to write"
+    if read_only_disk(path.parent):  # SQLite would say "unable to open database file", or "attempt to write"
         refuse(f"{shown} is on a read-only file system: the service writes to it (collie export reads it there)")
     if not path.is_file() or path.stat().st_size == 0:
         return

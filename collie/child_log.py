@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
+from collie.whole_files import nearly_full
+
 EXCEPTION_LINE = re.compile(r"[A-Za-z_][\w.]*(Error|Exception): ")
-NEARLY_FULL = 1 << 20  # bytes free under which a silent log is put down to its disk
 
 
 def last_error(log: Path, since: int = 0) -> str:
@@ -31,11 +31,5 @@ def last_error(log: Path, since: int = 0) -> str:
 
 def full_disk(log: Path) -> str:
     """ "nothing in its log: the disk under FOLDER is full (N KB free)", or "" where it is not."""
-    try:
-        room = os.statvfs(log.parent)
-    except OSError:
-        return ""
-    free = room.f_bavail * room.f_frsize
-    if free >= NEARLY_FULL:
-        return ""
-    return f"nothing in its log: the disk under {log.parent} is full ({free // 1024} KB free)"
+    free = nearly_full(log.parent)
+    return "" if free is None else f"nothing in its log: the disk under {log.parent} is full ({free // 1024} KB free)"

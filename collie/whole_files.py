@@ -46,6 +46,28 @@ def not_replaceable(path: Path) -> bool:
     return in_dev or (path.exists() and not path.is_file() and not path.is_dir())
 
 
+NEARLY_FULL = 1 << 20  # bytes free under which a disk is called full (a log line, a small file fail there)
+
+
+def nearly_full(folder: Path) -> int | None:
+    """The bytes free on `folder`'s disk where they are under NEARLY_FULL, else None (also where
+    the disk cannot be asked)."""
+    try:
+        room = os.statvfs(folder)
+    except OSError:
+        return None
+    free = room.f_bavail * room.f_frsize
+    return free if free < NEARLY_FULL else None
+
+
+def read_only_disk(folder: Path) -> bool:
+    """Whether `folder` is on a file system mounted read-only (which root cannot write either)."""
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
 class FolderRefused(FileNotFoundError):
     """mkdir's "No such file or directory" for a folder whose parents are there: a file system
     that makes no folders (/proc, /sys). Any other FileNotFoundError is a bug to show whole."""

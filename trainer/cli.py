@@ -22,7 +22,7 @@ from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
-from collie.whole_files import UNWRITABLE, broken_link
+from collie.whole_files import UNWRITABLE, broken_link, read_only_disk
 from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
 from trainer.run_files import ResumeError, RunFolderError, read_json_object, write_json
@@ -444,8 +444,7 @@ def check_out(out: Path, resume: bool) -> list[Path]:
         if not nearest.is_dir():
             raise ValueError(f"--out {out}: {nearest} is a file, not a folder")
         if not os.access(nearest, os.W_OK | os.X_OK):
-            read_only = os.statvfs(nearest).f_flag & os.ST_RDONLY  # access() says no there, for root too
-            why = "read-only file system" if read_only else "permission denied"
+            why = "read-only file system" if read_only_disk(nearest) else "permission denied"
             raise ValueError(f"--out {out}: cannot write in {nearest} ({why})")
     except PermissionError as exc:  # e.g. a file inside that this user may not read
         raise ValueError(f"--out {out}: permission denied ({exc.filename})") from None
@@ -557,14 +556,6 @@ def short_of_memory(exc: BaseException, args: argparse.Namespace) -> str | None:
     measured = f" ({exc})" if isinstance(exc, NotEnoughMemory) else ""  # checked before allocating: the figures
     later = ", or start it once those runs have ended" if isinstance(exc, NotEnoughMemory) and exc.fits_alone else ""
     return f"this machine has not enough memory for the run's sizes ({sizes}){measured}: give smaller ones{later}"
-
-
-def refusal_status(exc: BaseException) -> int:
-    """2, or EX_TEMPFAIL (75) for a run refused only for the memory running runs were promised: a
-    sweep starts it again once one of its own has ended."""
-    from trainer.memory_plan import NotEnoughMemory
-
-    return os.EX_TEMPFAIL if isinstance(exc, NotEnoughMemory) and exc.fits_alone else 2
 
 
 def run(args: argparse.Namespace) -> int:
@@ -694,8 +685,10 @@ def run(args: argparse.Namespace) -> int:
                 return 1
         if refusal is None:
             raise
+        from trainer.memory_plan import refusal_status
+
         print(f"collie train: error: {refusal}", file=sys.stderr)
-        return refusal_status(exc)
+        return refusal_status(exc)  # 75 where memory promised to running runs is why
     if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
         raise KeyboardInterrupt
     from collie.client import ApiError

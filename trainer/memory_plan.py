@@ -47,6 +47,12 @@ class NotEnoughMemory(MemoryError):
         return self.held > 0 and self.needed <= self.available
 
 
+def refusal_status(exc: BaseException) -> int:
+    """A refused start's exit status: EX_TEMPFAIL (75) where only memory running runs were promised
+    is why (a sweep, `collie up` start it again once they have ended), else 2."""
+    return os.EX_TEMPFAIL if isinstance(exc, NotEnoughMemory) and exc.fits_alone else 2
+
+
 def size(n: int) -> str:
     """Bytes as people read them here: GiB to a tenth, MiB below a tenth of a GiB."""
     if n >= GIB / 10:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -24,7 +23,7 @@ import torch
 from trainer.downstream.goal import GoalOptions
 from trainer.downstream.ppo import PpoConfig, evaluate, greedy, train_ppo
 from trainer.downstream.zero_shot import zero_shot
-from trainer.memory_plan import NotEnoughMemory
+from trainer.memory_plan import NotEnoughMemory, refusal_status
 from trainer.pretrained import TrainedSkills, load_skills
 from trainer.run_files import RunFolderError, read_json_object, write_json
 from trainer.task_choice import judged_by
@@ -154,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except NotEnoughMemory as exc:  # the evaluation's envs; 75 where other runs' promises are why (a sweep waits)
         print(f"downstream: error: this machine has not enough memory ({exc})", file=sys.stderr)
-        return os.EX_TEMPFAIL if exc.fits_alone else 2
+        return refusal_status(exc)
     for kind, r in result.items():
         print(json.dumps({"kind": kind, **{k: v for k, v in r.items() if k not in ("train_curve", "ppo")}}))
     return 0
