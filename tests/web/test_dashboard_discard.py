@@ -55,7 +55,7 @@ def test_two_clicks_discard_a_labelers_labels(page: Any, trainer: CollieClient, 
         "document.querySelector('#discard-message').textContent.startsWith('discarded 2 labels of careless-web')"
     )
     page.wait_for_function(
-        "document.querySelector('#labelers-stats tr[data-labeler=\"careless-web\"] td.labels').textContent === '0'"
+        "document.querySelector('#labelers-stats tr[data-labeler=\"careless-web\"] td.labels')?.textContent === '0'"
     )
     assert page.query_selector(button) is None  # nothing left to discard
     assert labels_of(page, "careful-web") == "1"

@@ -55,7 +55,7 @@ def test_a_link_to_a_missing_run_says_so_where_the_run_would_be_shown(
         page.on("request", lambda r: asked.append(r.url) if "/api/dashboard/runs/99" in r.url else None)
         with page.expect_response(lambda r: "/api/dashboard/runs/99" in r.url):
             page.reload()  # counted from the start
-        epoch = f"document.querySelector('#runs-body tr[data-run-id=\"{run.id}\"]').cells[5].textContent"
+        epoch = f"document.querySelector('#runs-body tr[data-run-id=\"{run.id}\"]')?.cells[5].textContent"
         page.wait_for_function(f"{epoch} === '0'")
         trainer.post_metrics(run.id, MetricsIn(epoch=7, values={"n_labels": 0.0}))  # the runs list changes
         page.wait_for_function(f"{epoch} === '7'")

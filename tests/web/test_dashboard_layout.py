@@ -56,7 +56,7 @@ def test_the_discard_buttons_stay_inside_the_labeling_card(browser: Any, url: st
         page.wait_for_selector("#labelers-stats tbody tr button")
         assert inside(page, "#labelers-stats button", "#labeling") == []
         page.click('#labelers-stats tr[data-labeler="annotator-from-the-night-shift"] button')  # armed: longer
-        page.wait_for_function("document.querySelector('#labelers-stats button').textContent.startsWith('Confirm')")
+        page.wait_for_function("document.querySelector('#labelers-stats button')?.textContent.startsWith('Confirm')")
         assert inside(page, "#labelers-stats button", "#labeling") == []
         assert page.evaluate("(e => e.scrollWidth <= e.clientWidth)(document.querySelector('#labeling'))")
 

@@ -190,6 +190,6 @@ def test_stop_finishes_the_run(stack: dict[str, Any], page: Any) -> None:
     assert page.text_content("#stop") == "Really stop?"
     page.click("#stop")
     page.wait_for_function("document.body.dataset.runStatus === 'finished'")
-    page.wait_for_function("document.querySelector('#runs-body .status').textContent === 'stopped'")
+    page.wait_for_function("document.querySelector('#runs-body .status')?.textContent === 'stopped'")
     assert page.text_content("#run-status").startswith("stopped")  # not "finished": the operator ended it
     assert all(not page.is_enabled(b) for b in ("#pause", "#resume", "#stop"))
