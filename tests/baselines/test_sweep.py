@@ -501,7 +501,13 @@ def test_runs_refused_for_memory_a_running_sibling_holds_start_again_once_it_end
     """Two runs refused while a third holds the memory wait for its end, each started once more
     then; a refused run's own end frees nothing and wakes no one (they had restarted each other)."""
     stop, done = sweep.Stop(), tmp_path / "holder-done"
-    holder = [sys.executable, "-c", f"import time, pathlib; time.sleep(3); pathlib.Path({str(done)!r}).touch()"]
+    starts = [str(tmp_path / f"{name}.starts") for name in ("a", "b")]
+    holds = (  # until both were refused once (however slowly they start), then 3 s more
+        "import time, pathlib\n"
+        f"while not all(pathlib.Path(p).exists() for p in {starts!r}): time.sleep(0.05)\n"
+        f"time.sleep(3); pathlib.Path({str(done)!r}).touch()"
+    )
+    holder = [sys.executable, "-c", holds]
     threads = [threading.Thread(target=stop.run, args=(holder,))]
     for name in ("a", "b"):
         cmd = [sys.executable, "-c", REFUSED_WHILE, str(done), str(tmp_path / f"{name}.starts")]

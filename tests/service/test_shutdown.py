@@ -50,7 +50,12 @@ def test_a_stop_ends_long_polls_and_streams_at_once(tmp_path: Path, logged: list
         poll.start()
         dashboard.start()
         wait_until_parked(server, run.id, poll)  # the long poll waits too
-        time.sleep(0.5)  # and the dashboard's has looked twice
+        deadline = time.monotonic() + 30
+        while len(server.server.server_state.tasks) < 3:  # the dashboard's reached it too: 3 requests open
+            assert dashboard.is_alive(), "the dashboard's long poll ended before it reached the service"
+            assert time.monotonic() < deadline, "the dashboard's long poll never reached the service"
+            time.sleep(0.01)
+        time.sleep(0.5)  # and has looked twice
         assert dashboard.is_alive()
         server.stop()
         assert not server._thread.is_alive()  # stopped (stop() gives up after 10 s)

@@ -160,7 +160,7 @@ def test_a_tab_whose_segment_another_tab_took_over_moves_on(stack: Stack, browse
     duplicate.set_default_timeout(TIMEOUT_S * 1000)
     assert wait_segment(duplicate) == first  # the service hands the id's first claim to the copy
     wait_text(original, "Moved to another tab")
-    moved_on = wait_segment(original, first, timeout_s=30.0)
+    moved_on = wait_segment(original, first)
     press(original, "1")
     wait_segment(original, moved_on)
     assert effective(stack, run.id) == {moved_on: (0, "shared-id")}

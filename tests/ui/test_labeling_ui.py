@@ -267,7 +267,7 @@ def test_a_revoked_labeler_is_told_without_pressing_a_key(stack: Stack, browser:
     wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
     stack.operator.revoke(created.id)
     assert stack.trainer.run(run.id).queue.leased == 0  # back in the pool at once
-    wait_text(page, "The service refused this token", timeout_s=15.0)
+    wait_text(page, "The service refused this token")  # at its next renewal
     assert segment_id(page) is None  # the segment left the screen
     page.context.close()
 
@@ -323,17 +323,18 @@ def test_a_label_the_service_is_slow_to_take_is_said_to_be_on_its_way(stack: Sta
     app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
     page = open_labeler(browser, app.labeler_url(stack.new_labeler("slow")))
     first = wait_segment(page)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # preloaded: no write of the tab's pending
     busy = sqlite3.connect(stack.service.app.state.db.url.removeprefix("sqlite:///"), isolation_level=None)
     busy.execute("BEGIN EXCLUSIVE")  # every write waits (the service's busy timeout is 5 s)
     try:
         press(page, "2")
-        wait_text(page, "Sending your label", timeout_s=4)
+        wait_text(page, "Sending your label", timeout_s=15)  # the label waits while the lock is held
         assert segment_id(page) == first
     finally:
         busy.execute("COMMIT")
         busy.close()
     wait_segment(page, first)
-    expect(page.get_by_text("Sending your label")).to_have_count(0)
+    expect(page.get_by_text("Sending your label")).to_have_count(0, timeout=TIMEOUT_S * 1000)
     assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {first: 1}
     page.context.close()
 
@@ -446,6 +447,6 @@ def test_a_labeler_taken_off_the_run_moves_on_and_stays_signed_in(stack: Stack, 
     wait_segment(page)
     wait_text(page, f"run {run.id} · point")
     stack.operator.set_labeler_runs(created.id, [other.id])
-    wait_text(page, f"run {other.id} · point", timeout_s=30.0)  # at the next claim renewal (lease_s / 3)
+    wait_text(page, f"run {other.id} · point")  # at the next claim renewal (lease_s / 3)
     assert "refused this token" not in page.inner_text("body")  # still signed in
     page.context.close()

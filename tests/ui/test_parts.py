@@ -87,7 +87,7 @@ def test_player_paces_at_most_30_hz_and_loops() -> None:
     rec = Recorder()
     player = Player(rec.render, lambda f, p: rec.frames.append((f, p)), fps=20.0)
     player.load(20)
-    assert rec.positions == [0.0]  # the first frame is drawn at once, by the caller
+    assert rec.positions[:1] == [0.0]  # the first frame is drawn at once, by the caller (the thread may add more)
 
     def advanced_and_wrapped(positions: list[float]) -> bool:
         # it advanced; the rate itself is benchmarked (bench-labeling), not tested
@@ -212,7 +212,7 @@ def test_cli_serves_reports_its_port_and_stops_on_sigterm(stack: Stack, tmp_path
         assert page.status_code == 200 and "<html" in page.text.lower()  # viser's client
     finally:
         proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=20)
+        out, _ = proc.communicate(timeout=60)  # it joins its warm-up compiles first
     assert proc.returncode == 0
     assert f"labeler URL: {served['url']}?token=tok%26en" in out
     assert [p.name for p in info.parent.iterdir()] == ["ui.json"]  # written whole: no partial file left
@@ -271,7 +271,7 @@ def test_a_port_in_use_is_said_with_the_port_served_instead(stack: Stack, tmp_pa
             served = json.loads(info.read_text())["port"]
         finally:
             proc.send_signal(signal.SIGTERM)
-            out, _ = proc.communicate(timeout=20)
+            out, _ = proc.communicate(timeout=60)  # it joins its warm-up compiles first
     assert served != taken
     assert f"port {taken} is in use; serving on port {served} instead" in out
 

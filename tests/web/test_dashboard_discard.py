@@ -48,11 +48,11 @@ def test_two_clicks_discard_a_labelers_labels(page: Any, trainer: CollieClient, 
     assert labels_of(page, "careless-web") == "2"
     button = '#labelers-stats tr[data-labeler="careless-web"] button[data-discard]'
     page.click(button)  # arms only
-    page.wait_for_function(f"document.querySelector('{button}').textContent === 'Confirm: discard 2'")
+    page.wait_for_function(f"document.querySelector('{button}')?.textContent === 'Confirm: discard 2'")
     assert trainer.run(run.id).n_labels == 3
     page.click(button)
     page.wait_for_function(
-        "document.querySelector('#discard-message').textContent.startsWith('discarded 2 labels of careless-web')"
+        "document.querySelector('#discard-message')?.textContent.startsWith('discarded 2 labels of careless-web')"
     )
     page.wait_for_function(
         "document.querySelector('#labelers-stats tr[data-labeler=\"careless-web\"] td.labels')?.textContent === '0'"
@@ -70,7 +70,7 @@ def test_an_armed_button_stays_armed_through_a_live_update(
 ) -> None:
     careful = '#labelers-stats tr[data-labeler="careful-web"] button[data-discard]'
     page.click(careful)
-    page.wait_for_function(f"document.querySelector('{careful}').textContent === 'Confirm: discard 1'")
+    page.wait_for_function(f"document.querySelector('{careful}')?.textContent === 'Confirm: discard 1'")
     with CollieClient(live.url, operator.create_labeler("newcomer-web").token) as newcomer:
         claim = newcomer.claim(run.id)
         assert claim is not None
@@ -79,6 +79,6 @@ def test_an_armed_button_stays_armed_through_a_live_update(
     assert page.inner_text(careful) == "Confirm: discard 1"
     page.click(careful)
     page.wait_for_function(
-        "document.querySelector('#discard-message').textContent.startsWith('discarded 1 label of careful-web')"
+        "document.querySelector('#discard-message')?.textContent.startsWith('discarded 1 label of careful-web')"
     )
     assert labels_of(page, "newcomer-web") == "1"

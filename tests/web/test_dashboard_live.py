@@ -166,8 +166,8 @@ def test_a_link_to_a_run_that_does_not_exist_says_so_where_the_run_was(stack: di
     page.evaluate("window.location.hash = '#run=99999'")  # from an open run to one that does not exist
     page.wait_for_function("document.querySelector('#run-problem').textContent.startsWith('Run #99999: no such run')")
     assert page.is_visible("#run-problem") and page.is_hidden("#run")
-    assert page.text_content("#connection") == "live"  # the connection's, and it is
-    assert page.locator(f"#runs-body tr[data-run-id='{stack['run_id']}']").count() == 1  # the runs to pick from
+    page.wait_for_function("document.querySelector('#connection').textContent === 'live'")  # the connection's
+    page.wait_for_selector(f"#runs-body tr[data-run-id='{stack['run_id']}']")  # the runs to pick from
     page.close()
 
 

@@ -5,6 +5,7 @@ with their paths and replay links, the run's quality settings, and the legends o
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -55,6 +56,15 @@ def page(live: BackgroundServer, browser: Any, run: RunRead) -> Iterator[Any]:
         yield page
 
 
+def clipboard(page: Any, expected: str, timeout_s: float = 10.0) -> str:
+    """The clipboard's text once it is `expected` or `timeout_s` passed: the page writes it after
+    the click has returned."""
+    deadline = time.monotonic() + timeout_s
+    while (text := page.evaluate("navigator.clipboard.readText()")) != expected and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return text
+
+
 def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: BackgroundServer) -> None:
     page.fill("#labeler-name", "alice-web")
     page.click("#labeler-create")
@@ -62,7 +72,7 @@ def test_an_operator_creates_lists_and_revokes_a_labeler(page: Any, live: Backgr
     token = page.input_value("#created-token")
     assert page.input_value("#created-link") == f"{UI}?token={token}"
     page.click("#copy-link")
-    assert page.evaluate("navigator.clipboard.readText()") == f"{UI}?token={token}"
+    assert clipboard(page, f"{UI}?token={token}") == f"{UI}?token={token}"
     with CollieClient(live.url, token) as alice:
         assert alice.me().name == "alice-web"  # a real token of a labeler
         page.wait_for_selector('#labelers-body tr[data-labeler="alice-web"]')

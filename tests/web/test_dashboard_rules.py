@@ -22,8 +22,8 @@ def open_run(browser: Any, live: BackgroundServer, run_id: int, width: int = 140
     page = browser.new_page(viewport={"width": width, "height": 1000})
     page.set_default_timeout(WAIT_MS)
     page.goto(f"{live.url}/?token={TOKENS['operator']}#run={run_id}")
-    # a selector, not wait_for_function: Playwright evaluates a string predicate with eval when it
-    # polls, which the dashboard's content security policy refuses (a failure only when it polls)
+    # under the dashboard's content security policy (no bypass_csp): Playwright polls a predicate
+    # given as an expression with eval, which the policy refuses; a function ("() => …") it does not
     page.wait_for_selector('#curves[data-rendered-at]:not([data-rendered-at=""])', state="attached")
     return page
 
@@ -38,7 +38,7 @@ def test_a_polygon_rule_is_drawn_from_the_stored_definition(
     run = trainer.create_run(make_run_spec().model_copy(update={"task": "wedge", "task_definition": definition}))
     trainer.post_metrics(run.id, MetricsIn(epoch=1, values={"safe_coverage": 3.0, "n_bins": 4.0}))
     page = open_run(browser, live, run.id)
-    page.wait_for_function("(document.querySelector('#map').layout?.shapes ?? []).length === 2")
+    page.wait_for_function("() => (document.querySelector('#map').layout?.shapes ?? []).length === 2")
     paths = page.evaluate("document.querySelector('#map').layout.shapes.map((s) => s.path ?? null)")
     assert paths[1].startswith("M0.0000,0.0000L40.0000,-40.0000L40.0000,40.0000Z")
     assert page.locator("#run-rule").inner_text() == "Keep out of the east wedge."
@@ -55,7 +55,7 @@ def test_an_instruction_run_shows_the_instruction_no_regions_and_only_rule_free_
     values = {"n_bins": 12.0, "n_labels": 2.0, "n_labels_bad": 1.0, "n_labels_neutral": 1.0, "w_mean": 0.8}
     trainer.post_metrics(run.id, MetricsIn(epoch=1, values=values))
     page = open_run(browser, live, run.id)
-    page.wait_for_function("document.querySelector('#curves').dataset.points === '1'")
+    page.wait_for_function("() => document.querySelector('#curves').dataset.points === '1'")
     assert instruction in page.locator("#run-rule").inner_text()
     titles = page.evaluate("document.querySelector('#curves').layout.annotations.map((a) => a.text)")
     joined = " ".join(titles)
@@ -78,7 +78,7 @@ def test_curve_titles_and_legends_do_not_overlap_on_a_narrow_screen(
     for epoch in (1, 2):
         trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values=dict.fromkeys(names, float(epoch))))
     page = open_run(browser, live, run.id, width=viewport)
-    page.wait_for_function("document.querySelector('#curves').dataset.points === '2'")
+    page.wait_for_function("() => document.querySelector('#curves').dataset.points === '2'")
     boxes = page.eval_on_selector_all(
         "#curves g.annotation",
         "gs => gs.map(g => { const r = g.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; })",
