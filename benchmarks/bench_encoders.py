@@ -37,6 +37,11 @@ from trainer.skills import SkillPrior
 ENV = "quadruped"
 
 
+def sync(dev: torch.device) -> None:
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+
+
 def collect(episodes: int, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random-action episodes: frames (n, T+1, 9, 64, 64) uint8, actions (n, T, 12), probe targets
     (n, T+1, 2): torso height and uprightness (the body z-axis' vertical component)."""
@@ -147,9 +152,11 @@ def main() -> None:
     speed = {kind: {"steps_per_s": []} for kind in agents}
     for _ in range(3):  # interleaved rounds: both see the same machine load
         for kind, agent in agents.items():
+            sync(dev)  # a GPU's queued kernels done: timed, not only queued
             start = time.perf_counter()
             for b in data[:5]:
                 agent.update(b, None)
+            sync(dev)
             speed[kind]["steps_per_s"].append(5 / (time.perf_counter() - start))
     for kind in agents:
         report[kind]["steps_per_s"] = float(np.median(speed[kind]["steps_per_s"]))

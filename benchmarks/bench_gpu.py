@@ -10,7 +10,7 @@ before the first session. `--method metra` times METRA's update instead. Without
 `no CUDA device` and exits 0 (`--device cpu --preset smoke` runs the same code on the CPU, as the
 test suite does).
 JSON (runs/bench/gpu.json): per env updates_per_s, env_steps_per_s, eval_s, peak_gpu_mb,
-epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device, preset and
+peak_gpu_reserved_mb, epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device, preset and
 method (also the file's settings, with the timed epochs). Without CUDA it writes nothing: a
 machine without a GPU must not overwrite a GPU's figures.
 """
@@ -18,6 +18,7 @@ machine without a GPU must not overwrite a GPU's figures.
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import tempfile
@@ -57,14 +58,16 @@ def bench_env(env: str, preset: str, device: str, epochs: int, method: str) -> d
         t = Trainer(cfg, progress=False)
         t._t0 = time.perf_counter()
         dev = t.device
-        if dev.type == "cuda":
+        if dev.type == "cuda":  # the env before's trainer gone (a reference cycle holds it until collected)
+            gc.collect()
+            torch.cuda.empty_cache()
             torch.cuda.reset_peak_memory_stats(dev)
         t.epoch += 1
         t.collect_epoch()
         if method == "collie":
             with_full_labels(t)
             assert t.beta() == 0.0
-        t.train_epoch()  # warm-up: allocator, cuDNN autotuning
+        t.train_epoch()  # warm-up: the allocator's pools, lazy CUDA modules
         sync(dev)
         collect_s = train_s = 0.0
         for _ in range(epochs):
@@ -85,6 +88,8 @@ def bench_env(env: str, preset: str, device: str, epochs: int, method: str) -> d
             "eval_s": eval_s,
             "epoch_s": epoch_s,
             "peak_gpu_mb": torch.cuda.max_memory_allocated(dev) / 1e6 if dev.type == "cuda" else 0.0,
+            # what the allocator held at most (its cache included; the CUDA context is not): the GPU's memory needed
+            "peak_gpu_reserved_mb": torch.cuda.max_memory_reserved(dev) / 1e6 if dev.type == "cuda" else 0.0,
             "epochs_full": full.epochs,
             "grad_steps": cfg.grad_steps,
             "projected_hours": (full.epochs * epoch_s + full.epochs / full.eval_every * eval_s) / 3600,
@@ -100,10 +105,12 @@ def main() -> int:
     p.add_argument("--device", default="cuda")
     p.add_argument("--method", default="collie", choices=("collie", "metra"), help="whose update is timed")
     a = p.parse_args()
-    if a.device == "cuda" and not torch.cuda.is_available():
-        print("no CUDA device")
+    device = torch.device(a.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        built = f"torch {torch.__version__} built for CUDA {torch.version.cuda}" if torch.version.cuda else None
+        print(f"no CUDA device ({built or f'torch {torch.__version__} built without CUDA'})")
         return 0
-    name = torch.cuda.get_device_name() if a.device == "cuda" else "cpu"
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
     print(f"bench-gpu on {name}, preset {a.preset}, {a.method}'s update, {a.epochs} timed epochs per env")
     figures: dict[str, object] = {"device": name, "preset": a.preset, "method": a.method}
     for env in a.envs.split(","):

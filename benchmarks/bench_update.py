@@ -91,10 +91,18 @@ from trainer.skills import SkillPrior
 from trainer.threads import resolve_threads
 
 
+def settled() -> None:
+    """Wait for a GPU's queued kernels: without it a clock times how fast they are queued."""
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
 def timed(fn: Callable[[], None], steps: int) -> float:
+    settled()
     start = time.perf_counter()
     for _ in range(steps):
         fn()
+    settled()
     return steps / (time.perf_counter() - start)
 
 

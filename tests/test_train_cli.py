@@ -27,6 +27,7 @@ from small_disk import fill, small_disk
 from unprivileged import as_nobody, closed_folder
 
 from trainer.cli import short_of_memory
+from trainer.networks import fast_ops_pay
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -485,6 +486,19 @@ def test_resume_warns_about_the_flags_it_ignores_and_what_a_run_saved_before_som
     assert fewer.returncode == 0 and "ignored: --epochs 1 (the run's: 3)" in fewer.stderr, fewer.stderr[-3000:]
     assert "finished all its 3 epochs: nothing to train (--epochs above 3 extends it)" in fewer.stderr
     assert "predates" not in fewer.stderr  # said once: the keys are written now
+
+
+def test_a_run_started_on_a_gpu_resumes_on_a_machine_without_one_with_device_cpu(run_copy: Path) -> None:
+    """Was: the run's own --device cuda won on resume, so a run moved off a GPU machine could never
+    resume (--device cpu was "ignored"). --device is taken as given, and fast ops chosen for it."""
+    saved = json.loads((run_copy / "config.json").read_text())
+    (run_copy / "config.json").write_text(json.dumps({**saved, "device": "cuda", "fast_ops": False}))  # a GPU's
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "--device cuda", "use --device cpu")
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--device", "cpu")
+    assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr[-3000:]
+    config = json.loads((run_copy / "config.json").read_text())
+    assert config["device"] == "cpu" and config["fast_ops"] == fast_ops_pay(torch.device("cpu"))  # chosen again
+    assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:

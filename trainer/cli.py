@@ -141,10 +141,11 @@ def int_type(name: str) -> Callable[[str], int]:
 
 
 RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command line (it may only extend them)
-# how many cores a resumed run uses, not what it computes: taken from the command line when given
-# (more intra-op threads may round some reductions differently, as a fresh run with them would).
+# how many cores and which device a resumed run uses, not what it computes: taken from the command
+# line when given (more intra-op threads or another device may round some reductions differently, as
+# a fresh run with them would; a run moved off a GPU machine resumes with --device cpu).
 # Not --physics-threads: the number of rollout groups changes the policy's noise draws.
-RESUME_RUNTIME = ("threads",)
+RESUME_RUNTIME = ("threads", "device")
 
 
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
@@ -601,6 +602,8 @@ def run(args: argparse.Namespace) -> int:
             asked, cfg = cfg, Config.from_stored(stored, source)  # a value of a wrong type: named
             cfg.epochs = max(cfg.epochs, asked.epochs if args.epochs else 0)
             cfg.out = asked.out  # where the folder is now (it may have been moved since)
+            if "device" in args.given and asked.device != cfg.device:
+                cfg.fast_ops = None  # chosen again below, for the device the run moves to
             for k in RESUME_RUNTIME:
                 if k in args.given:
                     setattr(cfg, k, getattr(asked, k))

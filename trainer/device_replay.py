@@ -21,6 +21,7 @@ from trainer.metra import TorchBatch
 from trainer.replay import TrajectoryReplay
 from trainer.rollout import Normaliser
 
+SYNC_SLOTS = 64  # trajectories copied to the device at a time (a pixel Quadruped one holds 201 × 9 × 64 × 64 bytes)
 # g(s) ∈ {0, 1, 2} of the task rule for states given as (…, 2) x-y and (…) pitch arrays
 StateRule = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -73,10 +74,11 @@ class DeviceReplay:
         self._host_direction[slots] = self._direction_of(r.skill[slots])
         if self._rule is not None:
             self._host_g[slots] = self._rule(r.xy[slots], r.pitch[slots])
-        if not self.shared:
-            index = torch.as_tensor(slots, device=self.device)
-            for key, tensor in self.tensors.items():
-                tensor.index_copy_(0, index, torch.from_numpy(self._host[key][slots]).to(self.device))
+        if not self.shared:  # in parts: a resume syncs every slot, and a whole copy of a pixel replay is GBs
+            for part in np.array_split(slots, -(-len(slots) // SYNC_SLOTS)):
+                index = torch.as_tensor(part, device=self.device)
+                for key, tensor in self.tensors.items():
+                    tensor.index_copy_(0, index, torch.from_numpy(self._host[key][part]).to(self.device))
 
     def normalised(self, raw: torch.Tensor) -> torch.Tensor:
         return (raw.to(torch.float32) - self.mean) / self.std

@@ -122,6 +122,9 @@ class Trainer:
         if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
             raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
+        if self.device.type == "cuda":  # cuDNN's deterministic convolutions: a seed's pixel run, and its
+            torch.backends.cudnn.deterministic = True  # resume, give the same numbers (TF32 convolutions stay
+            torch.backends.cudnn.benchmark = False  # on, torch's default: docs/training.md, "On a GPU")
         if cfg.fast_ops is None:  # fixed now, so config.json and a resume carry this machine's choice
             cfg.fast_ops = fast_ops_pay(self.device)
         torch.set_num_threads(resolve_threads(cfg.threads, cfg.hidden))  # fair share on a busy machine
@@ -469,7 +472,7 @@ class Trainer:
             "segment_xy": self.segment_xy,
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
-            "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
+            "cuda_rng": torch.cuda.get_rng_state(self.device) if self.device.type == "cuda" else None,  # its GPU's only
             "python_rng": random.getstate(),
             "feedback": self.feedback.state_dict(),
             "last_info": self.last_info,
@@ -492,8 +495,11 @@ class Trainer:
             self.instruction.load_state_dict(s["instruction"])
         self.rng.bit_generator.state = s["rng"]
         torch.set_rng_state(s["torch_rng"])
-        if s["cuda_rng"] is not None and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(s["cuda_rng"])
+        cuda_rng, gpu = s["cuda_rng"], self.device.index or 0
+        if isinstance(cuda_rng, list):  # before 12-07 every visible GPU's: this run's
+            cuda_rng = cuda_rng[gpu] if gpu < len(cuda_rng) else None
+        if cuda_rng is not None and self.device.type == "cuda":  # not when the run moved off its GPU
+            torch.cuda.set_rng_state(cuda_rng, self.device)
         random.setstate(s["python_rng"])
         self._asking = s.get("asking")  # this epoch's rollouts are in; its feedback, update, … are not
         # checkpoints from before the source kept its own state stored the oracle's RNG as teacher_rng

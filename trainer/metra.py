@@ -52,9 +52,9 @@ class Metra:
         f = feature_dim(obs_shape)
         enc = self._encoders(obs_shape, cfg.encoder)
         fast = fast_ops_pay(device) if cfg.fast_ops is None else cfg.fast_ops
-        self.phi = SkillLatent(f, k, h, n, enc["phi"]).to(device)
-        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"], fast).to(device)
-        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"], fast).to(device)
+        self.phi = SkillLatent(f, k, h, n, enc["phi"])
+        self.qf = TwinQ(f + k + action_dim, h, n, enc["qf"], fast)
+        self.qf_target = TwinQ(f + k + action_dim, h, n, enc["qf_target"], fast)
         self.policy = TanhGaussianPolicy(
             f + k,
             action_dim,
@@ -64,9 +64,11 @@ class Metra:
             detach_encoder=cfg.encoder == "shared",
             log_std_min=cfg.log_std_min,
             fast=fast,
-        ).to(device)
+        )
         if cfg.init == "reference":
             init_like_reference(self.phi, self.qf, self.policy)
+        for net in (self.phi, self.qf, self.qf_target, self.policy):  # initialised on the CPU: a seed's
+            net.to(device)  # weights are the same on every device
         self.qf_target.load_state_dict(self.qf.state_dict())
         self.qf_target.requires_grad_(False)
         self.learn_alpha = True  # DIAYN's reference variant keeps α fixed

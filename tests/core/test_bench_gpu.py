@@ -23,8 +23,11 @@ def bench(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
 @pytest.mark.skipif(torch.cuda.is_available(), reason="a CUDA device is present")
 def test_without_cuda_it_says_so_and_exits_0(tmp_path):
     proc = bench(tmp_path)
-    assert proc.returncode == 0 and proc.stdout.strip() == "no CUDA device"
+    built = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "built without CUDA"
+    assert proc.returncode == 0 and proc.stdout.strip() == f"no CUDA device (torch {torch.__version__} {built})"
     assert not (tmp_path / "gpu.json").exists()
+    named = bench(tmp_path, "--device", "cuda:1")  # a GPU named by number: the same (was a traceback)
+    assert named.returncode == 0 and named.stdout.startswith("no CUDA device ("), named.stderr[-2000:]
 
 
 def test_its_code_path_runs_on_the_cpu(tmp_path):

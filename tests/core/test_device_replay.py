@@ -76,3 +76,21 @@ def test_device_copies_follow_new_trajectories():
     assert not torch.equal(device.tensors["obs"][2], torch.from_numpy(r.obs[2]))
     device.sync(np.array([2]))
     assert torch.equal(device.tensors["obs"][2], torch.from_numpy(r.obs[2]))
+
+
+def test_a_whole_replay_is_copied_to_the_device_in_parts(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A resume copies every slot: in parts of SYNC_SLOTS, so no second whole replay is made on the
+    host and on the device at once; every part lands where it belongs."""
+    import trainer.device_replay as device_replay
+
+    monkeypatch.setattr(device_replay, "SYNC_SLOTS", 4)
+    r = filled((7,), np.float32)
+    copied: list[int] = []
+    real = torch.Tensor.index_copy_
+    monkeypatch.setattr(torch.Tensor, "index_copy_", lambda t, d, i, s: copied.append(len(i)) or real(t, d, i, s))
+    device = DeviceReplay(
+        r, Normaliser(np.zeros(7), np.ones(7)), lambda z: z, torch.device("cpu"), share_host_memory=False
+    )
+    assert r.count == 6 and sorted(set(copied)) == [3]  # 6 slots: two parts of 3, each key
+    for key, host in (("obs", r.obs), ("action", r.action), ("skill", r.skill)):
+        assert torch.equal(device.tensors[key], torch.from_numpy(host))
