@@ -7,8 +7,8 @@ seconds of one 48-episode evaluation, peak GPU memory, and the projected wall ti
 run (Ant 10 000 epochs, Quadruped 5 000): epochs × (rollout + update time per epoch) plus
 (epochs / eval_every) evaluations; an upper bound, since the label set grows over the run and w ≡ 1
 before the first session. `--method metra` times METRA's update instead. Without CUDA it prints
-`no CUDA device` and exits 0 (`--device cpu --preset smoke` runs the same code on the CPU, as the
-test suite does).
+`no CUDA device (torch <version> built …)` and exits 0 (`--device cpu --preset smoke` runs the
+same code on the CPU, as the test suite does).
 JSON (runs/bench/gpu.json): per env updates_per_s, env_steps_per_s, eval_s, peak_gpu_mb,
 peak_gpu_reserved_mb, epoch_s, projected_hours, epochs_full, grad_steps, labelled_states; plus device, preset and
 method (also the file's settings, with the timed epochs). Without CUDA it writes nothing: a
@@ -105,16 +105,22 @@ def main() -> int:
     p.add_argument("--device", default="cuda")
     p.add_argument("--method", default="collie", choices=("collie", "metra"), help="whose update is timed")
     a = p.parse_args()
-    device = torch.device(a.device)
+    device = torch.device("cuda" if a.device == "auto" else a.device)  # a GPU's benchmark: auto is cuda
     if device.type == "cuda" and not torch.cuda.is_available():
-        built = f"torch {torch.__version__} built for CUDA {torch.version.cuda}" if torch.version.cuda else None
-        print(f"no CUDA device ({built or f'torch {torch.__version__} built without CUDA'})")
+        built = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "built without CUDA"
+        print(f"no CUDA device (torch {torch.__version__} {built})")
         return 0
+    if device.type == "cuda" and (device.index or 0) >= torch.cuda.device_count():
+        print(
+            f"bench-gpu: --device {a.device}: this machine has {torch.cuda.device_count()} CUDA devices",
+            file=sys.stderr,
+        )
+        return 2
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
     print(f"bench-gpu on {name}, preset {a.preset}, {a.method}'s update, {a.epochs} timed epochs per env")
     figures: dict[str, object] = {"device": name, "preset": a.preset, "method": a.method}
     for env in a.envs.split(","):
-        r = bench_env(env, a.preset, a.device, a.epochs, a.method)
+        r = bench_env(env, a.preset, str(device), a.epochs, a.method)
         figures[env] = r
         print(
             f"  {env:10s} {r['updates_per_s']:8.1f} updates/s ({r['labelled_states']} labelled states)  "

@@ -490,15 +490,23 @@ def test_resume_warns_about_the_flags_it_ignores_and_what_a_run_saved_before_som
 
 def test_a_run_started_on_a_gpu_resumes_on_a_machine_without_one_with_device_cpu(run_copy: Path) -> None:
     """Was: the run's own --device cuda won on resume, so a run moved off a GPU machine could never
-    resume (--device cpu was "ignored"). --device is taken as given, and fast ops chosen for it."""
+    resume (--device cpu was "ignored"). --device is taken as given; fast ops are chosen again for
+    another kind of device, and kept for the same kind or "auto" (a resume stays exact)."""
+    no_gpu = {**os.environ, "CUDA_VISIBLE_DEVICES": ""}  # a machine without one, whatever this one has
     saved = json.loads((run_copy / "config.json").read_text())
-    (run_copy / "config.json").write_text(json.dumps({**saved, "device": "cuda", "fast_ops": False}))  # a GPU's
-    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), "--device cuda", "use --device cpu")
-    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--device", "cpu")
+    gpus = not fast_ops_pay(torch.device("cpu"))  # the run's, unlike this CPU's choice
+    (run_copy / "config.json").write_text(json.dumps({**saved, "device": "cuda", "fast_ops": gpus}))
+    said = refused(train("--out", str(run_copy), "--resume", "--epochs", "3", env=no_gpu), "use --device cpu")
+    assert f"the run's own, from {run_copy / 'config.json'}: --resume with it moves the run" in said
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--device", "cpu", env=no_gpu)
     assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr[-3000:]
     config = json.loads((run_copy / "config.json").read_text())
-    assert config["device"] == "cpu" and config["fast_ops"] == fast_ops_pay(torch.device("cpu"))  # chosen again
+    assert config["device"] == "cpu" and config["fast_ops"] == (not gpus)  # chosen again, for the CPU
     assert json.loads((run_copy / "summary.json").read_text())["epochs_done"] == 3
+    proc = train("--out", str(run_copy), "--resume", "--epochs", "4", "--device", "auto", env=no_gpu)
+    assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr[-3000:]
+    config = json.loads((run_copy / "config.json").read_text())
+    assert config["device"] == "auto" and config["fast_ops"] == (not gpus)  # "auto": no other kind named, kept
 
 
 def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) -> None:

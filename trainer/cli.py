@@ -148,6 +148,13 @@ RESUME_MAY_CHANGE = ("epochs",)  # what a resumed run takes from the command lin
 RESUME_RUNTIME = ("threads", "device")
 
 
+def moved_device(stored: str, given: str) -> bool:
+    """Whether a resume moves a run to another kind of device (cpu, cuda, mps): its fast ops are
+    chosen again. "auto" names no kind: the run keeps its own."""
+    kinds = {name.split(":")[0] for name in (stored, given)}
+    return len(kinds) == 2 and "auto" not in kinds
+
+
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
     """The given flags whose values differ from the resumed run's own config (which wins), and
     --epochs below the run's own (epochs may only be extended)."""
@@ -602,12 +609,15 @@ def run(args: argparse.Namespace) -> int:
             asked, cfg = cfg, Config.from_stored(stored, source)  # a value of a wrong type: named
             cfg.epochs = max(cfg.epochs, asked.epochs if args.epochs else 0)
             cfg.out = asked.out  # where the folder is now (it may have been moved since)
-            if "device" in args.given and asked.device != cfg.device:
-                cfg.fast_ops = None  # chosen again below, for the device the run moves to
+            moved = "device" in args.given and moved_device(cfg.device, asked.device)
+            if moved:  # fast ops as given, or chosen again below for the kind of device the run moves to
+                cfg.fast_ops = asked.fast_ops
             for k in RESUME_RUNTIME:
                 if k in args.given:
                     setattr(cfg, k, getattr(asked, k))
             assumed = {k: v for k, v in first_version(stored).items() if k not in stored}
+            if moved:
+                assumed.pop("fast_ops", None)
             if assumed:  # config.json is rewritten with them: say so once, when they are filled in
                 said = ", ".join(f"{flag(k)} {v if isinstance(v, str) else json.dumps(v)}" for k, v in assumed.items())
                 print(f"collie train: {source} predates some options; it resumes as it ran: {said}", file=sys.stderr)
@@ -638,8 +648,16 @@ def run(args: argparse.Namespace) -> int:
         from trainer.networks import fast_ops_pay
 
         mark("imports")  # torch, mujoco, the trainer's modules
+        try:  # before a service is told of the run
+            device = pick_device(cfg.device)
+        except ValueError as exc:
+            if not args.resume or "device" in args.given:
+                raise
+            raise ValueError(
+                f"{exc} — the run's own, from {Path(cfg.out) / 'config.json'}: --resume with it moves the run"
+            ) from None
         if cfg.fast_ops is None:  # this machine's choice, in the service's copy of the config too
-            cfg.fast_ops = fast_ops_pay(pick_device(cfg.device))
+            cfg.fast_ops = fast_ops_pay(device)
 
         # a resumed run keeps the rule it started with, whatever its file says now
         rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)

@@ -92,8 +92,10 @@ def pick_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     device = torch.device(name)  # the name's form is checked by Config.validate
-    if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
-        raise ValueError(f"--device {name}: this machine has {torch.cuda.device_count()} CUDA devices")
+    count = torch.cuda.device_count()
+    if device.type == "cuda" and device.index is not None and device.index >= count:
+        others = f"cuda:0 … cuda:{count - 1}, " if count > 1 else "cuda, " if count else ""
+        raise ValueError(f"--device {name}: this machine has {count} CUDA devices; use --device {others}cpu (or auto)")
     if device.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"--device {name}: torch sees no CUDA device here; use --device cpu (or auto)")
     if device.type == "mps" and not torch.backends.mps.is_available():

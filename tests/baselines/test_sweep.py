@@ -504,7 +504,9 @@ def test_runs_refused_for_memory_a_running_sibling_holds_start_again_once_it_end
     starts = [str(tmp_path / f"{name}.starts") for name in ("a", "b")]
     holds = (  # until both were refused once (however slowly they start), then 3 s more
         "import time, pathlib\n"
-        f"while not all(pathlib.Path(p).exists() for p in {starts!r}): time.sleep(0.05)\n"
+        "deadline = time.monotonic() + 60\n"
+        f"while not all(pathlib.Path(p).exists() for p in {starts!r}) and time.monotonic() < deadline:\n"
+        "    time.sleep(0.05)\n"
         f"time.sleep(3); pathlib.Path({str(done)!r}).touch()"
     )
     holder = [sys.executable, "-c", holds]

@@ -180,7 +180,7 @@ def test_a_run_whose_trainer_falls_silent_says_so(stack: dict[str, Any], page: A
     assert page.evaluate(f"{mark}.textContent") == ""  # a live trainer: nothing to say
     page.evaluate("window.realNow = Date.now; Date.now = () => window.realNow() + 360e3")
     try:  # the page's clock six minutes on: its trainer's last call looks six minutes old
-        page.wait_for_function(f"{mark}.textContent.startsWith('no word from its trainer since 6 min ago')")
+        page.wait_for_function(f"{mark}?.textContent.startsWith('no word from its trainer since 6 min ago')")
     finally:
         page.evaluate("Date.now = window.realNow")
 
