@@ -497,7 +497,7 @@ def test_a_run_started_on_a_gpu_resumes_on_a_machine_without_one_with_device_cpu
     gpus = not fast_ops_pay(torch.device("cpu"))  # the run's, unlike this CPU's choice
     (run_copy / "config.json").write_text(json.dumps({**saved, "device": "cuda", "fast_ops": gpus}))
     said = refused(train("--out", str(run_copy), "--resume", "--epochs", "3", env=no_gpu), "use --device cpu")
-    assert f"the run's own, from {run_copy / 'config.json'}: --resume with it moves the run" in said
+    assert f"(cuda is the run's own, from {run_copy / 'config.json'}; --resume with another --device" in said
     proc = train("--out", str(run_copy), "--resume", "--epochs", "3", "--device", "cpu", env=no_gpu)
     assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr[-3000:]
     config = json.loads((run_copy / "config.json").read_text())

@@ -654,7 +654,8 @@ def run(args: argparse.Namespace) -> int:
             if not args.resume or "device" in args.given:
                 raise
             raise ValueError(
-                f"{exc} — the run's own, from {Path(cfg.out) / 'config.json'}: --resume with it moves the run"
+                f"{exc} ({cfg.device} is the run's own, from {Path(cfg.out) / 'config.json'}; "
+                "--resume with another --device moves the run)"
             ) from None
         if cfg.fast_ops is None:  # this machine's choice, in the service's copy of the config too
             cfg.fast_ops = fast_ops_pay(device)
