@@ -450,6 +450,8 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
         since = stack.children["labeling_ui"].log_from
         ui_meta = wait_for(ui_info, ui, "the labeling UI", stopping=stopping, log=logs / "labeling_ui.log", since=since)
         mark("waited: labeling UI serving")
+        if args.ui_port and int(ui_meta["port"]) != args.ui_port:  # said in its log only, else
+            print(f"collie up: --ui-port {args.ui_port} is in use; the labeling UI serves on port {ui_meta['port']}")
         port["labeling_ui"] = int(ui_meta["port"])
         labeler_url = ui_meta["url"] + "?token=" + quote(tokens["labeler"])  # its URL names `shown` too
     site = f"http://{shown}:{sock.getsockname()[1]}"
@@ -462,6 +464,9 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     print(f"  service   {site}   (API docs {site}/docs)")
     if labeler_url:  # links with tokens go to the terminal of the person who started the stack, not to logs
         print(f"  label     {labeler_url}")
+    elif args.teacher == "none":  # else the run would wait for labels with no word of who gives them
+        print(f"  label     no labeling UI here (--no-label-ui): `collie label-ui --api {site} --run {run_id} "
+              "--token TOKEN` with a labeler's token (dashboard → Labelers), or --teacher oracle")  # fmt: skip
     print(f"  dashboard {dashboard}")
     print(f"  tokens    in {tokens_file} (readable by you only)")
     print(f"  logs      {out / 'logs'}   trainer output {trainer_out}")

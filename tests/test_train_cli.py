@@ -526,6 +526,8 @@ def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) 
     assert printed["epochs_done"] == summary["epochs_done"] >= 2 and printed["epoch"] == summary["epoch"] == 0
     evaluated = json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])
     assert printed["wall_s"] == summary["wall_s"] > evaluated["wall_s"]
+    said = f"stopped after epoch {summary['epochs_done']} of 1000; `collie train --out {out} --resume` continues"
+    assert stderr.strip().splitlines()[-1] == f"collie train: {said}"  # where it stopped, not the evaluation's epoch
 
 
 def test_help_lists_every_registered_task() -> None:
@@ -536,6 +538,7 @@ def test_help_lists_every_registered_task() -> None:
     flat = " ".join(proc.stdout.split())
     assert "hazard" in task_names() and all(name in flat for name in task_names())
     assert "--hidden HIDDEN width of every MLP layer" in flat  # each hyperparameter says what it is
+    assert "car (default point)" in flat and "(default collie)" in flat and "the run's seed (default 0)" in flat
 
 
 def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Path) -> None:
@@ -655,7 +658,7 @@ def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -
     try:
         assert proc.stderr is not None
         for line in proc.stderr:
-            if "waiting for the labeling service" in line:
+            if "waiting for the labeling service at http://127.0.0.1:9 (at most 120 s)" in line:  # says how long
                 break
         sent = time.monotonic()
         proc.send_signal(signal.SIGTERM)

@@ -4,6 +4,7 @@ exactly those the trainer applied (no label lost, none counted twice)."""
 
 import json
 import os
+import socket
 import subprocess
 import sys
 
@@ -18,6 +19,10 @@ pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (test
 @pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: pixel segments travel packed
 def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tmp_path, env):
     info = tmp_path / "info.json"
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    taken = busy.getsockname()[1]
     cmd = [
         sys.executable,
         "-m",
@@ -34,7 +39,7 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
         "--port",
         "0",
         "--ui-port",
-        "0",
+        str(taken) if env == "point" else "0",  # point: a port in use, said and moved from
         "--out",
         str(tmp_path),
         "--info-json",
@@ -45,8 +50,12 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     db = tmp_path / ("lab.db" if env == "point" else "collie.db")
     lab_tokens = {f"COLLIE_{r}_TOKEN": f"lab-{r.lower()}-" + "t" * 20 for r in ("OPERATOR", "TRAINER", "LABELER")}
     lab = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{db}", **lab_tokens} if env == "point" else None
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=lab)
+    with busy:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=lab)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    meta = json.loads(info.read_text())
+    moved = f"collie up: --ui-port {taken} is in use; the labeling UI serves on port "
+    assert (moved in proc.stdout) == (env == "point"), proc.stdout[-2000:]
     assert db.exists() and (env != "point" or not (tmp_path / "collie.db").exists())
     meta = json.loads(info.read_text())
     assert set(meta) >= {"api", "labeling_ui", "dashboard", "run_id", "tokens"}

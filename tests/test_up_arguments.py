@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -240,3 +241,23 @@ def test_a_stack_whose_trainer_token_was_revoked_says_it_cannot_run_again(tmp_pa
         f"{tokens} holds no trainer token (revoked on the service: final); this stack cannot run again: "
         "start a new one in another --out"
     )
+
+
+def test_a_stack_without_a_labeling_ui_or_a_teacher_says_how_labels_come(tmp_path: Path) -> None:
+    """Was: no label link and no word, and then "waiting for labels" for good."""
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", "--preset", "smoke", "--port", "0"]
+    proc = subprocess.Popen([*command, "--out", str(tmp_path / "o")], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        assert proc.stdout is not None
+        printed = []
+        for line in proc.stdout:
+            printed.append(line)
+            if line.startswith("  dashboard "):
+                break
+        label = [line for line in printed if line.startswith("  label     ")]
+        assert len(label) == 1 and "no labeling UI here (--no-label-ui): `collie label-ui --api http://" in label[0]
+        assert "--token TOKEN` with a labeler's token (dashboard → Labelers), or --teacher oracle" in label[0]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=120)
+    assert proc.returncode == 130  # Ctrl-C's

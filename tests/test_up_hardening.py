@@ -351,6 +351,7 @@ def test_a_stack_that_crashed_before_its_first_checkpoint_resumes_its_run_not_a_
     )
     assert again.returncode == 0, again.stderr[-2000:]
     assert f"collie up: run {meta['run_id']} " in again.stdout
+    assert "  label     " not in again.stdout  # the oracle labels: no link, no hint
     with contextlib.closing(sqlite3.connect(tmp_path / "collie.db")) as db:
         assert db.execute("SELECT id, status FROM runs").fetchall() == [(meta["run_id"], "finished")]  # no run 2
     summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())

@@ -10,6 +10,7 @@ import errno
 import json
 import os
 import re
+import shlex
 import sys
 import time
 from collections.abc import Callable
@@ -44,7 +45,12 @@ DASHED_VALUE_OPTIONS = ("--token",)  # a token may start with "-": `--token -xâ€
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.set_defaults(given=frozenset())  # the run's flags given on this command line (Given)
-    p.add_argument("--env", default="point", action=Given, help="point, ant, half_cheetah, quadruped, humanoid or car")
+    p.add_argument(
+        "--env",
+        default="point",
+        action=Given,
+        help="point, ant, half_cheetah, quadruped, humanoid or car (default point)",
+    )
     p.add_argument(
         "--task",
         default=None,
@@ -60,9 +66,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--instruction", default=None, action=Given, help="no rule: people label by this intent in words (needs --api)"
     )
-    p.add_argument("--method", default="collie", action=Given, help=f"one of: {', '.join(METHODS)}")
-    p.add_argument("--preset", default="cpu", action=Given, help=f"one of: {', '.join(PRESETS)}")
-    p.add_argument("--seed", type=seed, default=0, action=Given)
+    p.add_argument("--method", default="collie", action=Given, help=f"one of: {', '.join(METHODS)} (default collie)")
+    p.add_argument("--preset", default="cpu", action=Given, help=f"one of: {', '.join(PRESETS)} (default cpu)")
+    p.add_argument("--seed", type=seed, default=0, action=Given, help="the run's seed (default 0)")
     p.add_argument("--out", default=None, help="run folder (default runs/<env>-<task>-<method>-s<seed>)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -229,7 +235,8 @@ def wait_for_service(api: str, token: str, timeout_s: float = 120.0) -> None:
                 if early_term.ASKED.is_set():  # its KeyboardInterrupt was lost in a finalizer
                     raise KeyboardInterrupt from None
                 if delay == 0.1:  # the first miss: say what we wait for
-                    print(f"collie train: waiting for the labeling service at {api}", file=sys.stderr, flush=True)
+                    said = f"waiting for the labeling service at {api} (at most {timeout_s:.0f} s)"
+                    print(f"collie train: {said}", file=sys.stderr, flush=True)
                 if time.monotonic() + delay > deadline:
                     raise ValueError(f"the labeling service at {api} did not answer in {timeout_s:.0f} s") from None
                 time.sleep(delay)
@@ -761,4 +768,8 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps({k: summary.get(k) for k in keys}))
     written = [name for name in RUN_OUTPUTS if (Path(cfg.out) / name).exists()]  # e.g. no w(s) map without guidance
     print(f"run folder: {cfg.out}  ({', '.join(written)})")
+    if summary.get("status") == "interrupted":  # "epoch" above is the last evaluation's: say where it stopped
+        again = shlex.join(["collie", "train", "--out", str(cfg.out), "--resume"])
+        done = summary.get("epochs_done")
+        print(f"collie train: stopped after epoch {done} of {cfg.epochs}; `{again}` continues", file=sys.stderr)
     return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1

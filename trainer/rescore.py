@@ -102,7 +102,8 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
         held = read_json_object(out / "summary.json")  # RunFolderError, a ValueError, names a broken one
         if keep_existing and same_run(held.get("rescored_from"), source):
             return out
-        raise RescoreError(f"{out} already holds a run (summary.json); remove it first")
+        again = " (--keep-existing leaves one rescored from this run as it is)" if not keep_existing else ""
+        raise RescoreError(f"{out} already holds a run (summary.json); remove it first{again}")
     if out.is_dir() and any(out.iterdir()):  # the new folder is renamed over it: only an empty one can be
         raise RescoreError(f"{out} holds files but no run (no summary.json); remove it or give another --out")
     arrays = read_arrays(saved, ("xy", "pitch"))  # RunFolderError, a ValueError, names a damaged one

@@ -75,7 +75,7 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     assert f"{source} is judged by north already" in capsys.readouterr().err
     assert main(["rescore", str(source), "--task", "hole"]) == 0
     assert main(["rescore", str(source), "--task", "hole"]) == 2
-    assert "already holds a run" in capsys.readouterr().err
+    assert "already holds a run (summary.json); remove it first (--keep-existing leaves" in capsys.readouterr().err
     other = tmp_path / "notes"
     other.mkdir()
     (other / "todo.txt").write_text("kept")  # the new folder is renamed into place: only over an empty one
