@@ -303,17 +303,22 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal stops the stack; nohup does not
         signal.signal(signal.SIGHUP, on_signal)
+    made_db, unheld = db is not None and not Path(db).exists(), False
     try:
         return supervise(args, out, db, stack, stopping)
     except Stopped:
         print("collie up: stopped while starting", file=sys.stderr)
         return 130
     except (RuntimeError, TimeoutError) as exc:  # ChildFailed included
+        unheld = isinstance(exc, RunNotHeld)
         stack.log(f"error: {exc}")
         print(f"collie up: error: {exc} (logs in {out / 'logs'})", file=sys.stderr)
         return 1
     finally:
         stack.stop()
+        if unheld and made_db:  # the service made it empty just now: the refused start leaves none behind
+            for path in (Path(f"{db}{end}") for end in ("", "-wal", "-shm")):
+                path.unlink(missing_ok=True)
 
 
 def stack_tokens(tokens_file: Path) -> dict[str, str]:
@@ -537,6 +542,10 @@ def wait_healthy(
     raise TimeoutError("the service did not become healthy")
 
 
+class RunNotHeld(RuntimeError):
+    """OUT/trainer belongs to a run the stack's database does not hold."""
+
+
 def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | None) -> None:
     """The run OUT/trainer belongs to is in the database, else RuntimeError saying so: a trainer
     resumed on a database without it would only ever be refused (404) and restarted."""
@@ -550,7 +559,7 @@ def held_by_database(client: CollieClient, run_id: int, memo: Path, db: Path | N
         if exc.status != 404:
             raise RuntimeError(f"the service {answered(exc)} when asked for run {run_id}") from None
         where = db if db is not None else DATABASE_ENV
-        raise RuntimeError(
+        raise RunNotHeld(
             f"{memo} belongs to run {run_id}, which the database ({where}) does not hold (was it deleted or "
             "replaced?): give the --db that holds it, or another --out for a new run"
         ) from None

@@ -216,6 +216,13 @@ def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(fin
     memo, db = out / "trainer" / "service_run.json", out / "collie.db"
     assert f"{memo} belongs to run 1, which the database ({db}) does not hold" in again.stderr
     assert "restarting" not in again.stderr
+    assert not db.exists() and not list(out.glob("collie.db-*"))  # the empty one this start made is gone
+    kept = copy_of(finished_stack, tmp_path / "kept")  # a database that was there stays, though it lacks the run
+    with contextlib.closing(sqlite3.connect(kept / "collie.db")) as held:
+        held.execute("UPDATE runs SET id = 7")  # another run than OUT/trainer's
+        held.commit()
+    refused = subprocess.run([*up_command(kept), "--no-label-ui"], capture_output=True, text=True, timeout=300)
+    assert refused.returncode == 1 and "belongs to run 1" in refused.stderr and (kept / "collie.db").exists()
 
 
 def test_a_part_that_keeps_dying_ends_the_stack_naming_it(tmp_path):
