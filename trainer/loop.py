@@ -637,7 +637,8 @@ class Trainer:
         self.rebuild_from_source()
         if not self.method.asks_labels or self.queries_asked >= self.cfg.total_queries:
             startup.done()  # no feedback session will come: no first segment to time
-        self._writer = self._tensorboard()
+        if self.epoch < self.cfg.epochs or self._asking is not None:  # else no event file with nothing in it
+            self._writer = self._tensorboard()
         if self.feedback.control(self.epoch) == "run":  # a run paused or stopped meanwhile is not announced as training
             self.reporter.status(StatusReport("training", self.epoch))
         startup.mark("run files, tensorboard")

@@ -785,8 +785,10 @@ def run(args: argparse.Namespace) -> int:
         check_writable(Path(args.out))
     say_what_finished_runs_get(specs)
     processes = "1 local process" if args.jobs == 1 else f"{args.jobs} local processes"
+    resumed = sum(to_train(s) and (Path(s.out) / "checkpoint.pt").exists() for s in specs)
     print(
-        f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - todo} already finished; engine: "
+        f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - todo} already finished"
+        f"{f', {resumed} resumed from their checkpoints' if resumed else ''}; engine: "
         f"{'ray ' + args.ray if args.ray else processes}"
     )
     failed: list[tuple[RunSpec, Exception]] = []

@@ -124,7 +124,8 @@ def test_collie_sweep_end_to_end_then_resume_skips(tmp_path):
     longer = subprocess.run([*cmd[:-1], "4"], capture_output=True, text=True, timeout=300)  # -- --epochs 4
     assert longer.returncode == 0, longer.stderr
     assert f"{run}: finished at 2 epochs; extended to 4 (resumed from its checkpoint)" in longer.stdout
-    assert json.loads(summary.read_text())["epochs_done"] == 4 and "0 already finished" in longer.stdout
+    assert json.loads(summary.read_text())["epochs_done"] == 4
+    assert "1 run, 0 already finished, 1 resumed from their checkpoints; engine" in longer.stdout
     epochs = [json.loads(line)["epoch"] for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert epochs == sorted(set(epochs)), epochs  # continued, not trained again from epoch 0
     stamp = summary.stat().st_mtime_ns
