@@ -419,15 +419,14 @@ class Trainer:
         beta = self.beta()
         if len(self.labelled) == 0 or beta >= 1.0:
             return None
-        flat = self.normalise(obs.reshape(-1, *obs.shape[2:]))
-        emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version)
+        raw = obs.reshape(-1, *obs.shape[2:])  # normalised a part at a time on the device, as the batches
+        emb = self.labelled.embeddings(self.agent.phi, self.agent.phi_version)  # (no float copy of all frames)
+        normalised = self.device_replay.normalised
         with torch.no_grad():
             w = torch.cat(
                 [
-                    guidance_weight(
-                        self.agent.phi(torch.as_tensor(chunk, dtype=torch.float32, device=self.device)), emb
-                    )
-                    for chunk in np.array_split(flat, -(-len(flat) // 4096))
+                    guidance_weight(self.agent.phi(normalised(torch.as_tensor(part, device=self.device))), emb)
+                    for part in np.array_split(raw, -(-len(raw) // 4096))
                 ]
             )
         return ((1.0 - beta) * w + beta).cpu().numpy().astype(np.float64).reshape(obs.shape[:2])

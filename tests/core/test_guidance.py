@@ -85,3 +85,30 @@ def test_labelled_sets_revisions_and_embedding_cache():
     assert sets.counts() == (0, 3, 0)
     with pytest.raises(ValueError, match="label must be"):
         sets.set("c", np.zeros((1, 2)), 3)
+
+
+@pytest.mark.parametrize("env", ["point", "quadruped"])  # quadruped: uint8 frames, normalised on the device
+def test_guidance_along_a_rollout_equals_the_host_normalised_path(tmp_path, env):
+    """The evaluations' w_e(s) normalises its frames a part at a time on the device, as the batches
+    are (no float copy of every frame on the host): the same numbers, bit for bit, on the CPU."""
+    from trainer.config import make_config
+    from trainer.loop import Trainer
+
+    cfg = make_config("smoke", env, out=str(tmp_path), eval_trajectories=2, episodes_per_epoch=2)
+    trainer = Trainer(cfg, progress=False)
+    trainer.epoch = 1
+    trainer.collect_epoch()
+    r = trainer.replay
+    for q, label in enumerate((0, 1, 2)):
+        trainer.labelled.set(f"q{q}", r.obs[q % r.count, q : q + 3], label)
+    trainer.first_feedback_epoch = trainer.epoch - cfg.feedback_every  # guidance on: β < 1
+    obs = r.obs[: r.count, ::4]
+    got = trainer.guidance_along(obs)
+    emb = trainer.labelled.embeddings(trainer.agent.phi, trainer.agent.phi_version)
+    with torch.no_grad():
+        flat = torch.as_tensor(trainer.normalise(obs.reshape(-1, *obs.shape[2:])), dtype=torch.float32)
+        w = guidance_weight(trainer.agent.phi(flat), emb)
+    beta = trainer.beta()
+    assert got is not None and beta < 1 and obs.dtype == (np.uint8 if env == "quadruped" else np.float32)
+    np.testing.assert_array_equal(got, ((1 - beta) * w + beta).numpy().astype(np.float64).reshape(obs.shape[:2]))
+    trainer.env.close()
