@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 import torch
+from gpu_sync import settled
 from record import record
 
 from trainer.config import make_config
@@ -35,11 +36,6 @@ from trainer.metra import Metra, TorchBatch
 from trainer.skills import SkillPrior
 
 ENV = "quadruped"
-
-
-def sync(dev: torch.device) -> None:
-    if dev.type == "cuda":
-        torch.cuda.synchronize(dev)
 
 
 def collect(episodes: int, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -153,11 +149,11 @@ def main() -> None:
     speed = {kind: {"steps_per_s": []} for kind in agents}
     for _ in range(3):  # interleaved rounds: both see the same machine load
         for kind, agent in agents.items():
-            sync(dev)  # a GPU's queued kernels done: timed, not only queued
+            settled(dev)  # a GPU's queued kernels done: timed, not only queued
             start = time.perf_counter()
             for b in data[:5]:
                 agent.update(b, None)
-            sync(dev)
+            settled(dev)
             speed[kind]["steps_per_s"].append(5 / (time.perf_counter() - start))
     for kind in agents:
         report[kind]["steps_per_s"] = float(np.median(speed[kind]["steps_per_s"]))

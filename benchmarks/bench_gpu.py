@@ -28,15 +28,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np
 import torch
+from gpu_sync import settled
 from record import record
 
 from trainer.config import make_config
 from trainer.loop import Trainer
-
-
-def sync(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
 
 
 def with_full_labels(t: Trainer) -> None:
@@ -68,7 +64,7 @@ def bench_env(env: str, preset: str, device: str, epochs: int, method: str) -> d
             with_full_labels(t)
             assert t.beta() == 0.0
         t.train_epoch()  # warm-up: the allocator's pools, lazy CUDA modules
-        sync(dev)
+        settled(dev)
         collect_s = train_s = 0.0
         for _ in range(epochs):
             t.epoch += 1
@@ -76,7 +72,7 @@ def bench_env(env: str, preset: str, device: str, epochs: int, method: str) -> d
             t.collect_epoch()
             mid = time.perf_counter()
             t.train_epoch()
-            sync(dev)
+            settled(dev)
             collect_s, train_s = collect_s + mid - start, train_s + time.perf_counter() - mid
         start = time.perf_counter()
         t.evaluate()

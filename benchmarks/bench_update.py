@@ -72,6 +72,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import torch
+from gpu_sync import settled
 from record import record
 from torch._ops import OpOverload
 from torch.utils._python_dispatch import TorchDispatchMode
@@ -89,12 +90,6 @@ from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
 from trainer.threads import resolve_threads
-
-
-def settled() -> None:
-    """Wait for a GPU's queued kernels: without it a clock times how fast they are queued."""
-    if torch.cuda.is_available():
-        torch.cuda.synchronize()
 
 
 def timed(fn: Callable[[], None], steps: int) -> float:
