@@ -780,14 +780,14 @@ def run(args: argparse.Namespace) -> int:
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
-    todo = sum(to_train(s) for s in specs)
-    if todo or args.downstream or not args.no_report:  # something will be written under --out
+    pending = [s for s in specs if to_train(s)]
+    if pending or args.downstream or not args.no_report:  # something will be written under --out
         check_writable(Path(args.out))
     say_what_finished_runs_get(specs)
     processes = "1 local process" if args.jobs == 1 else f"{args.jobs} local processes"
-    resumed = sum(to_train(s) and (Path(s.out) / "checkpoint.pt").exists() for s in specs)
+    resumed = sum((Path(s.out) / "checkpoint.pt").exists() for s in pending)
     print(
-        f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - todo} already finished"
+        f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - len(pending)} already finished"
         f"{f', {resumed} resumed from their checkpoints' if resumed else ''}; engine: "
         f"{'ray ' + args.ray if args.ray else processes}"
     )
