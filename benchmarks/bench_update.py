@@ -16,7 +16,7 @@ so a partial run never overwrites the whole one. Settings: env, threads, device.
    `flop_fraction_<h>` (goal ≥ 0.6); `flop_fraction_foreach_<h>` the same with `--fused-adam false`,
    `flop_fraction_before_<h>` with `--fused-adam false --fast-ops false` (the step before 12-05);
    `flop_fraction_fast_ops_on_<h>` / `_off_<h>`: the default with `--fast-ops` forced on / off
-   (`fast_ops_default`: whether this machine's default turns them on, trainer/networks.py; only
+   (`fast_ops_default`: whether this machine's default turns them on, trainer/fast_ops.py; only
    the one that differs from the default is timed, the other is `flop_fraction_<h>`);
    `matmuls_alone_fraction_<h>`: the step's own matmuls (same shapes and strides) replayed with
    nothing else, ÷ the same matmul rate — the ceiling of `flop_fraction_<h>` were all other work free.
@@ -43,10 +43,12 @@ so a partial run never overwrites the whole one. Settings: env, threads, device.
 5. Checkpoints: a periodic checkpoint of an Ant `cpu` run (replay holding 200 trajectories, 25
    epochs of new ones since the last checkpoint). Keys `checkpoint_s` (goal < 1), `checkpoint_mb`
    (bytes written, goal < 50), `replay_mb` (the whole replay, what a checkpoint used to rewrite).
-6. Kernels (`--fast-ops`, trainer/networks.py), one thread, forward and backward on a batch of 256
+6. Kernels (`--fast-ops`; trainer/fast_ops.py's measurement, which decides their default, with ten
+   times its passes), one thread, forward and backward on a batch of 256
    at width h = 256 and 1024: `tanh_speedup_<h>` (torch.tanh's time ÷ `Tanh`'s, 2σ(2x) − 1) and
    `one_output_speedup_<h>` (the twin Q's one-output layer by bmm ÷ by multiply-sum), with the
-   times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`).
+   times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`);
+   `fast_ops_default` as in 2.
 7. A trained agent's update (`--flush-denormal`, trainer/denormals.py): a point `cpu` COLLIE run
    trained `--aged-epochs` epochs (key `aged_epochs`) without flushing, resumed twice, each copy's epoch of updates
    timed alternately with and without flushing denormals. Keys `aged_denormals` (values of the
@@ -82,10 +84,10 @@ from trainer.acting import TorchActor, actor
 from trainer.config import make_config
 from trainer.device_replay import DeviceReplay
 from trainer.envs import VectorEnv, make_env
+from trainer.fast_ops import fast_ops_pay, measure
 from trainer.guidance import LabelledSets, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
-from trainer.networks import EnsembleLinear, Tanh, fast_ops_pay
 from trainer.replay import FIELDS, TrajectoryReplay
 from trainer.rollout import Normaliser, rollout
 from trainer.skills import SkillPrior
@@ -426,35 +428,15 @@ def bench_checkpoint() -> dict[str, float]:
         }
 
 
-def fwd_bwd_us(module: torch.nn.Module, x: torch.Tensor, repeats: int = 200) -> float:
-    """Median µs of one forward and backward pass of `module` on `x` (5 blocks of `repeats`)."""
-    grad = torch.randn_like(module(x))
-
-    def once() -> None:
-        x.grad = None
-        module(x).backward(grad)
-
-    return 1e6 / float(np.median([timed(once, repeats) for _ in range(5)]))
-
-
 def bench_kernels() -> dict[str, float]:
-    """`--fast-ops`'s two kernels against torch's, one thread, batch 256."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    out: dict[str, float] = {}
-    try:
-        for h in (256, 1024):
-            x = torch.randn(256, h, requires_grad=True)
-            out[f"tanh_us_{h}"] = fwd_bwd_us(torch.nn.Tanh(), x)
-            out[f"fast_tanh_us_{h}"] = fwd_bwd_us(Tanh(), x)
-            hidden = torch.randn(2, 256, h, requires_grad=True)
-            fast, exact = EnsembleLinear(2, h, 1), EnsembleLinear(2, h, 1, fast=False)
-            out[f"one_output_bmm_us_{h}"] = fwd_bwd_us(exact, hidden)
-            out[f"one_output_fast_us_{h}"] = fwd_bwd_us(fast, hidden)
-            out[f"tanh_speedup_{h}"] = out[f"tanh_us_{h}"] / out[f"fast_tanh_us_{h}"]
-            out[f"one_output_speedup_{h}"] = out[f"one_output_bmm_us_{h}"] / out[f"one_output_fast_us_{h}"]
-    finally:
-        torch.set_num_threads(threads)
+    """`--fast-ops`'s two kernels against torch's, one thread, batch 256: trainer/fast_ops.py's
+    measurement, which decides the default, with ten times its passes; and that default."""
+    out: dict[str, float] = {"fast_ops_default": float(fast_ops_pay(torch.device("cpu")))}
+    for h in (256, 1024):
+        k = measure(h, repeats=200)
+        out.update({f"tanh_us_{h}": k.tanh_us, f"fast_tanh_us_{h}": k.fast_tanh_us})
+        out.update({f"one_output_bmm_us_{h}": k.bmm_us, f"one_output_fast_us_{h}": k.fast_one_output_us})
+        out.update({f"tanh_speedup_{h}": k.tanh_speedup, f"one_output_speedup_{h}": k.one_output_speedup})
     return out
 
 
@@ -607,6 +589,7 @@ def main() -> None:
                 f"{k[f'one_output_bmm_us_{h}']:.0f} µs vs multiply-sum {k[f'one_output_fast_us_{h}']:.0f} µs "
                 f"({k[f'one_output_speedup_{h}']:.1f}×)"
             )
+        print(f"  --fast-ops by default on this host: {'on' if k['fast_ops_default'] else 'off'} (trainer/fast_ops.py)")
     if "aged" in parts:
         g = bench_aged(a.aged_epochs, max(a.rounds, 8))
         figures |= g

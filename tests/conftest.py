@@ -33,19 +33,22 @@ def scratch_cwd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
 
 
 @pytest.fixture(autouse=True, scope="session")
-def own_memory_ledger(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+def own_machine_state(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """The runs tests start promise their memory in the session's own ledger
     (trainer/memory_ledger.py), not in the machine's: a run of the user's beside the suite is not
-    counted by the tests, nor theirs by it."""
-    before = os.environ.get("COLLIE_MEMORY_LEDGER")
-    os.environ["COLLIE_MEMORY_LEDGER"] = str(tmp_path_factory.mktemp("memory-ledger"))
+    counted by the tests, nor theirs by it. And they keep this host's `--fast-ops` measurement in
+    the session's own cache (trainer/fast_ops.py), not the user's."""
+    made = {"COLLIE_MEMORY_LEDGER": "memory-ledger", "COLLIE_CACHE_DIR": "cache"}
+    before = {k: os.environ.get(k) for k in made}
+    os.environ.update({k: str(tmp_path_factory.mktemp(name)) for k, name in made.items()})
     try:
         yield
     finally:
-        if before is None:
-            os.environ.pop("COLLIE_MEMORY_LEDGER", None)
-        else:
-            os.environ["COLLIE_MEMORY_LEDGER"] = before
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 # The longest files, longest first (worker-seconds of a quiet `make test` here on 2026-12-07: 135, 118,

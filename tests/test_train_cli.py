@@ -27,7 +27,7 @@ from small_disk import fill, small_disk
 from unprivileged import as_nobody, closed_folder
 
 from trainer.cli import short_of_memory
-from trainer.networks import fast_ops_pay
+from trainer.fast_ops import fast_ops_pay
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 

@@ -651,8 +651,8 @@ def run(args: argparse.Namespace) -> int:
         for said in idle_parts(cfg):
             print(f"collie train: warning: {said}", file=sys.stderr)
         apply_openmp_env(resolve_threads(cfg.threads, cfg.hidden))  # before torch loads OpenMP
+        from trainer.fast_ops import fast_ops_pay
         from trainer.loop import Trainer, TrainingDiverged, pick_device
-        from trainer.networks import fast_ops_pay
 
         mark("imports")  # torch, mujoco, the trainer's modules
         try:  # before a service is told of the run

@@ -55,7 +55,7 @@ class Config:
     fused_adam: bool = True  # Adam's fused kernel (trainer/optim.py); false: foreach, as runs before 12-05
     flush_denormal: bool = True  # the update flushes denormals to zero (trainer/denormals.py); false: before 12-06
     # tanh as 2σ(2x) − 1, one-output Q layer as multiply-sum (networks.py); false: before 12-05;
-    # None: on where they measured faster (networks.fast_ops_pay), fixed when the trainer starts
+    # None: on where they measured faster (trainer/fast_ops.py), fixed when the trainer starts
     fast_ops: bool | None = None  # tanh as 2σ(2x) − 1 and a multiply-sum one-output layer; unset: where measured faster
     acting: Literal["fast", "torch"] = "fast"  # rollouts' π path (trainer/acting.py); torch: as runs before 12-01
     # networks and optimisation (Table 5)

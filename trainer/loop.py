@@ -41,6 +41,7 @@ from trainer.denormals import flushing_denormals
 from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
 from trainer.envs import VectorEnv
+from trainer.fast_ops import fast_ops_pay
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
 from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
 from trainer.memory_ledger import reserve
@@ -48,7 +49,6 @@ from trainer.memory_plan import run_floor_bytes
 from trainer.methods import build_agent, method
 from trainer.metra import WeightFn
 from trainer.metrics import coverage_metrics, travel_metrics
-from trainer.networks import fast_ops_pay
 from trainer.obs_noise import NoisyObservations
 from trainer.obs_stats import observation_stats
 from trainer.plots import plot_curves, plot_guidance_map, plot_skill_trajectories

@@ -20,7 +20,8 @@ import torch
 
 from trainer.config import Config
 from trainer.encoders import PixelEncoder, feature_dim, is_pixels
-from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, fast_ops_pay, init_like_reference
+from trainer.fast_ops import fast_ops_pay
+from trainer.networks import SkillLatent, TanhGaussianPolicy, TwinQ, init_like_reference
 from trainer.optim import adam, restore_kernel, step_together
 from trainer.skills import SkillPrior
 

@@ -39,23 +39,13 @@ class _TanhViaSigmoid(torch.autograd.Function):
 
 
 class Tanh(nn.Tanh):
-    """nn.Tanh computed as 2σ(2x) − 1: with the CPU wheel's AVX2 kernels torch's tanh is several
-    times slower than its sigmoid (not with its AVX-512 ones: `fast_ops_pay`), and the policy trunk
-    runs it on every hidden unit (`make bench-update`: `tanh_speedup_<h>`, forward and backward).
+    """nn.Tanh computed as 2σ(2x) − 1: on some CPUs torch's tanh is several times slower than its
+    sigmoid (not on all: trainer/fast_ops.py measures it), and the policy trunk runs it on every
+    hidden unit (`make bench-update`: `tanh_speedup_<h>`, forward and backward).
     Equal to torch.tanh within 2e-7 (float32 rounding near 0.5 inside σ)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return _TanhViaSigmoid.apply(x)
-
-
-def fast_ops_pay(device: torch.device) -> bool:
-    """`--fast-ops`'s default: on only where `make bench-update` measured its kernels faster than
-    torch's, a CPU on which torch runs its AVX2 kernels (tanh 1.8–2.8×, the one-output layer
-    3.8–7.7×, forward and backward; that host's kernels were not recorded, its matmul rate, half an
-    AVX-512 host's, says AVX2). With torch's AVX-512 kernels both were slower (0.4–0.6×,
-    0.7–1.0×; the 2×256 step about 5 % slower), and on a GPU they are unmeasured (tanh is one
-    kernel there, 2σ(2x) − 1 three): off. docs/results.md, "Another host"."""
-    return device.type == "cpu" and torch.backends.cpu.get_cpu_capability() == "AVX2"
 
 
 def relu_in_place() -> nn.ReLU:
@@ -90,8 +80,8 @@ class SkillLatent(nn.Module):
 
 class EnsembleLinear(nn.Module):
     """`n` independent linear layers evaluated in one batched matmul (twin Q as one call). With
-    `fast`, a one-output layer is a multiply-and-sum instead: with the CPU wheel's AVX2 kernels bmm's
-    matrix-vector product is several times slower (`make bench-update`: `one_output_speedup_<h>`)."""
+    `fast`, a one-output layer is a multiply-and-sum instead: on some CPUs bmm's matrix-vector product
+    is several times slower (trainer/fast_ops.py) (`make bench-update`: `one_output_speedup_<h>`)."""
 
     def __init__(self, n: int, inp: int, out: int, fast: bool = True) -> None:
         super().__init__()

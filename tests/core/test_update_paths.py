@@ -11,10 +11,11 @@ import pytest
 import torch
 
 from trainer.config import make_config
+from trainer.fast_ops import fast_ops_pay
 from trainer.guidance import CDIST_MM_ROWS, EMPTY_CLASS_DISTANCE, LabelledSets, class_distances, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
-from trainer.networks import EnsembleLinear, SkillLatent, Tanh, TwinQ, fast_ops_pay
+from trainer.networks import EnsembleLinear, SkillLatent, Tanh, TwinQ
 from trainer.optim import adam, step_together
 from trainer.skills import SkillPrior
 
