@@ -33,5 +33,6 @@ RUN apt-get update \
 RUN pip install --index-url https://download.pytorch.org/whl/cpu "torch==2.13.0" \
  && pip install ".[trainer,service,ui]"
 USER collie
-ENV MUJOCO_GL=egl
+# The trainer's --fast-ops measurement (trainer/fast_ops.py) kept on the runs volume, not measured per container.
+ENV MUJOCO_GL=egl COLLIE_CACHE_DIR=/runs/.cache
 CMD ["collie", "--help"]

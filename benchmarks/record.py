@@ -6,8 +6,8 @@ measured (`meta`: commit, the host's CPU model and core count, load average, tor
 CPU kernels it chose when loaded). Each run overwrites it. Strict JSON: a figure that is not finite
 (a break-even never reached, a percentile of nothing) is written as null. The CPU matters: the
 same 2-core machine has been lent on hosts whose one-thread matmul rate differed by 2×, and
-torch's AVX-512 kernels (tanh, bmm) rank differently against `--fast-ops` than its AVX2 ones
-(docs/results.md).
+torch's tanh and bmm rank differently against `--fast-ops` from one CPU to another, even with the
+same kernels (docs/results.md; trainer/fast_ops.py measures it per host).
 """
 
 from __future__ import annotations

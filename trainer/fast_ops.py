@@ -5,11 +5,11 @@ multiply-and-sum) compute the same functions as torch's tanh and `bmm`. Which is
 the CPU and on the kernels torch picks for it, and the CPU's capability alone does not tell: with
 torch's AVX-512 kernels the fast ops were slower on an Intel Xeon host and 1.8× and 3.6× faster
 on an AMD EPYC host (docs/results.md). So the default is measured: the first run on a host times
-both forms, forward and backward, one thread, batch 256, interleaved (about 0.1 s), and keeps the
+both forms, forward and backward, one thread, batch 256, interleaved (about 0.3 s), and keeps the
 answer in CACHE, keyed by the CPU's model, torch's capability and torch's version. Every later run
 on that host reads it, so a seed's run does not change with a timing; runs started together (a
 sweep) wait on one lock for the first one's answer. Where CACHE cannot be written the run measures
-for itself. GPUs: off, unmeasured (tanh is one kernel there, 2σ(2x) − 1 three).
+for itself and says so. GPUs: off, unmeasured (tanh is one kernel there, 2σ(2x) − 1 three).
 
 CACHE is $COLLIE_CACHE_DIR/fast_ops.json, else $XDG_CACHE_HOME/collie/…, else ~/.cache/collie/….
 Delete it to measure again."""
@@ -22,6 +22,7 @@ import functools
 import json
 import os
 import statistics
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -33,6 +34,7 @@ from collie.whole_files import write_whole
 from trainer.networks import EnsembleLinear, Tanh
 
 CACHE_ENV = "COLLIE_CACHE_DIR"
+LOCK_WAIT_S = 30.0  # a measurement takes under a second; longer is a stopped or hung process
 
 
 class KernelTimes(BaseModel):
@@ -74,18 +76,32 @@ def fast_ops_pay(device: torch.device) -> bool:
 @functools.cache
 def cpu_choice() -> HostChoice:
     """This host's entry in CACHE, measured and written there first if it has none (or a damaged
-    one). Where CACHE cannot be read or written (no home, a read-only one): this run's own measurement."""
+    one). Where the lock cannot be had, CACHE is read without it; where CACHE cannot be read or
+    written (no home, another user's folder), this run measures for itself and says so."""
     key = host_key()
     try:
-        with locked(cache_file()) as path:
-            entries = read_entries(path)
-            if key not in entries:
-                entries[key] = measure_choice()
-                with contextlib.suppress(OSError):
-                    write_entries(path, entries)
+        path = cache_file()
+    except (OSError, RuntimeError) as exc:  # RuntimeError: no home folder to be found
+        return measured_alone(f"no cache folder ({exc})")
+    with locked(path):
+        entries = read_entries(path)
+        if key in entries:
             return entries[key]
-    except OSError:
-        return measure_choice()
+        entries[key] = measure_choice()
+        try:
+            write_entries(path, entries)
+        except OSError as exc:
+            warn(f"this run's --fast-ops measurement is not kept: {path} cannot be written ({exc})")
+        return entries[key]
+
+
+def measured_alone(why: str) -> HostChoice:
+    warn(f"--fast-ops measured for this run alone: {why}")
+    return measure_choice()
+
+
+def warn(said: str) -> None:
+    print(f"collie: warning: {said}", file=sys.stderr)
 
 
 def host_key() -> str:
@@ -100,22 +116,50 @@ def host_key() -> str:
 
 
 def cache_file() -> Path:
+    """CACHE, its folder made if absent. A relative $XDG_CACHE_HOME is ignored, as XDG says."""
     given = os.environ.get(CACHE_ENV)
-    if given:
-        folder = Path(given)
-    else:
-        xdg = os.environ.get("XDG_CACHE_HOME")
-        folder = (Path(xdg) if xdg else Path.home() / ".cache") / "collie"
+    folder = Path(given) if given else user_cache() / "collie"
     folder.mkdir(parents=True, exist_ok=True)
     return folder / "fast_ops.json"
 
 
+def user_cache() -> Path:
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    return Path(xdg) if os.path.isabs(xdg) else Path.home() / ".cache"
+
+
 @contextlib.contextmanager
-def locked(path: Path) -> Iterator[Path]:
-    """`path`, with its lock file held: one process measures while the others wait for its answer."""
-    with open(path.with_name(path.name + ".lock"), "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        yield path
+def locked(path: Path) -> Iterator[None]:
+    """Held: CACHE's lock, so that one process measures while the others wait for its answer. Not
+    held, with a warning, where the lock file cannot be opened (another user's, a file system
+    without locks) or another process holds it past LOCK_WAIT_S (one stopped mid-measurement)."""
+    lock, wait_s = path.with_name(path.name + ".lock"), LOCK_WAIT_S
+    try:
+        fd = os.open(lock, os.O_RDONLY | os.O_CREAT, 0o644)  # flock needs no write access
+    except OSError:
+        try:
+            fd = os.open(lock, os.O_RDONLY)
+        except OSError as exc:
+            warn(f"{lock} cannot be opened ({exc}): the --fast-ops cache is read without its lock")
+            yield
+            return
+    try:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    warn(f"{lock} is held for more than {wait_s:g} s: the --fast-ops cache is read without its lock")
+                    break
+                time.sleep(0.02)
+            except OSError as exc:  # ENOLCK: a file system that cannot lock
+                warn(f"{lock} cannot be locked ({exc}): the --fast-ops cache is read without its lock")
+                break
+        yield
+    finally:
+        os.close(fd)
 
 
 def read_entries(path: Path) -> dict[str, HostChoice]:
@@ -148,7 +192,7 @@ def measure(hidden: int, repeats: int = 20, blocks: int = 5) -> KernelTimes:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        with torch.random.fork_rng(devices=[]):
+        with torch.random.fork_rng(devices=[]), torch.enable_grad():  # a caller's no_grad would stop backward
             return timed_passes(hidden, repeats, blocks)
     finally:
         torch.set_num_threads(threads)

@@ -150,7 +150,7 @@ def test_exact_step_equals_the_old_path_bit_for_bit(sizes):
 @pytest.mark.parametrize("options", [{}, {"fused_adam": False}, {"fast_ops": False}, {"fast_ops": True}])
 def test_default_step_matches_the_old_path_to_float_tolerance(options):
     """The default (fused Adam; fast ops where they pay) and each lever alone, fast ops forced on
-    too (on every host: the default turns them off where torch runs AVX-512 kernels). One step
+    too (on every host: the default may turn them off, trainer/fast_ops.py). One step
     from the same batch lands within float rounding; over several steps Adam's normalisation can
     turn a rounding difference in a near-zero gradient into a visible one, so there only the
     losses are compared."""
