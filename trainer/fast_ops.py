@@ -106,13 +106,26 @@ def warn(said: str) -> None:
 
 def host_key() -> str:
     """What decides the kernels' speeds: the CPU, the code path torch picks for it, torch's version."""
-    model = "unknown CPU"
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith(("model name", "Model", "Hardware")) and ":" in line:
-                model = line.split(":", 1)[1].strip()
-                break
+    try:
+        model = cpu_model(Path("/proc/cpuinfo").read_text())
+    except OSError:
+        model = "unknown CPU"
     return f"{model} | {torch.backends.cpu.get_cpu_capability()} | torch {torch.__version__}"
+
+
+# An x86 CPU names itself in "model name"; an ARM one often only by its implementer and part
+# numbers: a home folder shared by a lab's machines must not give two kinds of CPU one entry.
+CPU_FIELDS = ("model name", "CPU implementer", "CPU part", "Hardware", "Model")
+
+
+def cpu_model(cpuinfo: str) -> str:
+    """The first core's CPU_FIELDS in /proc/cpuinfo's text, joined; "unknown CPU" if none."""
+    found: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        name, colon, value = line.partition(":")
+        if colon and name.strip() in CPU_FIELDS:
+            found.setdefault(name.strip(), value.strip())
+    return " ".join(found[f] for f in CPU_FIELDS if f in found) or "unknown CPU"
 
 
 def cache_file() -> Path:

@@ -168,3 +168,18 @@ def test_a_measurement_leaves_torchs_random_state_as_it_was(own_cache: Path) -> 
     after = torch.rand(3)
     torch.manual_seed(7)
     assert torch.equal(torch.rand(3), after)
+
+
+def test_the_host_key_tells_cpus_apart_on_x86_and_on_arm() -> None:
+    """A home folder shared by a lab's machines holds one entry per kind of CPU: an ARM core names
+    itself by implementer and part, not "model name"."""
+    x86 = (
+        "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7763\nflags\t: avx2\n\n"
+        "processor\t: 1\nmodel name\t: AMD EPYC 7763\n"
+    )
+    graviton2 = "processor\t: 0\nBogoMIPS\t: 243.75\nCPU implementer\t: 0x41\nCPU part\t: 0xd0c\n"
+    graviton3 = "processor\t: 0\nBogoMIPS\t: 2100.00\nCPU implementer\t: 0x41\nCPU part\t: 0xd40\n"
+    assert fast_ops.cpu_model(x86) == "AMD EPYC 7763"
+    assert fast_ops.cpu_model(graviton2) == "0x41 0xd0c" != fast_ops.cpu_model(graviton3)
+    assert fast_ops.cpu_model("processor\t: 0\n") == "unknown CPU"
+    assert host_key().startswith(fast_ops.cpu_model(Path("/proc/cpuinfo").read_text()) + " | ")
