@@ -48,7 +48,8 @@ so a partial run never overwrites the whole one. Settings: env, threads, device.
    at width h = 256 and 1024: `tanh_speedup_<h>` (torch.tanh's time ÷ `Tanh`'s, 2σ(2x) − 1) and
    `one_output_speedup_<h>` (the twin Q's one-output layer by bmm ÷ by multiply-sum), with the
    times in µs (`tanh_us_<h>`, `fast_tanh_us_<h>`, `one_output_bmm_us_<h>`, `one_output_fast_us_<h>`);
-   `fast_ops_default` as in 2.
+   `fast_ops_default` as in 2; `fast_ops_measure_s`: the seconds the first run on a host spends on
+   that measurement (trainer/fast_ops.py).
 7. A trained agent's update (`--flush-denormal`, trainer/denormals.py): a point `cpu` COLLIE run
    trained `--aged-epochs` epochs (key `aged_epochs`) without flushing, resumed twice, each copy's epoch of updates
    timed alternately with and without flushing denormals. Keys `aged_denormals` (values of the
@@ -84,7 +85,7 @@ from trainer.acting import TorchActor, actor
 from trainer.config import make_config
 from trainer.device_replay import DeviceReplay
 from trainer.envs import VectorEnv, make_env
-from trainer.fast_ops import fast_ops_pay, measure
+from trainer.fast_ops import fast_ops_pay, measure, measure_choice
 from trainer.guidance import LabelledSets, guidance_weight
 from trainer.loop import Trainer
 from trainer.metra import Metra, TorchBatch
@@ -432,6 +433,9 @@ def bench_kernels() -> dict[str, float]:
     """`--fast-ops`'s two kernels against torch's, one thread, batch 256: trainer/fast_ops.py's
     measurement, which decides the default, with ten times its passes; and that default."""
     out: dict[str, float] = {"fast_ops_default": float(fast_ops_pay(torch.device("cpu")))}
+    start = time.perf_counter()
+    measure_choice()  # what the first run on a host spends deciding
+    out["fast_ops_measure_s"] = time.perf_counter() - start
     for h in (256, 1024):
         k = measure(h, repeats=200)
         out.update({f"tanh_us_{h}": k.tanh_us, f"fast_tanh_us_{h}": k.fast_tanh_us})
@@ -589,7 +593,10 @@ def main() -> None:
                 f"{k[f'one_output_bmm_us_{h}']:.0f} µs vs multiply-sum {k[f'one_output_fast_us_{h}']:.0f} µs "
                 f"({k[f'one_output_speedup_{h}']:.1f}×)"
             )
-        print(f"  --fast-ops by default on this host: {'on' if k['fast_ops_default'] else 'off'} (trainer/fast_ops.py)")
+        print(
+            f"  --fast-ops by default on this host: {'on' if k['fast_ops_default'] else 'off'} (trainer/fast_ops.py; "
+            f"its measurement took {k['fast_ops_measure_s']:.2f} s)"
+        )
     if "aged" in parts:
         g = bench_aged(a.aged_epochs, max(a.rounds, 8))
         figures |= g

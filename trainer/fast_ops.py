@@ -5,8 +5,9 @@ multiply-and-sum) compute the same functions as torch's tanh and `bmm`. Which is
 the CPU and on the kernels torch picks for it, and the CPU's capability alone does not tell: with
 torch's AVX-512 kernels the fast ops were slower on an Intel Xeon host and 1.8× and 3.6× faster
 on an AMD EPYC host (docs/results.md). So the default is measured: the first run on a host times
-both forms, forward and backward, one thread, batch 256, interleaved (about 0.3 s), and keeps the
-answer in CACHE, keyed by the CPU's model, torch's capability and torch's version. Every later run
+both forms, forward and backward, one thread, batch 256, interleaved (under half a second; `make
+bench-update`: `fast_ops_measure_s`), and keeps the answer in CACHE, keyed by the CPU's model,
+torch's capability and torch's version. Every later run
 on that host reads it, so a seed's run does not change with a timing; runs started together (a
 sweep) wait on one lock for the first one's answer. Where CACHE cannot be written the run measures
 for itself and says so. GPUs: off, unmeasured (tanh is one kernel there, 2σ(2x) − 1 three).
@@ -17,7 +18,6 @@ Delete it to measure again."""
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import functools
 import json
 import os
@@ -30,6 +30,7 @@ from pathlib import Path
 import torch
 from pydantic import BaseModel, ValidationError
 
+from collie.processes import LockHeld, hold_lock
 from collie.whole_files import write_whole
 from trainer.networks import EnsembleLinear, Tanh
 
@@ -82,7 +83,8 @@ def cpu_choice() -> HostChoice:
     try:
         path = cache_file()
     except (OSError, RuntimeError) as exc:  # RuntimeError: no home folder to be found
-        return measured_alone(f"no cache folder ({exc})")
+        warn(f"--fast-ops measured for this run alone: no cache folder ({exc})")
+        return measure_choice()
     with locked(path):
         entries = read_entries(path)
         if key in entries:
@@ -93,11 +95,6 @@ def cpu_choice() -> HostChoice:
         except OSError as exc:
             warn(f"this run's --fast-ops measurement is not kept: {path} cannot be written ({exc})")
         return entries[key]
-
-
-def measured_alone(why: str) -> HostChoice:
-    warn(f"--fast-ops measured for this run alone: {why}")
-    return measure_choice()
 
 
 def warn(said: str) -> None:
@@ -144,32 +141,24 @@ def user_cache() -> Path:
 @contextlib.contextmanager
 def locked(path: Path) -> Iterator[None]:
     """Held: CACHE's lock, so that one process measures while the others wait for its answer. Not
-    held, with a warning, where the lock file cannot be opened (another user's, a file system
-    without locks) or another process holds it past LOCK_WAIT_S (one stopped mid-measurement)."""
-    lock, wait_s = path.with_name(path.name + ".lock"), LOCK_WAIT_S
-    try:
-        fd = os.open(lock, os.O_RDONLY | os.O_CREAT, 0o644)  # flock needs no write access
-    except OSError:
+    held, with a warning, where the lock file cannot be opened or locked (another user's, a file
+    system without locks) or another process holds it past LOCK_WAIT_S (one stopped mid-measurement)."""
+    lock, deadline = path.with_name(path.name + ".lock"), time.monotonic() + LOCK_WAIT_S
+    while True:
         try:
-            fd = os.open(lock, os.O_RDONLY)
+            fd = hold_lock(lock)
+            break
+        except LockHeld:
+            if time.monotonic() > deadline:
+                warn(f"{lock} is held for more than {LOCK_WAIT_S:g} s: the --fast-ops cache is read without its lock")
+                yield
+                return
+            time.sleep(0.02)
         except OSError as exc:
-            warn(f"{lock} cannot be opened ({exc}): the --fast-ops cache is read without its lock")
+            warn(f"{lock} cannot be locked ({exc}): the --fast-ops cache is read without its lock")
             yield
             return
     try:
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    warn(f"{lock} is held for more than {wait_s:g} s: the --fast-ops cache is read without its lock")
-                    break
-                time.sleep(0.02)
-            except OSError as exc:  # ENOLCK: a file system that cannot lock
-                warn(f"{lock} cannot be locked ({exc}): the --fast-ops cache is read without its lock")
-                break
         yield
     finally:
         os.close(fd)

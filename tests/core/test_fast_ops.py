@@ -106,7 +106,7 @@ def test_a_cache_whose_lock_cannot_be_opened_is_still_read(own_cache, monkeypatc
     cpu_choice.cache_clear()
     calls = counted_measurements(monkeypatch)
     assert fast_ops_pay(torch.device("cpu")) is (not entry["fast_ops"]) and not calls
-    assert f"{lock} cannot be opened" in capsys.readouterr().err
+    assert f"{lock} cannot be locked" in capsys.readouterr().err
 
 
 def test_a_lock_held_too_long_is_passed_by(own_cache, monkeypatch, capsys) -> None:
