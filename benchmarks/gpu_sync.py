@@ -7,6 +7,6 @@ import torch
 
 
 def settled(device: torch.device | None = None) -> None:
-    """Wait for `device`'s queued kernels (every GPU's when None)."""
+    """Wait for `device`'s queued kernels (the current GPU's when None, as torch.cuda.synchronize)."""
     if (device is None or device.type == "cuda") and torch.cuda.is_available():
         torch.cuda.synchronize(device)

@@ -137,6 +137,9 @@ def test_a_trainer_stopped_while_waiting_for_labels_resumes_in_that_wait(tmp_pat
         if sig == signal.SIGTERM:  # the final checkpoint holds the session it waited on
             ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
             assert ckpt["epoch"] == stopped_at and [s.query_id for s in ckpt["asking"]] == ["s0-q0", "s0-q1"]
+            # the line it ends with names the command that resumes it: with --api (refused without it)
+            again = f"`collie train --out {out} --resume --api {api}` with the trainer's token continues"
+            assert again in (tmp_path / "trainer.log").read_text()
         teacher = cli(
             "teacher",
             "--api",

@@ -53,7 +53,6 @@ def test_collie_up_with_oracle_teacher_completes_and_agrees_with_the_database(tm
     with busy:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=lab)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    meta = json.loads(info.read_text())
     moved = f"collie up: --ui-port {taken} is in use; the labeling UI serves on port "
     assert (moved in proc.stdout) == (env == "point"), proc.stdout[-2000:]
     assert db.exists() and (env != "point" or not (tmp_path / "collie.db").exists())

@@ -769,7 +769,10 @@ def run(args: argparse.Namespace) -> int:
     written = [name for name in RUN_OUTPUTS if (Path(cfg.out) / name).exists()]  # e.g. no w(s) map without guidance
     print(f"run folder: {cfg.out}  ({', '.join(written)})")
     if summary.get("status") == "interrupted":  # "epoch" above is the last evaluation's: say where it stopped
-        again = shlex.join(["collie", "train", "--out", str(cfg.out), "--resume"])
+        # a run labelled through a service resumes only with --api (refused without it, above)
+        service = ["--api", args.api] if args.api else []
+        again = shlex.join(["collie", "train", "--out", str(cfg.out), "--resume", *service])
+        token = " with the trainer's token" if args.api else ""
         done = summary.get("epochs_done")
-        print(f"collie train: stopped after epoch {done} of {cfg.epochs}; `{again}` continues", file=sys.stderr)
+        print(f"collie train: stopped after epoch {done} of {cfg.epochs}; `{again}`{token} continues", file=sys.stderr)
     return 0 if summary.get("status") in ("finished", "stopped", "interrupted") else 1
