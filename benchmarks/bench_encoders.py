@@ -31,6 +31,7 @@ from gpu_sync import settled
 from record import record
 
 from trainer.config import make_config
+from trainer.encoders import deterministic_convolutions
 from trainer.envs import VectorEnv
 from trainer.metra import Metra, TorchBatch
 from trainer.skills import SkillPrior
@@ -112,7 +113,7 @@ def main() -> None:
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    torch.backends.cudnn.deterministic = True  # as a run's convolutions on a GPU (trainer/loop.py)
+    deterministic_convolutions()  # as a run's convolutions on a GPU
     frames, actions, pose = collect(a.episodes, 50, seed=0)
     held_frames, _, held_pose = collect(max(2, 2 * a.episodes // 5), 50, seed=1000)
     prior = SkillPrior(make_config("paper", ENV).skill_dim, False)

@@ -26,7 +26,7 @@ from collie.tokens import add_token_arguments, resolve_token
 from collie.whole_files import UNWRITABLE, broken_link, read_only_disk
 from trainer.config import PRESETS, Config, field_notes, first_version, flag, make_config, people_schedule
 from trainer.methods import METHODS
-from trainer.run_files import ResumeError, RunFolderError, read_json_object, write_json
+from trainer.run_files import ResumeError, RunFolderError, has_checkpoint, read_json_object, write_json
 from trainer.same_run import differing_keys
 from trainer.task_choice import INSTRUCTION_TASK, RunRule, choose_rule, from_stored, saved_rule
 
@@ -438,7 +438,7 @@ def check_out(out: Path, resume: bool) -> list[Path]:
         if resume and (out / "checkpoint.pt").is_dir():
             raise ValueError(f"--resume: {out / 'checkpoint.pt'} is a folder, not a checkpoint")
         holds_a_run = any((out / name).exists() for name in RUN_FILES)
-        if resume and not (out / "checkpoint.pt").is_file():
+        if resume and not has_checkpoint(out):
             if holds_a_run:  # its checkpoint deleted, or a run stopped before its first one
                 raise ValueError(
                     f"--resume: {out} holds a run but no checkpoint.pt to continue it from: start it again "
@@ -451,7 +451,7 @@ def check_out(out: Path, resume: bool) -> list[Path]:
         if not resume and holds_a_run:
             continued = (
                 "add --resume to continue it, or choose"
-                if (out / "checkpoint.pt").exists()
+                if has_checkpoint(out)
                 else "it has no checkpoint.pt to continue it from: choose"
             )
             raise ValueError(f"{out} already holds a run: {continued} another --out (or remove it)")
@@ -535,7 +535,7 @@ def write_failure(exc: OSError, out: Path) -> str:
     else:  # EROFS
         said, when = f"the file system is read-only now ({said})", "once it is writable"
     where = exc.filename or out
-    how = f"continue it with --resume {when}" if (out / "checkpoint.pt").is_file() else f"start it again {when}"
+    how = f"continue it with --resume {when}" if has_checkpoint(out) else f"start it again {when}"
     return f"the run stopped: {said} writing {where}: {how}"
 
 

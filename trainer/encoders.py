@@ -40,6 +40,14 @@ class PixelEncoder(nn.Module):
         return features.reshape(len(batch), self.copies, self.out_dim).transpose(0, 1)
 
 
+def deterministic_convolutions() -> None:
+    """cuDNN's deterministic convolution algorithms, none picked by timing: a seed's pixel run on a
+    GPU, and its resume, give the same numbers (TF32 convolutions stay on, torch's default;
+    docs/training.md, "On a GPU"). Nothing changes on the CPU."""
+    torch.backends.cudnn.deterministic = True
+    torch.backends.cudnn.benchmark = False
+
+
 def is_pixels(obs_shape: int | tuple[int, ...]) -> bool:
     return not isinstance(obs_shape, int) and len(obs_shape) == 3
 

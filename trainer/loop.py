@@ -40,6 +40,7 @@ from trainer.config import LABEL_METHODS, RULE_METHODS, Config
 from trainer.denormals import flushing_denormals
 from trainer.device_replay import DeviceBatch, DeviceReplay
 from trainer.dodont import dodont_weight
+from trainer.encoders import deterministic_convolutions
 from trainer.envs import VectorEnv
 from trainer.fast_ops import fast_ops_pay
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
@@ -124,9 +125,8 @@ class Trainer:
         if self.task is None and feedback is None and cfg.method in LABEL_METHODS:
             raise ValueError("a run without a task rule learns from people's labels: give --api (no oracle here)")
         self.device = pick_device(cfg.device)
-        if self.device.type == "cuda":  # cuDNN's deterministic convolutions: a seed's pixel run, and its
-            torch.backends.cudnn.deterministic = True  # resume, give the same numbers (TF32 convolutions stay
-            torch.backends.cudnn.benchmark = False  # on, torch's default: docs/training.md, "On a GPU")
+        if self.device.type == "cuda":
+            deterministic_convolutions()
         if cfg.fast_ops is None:  # fixed now, so config.json and a resume carry this machine's choice
             cfg.fast_ops = fast_ops_pay(self.device)
         torch.set_num_threads(resolve_threads(cfg.threads, cfg.hidden))  # fair share on a busy machine

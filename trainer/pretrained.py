@@ -16,6 +16,7 @@ from trainer.methods import build_agent
 from trainer.metra import Metra
 from trainer.obs_stats import observation_stats
 from trainer.rollout import Normaliser
+from trainer.run_files import has_checkpoint
 from trainer.skills import SkillPrior
 
 
@@ -38,7 +39,7 @@ def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
     """Rebuild the run's learner from its checkpoint, on `device`, ready to act."""
     if not Path(run_dir).is_dir():
         raise FileNotFoundError(f"{run_dir} is not a folder: give a run folder")
-    if not (Path(run_dir) / "checkpoint.pt").exists():
+    if not has_checkpoint(run_dir):
         raise FileNotFoundError(
             f"{run_dir} has no checkpoint.pt: its networks are not kept (an archived run holds results only)"
         )

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from trainer.envs import env_class
 from trainer.plots import draw_skill_panel
 from trainer.report import HEADLINE_MARK, RunResult, has_rule_figure, metric_value, run_task
-from trainer.run_files import read_arrays
+from trainer.run_files import has_checkpoint, read_arrays
 
 MAX_COLUMNS = 4  # panels per row
 
@@ -50,7 +50,7 @@ def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
 def drawable(run: RunResult) -> bool:
     """Its final skills can be drawn: saved, or to be rolled out again from its checkpoint (a run
     folder that lost both still counts in the tables)."""
-    return (run.path / "eval_latest.npz").exists() or (run.path / "checkpoint.pt").exists()
+    return (run.path / "eval_latest.npz").exists() or has_checkpoint(run.path)
 
 
 def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:

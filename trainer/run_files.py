@@ -34,6 +34,11 @@ class ResumeError(ValueError):
     OpenMP's variables (trainer/threads.py)."""
 
 
+def has_checkpoint(folder: str | Path) -> bool:
+    """Whether `folder` holds a run's checkpoint.pt (what `--resume` continues from)."""
+    return (Path(folder) / "checkpoint.pt").is_file()
+
+
 def read_json_object(path: Path) -> dict[str, Any]:
     """`path`'s JSON object; RunFolderError naming the file and why if it is missing, not JSON or
     not an object (a file cut short by a full disk, or written by hand)."""

@@ -46,7 +46,7 @@ from collie.whole_files import make_folder
 from trainer.config import PRESETS, flag
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES
-from trainer.run_files import RunFolderError, read_json_object, write_json, writing_into
+from trainer.run_files import RunFolderError, has_checkpoint, read_json_object, write_json, writing_into
 from trainer.same_run import comparable, differing_keys, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
@@ -246,7 +246,7 @@ def extension(spec: RunSpec) -> tuple[int, int] | None:
     has the checkpoint to resume from: the sweep extends it, as `collie train --resume --epochs N`
     does exactly; None otherwise."""
     keys, made, asked = config_change(spec)
-    if not only_more_epochs(keys, made, asked) or not (Path(spec.out) / "checkpoint.pt").is_file():
+    if not only_more_epochs(keys, made, asked) or not has_checkpoint(spec.out):
         return None
     return made["epochs"], asked["epochs"]
 
@@ -262,7 +262,7 @@ def keeps_its_record(spec: RunSpec) -> bool:
     sweep_run.json: `collie train --resume` keeps the run's config (more epochs aside), and the
     command's flags written there would name flags it does not run with (the warnings' `recorded`)."""
     folder = Path(spec.out)
-    if not ((folder / "checkpoint.pt").exists() and (folder / "sweep_run.json").exists()):
+    if not (has_checkpoint(folder) and (folder / "sweep_run.json").exists()):
         return False
     keys, made, asked = config_change(spec, every_key=True)  # a flag it does not read is one it does not run with
     return bool(keys) and not only_more_epochs(keys, made, asked)
@@ -303,7 +303,7 @@ def recorded(spec: RunSpec) -> str:
 
 
 def train_command(spec: RunSpec) -> list[str]:
-    resume = ["--resume"] if (Path(spec.out) / "checkpoint.pt").exists() else []
+    resume = ["--resume"] if has_checkpoint(spec.out) else []
     return [sys.executable, "-m", "collie.cli", "train", *train_argv(spec), *resume]
 
 
@@ -722,7 +722,7 @@ def resumed_otherwise(spec: RunSpec) -> str | None:
     command would make (its epochs aside: a resume takes the command's), as made_otherwise says it;
     None if it does not or starts anew. `collie train --resume` keeps the checkpoint's config, so
     the new flags would apply to the runs begun now and not to it, said only in its .log."""
-    if is_finished(spec.out) or not (Path(spec.out) / "checkpoint.pt").exists():
+    if is_finished(spec.out) or not has_checkpoint(spec.out):
         return None
     keys, made, asked = config_change(spec, besides=("epochs",))
     return f"{recorded(spec)} ({shown_values(keys, made, asked)})" if keys else None
@@ -785,7 +785,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(Path(args.out))
     say_what_finished_runs_get(specs)
     processes = "1 local process" if args.jobs == 1 else f"{args.jobs} local processes"
-    resumed = sum((Path(s.out) / "checkpoint.pt").exists() for s in pending)
+    resumed = sum(has_checkpoint(s.out) for s in pending)
     print(
         f"{len(specs)} run{'' if len(specs) == 1 else 's'}, {len(specs) - len(pending)} already finished"
         f"{f', {resumed} resumed from their checkpoints' if resumed else ''}; engine: "

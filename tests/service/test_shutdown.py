@@ -9,6 +9,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -49,12 +50,11 @@ def test_a_stop_ends_long_polls_and_streams_at_once(tmp_path: Path, logged: list
         assert next_data(lines)["data"]["epoch"] == 0  # the stream waits for news now
         poll.start()
         dashboard.start()
-        wait_until_parked(server, run.id, poll)  # the long poll waits too
-        deadline = time.monotonic() + 30
-        while sum(not t.done() for t in server.server.server_state.tasks) < 3:  # the dashboard's reached it too
-            assert dashboard.is_alive(), "the dashboard's long poll ended before it reached the service"
-            assert time.monotonic() < deadline, "the dashboard's long poll never reached the service"
-            time.sleep(0.01)
+        hub: EventHub = server.app.state.hub
+        wait_while_alive(lambda: bool(hub._waiters.get(run.id)), poll, "the long poll waited in the hub")
+        # uvicorn runs one task per open request: the stream, the long poll and now the dashboard's
+        requests = server.server.server_state.tasks
+        wait_while_alive(lambda: sum(not t.done() for t in requests) >= 3, dashboard, "the dashboard's poll arrived")
         time.sleep(0.5)  # and has looked twice
         assert dashboard.is_alive()
         server.stop()
@@ -71,11 +71,10 @@ def test_a_stop_ends_long_polls_and_streams_at_once(tmp_path: Path, logged: list
     assert [r.getMessage() for r in logged if r.levelno >= logging.ERROR] == []
 
 
-def wait_until_parked(server: BackgroundServer, run_id: int, poll: threading.Thread, timeout_s: float = 30.0) -> None:
-    """Until the long poll waits in the service's hub for news of the run."""
-    hub: EventHub = server.app.state.hub
+def wait_while_alive(reached: Callable[[], bool], thread: threading.Thread, what: str, timeout_s: float = 30.0) -> None:
+    """Until `reached()`, failing if `thread` (the request that should get there) ends first."""
     deadline = time.monotonic() + timeout_s
-    while not hub._waiters.get(run_id):
-        assert poll.is_alive(), "the long poll ended before it waited"
-        assert time.monotonic() < deadline, "the long poll never waited in the hub"
+    while not reached():
+        assert thread.is_alive(), f"ended before: {what}"
+        assert time.monotonic() < deadline, f"never: {what}"
         time.sleep(0.01)

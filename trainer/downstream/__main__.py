@@ -25,7 +25,7 @@ from trainer.downstream.ppo import PpoConfig, evaluate, greedy, train_ppo
 from trainer.downstream.zero_shot import zero_shot
 from trainer.memory_plan import NotEnoughMemory, refusal_status
 from trainer.pretrained import TrainedSkills, load_skills
-from trainer.run_files import RunFolderError, read_json_object, write_json
+from trainer.run_files import RunFolderError, has_checkpoint, read_json_object, write_json
 from trainer.task_choice import judged_by
 
 PPO_PRESETS: dict[str, dict[str, Any]] = {
@@ -116,7 +116,7 @@ def not_finished(run_dir: Path) -> str | None:
     """Words for a run that stopped short (its skills are its last checkpoint's), else None."""
     if not (run_dir / "summary.json").exists():  # still training, or killed: no summary yet
         why = "no summary.json: still training, or stopped without one"
-        if not (run_dir / "checkpoint.pt").exists():
+        if not has_checkpoint(run_dir):
             return None  # no run here: load_skills says what is missing
     else:
         try:
