@@ -7,11 +7,24 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
+from starlette.routing import Match, Mount
+from starlette.types import Scope
 
 from backend.routes import dashboard, quality
 
 # backend/web: in the checkout a link to web/, in a wheel the files themselves (package data)
 WEB_DIR = (Path(__file__).resolve().parents[1] / "web").resolve()
+
+
+class PageMount(Mount):
+    """The page's mount at /, which leaves /api to the routes: a method a route does not take is
+    its 405 (HEAD /api/runs), an unknown API path a 404, instead of a missing file of the page."""
+
+    def matches(self, scope: Scope) -> tuple[Match, Scope]:
+        path = scope.get("path", "")
+        if path == "/api" or path.startswith("/api/"):
+            return Match.NONE, {}
+        return super().matches(scope)
 
 
 def install(app: FastAPI, web_dir: Path | None = None) -> None:
@@ -22,4 +35,4 @@ def install(app: FastAPI, web_dir: Path | None = None) -> None:
     app.include_router(quality.router, prefix="/api")  # the quality panel's one write
     directory = web_dir or WEB_DIR
     if (directory / "index.html").is_file():
-        app.mount("/", StaticFiles(directory=directory, html=True), name="web")
+        app.router.routes.append(PageMount("/", StaticFiles(directory=directory, html=True), name="web"))

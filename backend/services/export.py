@@ -25,6 +25,9 @@ EVENT_FIELDS = (
     "revises_event_id",
     "created_at",
 )
+# A text cell that starts with one of these is run as a formula by spreadsheets (CSV injection): a
+# labeler's client_request_id may start with any of them.
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
 EFFECTIVE_FIELDS = ("query_id", "session", "label", "label_name", "event_id", "labeler", "seconds", "labelled_at")
 
 
@@ -52,5 +55,11 @@ def render(records: list[dict[str, object]], fmt: str, effective: bool) -> str:
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=EFFECTIVE_FIELDS if effective else EVENT_FIELDS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(records)
+    writer.writerows({k: spreadsheet_safe(v) for k, v in r.items()} for r in records)
     return out.getvalue()
+
+
+def spreadsheet_safe(value: object) -> object:
+    """A text cell a spreadsheet would run as a formula gets a leading apostrophe (OWASP's advice for
+    CSV files), which spreadsheets show as text; numbers and the JSON export are left as they are."""
+    return "'" + value if isinstance(value, str) and value.startswith(FORMULA_STARTS) else value

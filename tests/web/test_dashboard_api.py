@@ -211,3 +211,16 @@ def test_the_page_is_served_at_the_root(live: BackgroundServer) -> None:
     plotly = httpx.get(f"{live.url}/vendor/plotly-basic.min.js")
     assert plotly.status_code == 200 and b"window.Plotly" in plotly.content
     assert httpx.get(f"{live.url}/api/health").json()["status"] == "ok"  # the API is not shadowed by /
+    assert httpx.head(f"{live.url}/").status_code == 200
+    token = {"Authorization": f"Bearer {TOKENS['operator']}"}
+    head = httpx.head(f"{live.url}/api/me", headers=token)  # was 404: the page's mount took it
+    assert head.status_code == 405 and head.headers["allow"] == "GET"
+    missing = httpx.get(f"{live.url}/api/no-such-route", headers=token)
+    assert missing.status_code == 404 and missing.json() == {"detail": "Not Found"}
+
+
+def test_labelled_paths_keep_huge_coordinates() -> None:
+    """A robot flung far away (diverged physics) still posts finite x-y; the panel's rounding to
+    thousandths must not turn 1e306 into inf, which JSON writes as null."""
+    xy = np.array([[1.23456, -2.0], [1e306, -1e306], [3e15, 0.0006]])
+    assert label_stats.thinned(xy, 10) == [[1.235, -2.0], [1e306, -1e306], [3e15, 0.001]]
