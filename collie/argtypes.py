@@ -69,6 +69,8 @@ def sqlite_file(value: str) -> Path:
             "takes a SQLite file's path, not a URL; for PostgreSQL leave --db out and set "
             "COLLIE_DATABASE_URL=postgresql+psycopg://USER:PASSWORD@HOST:5432/DB"
         )
+    if not value.strip():  # Path("") is ".", which would be refused as "a folder"
+        raise argparse.ArgumentTypeError("is empty: give a SQLite file's path (or leave --db out)")
     return Path(value)
 
 
@@ -84,7 +86,8 @@ def float_in(low: float, high: float = math.inf, *, low_open: bool = True) -> Ca
         above = number > low if low_open else number >= low
         if not (math.isfinite(number) and above and number <= high):  # NaN fails every comparison
             bound = f"{'>' if low_open else '≥'} {low:g}" + (f" and ≤ {high:g}" if math.isfinite(high) else "")
-            raise argparse.ArgumentTypeError(f"{value} must be {bound}")
+            finite = "" if math.isfinite(number) else "a finite number "  # `inf must be ≥ 0` would be wrong
+            raise argparse.ArgumentTypeError(f"{value} must be {finite}{bound}")
         return number
 
     return parse

@@ -78,11 +78,34 @@ def package_version() -> str:
         return "(not installed)"
 
 
-def main(argv: list[str] | None = None) -> int:
-    from collie.startup import mark
+def caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a Ctrl-C caused `exc`: MuJoCo's extension reports one that lands in its import as
+    `ImportError: initialization failed`, the KeyboardInterrupt as its cause."""
+    seen: BaseException | None = exc
+    for _ in range(8):  # a chain, not a cycle
+        if seen is None:
+            return False
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
 
+
+def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     wanted = argv[0] if argv and not argv[0].startswith("-") else None
+    try:
+        return run_command(argv, wanted)
+    except (KeyboardInterrupt, ImportError) as exc:  # Ctrl-C in the imports too (torch's take seconds): a line
+        if not caused_by_interrupt(exc):
+            raise
+        print(f"collie{f' {wanted}' if wanted in SUBCOMMANDS else ''}: interrupted", file=sys.stderr)
+        return 130
+
+
+def run_command(argv: list[str], wanted: str | None) -> int:
+    from collie.startup import mark
+
     if wanted == "train":  # a SIGTERM in its seconds of imports ends it with a word, as Ctrl-C does
         from collie import early_term
 
@@ -110,9 +133,6 @@ def main(argv: list[str] | None = None) -> int:
         chosen.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
     try:
         return int(args._module.run(args) or 0)
-    except KeyboardInterrupt:  # Ctrl-C where the command keeps no handler of its own: a line, not a traceback
-        print(f"collie {args.command}: interrupted", file=sys.stderr)
-        return 130
     except PermissionError as exc:  # a file, folder or port this user may not use: which, not a traceback
         print(f"collie {args.command}: error: {refusal_line(exc)}", file=sys.stderr)
         return 2

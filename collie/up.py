@@ -277,16 +277,23 @@ def locked(out: Path) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    new_out = False
     try:
         out = checked(args)
         why = refused_by_trainer(args)
         if why is not None:
             raise ValueError(f"collie train would refuse the run: {why}")
+        new_out = not out.exists()
         if args.info_json is not None:
             made(args.info_json.parent, "the folder of --info-json")
         made(out, "--out")
         lock = locked(out)
+        sock = listening_socket(args.host, args.port)  # a port in use: refused before anything is written
     except ValueError as exc:
+        if new_out and (out / STACK_LOCK).exists():  # nothing of a stack yet: no folder left behind
+            (out / STACK_LOCK).unlink()
+            with contextlib.suppress(OSError):
+                out.rmdir()
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
     # an explicit --db, else the lab's database when COLLIE_DATABASE_URL names one, else OUT's SQLite file
@@ -305,7 +312,7 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGHUP, on_signal)
     made_db, unheld = db is not None and not Path(db).exists(), False
     try:
-        return supervise(args, out, db, stack, stopping)
+        return supervise(args, out, db, stack, stopping, sock)
     except Stopped:
         print("collie up: stopped while starting", file=sys.stderr)
         return 130
@@ -353,7 +360,9 @@ def child_env(token: str | None = None) -> dict[str, str]:
     return {**env, TOKEN_ENV: token} if token is not None else env
 
 
-def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Supervisor, stopping: dict) -> int:
+def supervise(
+    args: argparse.Namespace, out: Path, db: Path | None, stack: Supervisor, stopping: dict, sock: socket.socket
+) -> int:
     timeline = out / "logs" / "startup.jsonl"  # every part's startup marks (collie/startup.py), this start's only
     timeline.unlink(missing_ok=True)
     os.environ[LOG_ENV] = str(timeline.resolve())  # for our own marks and, through child_env, the parts'
@@ -367,7 +376,6 @@ def supervise(args: argparse.Namespace, out: Path, db: Path | None, stack: Super
     # We bind the service's socket and hand it over: its URL is known at once, so the trainer starts
     # (and imports torch) while the service imports and migrates; requests queue until it serves,
     # and a restarted service keeps the port.
-    sock = listening_socket(args.host, args.port)
     stack.closing(sock)
     api = f"http://{local_address(args.host)}:{sock.getsockname()[1]}"  # the parts' own way in
     shown = link_host(args.host)  # what the links name: where other machines reach us
@@ -515,7 +523,7 @@ def listening_socket(host: str, port: int) -> socket.socket:
         sock.bind((host, port))
     except OSError as exc:
         sock.close()
-        raise RuntimeError(
+        raise ValueError(
             f"cannot listen on {host}:{port} for the service: {exc.strerror} (--port 0 takes any free port)"
         ) from None
     sock.listen(128)

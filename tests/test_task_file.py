@@ -175,6 +175,8 @@ BAD_SPECS = [
         "less than or equal to 1000000",
     ),
     ('name = "north"\ndescription = "d"\nregions = []\n', "name", "already a registered task"),
+    ('description = "d"\nregions = 5\n', "regions", "valid list (got 5)"),  # was a TypeError traceback
+    ('description = "d"\nregions = true\n', "regions", "valid list (got True)"),
     ('description = "d"\nregions = [\n  { kind = "disc" \n', "line 3", "not valid TOML"),
 ]
 

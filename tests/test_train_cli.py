@@ -401,6 +401,18 @@ def test_a_config_value_of_another_type_is_named_on_resume(run_copy: Path) -> No
 
 
 @pytest.mark.parametrize(
+    ("key", "value", "said"), [("env", "nope", "unknown env 'nope'"), ("hidden", 0, "must be ≥ 1")]
+)
+def test_a_bad_config_value_is_named_with_its_file_on_resume(
+    run_copy: Path, key: str, value: object, said: str
+) -> None:
+    """Was "collie train: error: unknown env 'nope'", which reads as a typo on a command line that gave no --env."""
+    config = run_copy / "config.json"
+    config.write_text(json.dumps(json.loads(config.read_text()) | {key: value}))
+    refused(train("--out", str(run_copy), "--resume", "--epochs", "3"), f"{config}: ", said)
+
+
+@pytest.mark.parametrize(
     ("key", "value", "kind"),
     [
         ("hidden", '"64"', "an integer"),
@@ -561,6 +573,9 @@ def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Pat
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\ndescription = "x"\n[[regions]]\nkind = "moat"\n')
     refused(train("--task-file", str(bad), "--print-config"), f"task file {bad}")  # as a run would refuse it
+    with open("/dev/full", "w") as full:  # was "cannot start the run in runs/…: no space left on device"
+        proc = subprocess.run([*TRAIN, "--print-config"], stdout=full, stderr=subprocess.PIPE, text=True, timeout=60)
+    refused(proc, "--print-config: cannot write to standard output: No space left on device")
 
 
 def test_the_end_of_run_line_lists_only_what_was_written(metra_run: Trained) -> None:
@@ -610,11 +625,14 @@ def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, metra_
 
 
 @pytest.mark.parametrize("at", ["python start", "imports"])  # torch's import next (was: exit 143, no word); envs next
-def test_sigterm_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path, at: str) -> None:
+@pytest.mark.parametrize(
+    "sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"]
+)  # SIGINT in the imports was a traceback, or exit 1
+def test_a_signal_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path, at: str, sig: int) -> None:
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark
     cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
-    marks.signal_at(proc, lambda m: m.what == at, signal.SIGTERM)
+    marks.signal_at(proc, lambda m: m.what == at, sig)
     try:
         _, err = proc.communicate(timeout=180)
     finally:
@@ -651,6 +669,32 @@ def test_sigterm_after_the_start_before_the_first_epoch_stops_the_run_checkpoint
     assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["status"], summary["epochs_done"]) == ("interrupted", 0) and (out / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("folder", ["new", "holding a file"])
+def test_ctrl_c_in_the_epoch_0_evaluation_leaves_no_run_behind(tmp_path: Path, folder: str) -> None:
+    """Was: exit 130 and a folder of config.json, metrics.jsonl, tb/ and train.lock that --resume
+    refused (no checkpoint). What the folder held before the start stays."""
+    marks = PacedMarks(tmp_path)
+    out = tmp_path / "run"
+    if folder != "new":
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    proc = subprocess.Popen(
+        [*TRAIN, "--out", str(out), "--epochs", "3"], stderr=subprocess.PIPE, text=True, env=marks.env
+    )
+    marks.signal_at(proc, lambda m: m.what == "run files, tensorboard", signal.SIGINT)  # the evaluation next
+    try:
+        _, err = proc.communicate(timeout=180)
+    finally:
+        proc.kill()
+        marks.release()
+    assert marks.sent.is_set(), err[-3000:]
+    assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
+    if folder == "new":
+        assert not out.exists()
+    else:
+        assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
 def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -> None:

@@ -201,11 +201,15 @@ def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        cmd = up_command(tmp_path)
+        cmd = up_command(tmp_path / "stack")
         cmd[cmd.index("--port") + 1] = str(port)
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 1
-    assert f"cannot listen on 127.0.0.1:{port}" in proc.stderr
+    assert proc.returncode == 2  # a refusal, as `collie serve` says it (was 1)
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"collie up: error: cannot listen on 127.0.0.1:{port} for the service: Address already in use "
+        "(--port 0 takes any free port)"
+    )
+    assert not (tmp_path / "stack").exists()  # was left holding tokens.json, up.lock and logs/
 
 
 def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(finished_stack, tmp_path):

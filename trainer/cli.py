@@ -11,6 +11,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -526,6 +527,20 @@ def remove_if_empty(folders: list[Path]) -> None:
             return
 
 
+def discard_unstarted(out: Path, held_before: set[str], made: list[Path]) -> None:
+    """Undo a fresh start interrupted before its first checkpoint (its config.json, metrics.jsonl,
+    tb/…: a folder `--resume` cannot continue). What the folder held before stays, and so does
+    service_run.json, with which a start again continues the same run of the labeling service."""
+    for entry in out.iterdir():
+        if entry.name in held_before or entry.name == "service_run.json":
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+    remove_if_empty(made)
+
+
 def write_failure(exc: OSError, out: Path) -> str:
     """Why the run stopped writing, where, and how it goes on: checkpoints are written whole
     (write_whole), so the last one stays as it was and `--resume` continues from it."""
@@ -592,7 +607,10 @@ def run(args: argparse.Namespace) -> int:
             rule = choose_rule(cfg)  # a bad task or task file is refused here as the run would refuse it
             if rule.definition is not None:
                 cfg.task = rule.definition.name
-            print(json.dumps(cfg.to_dict(), indent=2))
+            try:
+                print(json.dumps(cfg.to_dict(), indent=2), flush=True)
+            except OSError as exc:  # e.g. > /dev/full: no run folder is involved
+                raise ValueError(f"--print-config: cannot write to standard output: {exc.strerror or exc}") from None
             return 0
         unused = [flag for flag in SERVICE_FLAGS if getattr(args, flag[2:].replace("-", "_"), None) is not None]
         if args.api is None and unused:  # a run without a service would ignore them, and a typo'd --api with them
@@ -600,6 +618,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{', '.join(unused)} {'is' if one else 'are'} for a run on a labeling service: "
                              f"give --api too (or drop {'it' if one else 'them'})")  # fmt: skip
         made = check_out(Path(cfg.out), args.resume)
+        held_before = {entry.name for entry in Path(cfg.out).iterdir()}  # another's files; this start's are new
         lock_run_folder(Path(cfg.out))  # held until this process ends (the descriptor stays open)
         locked = True
         if args.resume and args.api is None and (Path(cfg.out) / "service_run.json").exists():
@@ -622,6 +641,10 @@ def run(args: argparse.Namespace) -> int:
             for k in RESUME_RUNTIME:
                 if k in args.given:
                     setattr(cfg, k, getattr(asked, k))
+            try:  # the trainer checks again; here a value edited by hand is named with its file, not as a flag
+                cfg.validate()
+            except ValueError as exc:
+                raise RunFolderError(f"{source}: {exc}") from None
             assumed = {k: v for k, v in first_version(stored).items() if k not in stored}
             if moved:
                 assumed.pop("fast_ops", None)
@@ -718,12 +741,12 @@ def run(args: argparse.Namespace) -> int:
 
         print(f"collie train: error: {refusal}", file=sys.stderr)
         return refusal_status(exc)  # 75 where memory promised to running runs is why
-    if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
-        raise KeyboardInterrupt
     from collie.client import ApiError
     from trainer.feedback import SourceRefused
 
     try:
+        if early_term.ASKED.is_set():  # SIGTERM while the run started: `collie train: interrupted`, exit 130
+            raise KeyboardInterrupt
         if feedback is not None and args.resume:  # once the run can train: a reopened run always has its trainer
             try:
                 kept = feedback.extend_to(cfg.epochs)
@@ -733,6 +756,10 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie train: error: {service_answered(args.api, exc)}", file=sys.stderr)
                 return 2
         summary = trainer.run(resume=args.resume)
+    except KeyboardInterrupt:  # before the loop's own handler (e.g. Ctrl-C in the epoch-0 evaluation)
+        if not args.resume and not has_checkpoint(Path(cfg.out)):  # nothing trained: nothing to keep
+            discard_unstarted(Path(cfg.out), held_before, made)
+        raise
     except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
         if exc.errno not in UNWRITABLE:  # any other is a fault to show whole
             raise

@@ -17,6 +17,7 @@ import types
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
+from collie.env_names import ENV_NAMES
 from collie.tasks import default_task
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
@@ -116,6 +117,7 @@ class Config:
             if not cond:
                 raise ValueError(msg)
 
+        need(self.env in ENV_NAMES, f"unknown env {self.env!r}; valid: {', '.join(ENV_NAMES)}")
         need(self.method in METHODS, f"unknown method {self.method!r}; valid: {', '.join(METHODS)}")
         need(not (self.instruction and self.task_file), "give --instruction (no rule) or --task-file, not both")
         need(

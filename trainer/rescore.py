@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from collie.tasks import get_task
+from collie.tasks import get_task, task_names
 from trainer.config import Config
 from trainer.envs import env_class
 from trainer.methods import METHODS
@@ -149,21 +149,32 @@ def run(args: argparse.Namespace) -> int:
     if args.out and Path(args.out).exists() and not Path(args.out).is_dir():  # as archive and report say it
         print(f"collie rescore: error: --out {args.out} is a file, not a folder", file=sys.stderr)
         return 2
+    if args.task not in task_names():  # once, not for each run
+        print(
+            f"collie rescore: error: unknown task {args.task!r}; valid tasks: {', '.join(task_names())}",
+            file=sys.stderr,
+        )
+        return 2
+    refused = 0  # each run is judged on its own, as `collie archive` goes on past a refused run
     for source in args.runs:
         try:
             out = rescore(Path(source), args.task, Path(args.out) if args.out else None, args.keep_existing)
         except (ValueError, KeyError) as exc:  # RescoreError, or an unknown task
-            print(f"collie rescore: error: {exc}", file=sys.stderr)
-            return 2
+            said = str(exc) if source in str(exc) else f"{source}: {exc}"  # which run, among several
+            print(f"collie rescore: error: {said}", file=sys.stderr)
+            refused += 1
+            continue
         print(f"{source} judged by {args.task}: {out}")
         if args.downstream and not downstream_done(out):
             if not (out / CHECKPOINT).exists():
                 print(f"collie rescore: error: {source} has no {CHECKPOINT}; no downstream task", file=sys.stderr)
-                return 2
+                refused += 1
+                continue
             try:
                 run_downstream_task(out)  # as `collie sweep --downstream` runs it
             except RuntimeError as exc:
-                print(f"collie rescore: error: the downstream task {exc}", file=sys.stderr)
-                return 2
+                print(f"collie rescore: error: {source}: the downstream task {exc}", file=sys.stderr)
+                refused += 1
+                continue
             print(f"  downstream task: {out / 'downstream.json'}")
-    return 0
+    return 2 if refused else 0

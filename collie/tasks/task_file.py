@@ -81,7 +81,8 @@ def _read_spec(path: Path) -> dict[str, Any]:
 
 def parse_spec(path: Path, data: dict[str, Any]) -> TaskDefinition:
     data = {"name": _stem_name(path), **data, "source": path.name}
-    for i, region in enumerate(data.get("regions") or []):
+    regions = data.get("regions")  # anything but a list is the schema's to refuse, below
+    for i, region in enumerate(regions if isinstance(regions, list) else []):
         kind = region.get("kind") if isinstance(region, dict) else None
         if isinstance(region, dict) and kind is not None and kind not in REGION_KINDS:
             raise TaskFileError(

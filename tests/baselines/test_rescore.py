@@ -88,6 +88,18 @@ def test_the_command_refuses_an_unknown_task_and_an_existing_run(tmp_path, capsy
     assert main(["rescore", str(source), "--task", "range", "--out", str(other)]) == 0  # an empty one is used
 
 
+def test_a_refused_run_is_named_and_the_others_are_rescored(tmp_path, capsys):
+    """Was: the first refusal, naming no folder, ended the command; the runs after it were never judged."""
+    collie_run, _ = finished_run(tmp_path / "a", "collie")
+    metra_run, _ = finished_run(tmp_path / "b", "metra")
+    assert main(["rescore", str(collie_run), str(metra_run), "--task", "range"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"collie rescore: error: {collie_run}: ") and "reads its task" in err, err
+    assert (tmp_path / "b" / "ant-range-metra-s0" / "summary.json").exists()
+    assert main(["rescore", str(collie_run), str(metra_run), "--task", "nowhere"]) == 2
+    assert capsys.readouterr().err.count("unknown task 'nowhere'") == 1  # said once, not for each run
+
+
 def test_an_out_that_is_a_file_is_a_one_line_error(tmp_path, capsys):
     source, _ = finished_run(tmp_path)
     (tmp_path / "a-file").write_text("kept")

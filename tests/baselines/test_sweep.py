@@ -12,6 +12,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import pytest
+from paced_marks import PacedMarks
 
 from trainer import sweep
 from trainer.sweep import RunSpec, grid, run_all, run_one, train_command
@@ -320,6 +321,30 @@ def test_an_interrupted_sweep_stops_its_run_with_a_checkpoint_and_starts_no_othe
     assert json.loads((first / "summary.json").read_text())["status"] == "interrupted"
     assert (first / "checkpoint.pt").exists()
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == [first.name]  # seeds 1 and 2 never began
+
+
+def test_a_sweep_interrupted_while_its_run_starts_reports_it_stopped_not_failed(tmp_path):
+    """Was: "FAILED …: failed (130)" beside "0 run(s) stopped", and the progress bar counted it done."""
+    marks = PacedMarks(tmp_path)
+    more = ("--tasks", "north", "--methods", "lsd", "--seeds", "1", "--jobs", "1", "--", "--epochs", "100000")
+    proc = subprocess.Popen(
+        sweep_command(tmp_path / "sweep", *more),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=marks.env,
+    )
+    # the trainer's first mark (the sweep marks too): its imports next, seconds long
+    marks.signal_at(proc, lambda m: m.pid != proc.pid and m.what == "python start", signal.SIGINT)
+    try:
+        _, err = proc.communicate(timeout=240)
+    finally:
+        proc.kill()
+        marks.release()
+    assert marks.sent.is_set(), err[-3000:]
+    assert proc.returncode == 130 and "FAILED" not in err, err[-3000:]
+    assert "collie sweep: interrupted; 1 run(s) stopped, 0 not started; rerun the same command to resume" in err
+    assert re.findall(r"\| (\d)/1 \[", err)[-1] == "0", err  # the progress bar counts no run as done
 
 
 CHARGER = """\
