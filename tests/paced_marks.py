@@ -19,6 +19,7 @@ import subprocess
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from collie.schemas import StartupMark
 
@@ -70,3 +71,18 @@ class PacedMarks:
         self._stop.set()
         if self._reader is not None:
             self._reader.join(30)
+
+    def run(
+        self, cmd: list[str], at: Callable[[StartupMark], bool], sig: int, timeout_s: float = 180, **popen: Any
+    ) -> tuple[int, str]:
+        """`cmd` (its startup log this FIFO), sent `sig` once a mark satisfies `at`, run to its end:
+        its exit status and stderr, the signal checked as sent."""
+        proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, **{"env": self.env, **popen})
+        self.signal_at(proc, at, sig)
+        try:
+            _, err = proc.communicate(timeout=timeout_s)
+        finally:
+            proc.kill()
+            self.release()
+        assert self.sent.is_set(), err[-3000:]
+        return proc.returncode, err

@@ -26,6 +26,7 @@ from paced_marks import PacedMarks
 from small_disk import fill, small_disk
 from unprivileged import as_nobody, closed_folder
 
+from collie.schemas import StartupMark
 from trainer.cli import short_of_memory
 from trainer.fast_ops import fast_ops_pay
 
@@ -631,15 +632,8 @@ def test_a_checkpoint_from_another_run_is_named_on_resume(run_copy: Path, metra_
 def test_a_signal_while_the_trainer_starts_ends_it_as_ctrl_c_does(tmp_path: Path, at: str, sig: int) -> None:
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's next mark
     cmd = [*TRAIN, "--out", str(tmp_path / "run"), "--epochs", "1"]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=marks.env)
-    marks.signal_at(proc, lambda m: m.what == at, sig)
-    try:
-        _, err = proc.communicate(timeout=180)
-    finally:
-        proc.kill()
-        marks.release()
-    assert marks.sent.is_set(), err[-3000:]
-    assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
+    code, err = marks.run(cmd, lambda m: m.what == at, sig)
+    assert code == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
     assert not (tmp_path / "run" / "summary.json").exists()  # it ended before training, not after
 
 
@@ -652,21 +646,18 @@ def test_an_abbreviated_flag_is_not_taken_for_the_flag(tmp_path: Path) -> None:
     assert not (tmp_path / "run").exists()
 
 
+def evaluation_next(mark: StartupMark) -> bool:
+    """The mark after which the trainer runs its epoch-0 evaluation."""
+    return mark.what == "run files, tensorboard"
+
+
 def test_sigterm_after_the_start_before_the_first_epoch_stops_the_run_checkpointed(tmp_path: Path) -> None:
     """Between the start's check and the loop's own handler (the run's files, its epoch-0
     evaluation) a SIGTERM was noted and then ignored: `collie up` waited 15 s and killed it."""
     marks = PacedMarks(tmp_path)
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [*TRAIN, "--out", str(out), "--epochs", "3"], stderr=subprocess.PIPE, text=True, env=marks.env
-    )
-    marks.signal_at(proc, lambda m: m.what == "run files, tensorboard", signal.SIGTERM)  # the evaluation next
-    try:
-        _, err = proc.communicate(timeout=180)
-    finally:
-        proc.kill()
-        marks.release()
-    assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
+    code, err = marks.run([*TRAIN, "--out", str(out), "--epochs", "3"], evaluation_next, signal.SIGTERM)
+    assert code == 0, err[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["status"], summary["epochs_done"]) == ("interrupted", 0) and (out / "checkpoint.pt").exists()
 
@@ -680,17 +671,8 @@ def test_ctrl_c_in_the_epoch_0_evaluation_leaves_no_run_behind(tmp_path: Path, f
     if folder != "new":
         out.mkdir()
         (out / "notes.txt").write_text("mine")
-    proc = subprocess.Popen(
-        [*TRAIN, "--out", str(out), "--epochs", "3"], stderr=subprocess.PIPE, text=True, env=marks.env
-    )
-    marks.signal_at(proc, lambda m: m.what == "run files, tensorboard", signal.SIGINT)  # the evaluation next
-    try:
-        _, err = proc.communicate(timeout=180)
-    finally:
-        proc.kill()
-        marks.release()
-    assert marks.sent.is_set(), err[-3000:]
-    assert proc.returncode == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
+    code, err = marks.run([*TRAIN, "--out", str(out), "--epochs", "3"], evaluation_next, signal.SIGINT)
+    assert code == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
     if folder == "new":
         assert not out.exists()
     else:

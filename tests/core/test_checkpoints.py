@@ -5,7 +5,6 @@ import errno
 import json
 import pickle
 import signal
-import subprocess
 import sys
 from pathlib import Path
 
@@ -96,14 +95,8 @@ def test_sigterm_writes_a_final_checkpoint_and_resume_reproduces_the_run(tmp_pat
     cmd += [f"--{k.replace('_', '-')}={v}" for k, v in common.items()]
     marks = PacedMarks(tmp_path)  # the signal lands before the trainer's mark after epoch 4's evaluation
     env = {**marks.env, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
-    marks.signal_at(proc, lambda m: m.what == "evaluate" and m.epoch == 4, signal.SIGTERM)
-    try:
-        _, err = proc.communicate(timeout=300)
-    finally:
-        proc.kill()
-        marks.release()
-    assert marks.sent.is_set() and proc.returncode == 0, err[-3000:]
+    code, err = marks.run(cmd, lambda m: m.what == "evaluate" and m.epoch == 4, signal.SIGTERM, 300, env=env)
+    assert code == 0, err[-3000:]
     summary = json.loads((stopped / "summary.json").read_text())
     assert summary["status"] == "interrupted" and summary["epochs_done"] in (4, 5)
     assert torch.load(stopped / "checkpoint.pt", weights_only=False)["epoch"] == summary["epochs_done"]
