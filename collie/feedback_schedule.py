@@ -13,10 +13,15 @@ def next_feedback_epoch(run: RunRead) -> int | None:
     every, warmup = config.get("feedback_every"), config.get("warmup", 0)
     if not isinstance(every, int) or every <= 0 or not isinstance(warmup, int):
         return None
-    q = run.queue  # the budget counts what was asked, retired ones too (the trainer asked them)
-    asked = q.pending + q.leased + q.labelled + q.retired
-    if run.n_total is not None and max(run.n_labels, asked) >= run.n_total:
+    if budget_spent(run):
         return None
     after = run.epoch + 1
     upcoming = warmup if after <= warmup else warmup + -(-(after - warmup) // every) * every
     return None if run.epochs_total is not None and upcoming > run.epochs_total else upcoming
+
+
+def budget_spent(run: RunRead) -> bool:
+    """Whether the run has asked its whole label budget `n_total`: no feedback session comes again."""
+    q = run.queue  # the budget counts what was asked, retired ones too (the trainer asked them)
+    asked = q.pending + q.leased + q.labelled + q.retired
+    return run.n_total is not None and max(run.n_labels, asked) >= run.n_total

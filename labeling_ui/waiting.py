@@ -1,13 +1,14 @@
 """What the page says while nothing is claimable: the epoch now, the epoch of the next feedback
 session and when it comes, from the trainer's own schedule (the run's config) and its epoch rate
-(the timestamps of its metrics, else the epochs the tab saw go by). The session fetches, this words it."""
+(the epochs the tab saw go by while it trained, else the timestamps of its metrics). The session
+fetches, this words it."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from collie.feedback_schedule import next_feedback_epoch
+from collie.feedback_schedule import budget_spent, next_feedback_epoch
 from collie.run_state import run_state
 from collie.schemas import FINISHED, MetricsRead, RunRead
 
@@ -35,13 +36,16 @@ def epoch_rate(metrics: Sequence[MetricsRead]) -> float | None:
 
 
 def forecast(run: RunRead, metrics: Sequence[MetricsRead], seen_rate: float | None = None) -> Forecast:
-    """`seen_rate`: the rate the tab saw (EpochClock), used until two metrics give one."""
-    return Forecast(run.epoch, next_feedback_epoch(run), epoch_rate(metrics) or seen_rate)
+    """`seen_rate`: the rate the tab saw (EpochClock), which wins where there is one: it counts
+    training time only, while the metrics' span also holds the waits for labels (several times the
+    training time, so an ETA several times too long)."""
+    return Forecast(run.epoch, next_feedback_epoch(run), seen_rate or epoch_rate(metrics))
 
 
 class EpochClock:
-    """Epochs per second as this tab sees a run's epoch advance: an ETA before the trainer has
-    posted two metrics (a robot's first evaluation may lie a hundred epochs away)."""
+    """Epochs per second as this tab sees a run's epoch advance while it trains (a pause or a wait
+    for labels starts the look again): the ETA's rate, also before the trainer has posted two
+    metrics (a robot's first evaluation may lie a hundred epochs away)."""
 
     MIN_S = 5.0  # a shorter look says little
 
@@ -49,7 +53,8 @@ class EpochClock:
         self._first: dict[int, tuple[float, int]] = {}  # run → (when, epoch) first seen
 
     def rate(self, run: RunRead, now: float) -> float | None:
-        if run.control == "pause" or run.status == "paused":  # no epochs go by: look again after it
+        stands = run.control == "pause" or run.status in ("paused", "waiting_for_labels")
+        if stands:  # no epochs go by: look again after it
             self._first.pop(run.id, None)
             return None
         when, epoch = self._first.setdefault(run.id, (now, run.epoch))
@@ -87,6 +92,11 @@ def waiting_text(run: RunRead, fc: Forecast, held_here: int) -> str:
         elif fc.next_feedback is not None:
             eta = f", in about **{duration(fc.eta_s)}**" if fc.eta_s is not None else " (no epoch rate yet for an ETA)"
             lines.append(f"Next feedback session at epoch **{fc.next_feedback}**{eta}.")
+        elif budget_spent(run):  # was "… when its schedule says so": a wait for nothing
+            lines.append(
+                f"Its label budget is spent ({run.n_total} segments asked): no more segments come; it trains on "
+                "to its last epoch."
+            )
         else:
             lines.append("The trainer posts the next feedback session when its schedule says so.")
     if q.pending and run.redundancy > 1 and run.status not in FINISHED:  # none of them is this labeler's to label

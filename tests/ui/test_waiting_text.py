@@ -88,11 +88,29 @@ def test_an_eta_from_the_epochs_the_tab_saw_before_two_metrics_exist() -> None:
     assert rate == 1.0
     fc = forecast(r.model_copy(update={"epoch": 20}), [], rate)
     assert fc.eta_s == 220.0 and "in about **4 min**" in waiting_text(r.model_copy(update={"epoch": 20}), fc, 0)
-    assert forecast(r, [metrics(0, 0.0), metrics(10, 5.0)], rate).epochs_per_s == 2.0  # metrics win once there
+    # the tab's own look wins: the metrics' span holds the waits for labels (was: an ETA of 2 min for 15 s)
+    assert forecast(r, [metrics(0, 0.0), metrics(10, 5.0)], rate).epochs_per_s == 1.0
+    assert forecast(r, [metrics(0, 0.0), metrics(10, 5.0)], None).epochs_per_s == 2.0  # until it has one
     assert clock.rate(r.model_copy(update={"epoch": 3}), 120.0) is None  # a restarted trainer: look again
     assert clock.rate(r.model_copy(update={"epoch": 5, "control": "pause"}), 130.0) is None
     assert clock.rate(r.model_copy(update={"epoch": 5}), 1000.0) is None  # after a resume: a new first look
     assert clock.rate(r.model_copy(update={"epoch": 15}), 1005.0) == 2.0  # not the pause's long gap
+    assert clock.rate(r.model_copy(update={"epoch": 20, "status": "waiting_for_labels"}), 1500.0) is None
+    assert clock.rate(r.model_copy(update={"epoch": 20}), 1600.0) is None  # training again: a new first look
+    assert clock.rate(r.model_copy(update={"epoch": 30}), 1610.0) == 1.0  # not the wait for labels' gap
+
+
+def test_a_spent_label_budget_promises_no_session() -> None:
+    """Was "The trainer posts the next feedback session when its schedule says so" at 40 / 40."""
+    r = run().model_copy(
+        update={"config": {"warmup": 0, "feedback_every": 20}, "epoch": 50, "status": "training", "n_total": 40}
+    )
+    spent = r.model_copy(update={"n_labels": 40, "queue": QueueCounts(labelled=40)})
+    text = waiting_text(spent, forecast(spent, []), held_here=0)
+    assert "label budget is spent (40 segments asked): no more segments come" in text
+    assert "schedule says so" not in text and "Next feedback session" not in text
+    open_budget = r.model_copy(update={"n_labels": 20, "queue": QueueCounts(labelled=20)})
+    assert "Next feedback session at epoch **60**" in waiting_text(open_budget, forecast(open_budget, []), held_here=0)
 
 
 def test_collie_ups_progress_line_says_when_the_next_session_comes(capsys) -> None:
