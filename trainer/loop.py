@@ -636,14 +636,18 @@ class Trainer:
         self.rebuild_from_source()
         if not self.method.asks_labels or self.queries_asked >= self.cfg.total_queries:
             startup.done()  # no feedback session will come: no first segment to time
-        if self.epoch < self.cfg.epochs or self._asking is not None:  # else no event file with nothing in it
-            self._writer = self._tensorboard()
-        if self.feedback.control(self.epoch) == "run":  # a run paused or stopped meanwhile is not announced as training
-            self.reporter.status(StatusReport("training", self.epoch))
-        startup.mark("run files, tensorboard")
-        if self.epoch == 0:
-            self.evaluate()  # epoch-0 baseline of every metric
-            startup.mark("evaluate", 0)
+        try:
+            if self.epoch < self.cfg.epochs or self._asking is not None:  # else no event file with nothing in it
+                self._writer = self._tensorboard()
+            if self.feedback.control(self.epoch) == "run":  # a run paused or stopped meanwhile is not announced
+                self.reporter.status(StatusReport("training", self.epoch))
+            startup.mark("run files, tensorboard")
+            if self.epoch == 0:
+                self.evaluate()  # epoch-0 baseline of every metric
+                startup.mark("evaluate", 0)
+        except BaseException:  # e.g. Ctrl-C before the loop's handlers: its writer thread ends before the caller
+            self.close_tensorboard()  # removes what a fresh start wrote (tb/ included)
+            raise
         asking = self._asking
         bar = tqdm(
             total=self.cfg.epochs,
@@ -682,8 +686,7 @@ class Trainer:
             for sig, handler in previous_handlers.items():
                 signal.signal(sig, handler)
             bar.close()
-            if self._writer is not None:
-                self._writer.close()
+            self.close_tensorboard()
         if status == "stopped" and self._signalled is not None:
             status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
         if status in ("stopped", "interrupted"):
@@ -753,6 +756,11 @@ class Trainer:
         if status != "interrupted":  # an interrupted run is not over for the service
             self.reporter.status(StatusReport(status, self.epoch, error=error))
         return summary
+
+    def close_tensorboard(self) -> None:
+        if self._writer is not None:
+            self._writer.close()  # flushes, and ends its writer thread
+            self._writer = None
 
     def _tensorboard(self) -> Any:
         try:
