@@ -12,6 +12,8 @@ import gc
 import importlib
 import sys
 
+from collie.early_term import INTERRUPTED
+
 # name → (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("trainer.cli", "run Algorithm 1 (METRA / COLLIE / Oracle) on one env and task"),
@@ -100,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         if not caused_by_interrupt(exc):
             raise
         print(f"collie{f' {wanted}' if wanted in SUBCOMMANDS else ''}: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED
 
 
 def run_command(argv: list[str], wanted: str | None) -> int:

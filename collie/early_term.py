@@ -12,6 +12,8 @@ import signal
 import threading
 from collections.abc import Iterator
 
+INTERRUPTED = 130  # the exit status of a command a signal ended with `collie X: interrupted` (128 + SIGINT)
+
 # Noted, not raised: a KeyboardInterrupt raised where the signal lands may be inside a finalizer
 # (GC), where Python prints it as "Exception ignored" and goes on; the start ends before training.
 ASKED = threading.Event()

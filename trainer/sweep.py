@@ -40,6 +40,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
+from collie.early_term import INTERRUPTED
 from collie.pass_through import owned_flags
 from collie.processes import end_with_parent
 from collie.whole_files import make_folder
@@ -52,7 +53,6 @@ from trainer.same_run import comparable, differing_keys, run_config
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
 POLL_S = 0.5  # how often a wait looks up from a child process or the cluster (a stop asked, a Ray cancel)
-INTERRUPTED = 130  # `collie train: interrupted`: a signal before its loop (no checkpoint yet)
 # how long a stopped run may take to write its final checkpoint (the rest of its epoch) and end
 STOP_WAIT_S = 300.0
 
@@ -362,7 +362,7 @@ def _call(cmd: list[str], log: Path, stop: Stop) -> None:
             if stop.asked.is_set():
                 raise Interrupted("not started: the sweep was interrupted")
             break
-    if code == INTERRUPTED and stop.asked.is_set():  # the sweep's SIGTERM came while it started: not a failure
+    if code == INTERRUPTED and stop.asked.is_set():  # the sweep's SIGTERM came before its loop: not a failure
         raise StoppedEarly(f"stopped while it started, before its first epoch: {shlex.join(cmd)}")
     if code != 0:
         raise RuntimeError(f"failed ({code}): {shlex.join(cmd)} — see {log}")
