@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 from collie.client import new_request_id
 from labeling_ui.tab import Submit, Withdraw
@@ -60,7 +61,10 @@ class Wake:
 
 @dataclass(frozen=True)
 class Moved:
+    """The segment on screen went to another tab of the labeler: it shows it, or `done` it there."""
+
     query_id: str
+    done: Literal["labelled", "skipped"] | None = None
 
 
 @dataclass(frozen=True)

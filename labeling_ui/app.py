@@ -18,11 +18,12 @@ from labeling_ui.browser import new_tab_id
 from labeling_ui.models import warm_models
 from labeling_ui.scene import south_view
 from labeling_ui.session import LabelerSession, UiConfig
+from labeling_ui.tab import Key
 
-PROBE_S = 3.0  # a page that does not answer a round trip this fast counts as open (see _tab_id)
+PROBE_S = 3.0  # a page that does not answer a round trip this fast counts as open (see tab_id)
 
 
-class LabelingApp:
+class LabelingApp:  # SiblingTabs for its sessions
     def __init__(
         self, config: UiConfig, host: str = "127.0.0.1", port: int = 8090, warm: tuple[str, ...] = MODEL_NAMES
     ) -> None:
@@ -35,7 +36,7 @@ class LabelingApp:
         self.server.initial_camera.position = south_view()  # as a segment aims it: no jump when it loads
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
-        self.tab_labels: dict[str, list[tuple[int, str]]] = {}  # each browser tab's labels, across its reloads
+        self.tab_labels: dict[str, list[Key]] = {}  # each browser tab's labels, across its reloads
         self._tabs: dict[str, LabelerSession] = {}  # each tab id → the connection that goes by it
         self._closing: list[LabelerSession] = []  # closed tabs still in their grace period
         self._lock = threading.Lock()
@@ -64,24 +65,39 @@ class LabelingApp:
         return f"{self.url}?token={quote(token, safe='')}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        session = LabelerSession(client, self.config, self._shown_in, self.tab_labels, self._tab_id)
+        session = LabelerSession(client, self.config, self)
         with self._lock:
             self.sessions[client.client_id] = session
         session.start()
 
-    def _shown_in(self, showing: LabelerSession, key: tuple[int, str]) -> None:
-        """`showing` put (run, query) on screen: the other tabs of the same labeler (open ones, and
-        closed ones still in their grace period) must no longer label or release it. The service
-        keeps a labeler's claims per labeler, so every such tab holds the same lease; the newest
-        tab to show a segment is the one that labels it."""
+    # ---------------------------------------------------------------- SiblingTabs (sibling_tabs.py)
+
+    def _siblings(self, of: LabelerSession) -> list[LabelerSession]:
+        """The other tabs of `of`'s labeler: open ones, and closed ones still in their grace period."""
         with self._lock:
             self._closing = [s for s in self._closing if not s.finished]
-            others = [s for s in [*self.sessions.values(), *self._closing] if s is not showing]
-        for other in others:
-            if other.who is not None and other.who == showing.who and key in other.on_screen_or_held():
+            others = [s for s in [*self.sessions.values(), *self._closing] if s is not of]
+        return [s for s in others if s.who is not None and s.who == of.who]
+
+    def shown(self, session: LabelerSession, key: Key) -> None:
+        """Tabs of one labeler that go by one id hold the same leases at the service (a reload and
+        the connection it replaced, a tab sharing another's id): the newest to show a segment is the
+        one that labels it; the others must no longer label or release it."""
+        for other in self._siblings(session):
+            if key in other.on_screen_or_held():
                 other.taken_over(key)
 
-    def _tab_id(self, session: LabelerSession, tab: str) -> str:
+    def done(self, session: LabelerSession, key: Key, skipped: bool) -> None:
+        for other in self._siblings(session):
+            if key in other.on_screen_or_held():
+                other.taken_over(key, "skipped" if skipped else "labelled")
+
+    def released(self, session: LabelerSession, keys: list[Key]) -> None:
+        if keys:
+            for other in self._siblings(session):
+                other.handed_back(keys)
+
+    def tab_id(self, session: LabelerSession, tab: str) -> str:
         """The id `session` goes by: `tab`, the one its page keeps in sessionStorage, unless another
         open page goes by it. A tab the browser duplicates (or opens with window.open) starts with a
         copy of that sessionStorage, id included, and the service keeps claims per tab id: the copy

@@ -8,7 +8,7 @@ wrong token in a new tab, never changes who the other tabs are. `?watch=RUN` ask
 The tab id names the tab's claims at the service (a claim is one tab's: only it may label the
 segment); it survives a reload, so a reloaded tab gets its segment back. A tab the browser
 duplicates, or one opened with window.open, starts with a copy of the sessionStorage, id
-included: the app (app.py, `_tab_id`) gives such a copy an id of its own (`remember_tab`).
+included: the app (app.py, `tab_id`) gives such a copy an id of its own (`remember_tab`).
 
 viser does not pass the page URL to the server and reads only localStorage, so a script (viser's
 RunJavascript message, the channel viser itself uses to ship plotly.js) moves the token from the

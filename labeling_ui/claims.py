@@ -16,7 +16,7 @@ from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
-from labeling_ui.tab import Segment
+from labeling_ui.tab import Key, Segment
 from labeling_ui.waiting import ended_words
 
 log = logging.getLogger(__name__)
@@ -84,7 +84,7 @@ class Claims:
                 state.preloaded(segment)
 
     def renew(self, link: ServiceLink) -> Segment | None:
-        """Keep the claims alive while the labeler watches (a claim renews every lease one holds).
+        """Keep the claims alive while the labeler watches (a claim renews every lease this tab holds).
         Returns the segment on screen if its lease was lost meanwhile (this tab stalled past it) or its
         run ended: it is dropped (with what was preloaded of that run), and the caller shows the next."""
         with self.tab as state:
@@ -119,21 +119,25 @@ class Claims:
             state.leases(run_id, set())
         return ended_words(run)
 
-    def release_all(self, link: ServiceLink | None) -> None:
+    def release_all(self, link: ServiceLink | None) -> list[Key]:
         """Hand every claim this tab holds back to the pool (a closed tab, a sign-out); claims that
-        another tab of this labeler took over were removed from this tab's by taken_over."""
+        another tab of this labeler took over were removed from this tab's by taken_over. Returns
+        the keys handed back (a release the service did not answer leaves its lease to run out)."""
         with self.tab as state:
             keys = state.release_all()
+        released = []
         for run_id, query_id in keys:
             if link is not None:
-                with contextlib.suppress(Rejected, ServiceDown, AuthRefused):  # else the lease runs out
+                with contextlib.suppress(Rejected, ServiceDown, AuthRefused):
                     link.release(run_id, query_id)
+                    released.append((run_id, query_id))
+        return released
 
-    def release_on_close(self, link: ServiceLink | None, grace_s: float) -> None:
+    def release_on_close(self, link: ServiceLink | None, grace_s: float) -> list[Key]:
         """The tab closed: after `grace_s` (a reload of the tab picks its claims up again meanwhile,
         and the new tab's on_show takes them off this one), hand back what is still held."""
         with self.tab as state:
             holding = bool(state.held)
         if grace_s > 0 and holding:
             time.sleep(grace_s)
-        self.release_all(link)
+        return self.release_all(link)

@@ -52,8 +52,10 @@ class Presenter:
 
     def show_next(self, link: ServiceLink, run: RunRead | None = None) -> bool:
         """Show the next segment (the prepared one, else a fresh claim in `run`, else in the run the
-        service picks); False (and the waiting screen) when there is none."""
+        service picks); False (and the waiting screen) when there is none, or the page went."""
         with self.tab as state:
+            if state.closed:
+                return False
             ready = state.next_ready()
         if ready is not None:
             return self.present(link, ready) or self.show_next(link, run)

@@ -16,7 +16,7 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable
+from typing import Literal
 
 import viser
 
@@ -32,6 +32,7 @@ from labeling_ui.presenter import Presenter
 from labeling_ui.revisions import Revisions
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
+from labeling_ui.sibling_tabs import SiblingTabs
 from labeling_ui.stream_waiter import StreamWaiter
 from labeling_ui.tab import Key, Phase, Refusal, Rules, Step, Submit, TabState, Withdraw
 from labeling_ui.timings import KeyTimings
@@ -47,21 +48,10 @@ SLOW_ANSWER_NOTICE = "The labeling service has not answered yet; your label is k
 class LabelerSession:
     """Implements panels.Actions for one viser client."""
 
-    def __init__(
-        self,
-        client: viser.ClientHandle,
-        config: UiConfig,
-        on_show: Callable[[LabelerSession, Key], None] = lambda *_: None,
-        tab_labels: dict[str, list[Key]] | None = None,
-        tab_id: Callable[[LabelerSession, str], str] = lambda _, tab: tab,
-    ) -> None:
-        """`on_show(session, key)`: the app tells this labeler's other tabs that this one took a segment.
-        `tab_labels`: each tab's labels by tab id, kept by the app across the tab's reloads.
-        `tab_id(session, tab)`: the id this tab goes by, given the one its page keeps (the app gives
-        a duplicated tab its own)."""
-        self._tab_id = tab_id
+    def __init__(self, client: viser.ClientHandle, config: UiConfig, siblings: SiblingTabs) -> None:
+        """`siblings`: the labeler's other tabs, as the app keeps them (sibling_tabs.py)."""
+        self.siblings = siblings
         self.page: str | None = None  # the page load it serves (browser.TabIdentity.page), once read
-        self.tab_labels = {} if tab_labels is None else tab_labels
         self.client = client
         self.config = config
         state = TabState(Rules(config.min_dwell_s, config.min_played))
@@ -77,7 +67,13 @@ class LabelerSession:
         self.claims = Claims(self.tab, self.screen, config.prefetch)
         self.waiter = StreamWaiter(f"collie-stream-{client.client_id}", self._closed, config.wait_s, self._actions.put)
         self.presenter = Presenter(
-            self.tab, self.screen, self.claims, self.waiter, config.fps, config.wait_s, lambda key: on_show(self, key)
+            self.tab,
+            self.screen,
+            self.claims,
+            self.waiter,
+            config.fps,
+            config.wait_s,
+            lambda key: siblings.shown(self, key),
         )
         self.revisions = Revisions(self.tab, self.claims, self.presenter)
         self.identity = Identity(client, config, self.tab, self.claims, self.presenter, self.waiter)
@@ -127,12 +123,18 @@ class LabelerSession:
             return False
         return True
 
-    def taken_over(self, key: Key) -> None:
-        """Another tab of this labeler shows `key` now: this one must not label it."""
+    def taken_over(self, key: Key, done: Literal["labelled", "skipped"] | None = None) -> None:
+        """Another tab of this labeler shows `key` now (`done`: "labelled" or "skipped" it): this
+        one must not label it."""
         with self.tab as state:
             was_shown = state.taken_elsewhere(key)
         if was_shown:
-            self._actions.put(Moved(key[1]))
+            self._actions.put(Moved(key[1], done))
+
+    def handed_back(self, keys: list[Key]) -> None:
+        """Another tab of this labeler closed and handed `keys` back: a claim may bring them here."""
+        with self.tab as state:
+            state.returned(keys)
 
     def start(self) -> LabelerSession:
         self._worker.start()
@@ -143,6 +145,8 @@ class LabelerSession:
         """The tab went away: stop, and hand back its claims (after a grace period in which a
         reload of the tab picks them up again: the new tab's on_show takes them off this one)."""
         self._grace = grace
+        with self.tab as state:
+            state.close()
         self._closed.set()
         self._actions.put(Close())
         self.player.close()
@@ -221,14 +225,14 @@ class LabelerSession:
     def _work(self) -> None:
         opened = read_identity(self.client)  # the token, ?watch= and the id of the tab it was opened in
         self.panels.fit_window(opened.window_width)
-        self.page = opened.page  # before the app compares it with its other connections' (_tab_id)
-        tab = self._tab_id(self, opened.tab)
+        self.page = opened.page  # before the app compares it with its other connections' (tab_id)
+        tab = self.siblings.tab_id(self, opened.tab)
         if tab != opened.tab:  # a copy of another open tab: a reload of it keeps the id it has now
             remember_tab(self.client, tab)
         with self.tab as state:
             state.watch_run, state.review = opened.watch, opened.review
             # the labels this tab made before a reload: U walks back through them
-            state.labelled = self.tab_labels.setdefault(tab, state.labelled)
+            state.labelled = self.siblings.tab_labels.setdefault(tab, state.labelled)
         self.identity.tab_id = tab  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)
@@ -259,7 +263,8 @@ class LabelerSession:
                 with self.tab as state:
                     state.failed()
                 self._closed.wait(1.0)
-        self.claims.release_on_close(self.link, self.config.release_grace_s if self._grace else 0.0)
+        released = self.claims.release_on_close(self.link, self.config.release_grace_s if self._grace else 0.0)
+        self.siblings.released(self, released)
 
     def _iterate(self) -> None:
         if self._retry is not None:  # an action the outage interrupted, same request id
@@ -328,9 +333,15 @@ class LabelerSession:
                     self.revisions.undo(self.link, request_id)
                 case Relabel(query_id):
                     self.revisions.relabel(self.link, query_id)
-                case Moved(query_id):
+                case Moved(query_id, None):
                     self.panels.notify(
                         "Moved to another tab", f"segment {query_id} is open in another of your tabs", "orange"
+                    )
+                case Moved(query_id, done):
+                    self.panels.notify(
+                        f"Already {done}",
+                        f"segment {query_id} was {done} in another of your tabs, or here before a reload",
+                        "gray",
                     )
                     with self.tab as state:  # the worker is the only writer of `shown`
                         state.drop_moved()
@@ -383,6 +394,8 @@ class LabelerSession:
                 state.recorded(submit)
             else:
                 state.refused(submit)
+        if reason is None:  # a reload of this tab may show it meanwhile (this page sent it before it went)
+            self.siblings.done(self, segment.key, skipped=submit.value == "skip")
         if reason is not None:
             self.panels.notify("Not recorded", reason, "red")
         self._show_next(segment.run)

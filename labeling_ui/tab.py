@@ -124,6 +124,7 @@ class TabState:
     recheck_at: float = 0.0  # while waiting: when to try a claim again without a wake-up (monotonic)
     watch_run: int | None = None
     review: Key | None = None  # the query an operator reviews in this tab (it never labels)
+    closed: bool = False  # the page went: nothing more is shown here (a label on its way still lands)
 
     @property
     def replay_only(self) -> bool:
@@ -190,6 +191,12 @@ class TabState:
         self.held.clear()
         self.moved.clear()
 
+    def close(self) -> None:
+        """The page went (a closed tab, or a reload: its new connection is another TabState). A
+        segment this one showed now would be taken off the reloaded tab, which then holds it and
+        never shows it; a label already sent still lands (its key was pressed before the close)."""
+        self.closed = True
+
     # ---------------------------------------------------------------- claims
 
     def claimed(self, segment: Segment) -> None:
@@ -202,16 +209,22 @@ class TabState:
         (a reload of this tab, or a tab that shared this one's id and so its claims)."""
         return key not in self.moved
 
+    def returned(self, keys: list[Key]) -> None:
+        """The tab that took `keys` over from this one closed and handed them back to the pool: a
+        later claim may bring them here again, and this tab must then show them (a lease it holds
+        and never shows is renewed for as long as the tab is open, and its run waits on it)."""
+        self.moved.difference_update(keys)
+
     def held_in(self, run_id: int) -> int:
         return sum(1 for k in self.held if k[0] == run_id)
 
     def wants_preload(self, prefetch: bool) -> bool:
-        return prefetch and self.shown is not None and not self.ahead and len(self.held) < MAX_HOLD
+        return prefetch and not self.closed and self.shown is not None and not self.ahead and len(self.held) < MAX_HOLD
 
     def preloaded(self, segment: Segment) -> bool:
         """A second claim came back: keep it to show next unless it is the one on screen, or another
         tab took it over while it was being prepared."""
-        if segment.key in self.moved or (self.shown is not None and segment.key == self.shown.key):
+        if self.closed or segment.key in self.moved or (self.shown is not None and segment.key == self.shown.key):
             return False
         if any(s.key == segment.key for s in self.ahead):
             return False
@@ -229,8 +242,8 @@ class TabState:
 
     def present(self, segment: Segment, now: float) -> bool:
         """`segment`'s first frame is about to be sent; False (and nothing changes) when another tab
-        of this labeler took it over after it was claimed here (it is not shown)."""
-        if segment.key in self.moved:
+        of this labeler took it over after it was claimed here, or the page went (it is not shown)."""
+        if segment.key in self.moved or self.closed:
             return False
         self.claimed(segment)
         segment.appeared, segment.played_to = now, 0.0

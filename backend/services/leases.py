@@ -4,15 +4,18 @@ leases go back to the pool at the next claim in their run (keeping their last ho
 still hand in a late label while nobody else has the query); a released query keeps no holder.
 Queries a labeler skipped come to them last; a query they voted on never comes to them again
 (redundancy: r distinct labelers), and gold copies (services/gold.py) are never in the pool: a due
-one is served to its labeler instead. A claim renews every lease the labeler holds in the run.
+one is served to its labeler instead. A claim renews every lease the labeler holds in the run, or
+with a tab, every lease that tab holds.
 
 A claim may name the browser tab it is for: the lease records it, and a label that names a tab
 is taken only from the tab holding the lease (services/labels.py), so a stale tab never labels a
 segment another tab of the same labeler shows. Each tab holds up to MAX_HOLD queries (the one on
 screen and the next, preloaded) and sees only its own; a labeler's tabs hold at most
-MAX_HOLD × MAX_TABS, and a tab beyond that which holds none is refused with why. A claim without a
-tab is the labeler's as a whole (an API client): it sees every query they hold and may hold
-MAX_HOLD. Statements are built once: this is the hottest path of the service."""
+MAX_HOLD × MAX_TABS, and a tab beyond that which holds none is refused with why. A tab's claim
+renews its own leases only: a closed tab's run out (after its UI's release, or lease_s) however long
+the labeler's other tabs go on. A claim without a tab is the labeler's as a whole (an API client):
+it sees and renews every query they hold and may hold MAX_HOLD. Statements are built once: this is
+the hottest path of the service."""
 
 from __future__ import annotations
 
@@ -21,7 +24,7 @@ import time
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import Connection, Update, bindparam, exists, select, update
+from sqlalchemy import Connection, Update, bindparam, exists, func, select, update
 from sqlalchemy.orm import aliased
 
 from backend.models import LabelEvent, LabelVote, Principal, Query, QueryData, Run
@@ -64,6 +67,10 @@ _RENEW = (
     )
     .values(lease_expires_at=bindparam("expires"))
     .returning(*_RETURNED)
+)
+_RENEW_TAB = _RENEW.where(Query.lease_tab == bindparam("tab"))
+_HELD_IN_RUN = select(func.count()).where(
+    Query.run_id == bindparam("run"), Query.status == "leased", Query.lease_owner_id == bindparam("me")
 )
 _RELEASE = (
     update(Query)
@@ -115,16 +122,16 @@ def claim(
     conn: Connection, run_id: int, caller: Caller, lease_s: float, hold: int = 1, tab: str | None = None
 ) -> bytes | None:
     """ClaimRead JSON for the caller's `hold`-th query (by session, then posting order) among those
-    they hold for `tab` (with no tab: among all they hold): every lease they hold in the run is
-    renewed; with fewer than `hold` held, the oldest pending query is taken (for `tab`) and
-    returned. None when one is needed and none is claimable right now."""
+    they hold for `tab` (with no tab: among all they hold), whose leases are renewed; with fewer
+    than `hold` held, the oldest pending query is taken (for `tab`) and returned. None when one is
+    needed and none is claimable right now."""
     now = time.time()
     params = {"run": run_id, "me": caller.id, "now": now, "expires": now + lease_s, "tab": tab}
     conn.execute(_SWEEP, params)
-    renewed = sorted(conn.execute(_RENEW, params).all(), key=lambda r: (r.session, r.id))
-    held = [r for r in renewed if r.lease_tab == tab] if tab is not None else renewed
+    held = sorted(conn.execute(_RENEW if tab is None else _RENEW_TAB, params).all(), key=lambda r: (r.session, r.id))
     row = held[hold - 1] if len(held) >= hold else None
-    room = tab is None or len(renewed) < MAX_HOLD * MAX_TABS  # no more tabs' worth than that
+    in_run = len(held) if tab is None or row is not None else conn.execute(_HELD_IN_RUN, params).scalar_one()
+    room = tab is None or in_run < MAX_HOLD * MAX_TABS  # no more tabs' worth than that
     # PostgreSQL: a concurrent claim may win our candidate (the re-checked WHERE then fails); try again.
     attempts = 1 if conn.dialect.name == "sqlite" else 4
     if row is None and room and (gold_pk := gold.serve_if_due(conn, run_id, caller, now + lease_s, tab)) is not None:
@@ -146,7 +153,7 @@ def claim(
         raise Conflict(f"{runs.ended(run_id, state.status, state.control)}: it takes no more labels")
     if not room and not held:  # a tab too many: say so, where an empty answer would read as "no work"
         raise Conflict(
-            f"your other tabs hold {len(renewed)} segments of run {run_id}, as many as {MAX_TABS} tabs may; "
+            f"your other tabs hold {in_run} segments of run {run_id}, as many as {MAX_TABS} tabs may; "
             "close one of them (or label there) to label in this one"
         )
     return None

@@ -183,3 +183,28 @@ def test_a_label_and_an_undo_lease_for_as_long_as_the_client_asks(
     assert 20 < expires_in(first.query.query_id) <= 30
     ack = who.submit(run.id, first.query.query_id, 2, tab=TAB_A, next=True)  # no lease_s: the service's
     assert ack.next is not None and expires_in(ack.next.query.query_id) > 100
+
+
+def test_a_closed_tabs_lease_runs_out_while_the_labelers_other_tab_goes_on(
+    new_labeler: Callable[[str], CollieClient], trainer: CollieClient
+) -> None:
+    """A tab's claim renews that tab's leases only. It used to renew every lease the labeler held,
+    so a segment left in a tab that closed without handing it back (its UI died, the service was
+    down then) stayed leased for as long as the labeler labelled elsewhere: nobody else could take
+    it, and a run that waits for its session's labels waited on it. An API client's claim (no tab)
+    is the labeler's as a whole and still renews everything they hold."""
+    run = fresh_run(trainer, 4)
+    who = new_labeler("closed-tab")
+    left = who.claim(run.id, tab=TAB_A, lease_s=1.0)
+    assert left is not None
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:  # the other tab renews every so often
+        assert who.claim(run.id, tab=TAB_B, lease_s=60.0) is not None
+        time.sleep(0.2)
+    with new_labeler("someone-else") as other:
+        taken = [other.claim(run.id, hold=h) for h in (1, 2)]
+    assert left.query.query_id in {c.query.query_id for c in taken if c is not None}
+    assert who.claim(run.id, lease_s=60.0) is not None  # no tab: renews the labeler's B lease
+    (b_query,) = [q for q in trainer.queries(run.id) if q.status == "leased" and q.lease_owner == "closed-tab"]
+    assert b_query.lease_expires_at is not None
+    assert (b_query.lease_expires_at - datetime.now(UTC)).total_seconds() > 30

@@ -5,15 +5,19 @@ preferences and the reset-view control."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from urllib.parse import quote
 
 import pytest
 from playwright.sync_api import Browser, Page
+from stalling_proxy import stalling_relay
 
 from collie.client import CollieClient
 from collie.schemas import MetricsIn
+from labeling_ui.app import LabelingApp
 from labeling_ui.browser import TAB_KEY
+from labeling_ui.session import UiConfig
 
 from .page import TIMEOUT_S, VIEWPORT, canvas_until, segment_id, wait_segment, wait_text
 from .stack import TOKENS, Stack
@@ -149,7 +153,7 @@ def test_a_tab_whose_segment_another_tab_took_over_moves_on(stack: Stack, browse
     and moves on by itself (it used to stay on it, refusing every key)."""
     run = stack.post_run("point", 6, seed=17)
     app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
-    app._tab_id = lambda _, tab: tab  # type: ignore[method-assign]  # the copy keeps the original's id
+    app.tab_id = lambda _, tab: tab  # type: ignore[method-assign]  # the copy keeps the original's id
     context = profile(browser)
     original = tab(context, app.labeler_url(stack.new_labeler("shared-id")))
     first = wait_segment(original)
@@ -347,8 +351,43 @@ def test_a_page_that_reconnects_keeps_its_tab_id_while_its_old_connection_looks_
         old = SimpleNamespace(page=page, closed=threading.Event(), page_open=lambda timeout_s: True)
         app._tabs[tab] = old  # type: ignore[assignment]
         back = SimpleNamespace(page=page, closed=threading.Event(), page_open=lambda timeout_s: True)
-        assert app._tab_id(back, tab) == tab  # type: ignore[arg-type]
+        assert app.tab_id(back, tab) == tab  # type: ignore[arg-type]
         copy = SimpleNamespace(page="page-" + "c" * 24)
-        assert app._tab_id(copy, tab) != tab  # type: ignore[arg-type]
+        assert app.tab_id(copy, tab) != tab  # type: ignore[arg-type]
     finally:
         app.stop()
+
+
+def test_a_reload_while_a_label_is_on_its_way_loses_nothing_and_stalls_nothing(stack: Stack, browser: Browser) -> None:
+    """The labeler presses a key, the network holds the label, and they reload. The reloaded tab
+    gets the segment back (the label has not arrived); when the old page's label then lands, the
+    tab moves on at once, saying why (it used to stay on a labelled segment until its lease renewal
+    called it lost to someone else), and every segment can still be labelled: the old page shows
+    nothing after its close (its preload once became a segment the reloaded tab held, never
+    showed and renewed for ever: the run never got its labels)."""
+    run = stack.post_run("point", 4, seed=19)
+    with stalling_relay(stack.api) as relay:
+        config = UiConfig(api=relay.url, run_id=run.id, min_dwell_s=NO_DWELL, min_played=0.0, lease_s=600.0)
+        app = LabelingApp(replace(config, release_grace_s=0.5), port=0)
+        stack.apps.append(app)
+        page = tab(profile(browser), app.labeler_url(stack.new_labeler("reload-in-flight")))
+        first = wait_segment(page)
+        wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+        relay.stall()
+        press(page, "2")
+        wait_text(page, "Sending your label")
+        page.reload()
+        assert wait_segment(page) == first  # not labelled yet: it is still this tab's
+        relay.resume()  # the old page's label arrives
+        wait_text(page, "Already labelled", timeout_s=30)  # not after a lease renewal (200 s)
+        shown = wait_segment(page, first, timeout_s=30)
+        labelled = {first}
+        while shown not in labelled:
+            labelled.add(shown)
+            press(page, "1")
+            shown = wait_segment(page, shown) if len(labelled) < 4 else shown
+        wait_text(page, "Nothing to label right now")
+        assert {q: v for q, (v, _) in effective(stack, run.id).items()} == {q: 1 if q == first else 0 for q in labelled}
+        wait_until(lambda: stack.trainer.run(run.id).queue.leased == 0)
+        assert "Claim lost" not in page.inner_text("body")
+        page.context.close()

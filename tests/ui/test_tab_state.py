@@ -293,3 +293,30 @@ def test_review_mode_is_its_own_phase_and_never_labels() -> None:
         assert isinstance(refused, Refusal) and refused.title == "Review only" and "0-1" in refused.body
     refused = state.undo_target([(4, "0-0")], "u")  # even with a label of the operator's in effect
     assert isinstance(refused, Refusal) and refused.title == "Review only"
+
+
+def test_a_closed_tab_shows_and_preloads_nothing_but_its_label_on_the_way_lands() -> None:
+    """A reload replaces the page's connection: the old one must not put a segment on screen (its
+    reloaded tab, which goes by the same id, would drop it and hold it unshown for ever)."""
+    a, b, c = segment("a", frames=1), segment("b", frames=1), segment("c", frames=1)
+    state = showing(a, Rules(0.0, 0.0), at=0.0)
+    sent = state.press(1, 1.0, "r")
+    assert isinstance(sent, Submit)
+    assert state.preloaded(b)
+    state.close()
+    state.recorded(sent)  # the label pressed before the reload was taken
+    assert a.key in state.labelled and state.shown is None
+    assert state.next_ready() is b and state.present(b, 2.0) is False and state.shown is None
+    assert not state.preloaded(c) and not state.wants_preload(prefetch=True)
+    assert b.key in state.release_all()  # handed back after the grace period, unless the reload shows it
+
+
+def test_a_segment_handed_back_by_the_tab_that_took_it_over_may_be_shown_here_again() -> None:
+    a, b = segment("a"), segment("b")
+    state = showing(a)
+    state.taken_elsewhere(b.key)  # the old connection of this tab showed it
+    assert not state.may_show(b.key)
+    state.returned([b.key])  # it closed and released it: the next claim of this tab's id may bring it
+    assert state.may_show(b.key)
+    state.claimed(b)
+    assert state.preloaded(b) and state.next_ready() is b
