@@ -343,9 +343,14 @@ class Panels:
     def show_inset(self, image: np.ndarray) -> None:
         self.inset.image = image
 
-    def show_progress(self, p: Progress) -> None:
+    def show_progress(self, p: Progress, yours: int) -> None:
+        """`yours`: this labeler's labels in effect in the session. With redundancy r a query counts
+        once r labelers agree, so a lone labeler's count would stay at 0: theirs is said beside it."""
         total = f"{p.total_done} / {p.total_planned}" if p.total_planned else f"{p.total_done}"
-        self.progress.content = f"This session **{p.session_done} / {p.session_size}** · total **{total}**"
+        session = f"This session **{p.session_done} / {p.session_size}**"
+        if p.redundancy > 1:
+            session += f" settled ({p.redundancy} labelers each) · yours **{yours}**"
+        self.progress.content = f"{session} · total **{total}**"
         self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)  # type: ignore[misc]  # settable
 
     def show_frame(self, frame: int, playing: bool) -> None:

@@ -128,10 +128,11 @@ class Presenter:
             shown = state.shown
         if shown is not None:
             progress = link.progress(shown.run.id, shown.query.session)
-            self.panels.show_progress(progress)
-            self.panels.show_instructions(progress.instructions)  # an operator may have changed them
             if mine:
                 self.load_mine(link, shown.run)
+            yours = sum(1 for label in self.mine if label.session == shown.query.session and label.in_effect)
+            self.panels.show_progress(progress, yours)
+            self.panels.show_instructions(progress.instructions)  # an operator may have changed them
 
     def load_mine(self, link: ServiceLink, run: RunRead) -> None:
         self.mine = tuple(link.my_labels(run.id))

@@ -206,6 +206,20 @@ def test_the_counts_follow_labels_made_elsewhere_while_a_segment_is_on_screen(st
     page.context.close()
 
 
+def test_with_redundancy_a_lone_labeler_sees_their_own_count_move(stack: Stack, browser: Browser) -> None:
+    """With two labelers per query a session counts a query once both labelled it: a lone labeler's
+    "This session 0 / 3" never moved, however many they labelled. Their own count is said beside it."""
+    run = stack.post_run("point", 3, redundancy=2)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("lone")))
+    first = wait_segment(page)
+    wait_text(page, "This session 0 / 3 settled (2 labelers each) · yours 0")
+    press(page, "1")
+    wait_segment(page, first)
+    wait_text(page, "This session 0 / 3 settled (2 labelers each) · yours 1")
+    page.context.close()
+
+
 def view(client: viser.ClientHandle) -> np.ndarray | None:
     """The camera as the browser last reported it (orientation and position), None before its first report."""
     try:
