@@ -250,12 +250,22 @@ def is_sqlite_database(path: Path) -> bool:
         return False
 
 
-def made(folder: Path, what: str) -> None:
-    """`folder` exists as a folder afterwards, else ValueError naming `what` and why."""
+def made(folder: Path, what: str) -> list[Path]:
+    """`folder` exists as a folder afterwards, else ValueError naming `what` and why. Returns the
+    folders this made, the deepest last (a refused start removes them again: `unmake`)."""
+    missing = [f for f in [folder, *folder.parents] if not f.exists()][::-1]
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ValueError(f"cannot create {what} {folder}: {broken_link(exc) or exc.strerror or exc}") from None
+    return missing
+
+
+def unmake(folders: list[Path]) -> None:
+    """Remove the folders `made` made, deepest first, where nothing else was put in them."""
+    for folder in reversed(folders):
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def locked(out: Path) -> int:
@@ -277,23 +287,22 @@ def locked(out: Path) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    new_out = False
+    new_info: list[Path] = []  # folders this start made: a refused one leaves none behind
+    new_out: list[Path] = []
     try:
         out = checked(args)
         why = refused_by_trainer(args)
         if why is not None:
             raise ValueError(f"collie train would refuse the run: {why}")
-        new_out = not out.exists()
         if args.info_json is not None:
-            made(args.info_json.parent, "the folder of --info-json")
-        made(out, "--out")
+            new_info = made(args.info_json.parent, "the folder of --info-json")
+        new_out = made(out, "--out")
         lock = locked(out)
         sock = listening_socket(args.host, args.port)  # a port in use: refused before anything is written
     except ValueError as exc:
-        if new_out and (out / STACK_LOCK).exists():  # nothing of a stack yet: no folder left behind
-            (out / STACK_LOCK).unlink()
-            with contextlib.suppress(OSError):
-                out.rmdir()
+        if new_out:  # nothing of a stack yet
+            (out / STACK_LOCK).unlink(missing_ok=True)
+        unmake(new_info + new_out)
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
     # an explicit --db, else the lab's database when COLLIE_DATABASE_URL names one, else OUT's SQLite file

@@ -201,7 +201,7 @@ def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        cmd = up_command(tmp_path / "stack")
+        cmd = [*up_command(tmp_path / "stack"), "--info-json", str(tmp_path / "info" / "deeper" / "info.json")]
         cmd[cmd.index("--port") + 1] = str(port)
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2  # a refusal, as `collie serve` says it (was 1)
@@ -210,6 +210,7 @@ def test_a_service_port_in_use_is_an_error_naming_it(tmp_path):
         "(--port 0 takes any free port)"
     )
     assert not (tmp_path / "stack").exists()  # was left holding tokens.json, up.lock and logs/
+    assert not (tmp_path / "info").exists()  # the folders made for --info-json go too
 
 
 def test_a_run_folder_whose_database_is_gone_is_one_error_not_a_restart_loop(finished_stack, tmp_path):
