@@ -187,10 +187,25 @@ def set_status(conn: Connection, run_id: int, change: StatusUpdate) -> RunRead:
     if (change.status, epoch) != (current.status, current.epoch) or change.message:
         now = time.time()
         conn.execute(update(Run).where(Run.id == run_id).values(status=change.status, epoch=epoch, updated_at=now))
+        if change.status in FINISHED and current.status not in FINISHED:
+            _end_leases(conn, run_id, now)
         events.append(
             conn, run_id, StatusChanged(status=change.status, epoch=epoch, message=change.message or None), now
         )
     return get(conn, run_id)
+
+
+def _end_leases(conn: Connection, run_id: int, now: float) -> None:
+    """A run that ended takes no label: what its labelers' tabs held goes back to the pool now (a
+    gold copy is retired, as a released one is), not when each lease runs out (the queue said
+    "leased: on a labeler's screen" of segments no screen could label any more)."""
+    leased = (Query.run_id == run_id, Query.status == "leased")
+    conn.execute(
+        update(Query).where(*leased, Query.gold_of.is_not(None)).values(status="retired", lease_expires_at=None)
+    )
+    conn.execute(
+        update(Query).where(*leased).values(status="pending", lease_owner_id=None, lease_tab=None, lease_expires_at=now)
+    )
 
 
 def extend(conn: Connection, run_id: int, body: RunExtend) -> RunRead:

@@ -110,3 +110,26 @@ def test_a_revoked_caller_past_the_token_check_takes_and_renews_nothing(
         assert leases.claim(conn, created.id, caller, lease_s=600.0, hold=2) is None  # nothing new
     assert trainer.query(created.id, held.query.query_id).lease_expires_at == expires  # not renewed
     assert trainer.run(created.id).queue.leased == 1
+
+
+def test_a_run_that_ends_hands_every_claim_back_at_once(
+    trainer: CollieClient, operator: CollieClient, new_labeler: Callable[[str], CollieClient]
+) -> None:
+    """The queue said "leased: on a labeler's screen now" of a finished run's segments until each
+    lease ran out, though no screen could label them any more. A run being stopped still takes the
+    labels on screen (the trainer has not finished): its leases stand until it ends."""
+    created = trainer.create_run(make_run_spec())
+    trainer.post_session(created.id, make_session(0, 4))
+    holder = new_labeler("holder-at-the-end")
+    held = [c.query.query_id for c in (holder.claim(created.id, hold=h) for h in (1, 2)) if c is not None]
+    assert len(held) == MAX_HOLD
+    operator.stop(created.id)
+    assert trainer.run(created.id).queue.leased == MAX_HOLD  # stopping: a label on screen still lands
+    holder.submit(created.id, held[0], 1)
+    trainer.set_status(created.id, "finished")
+    assert trainer.run(created.id).queue.model_dump(include={"pending", "leased", "labelled"}) == {
+        "pending": 3,
+        "leased": 0,
+        "labelled": 1,
+    }
+    assert trainer.query(created.id, held[1]).lease_owner is None
