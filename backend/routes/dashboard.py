@@ -87,10 +87,11 @@ def as_json(model: BaseModel) -> Response:
 
 @router.get("/runs/{run_id}", response_model=RunDashboard)
 def run_page(
-    run_id: RunId, _: AnyCaller, db: DB, cache: Cache, max_points: Points = DEFAULT_HISTORY_POINTS
+    run_id: RunId, caller: AnyCaller, db: DB, cache: Cache, max_points: Points = DEFAULT_HISTORY_POINTS
 ) -> Response:
+    """The run page; a labeler's has no disagreements (they name other labelers' votes)."""
     with db.read() as conn:
-        return as_json(dashboard.run_page(conn, run_id, max_points, cache))
+        return as_json(dashboard.run_page(conn, run_id, max_points, cache, votes=caller.role != "labeler"))
 
 
 @router.get("/runs/{run_id}/metrics", response_model=MetricHistory)
@@ -100,9 +101,10 @@ def metric_history(run_id: RunId, _: AnyCaller, db: DB, max_points: Points = DEF
 
 
 @router.get("/runs/{run_id}/labeling")
-def labeling(run_id: RunId, _: AnyCaller, db: DB, cache: Cache) -> LabelingView:
+def labeling(run_id: RunId, caller: AnyCaller, db: DB, cache: Cache) -> LabelingView:
+    """The labeling panel; a labeler's has no disagreements (they name other labelers' votes)."""
     with db.read() as conn:
-        return dashboard.labeling_view(conn, run_id, cache)
+        return dashboard.labeling_view(conn, run_id, cache, votes=caller.role != "labeler")
 
 
 @router.get("/runs/{run_id}/queries/{query_id}/review", response_model=QueryReview)

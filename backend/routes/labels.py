@@ -100,13 +100,16 @@ def discard_votes(run_id: RunId, labeler_id: PrincipalId, caller: OperatorCaller
 @router.get("/labels")
 def list_label_events(
     run_id: RunId,
-    _: AnyCaller,
+    caller: AnyCaller,
     db: DB,
     after: Annotated[int, Query(ge=0, le=MAX_INT)] = 0,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
 ) -> list[LabelEventRead]:
+    """The run's label events in order; a labeler gets their own only (another's vote, seen before
+    theirs on a query that may still come to them, defeats redundancy's independent votes)."""
+    mine = caller.id if caller.role == "labeler" else None
     with db.read() as conn:
-        return labels.list_events(conn, run_id, after, limit)
+        return labels.list_events(conn, run_id, after, limit, mine)
 
 
 @router.get("/labels/mine")

@@ -4,14 +4,13 @@ metric history thinned in SQL so that a run of 10 000 evaluations costs ~1000 de
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from sqlalchemy import Connection, func, or_, select
 
 from backend.models import LabelEvent, Metrics, Rollouts, StreamEvent
 from backend.services import label_stats, runs, telemetry
 from backend.services.label_stats import SegmentCache
-from collie.dashboard_schemas import MetricHistory, RunDashboard, RunSummary
+from collie.dashboard_schemas import LabelingView, MetricHistory, RunDashboard, RunSummary
 from collie.schemas import RolloutsRead, RunRead
 from collie.tasks import Task, task_for_run
 
@@ -98,12 +97,15 @@ def task_of(run: RunRead) -> tuple[Task | None, str | None]:
         return None, str(exc)
 
 
-def run_page(conn: Connection, run_id: int, max_points: int, cache: SegmentCache) -> RunDashboard:
-    """The whole run page from one read transaction (a consistent snapshot up to last_event_id)."""
+def run_page(conn: Connection, run_id: int, max_points: int, cache: SegmentCache, votes: bool = True) -> RunDashboard:
+    """The whole run page from one read transaction (a consistent snapshot up to last_event_id);
+    `votes`: with the disagreements, which name who voted what (not for a labeler: `without_votes`)."""
     row = runs.row(conn, run_id)
     run = runs.get(conn, run_id)
     task, task_error = task_of(run)
     view = label_stats.view(conn, row, task, cache)
+    if not votes:
+        view = without_votes(view)
     return RunDashboard(
         run=run,
         task=task.to_dict() if task is not None else None,
@@ -115,6 +117,13 @@ def run_page(conn: Connection, run_id: int, max_points: int, cache: SegmentCache
     )
 
 
-def labeling_view(conn: Connection, run_id: int, cache: SegmentCache) -> Any:
+def labeling_view(conn: Connection, run_id: int, cache: SegmentCache, votes: bool = True) -> LabelingView:
     row = runs.row(conn, run_id)
-    return label_stats.view(conn, row, task_of(runs.get(conn, run_id))[0], cache)
+    view = label_stats.view(conn, row, task_of(runs.get(conn, run_id))[0], cache)
+    return view if votes else without_votes(view)
+
+
+def without_votes(view: LabelingView) -> LabelingView:
+    """A labeler's copy: no disagreements, whose labels name who voted what on queries that may still
+    come to them (with redundancy r, a vote seen before one's own defeats the r independent votes)."""
+    return view.model_copy(update={"labeling": view.labeling.model_copy(update={"disagreements": []})})

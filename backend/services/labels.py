@@ -475,15 +475,16 @@ def count_reached(conn: Connection, run_id: int, now: float) -> list[str]:
     return counted
 
 
-def list_events(conn: Connection, run_id: int, after: int, limit: int) -> list[LabelEventRead]:
-    """The run's label events in order (those of gold copies excepted: they are no query's labels)."""
+def list_events(
+    conn: Connection, run_id: int, after: int, limit: int, labeler_id: int | None = None
+) -> list[LabelEventRead]:
+    """The run's label events in order (those of gold copies excepted: they are no query's labels);
+    with `labeler_id`, that labeler's only."""
     runs.row(conn, run_id)
-    rows = conn.execute(
-        _event_select()
-        .where(LabelEvent.run_id == run_id, LabelEvent.id > after, Query.gold_of.is_(None))
-        .order_by(LabelEvent.id)
-        .limit(limit)
-    )
+    query = _event_select().where(LabelEvent.run_id == run_id, LabelEvent.id > after, Query.gold_of.is_(None))
+    if labeler_id is not None:
+        query = query.where(LabelEvent.labeler_id == labeler_id)
+    rows = conn.execute(query.order_by(LabelEvent.id).limit(limit))
     return [_event_read(r) for r in rows]
 
 

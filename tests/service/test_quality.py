@@ -269,6 +269,35 @@ def test_agreement_and_disagreements_on_the_dashboard(
     assert len(odd["xy"]) == DIMS.horizon and stats["n_disagreements"] == 1
 
 
+def test_a_labeler_never_sees_another_labelers_vote(
+    live: BackgroundServer, trainer: CollieClient, operator: CollieClient, new_labeler: Labelers
+) -> None:
+    """With redundancy 2 a query counts once two labelers voted on it independently. A labeler's
+    token read the other's vote on a query still open to them: in the dashboard's disagreements
+    (labeler → label) and in the run's label events. Now a labeler reads their own events only and
+    no disagreements; the operator's and the trainer's reads are unchanged."""
+    spec = make_run_spec(task="range_north").model_copy(update={"redundancy": 2})
+    run = trainer.create_run(spec)
+    trainer.post_session(run.id, north_session(0, [-3.0, -3.0]))
+    first, second = new_labeler("votes-first"), new_labeler("votes-second")
+    for query_id, label in (("0-0", 2), ("0-1", 1)):  # range_north calls both neutral: 0-0 disagrees with the rule
+        claim = first.claim(run.id)
+        assert claim is not None and claim.query.query_id == query_id
+        first.submit(run.id, query_id, label)  # type: ignore[arg-type]
+
+    def page(token: str, path: str) -> dict:
+        url = f"{live.url}/api/dashboard/runs/{run.id}{path}"
+        return httpx.get(url, headers={"Authorization": f"Bearer {token}"}, timeout=30).json()
+
+    assert page(TOKENS["operator"], "/labeling")["labeling"]["disagreements"][0]["labels"] == {"votes-first": 2}
+    assert page(second.token, "/labeling")["labeling"]["disagreements"] == []
+    assert page(second.token, "")["labeling"]["disagreements"] == []  # the whole run page too
+    assert page(second.token, "")["labeling"]["n_disagreements"] == 1  # how many, not whose
+    assert second.label_events(run.id) == []
+    assert [e.query_id for e in first.label_events(run.id)] == ["0-0", "0-1"]  # one's own, as before
+    assert len(operator.label_events(run.id)) == len(trainer.label_events(run.id)) == 2
+
+
 def test_a_0002_database_keeps_its_labels_as_votes(tmp_path: Path) -> None:
     path = tmp_path / "old.db"
     db = Database(f"sqlite:///{path}")
