@@ -22,7 +22,7 @@ import numpy as np
 from collie.schemas import RolloutsRead, RunRead
 from labeling_ui.models import ModelError, Poser, replay_model
 from labeling_ui.panels import skill_text
-from labeling_ui.service import ServiceLink
+from labeling_ui.service import Rejected, ServiceLink
 
 if TYPE_CHECKING:
     from labeling_ui.screen import TabScreen
@@ -44,12 +44,21 @@ class SkillShow:
         self.index = 0
         self.auto = True  # the next skill when one ends
         self._lock = threading.Lock()  # the worker and the skill buttons (watch mode) both move it
-        if self.watch:
-            screen.panels.add_skill_controls(self)
+        self._controls = False  # watch mode's skill buttons, added once the run is known
 
     def reload(self, link: ServiceLink) -> None:
-        """Fetch the latest evaluation; show it if it is new."""
-        run = link.run(self.run_id)
+        """Fetch the latest evaluation; show it if it is new. Watch mode of a run the service does not
+        have (or this token may not see) says so alone on screen: no label controls, no skill buttons."""
+        try:
+            run = link.run(self.run_id)
+        except Rejected as exc:
+            if not self.watch:
+                raise
+            self.screen.show_alone(f"⚠️ **Cannot watch run {self.run_id}**: {exc}.")
+            return
+        if self.watch and not self._controls:
+            self.screen.panels.add_skill_controls(self)
+            self._controls = True
         if self.watch_stream is not None:
             self.watch_stream(run.id, run.last_event_id)
         latest = link.latest_rollouts(self.run_id)

@@ -3,6 +3,7 @@ evaluation from the simulator states the trainer posted, and claims nothing."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from urllib.parse import quote
 
@@ -41,6 +42,19 @@ def test_watch_replays_every_skill_and_claims_nothing(stack: Stack, browser: Bro
     assert stack.trainer.run(run.id).queue.leased == 0
     stack.trainer.post_rollouts(run.id, evaluation(50, 4))  # a newer evaluation replaces the skills
     wait_text(page, "evaluation at epoch 50")
+    page.context.close()
+
+
+def test_watching_a_run_the_service_does_not_have_says_so_alone(stack: Stack, browser: Browser) -> None:
+    """Was: the labeling screen's waiting words ("Nothing to label right now … The service said: no
+    run 99"), its undo button, and one more "Skills" panel at every retry."""
+    app = stack.ui()
+    page = open_labeler(browser, f"{app.url}?token={quote(TOKENS['operator'])}&watch=99999")
+    wait_text(page, "Cannot watch run 99999: no run 99999")
+    time.sleep(2 * app.config.wait_s / 10 + 1.0)  # a few of the worker's turns
+    body = page.inner_text("body")
+    assert "Nothing to label" not in body and "Undo last label" not in body
+    assert page.get_by_text("next ▶").count() == 0  # no skill buttons for a run that is not there
     page.context.close()
 
 

@@ -82,3 +82,14 @@ def test_an_armed_button_stays_armed_through_a_live_update(
         "document.querySelector('#discard-message')?.textContent.startsWith('discarded 1 label of careful-web')"
     )
     assert labels_of(page, "newcomer-web") == "1"
+
+
+def test_a_stopped_run_offers_no_discard(
+    page: Any, live: BackgroundServer, operator: CollieClient, run: RunRead
+) -> None:
+    """Was: the button stayed, and its second click answered that a stopped run keeps its labels."""
+    newcomer = '#labelers-stats tr[data-labeler="newcomer-web"]'
+    page.wait_for_selector(f"{newcomer} button[data-discard]")
+    operator.stop(run.id)
+    page.wait_for_function(f"document.querySelector('{newcomer} button[data-discard]') === null")
+    assert labels_of(page, "newcomer-web") == "1"  # the labels are still shown, only not discardable

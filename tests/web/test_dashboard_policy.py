@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
+import httpx
 import pytest
 from service.conftest import TOKENS, make_run_spec
 
@@ -116,11 +117,15 @@ def test_a_labeler_token_may_not_set_it(
     labeler = browser.new_page(bypass_csp=True)
     labeler.set_default_timeout(WAIT_MS)
     labeler.goto(f"{live.url}/?token={TOKENS['labeler']}#run={run.id}")
-    shown(labeler, "continue after 2.5 s")
-    labeler.fill("#policy-seconds", "9")
-    labeler.click("#policy-apply")
-    labeler.wait_for_function("document.querySelector('#control-message').textContent.includes('403')")
+    labeler.wait_for_function("document.body.dataset.role === 'labeler'")
+    assert not labeler.is_visible("#policy")  # not offered (was: it answered 403 once applied)
     labeler.close()
+    refused = httpx.post(
+        f"{live.url}/api/runs/{run.id}/feedback-policy",
+        json={"timeout_s": 9},
+        headers={"Authorization": f"Bearer {TOKENS['labeler']}"},
+    )
+    assert refused.status_code == 403
     assert trainer.run(run.id).feedback_timeout_s == 2.5
 
 

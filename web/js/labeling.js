@@ -22,8 +22,9 @@ const COLUMN_HELP = [
 ];
 
 // A labeler's labels in this run can be discarded (operator; a second click confirms: `discard.armed`
-// is the id of the labeler whose button waits for it, `discard.message` says what the last one did).
-const discardButton = (l, armed) => (l.labels ? `<button type="button" class="danger" data-discard="${l.id}">${
+// is the id of the labeler whose button waits for it, `discard.message` says what the last one did),
+// until the run is stopped or over (`discard.closed`: the service keeps its labels as they are then).
+const discardButton = (l, armed, closed) => (l.labels && !closed ? `<button type="button" class="danger operator-only" data-discard="${l.id}">${
   armed === l.id ? `Confirm: discard ${l.labels}` : "Discard labels"}</button>` : "");
 
 // `ruleless`: the run has no task rule (only an instruction), so there is no oracle to agree with.
@@ -34,7 +35,7 @@ export function renderLabeling(element, view, ruleless = false, discard = { arme
       <td>${l.median_s == null ? "—" : `${num(l.median_s, 1)} s`}</td><td>${percent(l.agreement)}</td>
       <td>${l.alpha == null ? "—" : num(l.alpha, 2)}</td>
       <td>${l.gold_answered ? `${percent(l.gold_accuracy)} of ${l.gold_answered}` : "—"}</td>
-      <td>${discardButton(l, discard.armed)}</td>
+      <td>${discardButton(l, discard.armed, discard.closed)}</td>
     </tr>`).join("");
   const quality = `${s.redundancy === 1 ? "1 label per query" : `${s.redundancy} labels per query from distinct labelers`}${
     s.gold_rate ? ` · ${percent(s.gold_rate)} gold` : ""}`;

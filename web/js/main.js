@@ -142,8 +142,28 @@ async function followRuns(generation) {
   }
 }
 
+// Who the token is: a labeler's or the trainer's sees the runs, and the page hides what the service
+// would refuse it (run control, quality, discards, labeler management, the disagreements' votes).
+async function showRole(generation) {
+  try {
+    const me = await api("me");
+    if (generation !== started) return;
+    document.body.dataset.role = me.role;
+    const note = $("#role-note");
+    note.hidden = me.role === "operator";
+    note.textContent = me.role === "operator" ? "" : `Signed in as ${me.name}, a ${me.role}: this page shows the ` +
+      "runs; pausing, stopping, the feedback policy, quality, discarding labels, managing labelers and " +
+      "the disagreements take an operator's token.";
+  } catch {
+    // a refused token is said by the runs poll; the page keeps offering everything meanwhile
+  }
+}
+
 function start() {
   started += 1;
+  delete document.body.dataset.role;
+  $("#role-note").hidden = true;
+  showRole(started);
   followRuns(started);
   labelers.load();
   if (selectedRun() != null) openSelected(); // a linked run loads beside the list, not after it

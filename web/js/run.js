@@ -135,7 +135,9 @@ export class RunPage {
   }
 
   showRun(run) {
+    const closedBefore = this.closed();
     this.run = run;
+    if (this.labelingView && this.closed() !== closedBefore) this.renderLabeling(this.labelingView); // no discard now
     const status = this.root.querySelector("#run-status");
     status.className = `status ${shownStatus(run)}`;
     status.textContent = (STATUS_TEXT[shownStatus(run)] ?? run.status) + (controlPending(run) ? ` (${run.control} requested)` : "");
@@ -149,9 +151,14 @@ export class RunPage {
     this.quality.show(run);
   }
 
+  // Stopped or over: the service keeps the run's labels as they are (no discard).
+  closed() {
+    return this.run != null && (this.run.control === "stop" || ["finished", "failed"].includes(this.run.status));
+  }
+
   renderLabeling(view) {
     this.labelingView = view;
-    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null, this.discard);
+    renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null, { ...this.discard, closed: this.closed() });
     if (this.run) {  // another operator may have changed them: the form's untouched inputs follow
       const { redundancy, gold_rate } = view.labeling;
       this.quality.show({ ...this.run, redundancy, gold_rate });
