@@ -7,6 +7,7 @@ import { Curves } from "./curves.js";
 import { Latest, STATUS_TEXT, coalesce, controlPending, plural, shownStatus } from "./format.js";
 import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
+import { InstructionsForm } from "./instructions.js";
 import { QualityForm } from "./quality.js";
 
 const MAX_POINTS = 500; // per curve: about one per pixel column of a panel
@@ -24,6 +25,7 @@ export class RunPage {
       this.labelingAnswers.skip(); // a labeling answer asked for before it would put the old settings back
       this.refreshLabeling();
     });
+    this.instructions = new InstructionsForm(root, (run) => this.showAnswer(run));
     this.colourBy = root.querySelector("#colour-by");
     this.colourBy.addEventListener("change", () => this.map.set({ colourBy: this.colourBy.value }));
     this.refreshLabeling = coalesce(() => this.loadLabeling().catch(() => this.onConnection("down")), 300);
@@ -149,6 +151,7 @@ export class RunPage {
     this.seeEpoch(run.epoch);
     this.controls.show(run);
     this.quality.show(run);
+    this.instructions.show(run);
   }
 
   // Stopped or over: the service keeps the run's labels as they are (no discard).
