@@ -7,6 +7,10 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -113,3 +117,49 @@ def test_a_service_that_stops_answering_is_said_not_responding(browser: Any, tmp
             page.wait_for_function("document.querySelector('#connection').textContent === 'live'")
     finally:
         stop(server)
+
+
+def test_a_service_restarted_on_its_port_is_not_said_not_responding(browser: Any, tmp_path: Path) -> None:
+    """`collie up` restarts a service that died on the port it keeps open. The browser re-sends the
+    runs list's long poll that the death cut into that port, where it waits for the new service and
+    then its full 20 s: the badge said "not responding" of a service that was up again (the poll's
+    timer ran from the first send). A poll cut by a connection change gets another window."""
+    env = {k: v for k, v in os.environ.items() if not (k.startswith("COLLIE_") and k.endswith("_TOKEN"))}
+    listening = socket.create_server(("127.0.0.1", 0))
+    port, fd = listening.getsockname()[1], listening.fileno()
+    db, tokens = tmp_path / "restarted.db", tmp_path / "tokens.json"
+
+    def serve() -> subprocess.Popen[bytes]:
+        command = [sys.executable, "-m", "collie.cli", "serve", "--fd", str(fd), "--db", str(db)]
+        return subprocess.Popen([*command, "--tokens-json", str(tokens)], env=env, pass_fds=(fd,))
+
+    server = serve()
+    try:
+        deadline = time.monotonic() + 60
+        while not tokens.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        minted = json.loads(tokens.read_text())["tokens"]
+        api = f"http://127.0.0.1:{port}"
+        with CollieClient(api, minted["trainer"]) as trainer:
+            run = trainer.create_run(make_run_spec())
+        with operator_page(browser, f"{api}/?token={minted['operator']}#run={run.id}", wait_ms=WAIT_MS) as page:
+            page.wait_for_function("document.querySelector('#connection').textContent === 'live'")
+            page.evaluate(
+                """() => { window.badges = []; const badge = document.querySelector('#connection');
+                new MutationObserver(() => window.badges.push(badge.textContent))
+                  .observe(badge, {childList: true, characterData: true, subtree: true}); }"""
+            )
+            time.sleep(8)  # the runs poll is well into its 20 s wait
+            server.kill()
+            server.wait(10)
+            time.sleep(3)
+            server = serve()
+            page.wait_for_function("window.badges.includes('reconnecting…')")
+            time.sleep(35)  # past the first poll's 30 s, counted from its first send
+            badges = page.evaluate("window.badges")
+            assert "not responding" not in badges, badges
+            assert page.text_content("#connection") == "live"
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(20)
+        listening.close()

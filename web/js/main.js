@@ -18,7 +18,10 @@ let opening = 0; // bumped by each open: a failure of one the operator has left 
 let reported = "no token"; // what the run's stream (or the runs poll) last said of the connection
 let silent = false; // the service keeps its connections open but answers nothing (stalled)
 
+let changes = 0; // connection changes seen: a long poll sent before one may have been re-sent by the browser
+
 function showConnection(state) {
+  if (state !== reported) changes += 1;
   reported = state;
   const shown = silent && (state === "live" || state === "down") ? "silent" : state;
   const pill = $("#connection");
@@ -33,12 +36,23 @@ function showConnection(state) {
 // within its wait: one that has not within STALL_S more says "not responding" until it does. (A
 // separate health check would wait for a free connection, six per host in HTTP/1.1, which three
 // dashboard tabs hold with their streams and polls: "not responding" of a service that is fine.)
+// A poll whose connection broke meanwhile (a service restarted by `collie up`, which keeps its port
+// open) may have been re-sent by the browser itself into the waiting port: its wait starts when the
+// new service reads it, so it is given another window (was: "not responding" of a service up again).
 const STALL_S = 10;
 function stalled(waitS) {
-  const timer = setTimeout(() => {
+  let seen = changes;
+  let timer;
+  const overdue = () => {
+    if (changes !== seen) {
+      seen = changes;
+      timer = setTimeout(overdue, (waitS + STALL_S) * 1000);
+      return;
+    }
     silent = true;
     showConnection(reported);
-  }, (waitS + STALL_S) * 1000);
+  };
+  timer = setTimeout(overdue, (waitS + STALL_S) * 1000);
   return () => {
     clearTimeout(timer);
     if (silent) {
