@@ -27,6 +27,7 @@ from collie.tasks import BAD, CLASS_NAMES, GOOD, NEUTRAL, Disc, Task
 CLASS_COLOURS = STRONG  # undesirable red, neutral green, desirable yellow, as in the paper's figures
 REGION_ALPHA = 0.22
 DPI = 100
+LABELLED_MARKER = "x"  # the guidance map's labelled states: crosses over its w-coloured dots
 _GRID = 300  # shading resolution per axis
 RGBA = tuple[float, float, float, float]
 Labelled = list[tuple[np.ndarray, int]]
@@ -93,13 +94,22 @@ def _shade(ax: Axes, task: Task | None, x0: float, x1: float, y0: float, y1: flo
     return sorted(int(c) for c in np.unique(classes))
 
 
-def _legend(ax: Axes, shaded: list[int], labels: set[int]) -> None:
+def _legend(ax: Axes, shaded: list[int], labels: set[int], marker: str = "o") -> None:
+    """The shaded regions and the labelled states, drawn with `marker` (black-edged circles, or
+    crosses in the label's colour: "x" has no face)."""
     handles: list[Any] = [Patch(color=CLASS_COLOURS[c], alpha=0.5, label=f"{CLASS_NAMES[c]} region") for c in shaded]
-    if labels:
-        handles += [
-            Line2D([], [], ls="", marker="o", mfc=CLASS_COLOURS[c], mec="k", label=f"labelled {CLASS_NAMES[c]}")
-            for c in sorted(labels)
-        ]
+    handles += [
+        Line2D(
+            [],
+            [],
+            ls="",
+            marker=marker,
+            mfc=CLASS_COLOURS[c],
+            mec="k" if marker == "o" else CLASS_COLOURS[c],
+            label=f"labelled {CLASS_NAMES[c]}",
+        )
+        for c in sorted(labels)
+    ]
     if handles:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
 
@@ -206,13 +216,13 @@ def plot_guidance_map(
         points = ax.scatter(t[:, 0], t[:, 1], c=np.asarray(wt)[: len(t)], cmap=cmap, vmin=0, vmax=2, s=6, zorder=2)
     for states, label in labelled:
         st = np.asarray(states, dtype=float)
-        ax.scatter(st[:, 0], st[:, 1], s=14, marker="x", c=CLASS_COLOURS[label], linewidths=0.8, zorder=3)
+        ax.scatter(st[:, 0], st[:, 1], s=14, marker=LABELLED_MARKER, c=CLASS_COLOURS[label], linewidths=0.8, zorder=3)
     if points is not None:
         fig.colorbar(points, ax=ax, label="w(s)", shrink=0.8)
     ax.set(xlim=(x0, x1), ylim=(y0, y1), xlabel="x", ylabel="y")
     ax.set_aspect("equal")
     ax.set_title(title or "guidance w(s)", fontsize=10)
-    _legend(ax, [], {int(label) for _, label in labelled})
+    _legend(ax, [], {int(label) for _, label in labelled}, marker=LABELLED_MARKER)
     fig.tight_layout()
     return _save(fig, path)
 

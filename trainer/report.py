@@ -18,10 +18,17 @@ visits, three of which the corner rule judges at a corner outside a wedge whose 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
 are folders whose files cannot be read or whose env or task this version does not know, each with
 why (`checked_run`, which `collie archive` applies too). ± is the sample standard deviation over
-seeds (as the paper's tables); a single seed shows its value alone. A cell never averages runs
-whose configurations differ (beyond `trainer.same_run.NOT_THE_RUN`: folder, threads, device…):
-each configuration has its own row, named by the keys that differ ("COLLIE (distance=l2)";
-`name_settings`), and report.md says which rows were split.
+seeds (as the paper's tables); a single seed shows its value alone, and a cell of fewer seeds than
+the report's most says how many ("53.00 (n=1)", or "39.00 (1 of 2 seeds)" where a run lacks the
+figure; metrics.csv counts the same seeds). A cell never averages runs whose configurations differ
+(beyond `trainer.same_run.NOT_THE_RUN`: folder, threads, device…): each configuration has its own
+row, named the same in every column by where it departs from its preset's defaults ("COLLIE
+(distance=l2)"; `name_settings`), and report.md lists those rows. A run found twice (an archive
+beside its run root, a `collie rescore` copy) counts once: the copy holding the most (`once_each`).
+
+Downstream cells that average results over different numbers of trajectories (episodes), or hold
+a result computed before its run was resumed and trained on (downstream.json's epoch below the
+run's), are kept and marked "[n]", with a footnote saying which counts or which epoch.
 
 Coverage cells use the reference's corner bin rule (the `corner_*` figures every run logs), as the
 paper's tables do, and where the paper published a cell (`trainer/paper_results.py`: Ant,
@@ -95,7 +102,7 @@ class RunResult:
     variant: str = ""
     downstream: dict[str, Any] = field(default_factory=dict)
     config: dict[str, Any] = field(default_factory=dict)
-    setting: str = ""  # how its configuration differs from others in its cell ("distance=l2"; name_settings)
+    setting: str = ""  # where its configuration departs from its preset ("distance=l2"; name_settings)
     bin_rule: str = "corner"  # the rule of the coverage figures shown (collie report --bin-rule)
 
     @property
@@ -239,14 +246,22 @@ def find_runs(roots: list[Path]) -> tuple[list[RunResult], list[tuple[Path, str]
     return runs, broken
 
 
-def format_cell(values: list[float], digits: int) -> str:
-    """'mean ± std' (sample std over seeds); a lone value as itself; nothing as '–'."""
-    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+def format_cell(values: list[float], digits: int, most: int = 0) -> str:
+    """'mean ± std' (sample std over seeds); a lone value as itself; nothing as '–'. A cell says how
+    many seeds it holds where some of its runs lack the figure ("39.00 (1 of 2 seeds)") or it holds
+    fewer than `most` (the report's most per cell: "53.00 (n=1)"), lest it read as the whole cell's
+    or an exact figure."""
+    v = np.asarray(finite(values), dtype=float)
     if len(v) == 0:
         return "–"
-    if len(v) == 1:
-        return f"{v[0]:.{digits}f}"
-    return f"{v.mean():.{digits}f} ± {v.std(ddof=1):.{digits}f}"
+    text = f"{v[0]:.{digits}f}" if len(v) == 1 else f"{v.mean():.{digits}f} ± {v.std(ddof=1):.{digits}f}"
+    if len(v) < len(values):
+        return f"{text} ({len(v)} of {len(values)} seeds)"
+    return f"{text} (n={len(v)})" if len(v) < most else text
+
+
+def finite(values: list[float]) -> list[float]:
+    return [x for x in values if x is not None and math.isfinite(x)]
 
 
 def _table(rows: list[str], columns: list[str], cell: dict[tuple[str, str], str], corner: str = "method") -> str:
@@ -289,14 +304,14 @@ def figures_rule(r: RunResult) -> str:
     return f"{(first_version(r.config) | r.config).get('bin_rule')}{HEADLINE_MARK}"
 
 
-def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
+def metric_table(runs: list[RunResult], metric: str, digits: int, most: int = 0) -> str:
     """Methods × tasks, each cell mean ± std of the run's final `metric` over seeds, with the paper's
     published cell in a "(paper)" column beside every task it reports."""
     rows, columns = _rows_and_columns(runs)
     cells: dict[tuple[str, str], str] = {}
     paper_columns: set[str] = set()
     for (label, col), g in _group(runs).items():
-        cell = format_cell([metric_value(r, metric) for r in g], digits)
+        cell = format_cell([metric_value(r, metric) for r in g], digits, most)
         headline = metric in CORNER_METRICS and not all(has_rule_figure(r, metric) for r in g)
         cells[(label, col)] = cell + (HEADLINE_MARK if headline and cell != "–" else "")
         paper = paper_cell(metric, g[0].env, g[0].task, g[0].method) if not g[0].variant else None
@@ -307,17 +322,68 @@ def metric_table(runs: list[RunResult], metric: str, digits: int) -> str:
     return _table(rows, shown, cells)
 
 
-def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
-    """(title, markdown) for the zero-shot (avg and best per task) and hierarchical returns."""
+# what a downstream result counts over: results over different counts are not one protocol
+# (zero-shot's best of more trajectories is higher), so a cell mixing them says so
+DOWNSTREAM_COUNT = {"zero_shot": "trajectories", "hierarchical": "episodes"}
+
+
+def trained_epochs(r: RunResult) -> int | None:
+    """The epochs the run trained (summary.json's epochs_done, else its last evaluation's epoch)."""
+    held = [r.metrics[k] for k in ("epochs_done", "epoch") if _is_number(r.metrics.get(k))]
+    return int(max(held)) if held else None
+
+
+def downstream_notes(g: list[RunResult], kind: str) -> list[str]:
+    """Why a downstream cell of runs `g` is not one plain figure: it mixes counts of trajectories
+    (episodes), or a run's result predates training it resumed (downstream.json's epoch < its own)."""
+    notes = []
+    counts = {r.downstream[kind].get(DOWNSTREAM_COUNT[kind]) for r in g}
+    if len(counts) > 1:
+        said = [f"{c:g}" for c in sorted(c for c in counts if _is_number(c))]
+        said += ["unrecorded"] if any(not _is_number(c) for c in counts) else []
+        notes.append(f"averages results over {' and '.join(said)} {DOWNSTREAM_COUNT[kind]} per run")
+    for r in g:
+        epoch, trained = r.downstream[kind].get("epoch"), trained_epochs(r)
+        if _is_number(epoch) and trained is not None and epoch < trained:
+            notes.append(f"seed {r.seed}'s result is from epoch {epoch} of {trained} (computed before it trained on)")
+    return notes
+
+
+class Footnotes:
+    """Numbered footnotes of one table: a cell's mark "[n]" per note, one number per distinct note."""
+
+    def __init__(self) -> None:
+        self.numbers: dict[str, int] = {}
+
+    def mark(self, notes: list[str]) -> str:
+        return "".join(f" [{self.numbers.setdefault(n, len(self.numbers) + 1)}]" for n in notes)
+
+    def text(self) -> str:
+        return "".join(f"\n\n[{i}] {note}." for note, i in self.numbers.items())
+
+
+def counts_note(runs: list[RunResult], kind: str) -> str:
+    """The count results of `kind` were computed over, where every run's is recorded and the same."""
+    counts = {r.downstream[kind].get(DOWNSTREAM_COUNT[kind]) for r in runs}
+    one = next(iter(counts)) if len(counts) == 1 else None
+    return f"\n\n{DOWNSTREAM_COUNT[kind].capitalize()} per run: {one}." if _is_number(one) else ""
+
+
+def downstream_tables(runs: list[RunResult], most: int = 0) -> list[tuple[str, str]]:
+    """(title, markdown) for the zero-shot (avg and best per task) and hierarchical returns; a cell
+    mixing trajectory counts, or holding a result older than its run, is marked and footnoted."""
     out = []
     zs = [r for r in runs if "zero_shot" in r.downstream]
     if zs:
         rows, columns = _rows_and_columns(zs)
         cells: dict[tuple[str, str], str] = {}
         published: set[str] = set()
+        notes = Footnotes()
         for (label, col), g in _group(zs).items():
+            mark = notes.mark(downstream_notes(g, "zero_shot"))
             for kind, key in (("avg", "mean"), ("best", "best")):
-                cells[(label, f"{col} ({kind})")] = format_cell([r.downstream["zero_shot"][key] for r in g], 2)
+                cell = format_cell([r.downstream["zero_shot"][key] for r in g], 2, most)
+                cells[(label, f"{col} ({kind})")] = cell + mark
                 paper = paper_cell(f"zero_shot_{key}", g[0].env, g[0].task, g[0].method) if not g[0].variant else None
                 if paper is not None:
                     cells[(label, f"{col} ({kind}, paper)")] = f"{paper[0]:.2f} ± {paper[1]:.2f}"
@@ -328,32 +394,36 @@ def downstream_tables(runs: list[RunResult]) -> list[tuple[str, str]]:
             for col in columns
             for c in ((f"{col} ({kind})", f"{col} ({kind}, paper)") if col in published else (f"{col} ({kind})",))
         ]
-        out.append(("Zero-shot motion return (Table 3)", _table(rows, cols, cells)))
+        table = _table(rows, cols, cells) + counts_note(zs, "zero_shot") + notes.text()
+        out.append(("Zero-shot motion return (Table 3)", table))
     hi = [r for r in runs if "hierarchical" in r.downstream]
     if hi:
         rows, columns = _rows_and_columns(hi)
         cells = {}
         published = set()
+        notes = Footnotes()
         for (label, col), g in _group(hi).items():
-            cells[(label, col)] = format_cell([r.downstream["hierarchical"]["mean"] for r in g], 2)
+            mark = notes.mark(downstream_notes(g, "hierarchical"))
+            cells[(label, col)] = format_cell([r.downstream["hierarchical"]["mean"] for r in g], 2, most) + mark
             paper = paper_cell("hierarchical_mean", g[0].env, g[0].task, g[0].method) if not g[0].variant else None
             if paper is not None:
                 cells[(label, f"{col} (paper)")] = f"{paper[0]:.2f} ± {paper[1]:.2f}"
                 published.add(col)
-            cells[(label, f"{col} (random skills)")] = format_cell(
-                [r.downstream["hierarchical"]["random_skills_mean"] for r in g], 2
-            )
+            random_skills = [r.downstream["hierarchical"]["random_skills_mean"] for r in g]
+            cells[(label, f"{col} (random skills)")] = format_cell(random_skills, 2, most) + mark
         cols = [
             c
             for col in columns
             for c in ((col, f"{col} (paper)") if col in published else (col,)) + (f"{col} (random skills)",)
         ]
-        out.append(("Hierarchical Goal return, PPO over frozen skills (Table 4)", _table(rows, cols, cells)))
+        table = _table(rows, cols, cells) + counts_note(hi, "hierarchical") + notes.text()
+        out.append(("Hierarchical Goal return, PPO over frozen skills (Table 4)", table))
     return out
 
 
 def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
-    """metrics.csv: one row per (env, task, method, variant, setting, metric)."""
+    """metrics.csv: one row per (env, task, method, variant, setting, metric), over the seeds that
+    have the figure (`n`, `seeds`), as report.md's cells."""
     rows = []
     for (_, _), g in sorted(_group(runs).items(), key=lambda kv: (kv[1][0].column, kv[1][0].order())):
         r0 = g[0]
@@ -362,7 +432,8 @@ def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
             if all(kind in r.downstream for r in g):
                 values[f"{kind}_{key}"] = [r.downstream[kind][key] for r in g]
         for metric, v in values.items():
-            a = np.asarray(v, dtype=float)
+            held = [(r.seed, x) for r, x in zip(g, v, strict=True) if finite([x])]
+            a = np.asarray([x for _, x in held], dtype=float)
             rows.append(
                 {
                     "env": r0.env,
@@ -372,10 +443,10 @@ def long_rows(runs: list[RunResult]) -> list[dict[str, Any]]:
                     "setting": r0.setting,
                     "label": r0.label,
                     "metric": metric,
-                    "mean": float(a.mean()),
+                    "mean": float(a.mean()) if len(a) else math.nan,
                     "std": float(a.std(ddof=1)) if len(a) > 1 else math.nan,
                     "n": len(a),
-                    "seeds": " ".join(str(r.seed) for r in g),
+                    "seeds": " ".join(str(seed) for seed, _ in held),
                 }
             )
     return rows
@@ -396,21 +467,27 @@ def markdown(
     broken: Sequence[tuple[Path, str]] = (),
 ) -> str:
     seeds = sorted({len(g) for g in _group(runs).values()})
+    most = max(seeds, default=0)
     tables = [
-        f"## {title}\n\n{metric_table(runs, metric, digits)}"
+        f"## {title}\n\n{metric_table(runs, metric, digits, most)}"
         for metric, title, digits in METRICS
         if any(metric in r.metrics for r in runs)
     ]
-    tables += [f"## {title}\n\n{table}" for title, table in downstream_tables(runs)]
+    tables += [f"## {title}\n\n{table}" for title, table in downstream_tables(runs, most)]
     paper = (
         ' "(paper)" columns: the paper\'s published tables at its own budget.' if "(paper)" in "".join(tables) else ""
     )
     parts = [
         f"# collie report\n\n{len(runs)} finished runs; seeds per cell: {', '.join(map(str, seeds)) or '–'}. "
-        "Cells: mean ± sample std over seeds of each run's final evaluation; " + rule_note(runs) + paper
+        "Cells: mean ± sample std over seeds of each run's final evaluation"
+        + (f" (a cell of fewer than {most} says how many)" if len(seeds) > 1 else "")
+        + "; "
+        + rule_note(runs)
+        + paper
     ]
-    if settings_note(runs):
-        parts.append(settings_note(runs))
+    note = settings_note(runs)
+    if note:
+        parts.append(note)
     if skipped:
         parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
     if broken:
@@ -428,52 +505,76 @@ def _setting_key(run: RunResult) -> str:
     return json.dumps(run.settings, sort_keys=True, default=str)
 
 
+def held_data(r: RunResult) -> list[str]:
+    """What a run folder holds beside its final figures that another copy of the run may lack (a
+    `collie rescore` copy has no wall time and no zero-shot result)."""
+    held = [f"{kind.replace('_', '-')} result" for kind in DOWNSTREAM_NUMBERS if kind in r.downstream]
+    return held + (["wall time"] if _is_number(r.metrics.get("wall_s")) else [])
+
+
 def once_each(runs: list[RunResult]) -> tuple[list[RunResult], list[tuple[Path, str]]]:
-    """The runs with one per (env, task, method, variant, seed, configuration) — the first in path
-    order — and the others, each with why: a run found twice (a run root and its archive given
-    together, say) is one seed, not two. Another configuration is another run (name_settings)."""
-    kept: dict[tuple[str, str, str, str, int, str], RunResult] = {}
-    left: list[tuple[Path, str]] = []
+    """The runs with one per (env, task, method, variant, seed, configuration) — the copy holding the
+    most (held_data), the first in path order among equals — and the others, each with why: a run
+    found twice (a run root and its archive given together, say) is one seed, not two. Another
+    configuration is another run (name_settings)."""
+    copies: dict[tuple[str, str, str, str, int, str], list[RunResult]] = {}
     for r in runs:
-        first = kept.setdefault((r.env, r.task, r.method, r.variant, r.seed, _setting_key(r)), r)
-        if first is not r:
-            left.append((r.path, f"the same run as `{first.path}`, which is the one counted"))
-    return list(kept.values()), left
+        copies.setdefault((r.env, r.task, r.method, r.variant, r.seed, _setting_key(r)), []).append(r)
+    kept: list[RunResult] = []
+    left: list[tuple[Path, str]] = []
+    for same in copies.values():
+        best = max(same, key=lambda r: len(held_data(r)))  # the first of equals
+        kept.append(best)
+        for r in same:
+            if r is not best:
+                lacks = [d for d in held_data(best) if d not in held_data(r)]
+                why = f": it has the {' and '.join(lacks)} this copy lacks" if lacks else ""
+                left.append((r.path, f"the same run as `{best.path}`, which is the one counted{why}"))
+    return kept, left
 
 
 def _shown(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
+def departures(r: RunResult) -> dict[str, Any]:
+    """The run's settings where they differ from what its preset gives its env (all of them for a
+    preset or env this version does not know)."""
+    defaults = preset_defaults(r.config)
+    base = comparable(defaults) if defaults else {}
+    return {k: v for k, v in r.settings.items() if k not in base or base[k] != v}
+
+
 def name_settings(runs: list[RunResult]) -> None:
-    """Give each run of a cell (method, variant, env, task) that holds several configurations a
-    `setting` naming how it differs, so that no cell averages runs of different configurations:
-    the keys whose values differ in that cell, those where the run departs from its preset's
-    default ("distance=l2"; the preset itself when presets differ). A run at every default keeps
-    the plain row."""
-    cells: dict[tuple[str, str, str, str], list[RunResult]] = {}
+    """Give each run a `setting` naming where its configuration departs from its preset's defaults,
+    the same in every column ("epochs=20"), so that no cell averages runs of different
+    configurations. Named: the keys a run's config sets away from its preset, and the keys whose
+    values differ within a cell (an option an older run predates: `first_version`); the preset
+    itself when the report holds several. A run at its preset's defaults keeps the plain row."""
+    cells: dict[tuple[str, str, str, str], list[dict[str, Any]]] = {}
     for r in runs:
-        cells.setdefault((r.method, r.variant, r.env, r.task), []).append(r)
-    for cell in cells.values():
-        settings = [r.settings for r in cell]
-        keys = sorted({k for s in settings for k in s if any(o.get(k) != s.get(k) for o in settings)})
-        for r, s in zip(cell, settings, strict=True):
-            base = preset_defaults(r.config)
-            named = [k for k in keys if k == "preset" or base.get(k) != s.get(k)]
-            named.sort(key=lambda k: k != "preset")  # the preset first: the other values depart from it
-            r.setting = ", ".join(f"{k}={_shown(s.get(k))}" for k in named)
+        cells.setdefault((r.method, r.variant, r.env, r.task), []).append(r.settings)
+    split = {k for cell in cells.values() for s in cell for k in s if any(o.get(k) != s.get(k) for o in cell)}
+    departed = [departures(r) for r in runs]
+    chosen = {k for r, d in zip(runs, departed, strict=True) for k in d if k in r.config}
+    keys = sorted((split | chosen) - {"preset"})
+    several = len({r.settings.get("preset") for r in runs}) > 1
+    for r, d in zip(runs, departed, strict=True):
+        named = (["preset"] if several else []) + [k for k in keys if k in d]
+        r.setting = ", ".join(f"{k}={_shown(r.settings.get(k))}" for k in named)
 
 
 def settings_note(runs: list[RunResult]) -> str:
-    """A line naming the rows split by configuration (empty when none is)."""
-    split = list(dict.fromkeys(r.label for r in sorted(runs, key=RunResult.order) if r.setting))
-    if not split:
-        return ""
+    """A line naming the rows whose configurations depart from their preset, or the one preset of
+    all runs (empty for none)."""
+    named = list(dict.fromkeys(r.label for r in sorted(runs, key=RunResult.order) if r.setting))
+    presets = sorted({str(r.settings.get("preset")) for r in runs})
+    if not named:
+        return f"All runs: preset {presets[0]}." if len(presets) == 1 else ""
+    preset = f"preset {presets[0]}" if len(presets) == 1 else "the preset each names"
     return (
-        "Runs of one method and task whose configurations differ are not averaged: each configuration "
-        "has its row, named by the keys that differ where it departs from its preset's defaults: "
-        + ", ".join(split)
-        + "."
+        "Runs whose configurations differ are never averaged: a row's name gives the settings where its "
+        f"runs depart from the defaults of {preset}, the same in every column: " + ", ".join(named) + "."
     )
 
 

@@ -5,6 +5,7 @@ eval_latest.npz; runs written before that file existed are rolled out again from
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,8 @@ from trainer.report import HEADLINE_MARK, RunResult, has_rule_figure, metric_val
 from trainer.run_files import has_checkpoint, read_arrays
 
 MAX_COLUMNS = 4  # panels per row
+TITLE_CHARS = 30  # a title line's characters that fit a 3.4-inch panel at 10 pt beside its neighbours
+TITLE_LINE_INCHES = 0.2  # a 10-pt title line's height
 
 
 def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +56,14 @@ def drawable(run: RunResult) -> bool:
     return (run.path / "eval_latest.npz").exists() or has_checkpoint(run.path)
 
 
+def panel_title(run: RunResult) -> str:
+    """The panel's title: its row (wrapped at its settings, which would run into the next panel's
+    title), seed and safe coverage (the tables' value: by the report's rule where logged)."""
+    mark = "" if has_rule_figure(run, "safe_coverage") else HEADLINE_MARK
+    figure = f"safe cov {metric_value(run, 'safe_coverage'):.0f}{mark}"
+    return "\n".join([*textwrap.wrap(f"{run.label} (seed {run.seed})", TITLE_CHARS), figure])
+
+
 def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
     """One PNG per (env, task) present in `runs`; returns their paths."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -65,25 +76,17 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
             continue
         first = list({r.label: r for r in reversed(group)}.values())[::-1]  # lowest seed per method
         first.sort(key=RunResult.order)
+        titles = [panel_title(run) for run in first]
         dims = env_class(env).position_dims
         cols = min(len(first), MAX_COLUMNS)
         rows = -(-len(first) // cols)
-        fig = Figure(figsize=(3.4 * cols, (3.6 if dims == 2 else 3.0) * rows))
-        for i, run in enumerate(first):
+        lines = max(t.count("\n") + 1 for t in titles)  # a row's panels make room for its longest title
+        panel = (3.6 if dims == 2 else 3.0) + TITLE_LINE_INCHES * (lines - 2)
+        fig = Figure(figsize=(3.4 * cols, panel * rows + 0.3))  # and the figure for its suptitle
+        for i, (run, title) in enumerate(zip(first, titles, strict=True)):
             xy, skill = final_skills(run)
-            task = run_task(run)
             ax = fig.add_subplot(rows, cols, i + 1)
-            cov = metric_value(run, "safe_coverage")  # the tables' value: by the report's rule where logged
-            mark = "" if has_rule_figure(run, "safe_coverage") else HEADLINE_MARK
-            draw_skill_panel(
-                ax,
-                list(xy),
-                task,
-                skills=skill,
-                position_dims=dims,
-                legend=False,
-                title=f"{run.label} (seed {run.seed})\nsafe cov {cov:.0f}{mark}",
-            )
+            draw_skill_panel(ax, list(xy), run_task(run), skills=skill, position_dims=dims, legend=False, title=title)
             ax.tick_params(labelsize=7)
         fig.suptitle(f"{env} {task_name}", fontsize=11)
         fig.tight_layout()

@@ -78,7 +78,7 @@ def test_report_tables_csv_and_figures(tmp_path):
     assert body == ["METRA", "DoDont*", "COLLIE", "COLLIE (additive)"]  # the paper's order, variants last
     assert "| COLLIE | 110.00 ± 14.14 | – |" in table
     assert "| METRA | -110.00 ± 14.14 | – |" in table
-    assert "| COLLIE (additive) | – | 50.00 |" in table
+    assert "| COLLIE (additive) | – | 50.00 (n=1) |" in table  # fewer seeds than the others
     assert "0.550 ± 0.071" in md  # safe ratio, three digits
     assert "Zero-shot motion return (Table 3)" in md and "10.50 ± 0.71" in md
     assert "point-north-diayn-s0" in md and "(running)" in md  # unfinished: listed, left out
@@ -128,8 +128,8 @@ def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
     table = md.split("## Safe state coverage (Table 1)")[1].split("##")[0]
     lines = table.strip().splitlines()
     assert lines[0] == "| method | ant north | ant north (paper) | point north |"
-    assert "| METRA | -10.00† | -1425.80 ± 756.14 | – |" in table  # visited value, marked
-    assert "| COLLIE | 1000.00 ± 70.71 | 1333.20 ± 129.10 | 7.00 |" in table  # corner: 950, 1050
+    assert "| METRA | -10.00 (n=1)† | -1425.80 ± 756.14 | – |" in table  # visited value, marked
+    assert "| COLLIE | 1000.00 ± 70.71 | 1333.20 ± 129.10 | 7.00 (n=1) |" in table  # corner: 950, 1050
     ratio = md.split("## Safe state ratio (Table 2)")[1].split("##")[0]
     assert "0.969 ± 0.025" in ratio  # the paper's 96.9 % ± 2.5
     runs_csv = list(csv.DictReader((tmp_path / "report" / "runs.csv").read_text().splitlines()))
@@ -140,7 +140,7 @@ def test_report_uses_the_corner_rule_and_prints_the_paper_beside_ours(tmp_path):
     visited = write_report([runs], tmp_path / "visited", figures=False, bin_rule="visited")["markdown"].read_text()
     table = visited.split("## Safe state coverage (Table 1)")[1].split("##")[0]
     assert "| COLLIE | 950.00 ± 70.71 |" in table  # the visited figures: 900, 1000
-    assert "| METRA | -10.00† |" in table and "coverage by the visited bin rule (--bin-rule)" in visited
+    assert "| METRA | -10.00 (n=1)† |" in table and "coverage by the visited bin rule (--bin-rule)" in visited
 
 
 @pytest.mark.parametrize("rule", ["corner", "visited"])
@@ -161,7 +161,7 @@ def test_runs_csv_names_each_rows_bin_rule_and_marks_an_old_run_as_report_md_doe
         "dodont": ("corner†", "3.0"),  # its headline, by the rule it ran with
     }
     for method, label in (("collie", "COLLIE"), ("metra", "METRA"), ("dodont", "DoDont*")):
-        cell = next(line for line in table.splitlines() if line.startswith(f"| {label} |")).split(" | ")[1]
+        cell = next(line for line in table.splitlines() if line.startswith(f"| {label}")).split(" | ")[1]
         assert cell.endswith("†") == said[method][0].endswith("†"), (method, cell)
 
 
@@ -195,8 +195,9 @@ def test_the_zero_shot_table_prints_the_papers_table_3_beside_ours(tmp_path):
         "| ant north (best) | ant north (best, paper) | point north (best) |"
     )
     # COLLIE's North cells of the paper's Table 3: average 1054.25 ± 376.79, best 1460.44 ± 53.12
-    assert (
-        lines[2] == "| COLLIE | -1650.00 ± 70.71 | 1054.25 ± 376.79 | 5.00 | 400.50 ± 0.71 | 1460.44 ± 53.12 | 6.00 |"
+    assert lines[2] == (
+        "| COLLIE | -1650.00 ± 70.71 | 1054.25 ± 376.79 | 5.00 (n=1) "
+        "| 400.50 ± 0.71 | 1460.44 ± 53.12 | 6.00 (n=1) |"  # one seed of point north, two of ant north
     )
 
 
@@ -306,7 +307,7 @@ def test_a_run_found_twice_counts_once_and_another_configuration_under_its_name_
     text = write_report(roots, tmp_path / "report", figures=False)["markdown"].read_text()
     assert "3 finished runs; seeds per cell: 1, 2." in text and "| Oracle | 8.00 ± 1.41 |" in text
     assert f"`{run}` (the same run as `{tmp_path / 'archive' / run.name}`, which is the one counted)" in text
-    assert "| Oracle (epochs=12) | 1.00 |" in text and str(other) not in text
+    assert "| Oracle (epochs=12) | 1.00 (n=1) |" in text and str(other) not in text
 
 
 def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_path):
@@ -337,18 +338,22 @@ def test_runs_whose_configurations_differ_are_never_averaged_into_one_cell(tmp_p
     fake_run(mix, "point", "range", "metra", 0, 7.0, config=config("smoke", "metra"))  # alone in its cell
     text = write_report([sw, mix], tmp_path / "report", figures=False)["markdown"].read_text()
     table = text.split("## Safe state coverage (Table 1)")[1].split("##")[0]
+    # two presets in the report: every row names its own, and its departures from it
     assert table.strip().splitlines()[2:] == [
-        "| METRA | – | 7.00 |",
         "| METRA (preset=cpu, epochs=40) | 15.00 ± 7.07 | – |",
-        "| METRA (preset=smoke) | 99.00 | – |",
-        "| COLLIE | 30.50 ± 0.71 | – |",  # threads 0 and 1, checkpoints every 10 and 11: one configuration
-        "| COLLIE (distance=l2) | 5.00 | – |",
+        "| METRA (preset=smoke) | 99.00 (n=1) | 7.00 (n=1) |",  # the same name in both columns
+        "| COLLIE (preset=cpu) | 30.50 ± 0.71 | – |",  # threads 0 and 1, checkpoints every 10 and 11: one configuration
+        "| COLLIE (preset=cpu, distance=l2) | 5.00 (n=1) | – |",
     ]
-    assert "configurations differ are not averaged" in text
-    assert "METRA (preset=cpu, epochs=40), METRA (preset=smoke), COLLIE (distance=l2)." in text
+    assert "configurations differ are never averaged" in text
+    assert (
+        "METRA (preset=cpu, epochs=40), METRA (preset=smoke), COLLIE (preset=cpu), COLLIE (preset=cpu, distance=l2)."
+        in text
+    )
     rows = list(csv.DictReader((tmp_path / "report" / "metrics.csv").read_text().splitlines()))
     cov = {r["label"]: (r["setting"], r["n"]) for r in rows if r["metric"] == "safe_coverage"}
-    assert cov["COLLIE (distance=l2)"] == ("distance=l2", "1") and cov["COLLIE"] == ("", "2")
+    assert cov["COLLIE (preset=cpu, distance=l2)"] == ("preset=cpu, distance=l2", "1")
+    assert cov["COLLIE (preset=cpu)"] == ("preset=cpu", "2")
 
 
 def test_a_run_folder_without_its_final_skills_is_in_the_tables_not_the_figures(tmp_path):
