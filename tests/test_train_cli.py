@@ -29,6 +29,7 @@ from unprivileged import as_nobody, closed_folder
 from collie.schemas import StartupMark
 from trainer.cli import short_of_memory
 from trainer.fast_ops import fast_ops_pay
+from trainer.loop import coverage_shown
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -57,6 +58,13 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
     proc = train("--epochs", "2", "--out", str(out))
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out
+
+
+def test_the_progress_bar_says_the_safe_coverage_as_a_whole_number() -> None:
+    """Was "safe_cov=-2e+3": tqdm shows a float postfix to 3 significant digits."""
+    assert coverage_shown({"safe_coverage": -1834.6}) == "-1835"
+    assert coverage_shown({"safe_coverage": 352.0}) == "352"
+    assert coverage_shown({}) == "-"  # a run without a rule has none
 
 
 @pytest.fixture

@@ -85,6 +85,12 @@ def non_finite(state: Any, at: str = "agent") -> str | None:
     return next((found for key, value in items if (found := non_finite(value, f"{at}.{key}"))), None)
 
 
+def coverage_shown(record: dict[str, Any]) -> str:
+    """An evaluation's safe coverage for the progress bar, whole (tqdm shows a float to 3 significant
+    digits: "-2e+3"); "-" without a rule."""
+    return f"{record['safe_coverage']:.0f}" if "safe_coverage" in record else "-"
+
+
 class TrainingDiverged(RuntimeError):
     """A NaN/inf appeared in observations or losses; the last checkpoint is left intact."""
 
@@ -718,7 +724,7 @@ class Trainer:
             startup.mark("evaluate", self.epoch)
             bar.set_postfix(
                 labels=len(self.labelled),
-                safe_cov=record.get("safe_coverage", "-"),  # absent without a rule
+                safe_cov=coverage_shown(record),
                 bins=record["n_bins"],
                 lam=f"{record['lambda']:.1f}",
             )
