@@ -319,12 +319,14 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:  # a closed terminal stops the stack; nohup does not
         signal.signal(signal.SIGHUP, on_signal)
-    made_db, unheld = db is not None and not Path(db).exists(), False
+    made_db, unheld, code = db is not None and not Path(db).exists(), False, 1
     try:
-        return supervise(args, out, db, stack, stopping, sock)
+        code = supervise(args, out, db, stack, stopping, sock)
+        return code
     except Stopped:
         print("collie up: stopped while starting", file=sys.stderr)
-        return 130
+        code = 130
+        return code
     except (RuntimeError, TimeoutError) as exc:  # ChildFailed included
         unheld = isinstance(exc, RunNotHeld)
         stack.log(f"error: {exc}")
@@ -335,6 +337,9 @@ def run(args: argparse.Namespace) -> int:
         if unheld and made_db:  # the service made it empty just now: the refused start leaves none behind
             for path in (Path(f"{db}{end}") for end in ("", "-wal", "-shm")):
                 path.unlink(missing_ok=True)
+        if code == 130 and (out / "trainer" / "checkpoint.pt").is_file():  # what Ctrl-C kept, and how on
+            kept = out / "trainer"
+            print(f"collie up: stopped; the trainer's checkpoint is in {kept}: the same command goes on from it")
 
 
 def stack_tokens(tokens_file: Path) -> dict[str, str]:

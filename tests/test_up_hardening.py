@@ -376,6 +376,9 @@ def test_a_closed_terminal_stops_the_stack_like_ctrl_c(tmp_path):
         proc.send_signal(signal.SIGHUP)
         assert proc.wait(timeout=120) == 130
         assert not [name for name, pid in parts.items() if alive(pid)]
+        said = proc.stdout.read().decode()  # type: ignore[union-attr]
+        kept = tmp_path / "trainer"  # the trainer's final checkpoint, and how to go on (was: "stopping…" alone)
+        assert f"collie up: stopped; the trainer's checkpoint is in {kept}: the same command goes on from it" in said
     finally:
         if proc.poll() is None:
             proc.kill()
