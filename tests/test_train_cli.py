@@ -67,6 +67,15 @@ def test_the_progress_bar_says_the_safe_coverage_as_a_whole_number() -> None:
     assert coverage_shown({}) == "-"  # a run without a rule has none
 
 
+def test_a_run_without_a_progress_bar_logs_a_line_per_evaluation(tmp_path: Path) -> None:
+    """A sweep's runs and collie up's trainer draw no bar: their logs held nothing for hours."""
+    proc = train("--task", "north", "--epochs", "2", "--out", str(tmp_path / "run"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("epoch ")]
+    assert [line.split(" · ")[0] for line in lines] == ["epoch 2/2"], proc.stderr[-3000:]
+    assert re.fullmatch(r"epoch 2/2 · safe cov -?\d+ · bins \d+ · labels \d+", lines[0]), lines
+
+
 @pytest.fixture
 def run_copy(finished: Path, tmp_path: Path) -> Path:
     """A copy of the finished run that a test may damage."""

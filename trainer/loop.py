@@ -23,6 +23,7 @@ import math
 import random
 import re
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -89,6 +90,11 @@ def coverage_shown(record: dict[str, Any]) -> str:
     """An evaluation's safe coverage for the progress bar, whole (tqdm shows a float to 3 significant
     digits: "-2e+3"); "-" without a rule."""
     return f"{record['safe_coverage']:.0f}" if "safe_coverage" in record else "-"
+
+
+def evaluation_line(epoch: int, epochs: int, record: dict[str, Any], labels: int) -> str:
+    """An evaluation in one line, for a log where no progress bar is drawn (else hours of silence)."""
+    return f"epoch {epoch}/{epochs} · safe cov {coverage_shown(record)} · bins {record['n_bins']:.0f} · labels {labels}"
 
 
 class TrainingDiverged(RuntimeError):
@@ -722,6 +728,12 @@ class Trainer:
         if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
             record = self.evaluate()
             startup.mark("evaluate", self.epoch)
+            if not self.progress:  # a log, not a terminal (a sweep's run, collie up's trainer): a line each
+                print(
+                    evaluation_line(self.epoch, self.cfg.epochs, record, len(self.labelled)),
+                    file=sys.stderr,
+                    flush=True,
+                )
             bar.set_postfix(
                 labels=len(self.labelled),
                 safe_cov=coverage_shown(record),
