@@ -40,6 +40,8 @@ def load_skills(run_dir: str | Path, device: str = "cpu") -> TrainedSkills:
     if not Path(run_dir).is_dir():
         raise FileNotFoundError(f"{run_dir} is not a folder: give a run folder")
     if not has_checkpoint(run_dir):
+        if has_checkpoint(Path(run_dir) / "trainer"):  # a `collie up` folder: its run is in trainer/
+            raise FileNotFoundError(f"{run_dir} is a collie up folder: give its run, {Path(run_dir) / 'trainer'}")
         raise FileNotFoundError(
             f"{run_dir} has no checkpoint.pt: its networks are not kept (an archived run holds results only)"
         )

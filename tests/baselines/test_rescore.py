@@ -184,6 +184,13 @@ def test_the_downstream_command_on_an_archived_run_says_its_networks_are_not_kep
     with pytest.raises(SystemExit):
         downstream([str(source), "--trajectories", "0"])
     assert "--trajectories must be ≥ 1, got 0" in capsys.readouterr().err
+    stack = tmp_path / "stack"  # a `collie up` folder given for its run (was: "… an archived run holds results only")
+    (stack / "trainer").mkdir(parents=True)
+    (stack / "trainer" / "checkpoint.pt").write_bytes(b"")
+    assert downstream([str(stack)]) == 2
+    assert f"downstream: error: {stack} is a collie up folder: give its run, {stack / 'trainer'}" in (
+        capsys.readouterr().err
+    )
 
 
 def test_the_downstream_command_on_an_unfinished_run_says_so(tmp_path):
