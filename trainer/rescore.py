@@ -125,7 +125,12 @@ def rescore(source: Path, task: str, out: Path | None = None, keep_existing: boo
                 write_json(new / "downstream.json", kept_results)
         write_json(new / TASK_JSON, choose_rule(config).to_json())
         kept = {k: v for k, v in summary.items() if k != "wall_s"}  # no training time was spent on this task
-        rescored = {**kept, **{k: float(v) for k, v in figures.items()}, "config": cfg, "rescored_from": str(source)}
+        rescored = {
+            **kept,
+            **{k: float(v) for k, v in figures.items()},
+            "config": cfg,
+            "rescored_from": str(source.absolute()),
+        }
         write_json(new / "summary.json", rescored)
     return out
 

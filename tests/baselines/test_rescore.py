@@ -1,6 +1,7 @@
 """`collie rescore`: a task-free run's final skills judged by another task's rule."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,7 +31,7 @@ def finished_run(root, method="metra", status="finished"):
     return d, list(xy)
 
 
-def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_run(tmp_path):
+def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_run(tmp_path, monkeypatch):
     source, xy = finished_run(tmp_path / "runs")
     done = {
         "zero_shot": {"task": "north", "mean": 1.0, "best": 3.0},
@@ -45,6 +46,9 @@ def test_a_metra_run_judged_by_range_has_the_range_figures_and_reads_as_a_range_
     assert summary["corner_n_bad_bins"] == expected["corner_n_bad_bins"] > 0  # the far ends left the disc
     assert summary["config"]["task"] == "range" and summary["rescored_from"] == str(source)
     assert "wall_s" not in summary  # no training time was spent on Range
+    monkeypatch.chdir(tmp_path)  # a relative source is kept absolute: read from anywhere, it names the run
+    again = rescore(Path("runs") / source.name, "hole", out=tmp_path / "hole")
+    assert json.loads((again / "summary.json").read_text())["rescored_from"] == str(source)
     assert json.loads((out / "task.json").read_text())["definition"]["name"] == "range"
     # the Goal task reads no task, so its result carries over; zero-shot used North's rule, so not
     assert json.loads((out / "downstream.json").read_text()) == {"hierarchical": done["hierarchical"]}
