@@ -18,6 +18,7 @@ from labeling_ui.browser import new_tab_id
 from labeling_ui.models import warm_models
 from labeling_ui.scene import south_view
 from labeling_ui.session import LabelerSession, UiConfig
+from labeling_ui.sibling_tabs import TabMemory
 from labeling_ui.tab import Key
 
 PROBE_S = 3.0  # a page that does not answer a round trip this fast counts as open (see tab_id)
@@ -36,7 +37,7 @@ class LabelingApp:  # SiblingTabs for its sessions
         self.server.initial_camera.position = south_view()  # as a segment aims it: no jump when it loads
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.sessions: dict[int, LabelerSession] = {}
-        self.tab_labels: dict[str, list[Key]] = {}  # each browser tab's labels, across its reloads
+        self.tab_memory: dict[str, TabMemory] = {}  # each browser tab's signed-in name and labels, across reloads
         self._tabs: dict[str, LabelerSession] = {}  # each tab id → the connection that goes by it
         self._closing: list[LabelerSession] = []  # closed tabs still in their grace period
         self._lock = threading.Lock()
@@ -85,6 +86,11 @@ class LabelingApp:  # SiblingTabs for its sessions
         one that labels it; the others must no longer label or release it."""
         for other in self._siblings(session):
             if key in other.on_screen_or_held():
+                other.taken_over(key)
+
+    def preloaded(self, session: LabelerSession, key: Key) -> None:
+        for other in self._siblings(session):
+            if other.closed.is_set() and key in other.on_screen_or_held():
                 other.taken_over(key)
 
     def done(self, session: LabelerSession, key: Key, skipped: bool) -> None:

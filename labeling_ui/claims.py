@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -23,8 +24,13 @@ log = logging.getLogger(__name__)
 
 
 class Claims:
-    def __init__(self, tab: GuardedTab, screen: TabScreen, prefetch: bool) -> None:
+    def __init__(
+        self, tab: GuardedTab, screen: TabScreen, prefetch: bool, on_hold: Callable[[Key], None] = lambda _: None
+    ) -> None:
+        """`on_hold(key)`: a preloaded segment is this tab's to show next (the app takes it off the
+        labeler's other tabs: the connection a reload replaced would hand it back after its grace)."""
         self.tab = tab
+        self.on_hold = on_hold
         self.screen = screen
         self.prefetch = prefetch  # claim and prepare the next segment while one is on screen
         self.next_claim: ClaimRead | None = None  # the preload a label's answer carried (used once)
@@ -81,7 +87,9 @@ class Claims:
         if usable and claimed.query.query_id != shown.query.query_id:
             segment = self.prepare(shown.run, claimed.query)
             with self.tab as state:
-                state.preloaded(segment)
+                kept = state.preloaded(segment)
+            if kept:
+                self.on_hold(segment.key)
 
     def renew(self, link: ServiceLink) -> Segment | None:
         """Keep the claims alive while the labeler watches (a claim renews every lease this tab holds).

@@ -13,6 +13,7 @@ from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.presenter import Presenter
 from labeling_ui.service import ServiceLink
+from labeling_ui.sibling_tabs import TabMemory
 from labeling_ui.stream_waiter import StreamWaiter
 
 
@@ -32,6 +33,7 @@ class Identity:
         self.link: ServiceLink | None = None  # the worker's; None while signed out
         self.stream_link: ServiceLink | None = None  # the stream waiter's
         self.tab_id: str | None = None  # the browser tab's id: claims and labels name it
+        self.memory: TabMemory | None = None  # what the app keeps of this tab across reloads
 
     def use_token(self, token: str) -> None:
         self.claims.release_all(self.link)
@@ -54,6 +56,8 @@ class Identity:
         with self.tab as state:
             before = state.accepted(me.name, me.role)
             watching = state.replay_only
+        if self.memory is not None:  # a reload of this tab knows who labelled here
+            self.memory.who = me.name
         self.panels.greet(me.name, me.role, before, labels=not watching)
         if before is not None:  # loud: this tab was someone else a moment ago
             self.panels.notify("You are now " + me.name, f"this tab was signed in as {before}", "red")

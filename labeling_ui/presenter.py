@@ -62,8 +62,9 @@ class Presenter:
         claim = self.claims.claim(link, run) if run is not None else None
         if claim is None:
             picked = link.pick_run()
-            if picked is None:  # none open: how the run just shown ended, else that none is open yet
-                self.wait_for(link, run, None if run else "No run is open on the service yet.", self.claims.refused)
+            if picked is None:  # none open: how the run just shown ended, else that none takes labels now
+                refused = self.claims.refused if run is not None else None  # (an earlier run's refusal is stale)
+                self.wait_for(link, run, None if run else "No run on the service takes labels now.", refused)
                 return False
             run = picked
             claim = self.claims.claim(link, run)

@@ -32,7 +32,7 @@ from labeling_ui.presenter import Presenter
 from labeling_ui.revisions import Revisions
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import AuthRefused, Rejected, ServiceDown, ServiceLink
-from labeling_ui.sibling_tabs import SiblingTabs
+from labeling_ui.sibling_tabs import SiblingTabs, TabMemory
 from labeling_ui.stream_waiter import StreamWaiter
 from labeling_ui.tab import Key, Phase, Refusal, Rules, Step, Submit, TabState, Withdraw
 from labeling_ui.timings import KeyTimings
@@ -64,7 +64,7 @@ class LabelerSession:
         self._down_since: float | None = None
         self._grace = True
         self._closed = threading.Event()
-        self.claims = Claims(self.tab, self.screen, config.prefetch)
+        self.claims = Claims(self.tab, self.screen, config.prefetch, lambda key: siblings.preloaded(self, key))
         self.waiter = StreamWaiter(f"collie-stream-{client.client_id}", self._closed, config.wait_s, self._actions.put)
         self.presenter = Presenter(
             self.tab,
@@ -229,11 +229,12 @@ class LabelerSession:
         tab = self.siblings.tab_id(self, opened.tab)
         if tab != opened.tab:  # a copy of another open tab: a reload of it keeps the id it has now
             remember_tab(self.client, tab)
+        memory = self.siblings.tab_memory.setdefault(tab, TabMemory())
         with self.tab as state:
             state.watch_run, state.review = opened.watch, opened.review
-            # the labels this tab made before a reload: U walks back through them
-            state.labelled = self.siblings.tab_labels.setdefault(tab, state.labelled)
-        self.identity.tab_id = tab  # this tab's claims at the service are its own
+            # the labels this tab made before a reload: U walks back through them, unless another signs in
+            state.labelled, state.was = memory.labelled, memory.who
+        self.identity.tab_id, self.identity.memory = tab, memory  # this tab's claims at the service are its own
         if opened.token:
             self.identity.use_token(opened.token)
         else:
@@ -396,6 +397,11 @@ class LabelerSession:
                 state.refused(submit)
         if reason is None:  # a reload of this tab may show it meanwhile (this page sent it before it went)
             self.siblings.done(self, segment.key, skipped=submit.value == "skip")
+        # no next with the label: the queue is empty, or the run is being stopped (its label still
+        # counts), and then what was preloaded of it goes too, not shown until a renewal drops it
+        no_next = reason is None and self.config.prefetch and self.claims.next_claim is None
+        if no_next and (words := self.claims.ended(self.link, segment.run.id)) is not None:
+            self.panels.notify("Run closed", words, "orange")
         if reason is not None:
             self.panels.notify("Not recorded", reason, "red")
         self._show_next(segment.run)

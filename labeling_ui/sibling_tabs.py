@@ -5,6 +5,7 @@ id's claims at the service, so each must hear what the others did with them."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
 from labeling_ui.tab import Key
@@ -13,8 +14,18 @@ if TYPE_CHECKING:
     from labeling_ui.session import LabelerSession
 
 
+@dataclass
+class TabMemory:
+    """What the app keeps of one browser tab (by its id) across its reloads: who signed in there
+    last, and the labels made there since (U walks back through them; another labeler signing in
+    here must not: `TabState.accepted` forgets them when the name changes)."""
+
+    who: str | None = None
+    labelled: list[Key] = field(default_factory=list)
+
+
 class SiblingTabs(Protocol):
-    tab_labels: dict[str, list[Key]]  # each tab's labels by tab id, kept across the tab's reloads
+    tab_memory: dict[str, TabMemory]  # by tab id
 
     def tab_id(self, session: LabelerSession, tab: str) -> str:
         """The id `session` goes by, given the one its page keeps (a duplicated tab gets its own)."""
@@ -22,6 +33,11 @@ class SiblingTabs(Protocol):
 
     def shown(self, session: LabelerSession, key: Key) -> None:
         """`session` put `key` on screen: the labeler's other tabs no longer label or release it."""
+        ...
+
+    def preloaded(self, session: LabelerSession, key: Key) -> None:
+        """`session` holds `key` to show next: a closed tab of the labeler (in its grace period) no
+        longer releases it. An open one that shows it keeps it (the first to show a segment takes it)."""
         ...
 
     def done(self, session: LabelerSession, key: Key, skipped: bool) -> None:

@@ -391,3 +391,47 @@ def test_a_reload_while_a_label_is_on_its_way_loses_nothing_and_stalls_nothing(s
         wait_until(lambda: stack.trainer.run(run.id).queue.leased == 0)
         assert "Claim lost" not in page.inner_text("body")
         page.context.close()
+
+
+def test_a_reload_keeps_the_preloaded_segment_too(stack: Stack, browser: Browser) -> None:
+    """The reloaded tab took its segment back and preloaded the next one its id held, but only the
+    one on screen was taken off the connection the reload replaced: after its grace period that
+    connection handed the preload back to the pool, where another labeler took it, and the tab's
+    label on it was refused ("its claim ran out")."""
+    run = stack.post_run("point", 4, seed=23)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0, release_grace_s=3.0)  # past the new preload
+    page = tab(profile(browser), app.labeler_url(stack.new_labeler("reload-preload")))
+    first = wait_segment(page)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+    page.reload()
+    assert wait_segment(page) == first
+    wait_until(lambda: any(s.state.ahead and not s.closed.is_set() for s in app.sessions.values()))
+    wait_until(lambda: all(s.finished for s in app._closing))  # the old connection's grace is over
+    assert stack.trainer.run(run.id).queue.leased == 2  # the preload is still this tab's
+    press(page, "1")
+    second = wait_segment(page, first)
+    press(page, "1")
+    wait_segment(page, second)
+    assert "no longer holds" not in page.inner_text("body")
+    assert set(effective(stack, run.id)) == {first, second}
+    page.context.close()
+
+
+def test_another_person_signing_in_after_a_reload_cannot_undo_the_labels_made_here(
+    stack: Stack, browser: Browser
+) -> None:
+    """The tab's labels outlive a reload (U walks back through them), but they were handed to
+    whoever signed in after it: an operator's U withdrew the labeler's label."""
+    run = stack.post_run("point", 3, seed=29)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    page = tab(profile(browser), app.labeler_url(stack.new_labeler("first-here")))
+    shown = wait_segment(page)
+    press(page, "2")
+    wait_until(lambda: len(stack.trainer.label_events(run.id)) == 1)
+    page.goto(app.labeler_url(TOKENS["operator"]))  # the same browser tab, another person
+    wait_text(page, "this tab was signed in as first-here")
+    wait_segment(page, shown)
+    press(page, "u")
+    wait_text(page, "Nothing to undo")
+    assert [e.kind for e in stack.trainer.label_events(run.id)] == ["label"]
+    page.context.close()

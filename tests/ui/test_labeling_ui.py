@@ -436,6 +436,18 @@ def test_a_narrow_window_opens_with_the_context_column_minimized(stack: Stack, b
         context.close()
 
 
+def test_a_labeler_whose_only_run_ended_is_told_no_run_takes_labels(stack: Stack, browser: Browser) -> None:
+    """Was "No run is open on the service yet." (as if one were coming), after a reload too."""
+    run = stack.post_run("point", 2)
+    token = stack.operator.create_labeler("scoped-ended", runs=[run.id]).token  # this run only
+    stack.operator.stop(run.id)
+    stack.trainer.set_status(run.id, "finished")
+    page = open_labeler(browser, stack.ui(min_dwell_s=NO_DWELL).labeler_url(token))  # no run pinned
+    wait_text(page, "No run on the service takes labels now.")
+    assert "yet" not in page.inner_text("body")
+    page.context.close()
+
+
 def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(stack: Stack, browser: Browser) -> None:
     run = stack.post_run("point", 3)
     app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
@@ -450,6 +462,22 @@ def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(
     assert segment_id(page) is None  # neither the labelled one nor the preloaded one
     assert "finished" not in page.inner_text("body")
     assert stack.trainer.label_events(run.id) == []
+    page.context.close()
+
+
+def test_a_label_on_a_run_being_stopped_counts_and_its_preload_is_not_shown(stack: Stack, browser: Browser) -> None:
+    """The trainer has not acted on the stop yet, so the label on screen still lands; the segment
+    preloaded before the stop used to come next, until a lease renewal 20 s later dropped it."""
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0, lease_s=600.0)  # no renewal within the test
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("stopping")))
+    first = wait_segment(page)
+    wait_until(lambda: stack.trainer.run(run.id).queue.leased == 2)  # on screen and preloaded
+    stack.operator.stop(run.id)  # the trainer goes on a moment: the run is "stopping"
+    press(page, "2")
+    wait_text(page, f"Run {run.id} (point, north) is stopping")
+    assert segment_id(page) is None
+    assert [(e.query_id, e.kind) for e in stack.trainer.label_events(run.id)] == [(first, "label")]
     page.context.close()
 
 
