@@ -1,7 +1,8 @@
 """What one tab's session tells, and asks, the labeler's other tabs (the app keeps them all): the id
-it goes by, that it showed a segment, that a label or skip of one landed, that it handed claims
-back. Tabs of one labeler that go by one id (a reload and the connection it replaced) share that
-id's claims at the service, so each must hear what the others did with them."""
+it goes by, that it showed or preloaded a segment, that a label or skip of one landed, that it
+handed claims back; and what the app keeps of a tab across its reloads (TabMemory). Tabs of one
+labeler that go by one id (a reload and the connection it replaced) share that id's claims at the
+service, so each must hear what the others did with them."""
 
 from __future__ import annotations
 
