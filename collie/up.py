@@ -25,6 +25,7 @@ from urllib.parse import quote
 from collie.addresses import is_loopback, link_host, local_address, network_address, not_listenable
 from collie.argtypes import Given, ipv4_host, port, seed, sqlite_file
 from collie.child_log import last_error
+from collie.early_term import INTERRUPTED
 from collie.feedback_schedule import next_feedback_epoch
 from collie.pass_through import owned_flags
 from collie.processes import LockHeld, hold_lock
@@ -325,7 +326,7 @@ def run(args: argparse.Namespace) -> int:
         return code
     except Stopped:
         print("collie up: stopped while starting", file=sys.stderr)
-        code = 130
+        code = INTERRUPTED
         return code
     except (RuntimeError, TimeoutError) as exc:  # ChildFailed included
         unheld = isinstance(exc, RunNotHeld)
@@ -337,7 +338,7 @@ def run(args: argparse.Namespace) -> int:
         if unheld and made_db:  # the service made it empty just now: the refused start leaves none behind
             for path in (Path(f"{db}{end}") for end in ("", "-wal", "-shm")):
                 path.unlink(missing_ok=True)
-        if code == 130 and (out / "trainer" / "checkpoint.pt").is_file():  # what Ctrl-C kept, and how on
+        if code == INTERRUPTED and (out / "trainer" / "checkpoint.pt").is_file():  # what Ctrl-C kept, and how on
             kept = out / "trainer"
             print(f"collie up: stopped; the trainer's checkpoint is in {kept}: the same command goes on from it")
 
@@ -652,4 +653,4 @@ def watch(api: str, token: str, run_id: int, stack: Supervisor, exit_when_done: 
             time.sleep(0.5)
     bar.close()
     print("collie up: stopping…", flush=True)
-    return 130
+    return INTERRUPTED

@@ -29,7 +29,7 @@ from unprivileged import as_nobody, closed_folder
 from collie.schemas import StartupMark
 from trainer.cli import short_of_memory
 from trainer.fast_ops import fast_ops_pay
-from trainer.loop import coverage_shown
+from trainer.loop import coverage_shown, evaluation_line
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -65,6 +65,8 @@ def test_the_progress_bar_says_the_safe_coverage_as_a_whole_number() -> None:
     assert coverage_shown({"safe_coverage": -1834.6}) == "-1835"
     assert coverage_shown({"safe_coverage": 352.0}) == "352"
     assert coverage_shown({}) == "-"  # a run without a rule has none
+    line = evaluation_line(40, 400, {"safe_coverage": 1834.0, "n_bins": 1340.0}, 12)
+    assert line == "epoch 40/400 · safe cov 1834 · bins 1340 · labels 12"
 
 
 def test_a_run_without_a_progress_bar_logs_a_line_per_evaluation(tmp_path: Path) -> None:

@@ -737,7 +737,7 @@ class Trainer:
             bar.set_postfix(
                 labels=len(self.labelled),
                 safe_cov=coverage_shown(record),
-                bins=record["n_bins"],
+                bins=f"{record['n_bins']:.0f}",  # a float: tqdm would show 1,340 bins as 1.34e+03
                 lam=f"{record['lambda']:.1f}",
             )
         if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
