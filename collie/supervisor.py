@@ -30,6 +30,7 @@ from collie.whole_files import write_whole
 
 STOP_ORDER = ("trainer", "teacher", "labeling_ui", "service")  # producers first
 BACKOFF_S, MAX_BACKOFF_S = 0.5, 10.0
+AGAIN_DOUBLINGS = 2  # an early-ending part's wait grows to again_after_s × 4, no further
 REFUSED = 2  # argparse's exit code, which the trainer, the teacher and the labeling UI use for their refusals too
 # a part refused for memory that runs beside the stack were promised (exit EX_TEMPFAIL: the trainer's
 # memory ledger) is no fault: it tries again this often until they have ended
@@ -157,10 +158,14 @@ class Supervisor:
                 self.log(f"{child.name} finished (exit 0)")
                 continue
             if code == 0 and child.again_after_s is not None:
-                # doubling while it keeps ending at once (a stopped run's teacher until the trainer sees the stop)
+                # doubling while it keeps ending at once (a stopped run's teacher until the trainer sees the
+                # stop), to at most 4×: a resumed run's teacher waits no longer than that once it reopens
                 child.early_ends = 0 if now - child.started_at >= self.stable_s else child.early_ends + 1
-                delay = min(child.again_after_s * 2 ** max(child.early_ends - 1, 0), MAX_BACKOFF_S * 3)
-                self.log(f"{child.name} ended (exit 0) before its work was over; again in {delay:g} s unless over")
+                delay = child.again_after_s * 2 ** min(max(child.early_ends - 1, 0), AGAIN_DOUBLINGS)
+                self.log(
+                    f"{child.name} ended (exit 0) while the run takes no work (finished or stopping, as the "
+                    f"trainer has not yet reopened or ended it); again in {delay:g} s unless over"
+                )
                 child.restart_at = now + delay
                 continue
             if code == os.EX_TEMPFAIL:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -121,6 +122,26 @@ def test_a_part_that_ended_early_is_not_restarted_once_its_work_is_over(tmp_path
         stack.stop()
     log = (tmp_path / "logs" / "up.log").read_text()
     assert log.count("started teacher") == 1 and "teacher finished (exit 0)" in log
+
+
+def test_a_part_that_keeps_ending_early_waits_at_most_four_times_its_delay(tmp_path: Path) -> None:
+    """A resumed run's teacher ends at once (the run is finished) until the trainer reopens it: its
+    waits double 1×, 2×, 4×, then stay at 4× (was: 8×, 16×, up to 30 s, so the first labels of a
+    resumed run waited that long after the trainer was ready)."""
+    stack = Supervisor(tmp_path)
+    try:
+        stack.start("teacher", lambda: ["--help"], dict(os.environ), lambda: False, again_after_s=0.1)
+        deadline = time.monotonic() + 120
+        log = tmp_path / "logs" / "up.log"
+        while log.read_text().count("again in") < 6 and time.monotonic() < deadline:
+            stack.proc("teacher").wait(timeout=60)
+            stack.check()
+            time.sleep(0.05)
+    finally:
+        stack.stop()
+    delays = [float(d) for d in re.findall(r"again in ([0-9.]+) s", log.read_text())]
+    assert delays[:6] == [0.1, 0.2, 0.4, 0.4, 0.4, 0.4], delays
+    assert "while the run takes no work" in log.read_text()
 
 
 HOLDER = """
