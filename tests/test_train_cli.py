@@ -515,8 +515,10 @@ def test_resume_warns_about_the_flags_it_ignores_and_what_a_run_saved_before_som
     assert said + "--fused-adam false, --fast-ops false, --flush-denormal false" in proc.stderr, proc.stderr[-2000:]
     assert json.loads((run_copy / "config.json").read_text())["fused_adam"] is False
     events = sorted((run_copy / "tb").iterdir())
+    wall_s = json.loads((run_copy / "summary.json").read_text())["wall_s"]
     fewer = train("--out", str(run_copy), "--resume", "--epochs", "1")  # epochs may only be extended
     assert sorted((run_copy / "tb").iterdir()) == events  # nothing trained: no empty event file added
+    assert json.loads((run_copy / "summary.json").read_text())["wall_s"] == wall_s  # nor time (was: + the start's)
     assert fewer.returncode == 0 and "ignored: --epochs 1 (the run's: 3)" in fewer.stderr, fewer.stderr[-3000:]
     assert "finished all its 3 epochs: nothing to train (--epochs above 3 extends it)" in fewer.stderr
     assert "predates" not in fewer.stderr  # said once: the keys are written now

@@ -97,6 +97,15 @@ def evaluation_line(epoch: int, epochs: int, record: dict[str, Any], labels: int
     return f"epoch {epoch}/{epochs} · safe cov {coverage_shown(record)} · bins {record['n_bins']:.0f} · labels {labels}"
 
 
+def summary_wall_s(out: Path, default: float) -> float:
+    """summary.json's wall_s (a finished run's, written after its last checkpoint), else `default`."""
+    try:
+        wall = json.loads((out / "summary.json").read_text()).get("wall_s")
+    except (OSError, ValueError, AttributeError):
+        return default
+    return float(wall) if isinstance(wall, int | float) and math.isfinite(wall) else default
+
+
 class TrainingDiverged(RuntimeError):
     """A NaN/inf appeared in observations or losses; the last checkpoint is left intact."""
 
@@ -198,6 +207,7 @@ class Trainer:
         self.epoch, self.env_steps, self.session = 0, 0, 0
         self.first_feedback_epoch: int | None = None
         self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
+        self._t0: float | None = None  # when this process's share began; None: it trains nothing
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -469,7 +479,7 @@ class Trainer:
 
     # ---- persistence ---------------------------------------------------------------------
     def wall_s(self) -> float:
-        return self.wall_before + (time.perf_counter() - self._t0)
+        return self.wall_before + (time.perf_counter() - self._t0 if self._t0 is not None else 0.0)
 
     def state_dict(self) -> dict[str, Any]:
         return {
@@ -641,6 +651,8 @@ class Trainer:
         self._t0 = time.perf_counter()
         if resume:
             self.resume()
+            if self.epoch >= self.cfg.epochs and self._asking is None:  # a finished run: its wall time stays
+                self._t0, self.wall_before = None, summary_wall_s(self.out, self.wall_before)
         else:
             (self.out / "metrics.jsonl").write_text("")
         write_json(self.out / "config.json", self.cfg.to_dict())
