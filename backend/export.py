@@ -94,9 +94,9 @@ def run(args: argparse.Namespace) -> int:
         said = f"{where} is damaged ({first_line(exc.orig)}): restore it from a backup"
         print(f"collie export: error: {said}", file=sys.stderr)
         return 2
-    except ServiceError as exc:
+    except ServiceError as exc:  # no such run: a wrong --run, refused as every other wrong argument is
         print(f"collie export: error: {exc.detail}", file=sys.stderr)
-        return 1
+        return 2
     finally:
         reader.dispose()
         db.dispose()

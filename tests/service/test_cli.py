@@ -89,7 +89,7 @@ def test_serve_then_export(tmp_path: Path) -> None:
     assert missing.returncode == 2 and "nope.db does not exist" in missing.stderr
     assert not (tmp_path / "nope.db").exists()
     unknown = collie("export", "--db", str(db), "--run", "99")
-    assert unknown.returncode == 1 and "no run 99" in unknown.stderr
+    assert unknown.returncode == 2 and "no run 99" in unknown.stderr
 
 
 def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -> None:
@@ -97,7 +97,7 @@ def test_export_reads_older_databases_and_refuses_what_is_none(tmp_path: Path) -
     and exported; a file that is no database, or none at all, is a one-line error."""
     out = collie("export", "--db", str(migrated(tmp_path / "old.db", "0008")), "--run", "1", "--effective")
     assert (
-        out.returncode == 1 and "no run 1" in out.stderr and "upgraded" in out.stderr and "Traceback" not in out.stderr
+        out.returncode == 2 and "no run 1" in out.stderr and "upgraded" in out.stderr and "Traceback" not in out.stderr
     )
     junk = tmp_path / "checkpoint.pt"
     junk.write_bytes(b"\x80\x02not sqlite at all" * 100)
@@ -122,7 +122,7 @@ def test_an_export_that_upgrades_leaves_the_upgrade_in_the_database_file(tmp_pat
     (tmp_path / "old").mkdir()  # a folder of its own: what the export leaves beside the file
     old = migrated(tmp_path / "old" / "collie.db", "0008")
     out = collie("export", "--db", str(old), "--run", "1")
-    assert out.returncode == 1 and "upgraded" in out.stderr and "no run 1" in out.stderr, out.stderr
+    assert out.returncode == 2 and "upgraded" in out.stderr and "no run 1" in out.stderr, out.stderr
     assert sorted(p.name for p in old.parent.iterdir()) == ["collie.db"]
     alone = tmp_path / "copy.db"
     shutil.copy(old, alone)
@@ -538,7 +538,7 @@ def test_export_reads_a_read_only_database_and_serve_names_a_missing_folder(tmp_
         shutil.copy(migrated(tmp_path / "old.db", "0008"), ro / "old.db")
         subprocess.run(["mount", "-o", "remount,ro", ro], check=True)
         out = collie("export", "--db", str(ro / "good.db"), "--run", "1")
-        assert out.returncode == 1 and out.stderr == "collie export: error: no run 1\n", out.stderr  # read it
+        assert out.returncode == 2 and out.stderr == "collie export: error: no run 1\n", out.stderr  # read it
         out = collie("export", "--db", str(ro / "old.db"), "--run", "1")
         assert out.returncode == 2 and out.stderr.startswith(f"collie export: error: {ro / 'old.db'} is at schema 0008")
         assert "cannot be upgraded here (unable to open database file): export a writable copy of it" in out.stderr
