@@ -221,25 +221,32 @@ def checked(args: argparse.Namespace) -> Path:
         raise ValueError(f"--host {args.host} is not an address of this machine ({cannot})")
     if args.teacher_rate is not None and args.teacher_rate <= 0:
         raise ValueError("--teacher-rate must be > 0 (oracle labels per second)")
-    if not (out / "tokens.json").exists():  # a new stack takes COLLIE_<ROLE>_TOKEN (stack_tokens): as the service would
+    new, lab = not (out / "tokens.json").exists(), on_lab_database(args)
+    if new or lab:  # a new stack, or any on the lab's database, takes COLLIE_<ROLE>_TOKEN (stack_tokens)
         names = [f"COLLIE_{r.upper()}_TOKEN" for r in ROLES]
         for name in names:
             why = weakness(os.environ.get(name) or "x" * MIN_TOKEN)
             if why:
                 raise ValueError(f"{name} {why}: unset it (a random one is made) or choose a longer random one")
         missing = [name for name in names if not os.environ.get(name)]
-        if os.environ.get(DATABASE_ENV) and args.db is None and missing:  # new random ones would replace the lab's
+        if lab and missing:  # new random ones, or this --out's from an earlier start, would replace the lab's
+            kept = "new ones" if new else f"new ones, or the older ones in {out / 'tokens.json'},"
             raise ValueError(
-                f"{DATABASE_ENV} names the lab's database: give its tokens in {', '.join(missing)} (new ones would "
+                f"{DATABASE_ENV} names the lab's database: give its tokens in {', '.join(missing)} ({kept} would "
                 "replace the tokens everyone else uses there), or --db FILE for a stack of its own"
             )
-        if args.db is not None and is_sqlite_database(args.db) and missing:  # likewise: a database of another stack
+        if new and args.db is not None and is_sqlite_database(args.db) and missing:  # a database of another stack
             raise ValueError(
                 f"--db {args.db} holds a database already, but {out} has no tokens.json: give its tokens "
                 f"in {', '.join(missing)} (new ones would replace the tokens of every link handed out for it), "
                 "the --out it was started with, or a new --db"
             )
     return out
+
+
+def on_lab_database(args: argparse.Namespace) -> bool:
+    """The stack runs on the lab's database (COLLIE_DATABASE_URL, no --db), whose tokens are the lab's."""
+    return bool(os.environ.get(DATABASE_ENV)) and args.db is None
 
 
 def is_sqlite_database(path: Path) -> bool:
@@ -343,10 +350,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"collie up: stopped; the trainer's checkpoint is in {kept}: the same command goes on from it")
 
 
-def stack_tokens(tokens_file: Path) -> dict[str, str]:
+def stack_tokens(tokens_file: Path, lab: bool) -> dict[str, str]:
     """A resumed stack keeps its tokens (links already handed out stay valid); a new one takes
-    COLLIE_<ROLE>_TOKEN from the environment, else fresh random ones."""
-    if tokens_file.exists():
+    COLLIE_<ROLE>_TOKEN from the environment, else fresh random ones. On the lab's database
+    (`lab`) the environment's always win (`checked` made sure of them): the lab may have rotated
+    its tokens since this stack last ran, and the service would put the older ones back."""
+    if tokens_file.exists() and not lab:
         try:
             kept = read_tokens_file(tokens_file)
         except ValueError as exc:  # reported as the stack's error, with the logs' folder
@@ -383,7 +392,7 @@ def supervise(
     os.environ[LOG_ENV] = str(timeline.resolve())  # for our own marks and, through child_env, the parts'
     mark("python start")
     tokens_file = out / "tokens.json"
-    tokens = stack_tokens(tokens_file)
+    tokens = stack_tokens(tokens_file, on_lab_database(args))
     write_secret(tokens_file, json.dumps({"tokens": tokens}))  # kept even if the service fails to start
     lab = {DATABASE_ENV: os.environ[DATABASE_ENV]} if db is None else {}  # the lab's database, for the service only
     service_env = {**child_env(), **lab, **{f"COLLIE_{r.upper()}_TOKEN": t for r, t in tokens.items()}}

@@ -75,6 +75,34 @@ def test_the_labs_database_without_the_labs_tokens_is_refused(tmp_path: Path) ->
     assert not (tmp_path / "lab.db").exists()
 
 
+def test_a_resumed_stack_on_the_labs_database_takes_the_labs_tokens_not_its_older_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Was: a resumed stack put OUT/tokens.json's tokens back on the lab's database, replacing the
+    ones the lab had rotated to since (every labeler locked out, nothing said), and with no
+    COLLIE_<ROLE>_TOKEN it started on them as well."""
+    from collie.up import stack_tokens
+
+    out = tmp_path / "o"
+    out.mkdir()
+    older = {"operator": "o" * 32, "trainer": "t" * 32, "labeler": "l" * 32}
+    (out / "tokens.json").write_text(json.dumps({"tokens": older}))
+    env = {**os.environ, "COLLIE_DATABASE_URL": f"sqlite:///{tmp_path / 'lab.db'}", "COLLIE_OPERATOR_TOKEN": "p" * 20}
+    command = [sys.executable, "-m", "collie.cli", "up", "--no-label-ui", "--out", str(out)]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert (
+        f"give its tokens in COLLIE_TRAINER_TOKEN, COLLIE_LABELER_TOKEN (new ones, or the older ones in "
+        f"{out / 'tokens.json'}, would replace the tokens everyone else uses there)"
+    ) in proc.stderr
+    assert not (tmp_path / "lab.db").exists()
+    rotated = {"operator": "p" * 32, "trainer": "r" * 32, "labeler": "m" * 32}
+    for role, token in rotated.items():
+        monkeypatch.setenv(f"COLLIE_{role.upper()}_TOKEN", token)
+    assert stack_tokens(out / "tokens.json", lab=True) == rotated
+    assert stack_tokens(out / "tokens.json", lab=False) == older  # its own database: the links handed out stay
+
+
 def test_another_stacks_database_without_its_tokens_is_refused(tmp_path: Path) -> None:
     """New random tokens would replace those of every link handed out for that database."""
     with sqlite3.connect(tmp_path / "old.db") as conn:
@@ -236,7 +264,7 @@ def test_a_stack_whose_trainer_token_was_revoked_says_it_cannot_run_again(tmp_pa
     tokens = tmp_path / "tokens.json"
     tokens.write_text(json.dumps({"tokens": {"operator": "o" * 32, "labeler": "l" * 32}}))
     with pytest.raises(RuntimeError) as caught:
-        stack_tokens(tokens)
+        stack_tokens(tokens, lab=False)
     assert str(caught.value) == (
         f"{tokens} holds no trainer token (revoked on the service: final); this stack cannot run again: "
         "start a new one in another --out"
