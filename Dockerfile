@@ -26,8 +26,10 @@ HEALTHCHECK --interval=5s --timeout=3s --retries=12 \
 CMD ["collie", "serve", "--host", "0.0.0.0", "--port", "8000", "--tokens-json", "/data/tokens.json"]
 
 FROM source AS full
+# Mesa's EGL and its software driver (a Recommends, left out by --no-install-recommends): MUJOCO_GL=egl
+# renders the pixel robots offscreen with them, as the Makefile's packages do on a host.
 RUN apt-get update \
- && apt-get install -y --no-install-recommends libegl1 libgl1 libosmesa6 libglib2.0-0 \
+ && apt-get install -y --no-install-recommends libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libosmesa6 libglib2.0-0 \
  && rm -rf /var/lib/apt/lists/*
 # The CPU wheel: an unpinned torch pulls gigabytes of CUDA packages.
 RUN pip install --index-url https://download.pytorch.org/whl/cpu "torch==2.13.0" \
