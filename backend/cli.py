@@ -327,9 +327,11 @@ def run(args: argparse.Namespace) -> int:
         elif args.no_generate_tokens:
             continue
         else:
-            shown = (  # the database keeps only its hash: it cannot be shown again
-                f"(kept from the last start, which printed it; to replace it, set COLLIE_{role.upper()}_TOKEN; "
-                "--tokens-json FILE writes tokens to a file)"
+            rotate = f"to replace it, set COLLIE_{role.upper()}_TOKEN"  # the database keeps only its hash
+            shown = (
+                f"(kept from the last start, which printed it; {rotate}; --tokens-json FILE writes tokens to a file)"
+                if args.tokens_json is None
+                else f"(kept from a start that printed it and wrote no {args.tokens_json}; {rotate} to write it there)"
             )
         print(f"  {role} token: {shown}", flush=True)
     if settings.teacher_token is not None:

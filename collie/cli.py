@@ -20,7 +20,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("backend.cli", "run the labeling service (FastAPI over a SQLite file or PostgreSQL)"),
     "teacher": ("teacher.cli", "label a run's queries through the API with the scripted oracle"),
     "label-ui": ("labeling_ui.cli", "serve the labeling UI (viser) for a labeling service"),
-    "up": ("collie.up", "start service, trainer, labeling UI (and the oracle teacher) together on the embedded SQLite"),
+    "up": (
+        "collie.up",
+        "start service, trainer, labeling UI (and the oracle teacher) together (SQLite, or the lab's database)",
+    ),
     "export": ("backend.export", "print a run's label events (or effective labels) as JSON or CSV"),
     "sweep": ("trainer.sweep", "run methods × tasks × seeds of `collie train` (resumable; local pool or Ray)"),
     "report": ("trainer.report", "turn run folders into the paper's tables (markdown, CSV) and skill figures"),

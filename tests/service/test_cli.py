@@ -217,6 +217,14 @@ def test_a_restarted_service_keeps_its_tokens(tmp_path: Path) -> None:
             assert operator.me().name == "operator"
     finally:
         stop(server)
+    fresh, later = tmp_path / "fresh.db", tmp_path / "later.json"
+    stop(start_serve(fresh, None, env)[0])  # printed its tokens; a later start names a tokens file
+    server, lines = start_serve(fresh, later, env)
+    try:  # was: "--tokens-json FILE writes tokens to a file", with --tokens-json given
+        said = f"operator token: (kept from a start that printed it and wrote no {later}; to replace it, set "
+        assert said + "COLLIE_OPERATOR_TOKEN to write it there)" in "".join(lines), lines
+    finally:
+        stop(server)
 
 
 def test_no_generate_tokens_keeps_the_tokens_file_s_other_tokens(tmp_path: Path) -> None:
