@@ -359,6 +359,18 @@ def test_resume_with_another_run_than_the_folders_is_refused(service: str, metra
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
+def test_a_finished_run_resumed_on_the_service_trains_nothing_and_says_nothing_to_it(
+    service: str, metra_run: Trained, tmp_path: Path
+) -> None:
+    """Was: "report status not delivered: 409: run N is finished" at every such start (compose's
+    trainer, say, brought up again after its run ended)."""
+    run = Path(shutil.copytree(metra_run.out, tmp_path / "run"))
+    mine = json.loads((run / "service_run.json").read_text())["run_id"]
+    proc = api_train(service, "--out", str(run), "--resume", "--epochs", "2", "--run-id", str(mine))
+    assert proc.returncode == 0 and "nothing to train" in proc.stderr, proc.stderr[-3000:]
+    assert "not delivered" not in proc.stderr and "warning" not in proc.stderr.lower(), proc.stderr[-3000:]
+
+
 def test_a_service_run_json_without_a_run_id_is_named(run_copy: Path, service: str) -> None:
     """1e400 was an OverflowError traceback."""
     (run_copy / "service_run.json").write_text(f'{{"api": "{service}", "run_id": 1e400}}')

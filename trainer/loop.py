@@ -663,7 +663,8 @@ class Trainer:
         try:
             if self.epoch < self.cfg.epochs or self._asking is not None:  # else no event file with nothing in it
                 self._writer = self._tensorboard()
-            if self.feedback.control(self.epoch) == "run":  # a run paused or stopped meanwhile is not announced
+            training = self._t0 is not None  # a finished run resumed is not announced, nor one paused or stopped
+            if training and self.feedback.control(self.epoch) == "run":
                 self.reporter.status(StatusReport("training", self.epoch))
             startup.mark("run files, tensorboard")
             if self.epoch == 0:
@@ -783,7 +784,8 @@ class Trainer:
         write_json(self.out / "summary.json", summary)
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
-        if status != "interrupted":  # an interrupted run is not over for the service
+        # an interrupted run is not over for the service; a finished one resumed told it so before
+        if status != "interrupted" and self._t0 is not None:
             self.reporter.status(StatusReport(status, self.epoch, error=error))
         return summary
 
