@@ -783,6 +783,12 @@ def run(args: argparse.Namespace) -> int:
     if wrong:
         print(f"collie sweep: error: {wrong}", file=sys.stderr)
         return 2
+    try:  # before anything is said or made (no head: one line); before our handlers, which ray.init would replace
+        if args.ray:
+            connect_ray(args.ray)
+    except RuntimeError as exc:
+        print(f"collie sweep: error: {exc}", file=sys.stderr)
+        return 2
     pending = [s for s in specs if to_train(s)]
     if pending or args.downstream or not args.no_report:  # something will be written under --out
         check_writable(Path(args.out))
@@ -796,12 +802,6 @@ def run(args: argparse.Namespace) -> int:
     )
     failed: list[tuple[RunSpec, Exception]] = []
     stop, before = Stop(), {}
-    try:
-        if args.ray:  # before our handlers: ray.init puts its own over SIGTERM's
-            connect_ray(args.ray)
-    except RuntimeError as exc:
-        print(f"collie sweep: error: {exc}", file=sys.stderr)
-        return 2
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # Ray's runs too: each is cancelled, and stops
         if signal.getsignal(sig) is not signal.SIG_IGN:  # under nohup a closed terminal stops nothing
             before[sig] = signal.signal(sig, stop.handle)

@@ -227,12 +227,13 @@ def test_a_ray_address_where_no_head_answers_is_a_one_line_error(tmp_path):
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     cmd = [sys.executable, "-m", "collie.cli", "sweep", "--ray", f"127.0.0.1:{port}", "--tasks", "north"]
-    cmd += ["--methods", "metra", "--seeds", "1", "--preset", "smoke", "--out", str(tmp_path), "--no-report"]
+    cmd += ["--methods", "metra", "--seeds", "1", "--preset", "smoke", "--out", str(tmp_path / "sw"), "--no-report"]
     # ray.init alone retries forever: the timeout fails that; the probe's refusal is immediate, and
     # the rest of the time is the interpreter and its imports (no wall-clock bound on those)
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
     assert f"collie sweep: error: --ray 127.0.0.1:{port}: no Ray head answers at that address" in done.stderr
+    assert done.stdout == "" and not (tmp_path / "sw").exists()  # was: "1 run, …; engine: ray …" and an empty --out
 
 
 def test_variant_names_are_letters_digits_and_underscores_and_an_underscore_alone_is_one(tmp_path, capsys):
