@@ -6,6 +6,7 @@ and a trainer on a live service labelled by a scripted person (not the oracle) b
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -148,6 +149,13 @@ def test_an_instruction_only_run_learns_from_people_and_shows_only_rule_free_met
             assert trainer.returncode == 0, log[-3000:]
             memo = out / "service_run.json"
             assert f"collie train: created run {run_id} on {server.url} (remembered in {memo})" in log
+            # --no-progress: the wait for people is said, not silence (was: nothing until the next evaluation)
+            waits = re.findall(r"^epoch (\d+)/\d+ · waiting for labels \(feedback session (\d+)\)$", log, re.M)
+            assert (
+                waits
+                and waits[0][1] == "0"
+                and len(re.findall(r"^epoch \d+/\d+ · labels in · ", log, re.M)) == len(waits)
+            )
             run = person.run(run_id)
         page = httpx.get(
             f"{server.url}/api/dashboard/runs/{run_id}", headers={"Authorization": f"Bearer {TOKENS['operator']}"}

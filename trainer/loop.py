@@ -625,12 +625,19 @@ class Trainer:
         self.device_replay.sync(slots)
         self.env_steps += n * self.cfg.episode_steps
 
+    def say(self, what: str) -> None:
+        """A line for a log where no progress bar is drawn (a sweep's run, collie up's trainer): else
+        a wait for people, or for an operator's resume, is silence as long as it lasts."""
+        if not self.progress:
+            print(f"epoch {self.epoch}/{self.cfg.epochs} · {what}", file=sys.stderr, flush=True)
+
     def wait_while_paused(self, bar: Any) -> bool:
         """Honour the operator: returns False when the run must stop."""
         wish = self.feedback.control(self.epoch)
         if wish == "pause":
             self.reporter.status(StatusReport("paused", self.epoch))
             bar.set_description("paused")
+            self.say("paused by an operator")
             self._waiting = True
             try:
                 while wish == "pause":
@@ -642,6 +649,7 @@ class Trainer:
                 self._waiting = False
             if wish != "stop":
                 self.reporter.status(StatusReport("training", self.epoch))
+                self.say("resumed")
         return wish != "stop"
 
     def run(self, resume: bool = False) -> dict[str, Any]:
@@ -732,7 +740,12 @@ class Trainer:
         record = None
         if asking is not None or self.is_feedback_epoch():
             bar.set_description("waiting for labels")
+            people = not isinstance(self.feedback, OracleFeedback)  # the oracle answers at once
+            if people:
+                self.say(f"waiting for labels (feedback session {self.session})")
             self.feedback_session(asking)
+            if people:
+                self.say(f"labels in · labels {len(self.labelled)}")
             bar.set_description("training")
         self.apply_labels(self.feedback.revisions())
         self.train_epoch()
@@ -741,7 +754,7 @@ class Trainer:
         if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
             record = self.evaluate()
             startup.mark("evaluate", self.epoch)
-            if not self.progress:  # a log, not a terminal (a sweep's run, collie up's trainer): a line each
+            if not self.progress:
                 print(
                     evaluation_line(self.epoch, self.cfg.epochs, record, len(self.labelled)),
                     file=sys.stderr,
