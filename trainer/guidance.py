@@ -97,8 +97,16 @@ def smoothing_beta(epoch: int, first_feedback_epoch: int | None, span: float, k_
 
 @dataclass
 class LabelledSegment:
-    obs: np.ndarray  # (H, d) raw observations of σ
+    obs: np.ndarray  # (H, d) raw observations of σ (uint8 frames for pixel envs, see `kept`)
     label: int  # 0 bad, 1 neutral, 2 good
+
+
+def kept(obs: np.ndarray) -> np.ndarray:
+    """A segment's raw states as they are kept: pixel frames stay uint8 (float32 would take 4× the
+    memory and checkpoint, and normalising makes them float anyway), other observations float32.
+    The same array as given when it is one of these, so a checkpoint holds it once."""
+    arr = np.asarray(obs)
+    return arr if arr.dtype == np.uint8 else np.asarray(arr, np.float32)
 
 
 class LabelledSets:
@@ -122,7 +130,7 @@ class LabelledSets:
         else:
             if label not in (0, 1, 2):
                 raise ValueError(f"label must be 0, 1 or 2, got {label!r}")
-            self.segments[query_id] = LabelledSegment(np.asarray(obs, np.float32), int(label))
+            self.segments[query_id] = LabelledSegment(kept(obs), int(label))
         self.version += 1
         self._tensors = None
 
@@ -179,8 +187,6 @@ class LabelledSets:
         return {qid: {"obs": s.obs, "label": s.label} for qid, s in self.segments.items()}
 
     def load_state_dict(self, state: dict) -> None:
-        self.segments = {
-            qid: LabelledSegment(np.asarray(v["obs"], np.float32), int(v["label"])) for qid, v in state.items()
-        }
+        self.segments = {qid: LabelledSegment(kept(v["obs"]), int(v["label"])) for qid, v in state.items()}
         self.version += 1
         self._tensors = None

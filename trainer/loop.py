@@ -45,7 +45,7 @@ from trainer.encoders import deterministic_convolutions
 from trainer.envs import VectorEnv
 from trainer.fast_ops import fast_ops_pay
 from trainer.feedback import FeedbackSource, LabelEvent, OracleFeedback, Segment, SourceRefused, StopRequested
-from trainer.guidance import LabelledSets, guidance_weight, smoothing_beta
+from trainer.guidance import LabelledSets, guidance_weight, kept, smoothing_beta
 from trainer.memory_ledger import reserve
 from trainer.memory_plan import run_floor_bytes
 from trainer.methods import build_agent, method
@@ -334,9 +334,9 @@ class Trainer:
             return
         self.labelled.load_state_dict({})
         for seg, label in history:
-            self.asked[seg.query_id] = np.asarray(seg.obs, np.float32)
+            self.asked[seg.query_id] = kept(seg.obs)  # one array for both: a checkpoint holds it once
             self.segment_xy[seg.query_id] = np.asarray(seg.xy)
-            self.labelled.set(seg.query_id, seg.obs, label)
+            self.labelled.set(seg.query_id, self.asked[seg.query_id], label)
         # self.session stays the checkpoint's: the replay reuses the sessions posted since (by position).
         if history and self.first_feedback_epoch is None:
             self.first_feedback_epoch = min(seg.epoch for seg, _ in history)
