@@ -8,6 +8,7 @@ from typing import Literal, get_args
 
 EnvName = Literal["point", "ant", "half_cheetah", "quadruped", "humanoid", "car"]
 ENV_NAMES: tuple[str, ...] = get_args(EnvName)
+PIXEL_ENVS = frozenset({"quadruped", "humanoid"})  # they observe 64×64 pixel frames; the others state vectors
 # (nq, nv) of each env's MuJoCo model, so that the service can refuse a run whose segments the
 # labeling UI could not replay without importing MuJoCo (tests/test_envs.py checks them against the models)
 ENV_JOINTS: dict[str, tuple[int, int]] = {

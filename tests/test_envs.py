@@ -21,6 +21,7 @@ PIXEL_ENVS = {"quadruped", "humanoid"}
 
 def test_env_names() -> None:
     assert set(ENV_NAMES) == set(DIMS) | PIXEL_ENVS
+    assert collie.env_names.PIXEL_ENVS == PIXEL_ENVS  # what the config refuses state-only methods on
     assert ENV_NAMES == collie.env_names.ENV_NAMES  # the names the service takes runs of, and the UI replays
 
 

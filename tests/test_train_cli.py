@@ -607,6 +607,14 @@ def test_print_config_shows_what_the_flags_make_and_starts_nothing(tmp_path: Pat
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\ndescription = "x"\n[[regions]]\nkind = "moat"\n')
     refused(train("--task-file", str(bad), "--print-config"), f"task file {bad}")  # as a run would refuse it
+    for flags, said in (  # was: refused only once a run had built its env and nets
+        (["--method", "lsd"], "LSD's Lipschitz φ reads state vectors, and quadruped observes 64×64 pixels"),
+        (["--distance", "l2"], "--distance l2 (LSD's Lipschitz φ) reads state vectors, and quadruped observes"),
+        (["--method", "dodont", "--instruction", "x"], "dodont's instruction classifier (an MLP) reads state"),
+        (["--method", "ddg", "--instruction", "x"], "ddg's instruction classifier (an MLP) reads state vectors"),
+    ):
+        refused(train("--env", "quadruped", *flags, "--print-config"), said)
+    refused(train("--method", "ddg", "--instruction", "x", "--distance", "l2", "--print-config"), "ddg runs on")
     with open("/dev/full", "w") as full:  # was "cannot start the run in runs/…: no space left on device"
         proc = subprocess.run([*TRAIN, "--print-config"], stdout=full, stderr=subprocess.PIPE, text=True, timeout=60)
     refused(proc, "--print-config: cannot write to standard output: No space left on device")

@@ -48,6 +48,10 @@ def up(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.Completed
         (["--train-args", "--bogus 3"], "collie train would refuse the run: unrecognized arguments: --bogus 3"),
         (["--train-args", "--epochs -3"], "collie train would refuse the run: --epochs must be ≥ 1, got -3"),
         (["--noise-band", "-1"], "collie train would refuse the run: --noise-band must be ≥ 0, got -1.0"),
+        (  # was: refused only once the trainer built its nets, after the stack had started and made OUT
+            ["--env", "humanoid", "--method", "lsd"],
+            "collie train would refuse the run: LSD's Lipschitz φ reads state vectors, and humanoid observes",
+        ),
     ],
 )
 def test_bad_arguments_are_refused_before_anything_starts(tmp_path: Path, args: list[str], said: str) -> None:

@@ -17,7 +17,7 @@ import types
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
-from collie.env_names import ENV_NAMES
+from collie.env_names import ENV_NAMES, PIXEL_ENVS
 from collie.tasks import default_task
 from trainer.methods import METHODS
 from trainer.metrics import BIN_RULES
@@ -190,6 +190,18 @@ class Config:
         )
         need(self.w_at in ("next", "current"), f"--w-at must be 'next' or 'current', got {self.w_at!r}")
         need(self.distance in DISTANCES, f"unknown distance {self.distance!r}; valid: {', '.join(DISTANCES)}")
+        need(
+            self.method != "ddg" or self.distance == "temporal",
+            "ddg runs on METRA's temporal distance only (--distance temporal)",
+        )
+        if self.env in PIXEL_ENVS:  # else refused only once the env and the nets are built, seconds in
+            lipschitz = "--distance l2 (LSD's Lipschitz φ)" if self.distance == "l2" else None
+            states_only = METHODS[self.method].states_only or lipschitz
+            need(
+                states_only is None,
+                f"{states_only} reads state vectors, and {self.env} observes 64×64 pixels: choose another "
+                "method or env (docs/baselines.md)",
+            )
         need(
             self.reward_form in REWARD_FORMS,
             f"unknown reward form {self.reward_form!r}; valid: {', '.join(REWARD_FORMS)}",

@@ -68,6 +68,7 @@ class Method:
     guidance: Guidance
     build: Builder
     learner_keys: tuple[str, ...] = ()  # its learner's own config keys: no learner of a method without them reads them
+    states_only: str | None = None  # what of it reads state vectors only (refused on pixel envs), if anything
 
     @property
     def specific_keys(self) -> frozenset[str]:
@@ -141,9 +142,23 @@ METHODS: dict[str, Method] = {
         Method("collie", asks_labels=True, guidance="labels", build=_plain),
         Method("metra", asks_labels=False, guidance="one", build=_plain),
         Method("oracle", asks_labels=False, guidance="task", build=_plain),
-        Method("dodont", asks_labels=True, guidance="instruction", build=_dodont, learner_keys=CLASSIFIER_KEYS),
-        Method("ddg", asks_labels=True, guidance="one", build=_ddg, learner_keys=CLASSIFIER_KEYS),
-        Method("lsd", asks_labels=False, guidance="one", build=_lsd),
+        Method(
+            "dodont",
+            asks_labels=True,
+            guidance="instruction",
+            build=_dodont,
+            learner_keys=CLASSIFIER_KEYS,
+            states_only="dodont's instruction classifier (an MLP)",
+        ),
+        Method(
+            "ddg",
+            asks_labels=True,
+            guidance="one",
+            build=_ddg,
+            learner_keys=CLASSIFIER_KEYS,
+            states_only="ddg's instruction classifier (an MLP)",
+        ),
+        Method("lsd", asks_labels=False, guidance="one", build=_lsd, states_only="LSD's Lipschitz φ"),
         Method("diayn", asks_labels=False, guidance="one", build=_diayn, learner_keys=("diayn",)),
     )
 }
