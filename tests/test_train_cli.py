@@ -576,6 +576,9 @@ def test_the_line_printed_after_ctrl_c_agrees_with_summary_json(tmp_path: Path) 
     assert printed["wall_s"] == summary["wall_s"] > evaluated["wall_s"]
     said = f"stopped after epoch {summary['epochs_done']} of 1000; `collie train --out {out} --resume` continues"
     assert stderr.strip().splitlines()[-1] == f"collie train: {said}"  # where it stopped, not the evaluation's epoch
+    # said when the signal came (was: nothing until the epoch ended, minutes on a pixel robot)
+    heard = f"collie train: SIGINT: stopping at the end of epoch {summary['epochs_done']}, with a checkpoint; again to"
+    assert f"{heard} stop at once, without one" in stderr.splitlines(), stderr[-3000:]
 
 
 def test_help_lists_every_registered_task() -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import random
 import re
 import signal
@@ -543,6 +544,12 @@ class Trainer:
         self.feedback.interrupt(reason)  # the waits check it too: a raise from here can be dropped
         if self._waiting:
             raise StopRequested(reason)
+        # said at once (a pixel epoch on a CPU takes many minutes); os.write: a print here could land
+        # inside the progress bar's own write to stderr and raise "reentrant call"
+        said = (
+            f"collie train: {signal.Signals(signum).name}: stopping at the end of epoch {self.epoch}, with a checkpoint"
+        )
+        os.write(2, f"{chr(10) if self.progress else ''}{said}; again to stop at once, without one\n".encode())
 
     def _install_signal_handlers(self) -> dict[int, Any]:
         if threading.current_thread() is not threading.main_thread():
