@@ -470,10 +470,11 @@ class LabelSubmit(Wire):
 
     @field_validator("value", mode="before")
     @classmethod
-    def _no_bool(cls, v: object) -> object:
-        # Literal[1] would accept true and 1.0 (they equal 1 in Python)
-        if isinstance(v, bool | float):
-            raise ValueError("a label is the integer 0, 1 or 2, or the string 'skip'")
+    def _label_or_skip(cls, v: object) -> object:
+        # one error for any other value (the union's two would name pydantic's internals), and no
+        # true or 1.0, which Literal[1] would take (they equal 1 in Python)
+        if v != "skip" and (isinstance(v, bool) or not isinstance(v, int) or v not in _LABELS):
+            raise ValueError(f"a label is the integer 0, 1 or 2, or the string 'skip'; got {v!r}")
         return v
 
 
