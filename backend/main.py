@@ -19,6 +19,7 @@ from backend.db import Database
 from backend.headers import SecurityHeaders
 from backend.limits import BodyLimit
 from backend.routes import control, health, labelers, labels, queries, runs, stream, telemetry, web
+from backend.routes.responses import SIGNED_IN
 from backend.services import auth
 from backend.services.errors import first_line
 from backend.services.events import EventHub
@@ -155,8 +156,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.begin_shutdown = begin_shutdown
     app.state.tokens = auth.TokenCache(settings.token_cache_s)
     app.state.trainer_contact = TrainerContact()
-    for module in (health, runs, control, queries, labels, telemetry, stream, labelers):
-        app.include_router(module.router, prefix="/api")
+    app.include_router(health.router, prefix="/api")
+    for module in (runs, control, queries, labels, telemetry, stream, labelers):
+        app.include_router(module.router, prefix="/api", responses=SIGNED_IN)
 
     errors.install(app)
 

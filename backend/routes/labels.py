@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Query, Request, Response
 
@@ -19,6 +19,7 @@ from backend.routes.deps import (
     json_body,
     parse_body,
 )
+from backend.routes.responses import LABELLING, Responses
 from backend.services import export, labels, leases
 from backend.services.errors import ServiceError
 from collie.schemas import (
@@ -45,13 +46,15 @@ def _ack_response(ack: LabelAck, next_claim: bytes | None = None) -> Response:
     return Response(body, status_code=200 if ack.duplicate else 201, media_type="application/json")
 
 
-_REPEAT: dict[int | str, dict[str, Any]] = {
-    200: {"description": "a repeat of an earlier client_request_id", "model": LabelAck}
-}
+_REPEAT: Responses = {200: {"description": "a repeat of an earlier client_request_id", "model": LabelAck}}
 
 
 @router.post(
-    "/labels", response_model=LabelAck, status_code=201, responses=_REPEAT, openapi_extra=json_body(LabelSubmit)
+    "/labels",
+    response_model=LabelAck,
+    status_code=201,
+    responses={**_REPEAT, **LABELLING},
+    openapi_extra=json_body(LabelSubmit),
 )
 async def submit_label(
     run_id: RunId,

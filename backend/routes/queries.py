@@ -21,6 +21,7 @@ from backend.routes.deps import (
     json_body,
     parse_body,
 )
+from backend.routes.responses import CLAIMING
 from backend.services import leases, queries
 from collie.schemas import (
     MAX_HOLD,
@@ -89,7 +90,9 @@ async def get_query(run_id: RunId, query_id: QueryId, _: AnyCaller, db: DB) -> Q
         return queries.get(conn, run_id, query_id)
 
 
-@router.post("/claim", response_model=ClaimRead, responses={204: {"description": "nothing to claim right now"}})
+@router.post(
+    "/claim", response_model=ClaimRead, responses={204: {"description": "nothing to claim right now"}, **CLAIMING}
+)
 async def claim(
     run_id: RunId,
     caller: LabelerCaller,

@@ -11,6 +11,7 @@ from starlette.routing import Match, Mount
 from starlette.types import Scope
 
 from backend.routes import dashboard, quality
+from backend.routes.responses import SIGNED_IN
 
 # backend/web: in the checkout a link to web/, in a wheel the files themselves (package data)
 WEB_DIR = (Path(__file__).resolve().parents[1] / "web").resolve()
@@ -31,8 +32,8 @@ def install(app: FastAPI, web_dir: Path | None = None) -> None:
     """Add the dashboard API (and the run quality settings it edits), then serve `web_dir`
     (default: the packaged web/) at / — last, since a mount at / answers every path the routes
     before it did not."""
-    app.include_router(dashboard.router, prefix="/api")
-    app.include_router(quality.router, prefix="/api")  # the quality panel's one write
+    app.include_router(dashboard.router, prefix="/api", responses=SIGNED_IN)
+    app.include_router(quality.router, prefix="/api", responses=SIGNED_IN)  # the quality panel's one write
     directory = web_dir or WEB_DIR
     if (directory / "index.html").is_file():
         app.router.routes.append(PageMount("/", StaticFiles(directory=directory, html=True), name="web"))

@@ -78,6 +78,20 @@ def test_policy_covers_every_route(live: BackgroundServer) -> None:
     assert {(method.upper(), path) for path, ops in paths.items() for method in ops} == set(POLICY)
 
 
+def test_the_schema_documents_the_refusals_a_client_meets(live: BackgroundServer) -> None:
+    """Was: /openapi.json listed 200/201/204/422 only, so a client written from it knew of no 401,
+    403, 404 or 409, nor of the typed NotHeld and OutOfScope bodies."""
+    paths = live.app.openapi()["paths"]
+    for (method, path), policy in POLICY.items():
+        answers = paths[path][method.lower()]["responses"]
+        assert policy == PUBLIC or {"401", "403", "404"} <= set(answers), (method, path)
+    assert "409" in paths["/api/runs/{run_id}/claim"]["post"]["responses"]
+    conflict = paths["/api/runs/{run_id}/labels"]["post"]["responses"]["409"]["content"]["application/json"]
+    assert {"$ref": "#/components/schemas/NotHeld"} in conflict["schema"]["anyOf"]
+    forbidden = paths["/api/runs/{run_id}/labels"]["post"]["responses"]["403"]["content"]["application/json"]
+    assert {"$ref": "#/components/schemas/OutOfScope"} in forbidden["schema"]["anyOf"]
+
+
 CASES = [(m, p, who) for (m, p) in POLICY for who in ("none", "wrong", "operator", "trainer", "labeler")]
 
 
