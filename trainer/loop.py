@@ -546,10 +546,9 @@ class Trainer:
             raise StopRequested(reason)
         # said at once (a pixel epoch on a CPU takes many minutes); os.write: a print here could land
         # inside the progress bar's own write to stderr and raise "reentrant call"
-        said = (
-            f"collie train: {signal.Signals(signum).name}: stopping at the end of epoch {self.epoch}, with a checkpoint"
-        )
-        os.write(2, f"{chr(10) if self.progress else ''}{said}; again to stop at once, without one\n".encode())
+        below_bar = "\n" if self.progress else ""
+        said = f"collie train: {signal.Signals(signum).name}: stopping at the end of epoch {self.epoch}, with a "
+        os.write(2, f"{below_bar}{said}checkpoint; again to stop at once, without one\n".encode())
 
     def _install_signal_handlers(self) -> dict[int, Any]:
         if threading.current_thread() is not threading.main_thread():
@@ -761,7 +760,7 @@ class Trainer:
         if self.epoch % self.cfg.eval_every == 0 or self.epoch == self.cfg.epochs:
             record = self.evaluate()
             startup.mark("evaluate", self.epoch)
-            if not self.progress:
+            if not self.progress:  # a log, not a terminal: a line each
                 print(
                     evaluation_line(self.epoch, self.cfg.epochs, record, len(self.labelled)),
                     file=sys.stderr,
