@@ -8,6 +8,7 @@ Panels only draw and forward clicks; what a click does is the session's business
 from __future__ import annotations
 
 import html
+import json
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -20,6 +21,7 @@ import viser
 
 from collie.labels import Label
 from collie.tasks import Task
+from labeling_ui.browser import run_script
 from labeling_ui.colours import EARLIER_RGB, PLAYED_RGB, TO_COME_RGB, css
 from labeling_ui.inset import SIZE
 from labeling_ui.playback import SPEEDS
@@ -50,6 +52,7 @@ LEGEND = (
 CONTROLS_PX, CONTEXT_PX = 360, 300  # the docked columns' widths: controls (right), context (left)
 NARROW_WINDOW_PX = 960  # below this the context column starts minimized: the 3D view would be < 300 px
 PHONE_WINDOW_PX = 600  # below this (a phone) viser's controls sheet covers most of the 3D view
+APP_TITLE = "collie labeling"  # the browser tab's title, after what the tab shows
 SIGN_IN = "Sign in"  # the button's words, which Enter in the token field presses (keys.py)
 MINE_SHOWN = 12  # rows of "my labels" listed (the newest); every one can be picked
 
@@ -114,6 +117,8 @@ class Panels:
 
         self.title = gui.add_markdown("**collie · labeling** — not signed in")
         self.status = gui.add_markdown("Connecting…")
+        self._page_title: str | None = None
+        self.page_title(APP_TITLE)
 
         with gui.add_folder("Sign in", visible=False) as self.login:
             self.token = gui.add_text("Labeler token", initial_value="", hint="the token your operator gave you")
@@ -126,7 +131,7 @@ class Panels:
             neutral = gui.add_button("2 · Neutral", color="gray", hint="key 2")
             good = gui.add_button("3 · Good", color="yellow", hint="key 3")  # the class colours of every screen
             skip = gui.add_button("X · Skip", color="dark", hint="key X: not a label; someone else gets it")
-            undo = gui.add_button("U · Undo last label", color="dark", hint="key U")
+            self.undo_button = undo = gui.add_button("U · Undo last label", color="dark", hint="key U")
             gui.add_markdown(KEYMAP)
             self.progress = gui.add_markdown("")
             self.session_bar = gui.add_progress_bar(0.0, color="orange")
@@ -212,25 +217,36 @@ class Panels:
             self.mine_folder.visible = not login and bool(self._mine)
             self.context_panel.visible = replay
 
+    def page_title(self, title: str) -> None:
+        """The browser tab's title (viser's page says "Viser"): which of a labeler's tabs labels, and
+        whether a segment waits in it. Sent only when it changes."""
+        if title != self._page_title:
+            self._page_title = title
+            run_script(self.client, f"document.title = {json.dumps(title)};")
+
     def show_login(self, message: str) -> None:
         """The sign-in field: this tab is nobody until a token is accepted (the title says so)."""
         with self.client.atomic():
             self._screen(message, login=True)
             self.title.content = "**collie · labeling** — not signed in"
+        self.page_title(f"Sign in · {APP_TITLE}")
 
     def show_checking(self, message: str) -> None:
         """Signing in (the token not yet accepted): no labeling control, not even undo, until the
         service says whose token it is."""
         self._screen(message)
 
-    def show_message(self, message: str, keep_replay: bool = False) -> None:
-        """A state with no segment (connecting, unreachable, waiting): only undo stays offered;
-        `keep_replay`: the evaluation's skills keep playing beside it."""
+    def show_message(self, message: str, keep_replay: bool = False, title: str = APP_TITLE, undo: bool = True) -> None:
+        """A state with no segment (connecting, unreachable, waiting): only undo stays offered
+        (`undo`: not for a run that ended, which takes no undo either); `keep_replay`: the
+        evaluation's skills keep playing beside it."""
         with self.client.atomic():
             self._screen(message, labeling=True, replay=keep_replay)
             self.query.content = ""
             for element in self.segment_only:
                 element.visible = False
+            self.undo_button.visible = undo
+        self.page_title(title)
 
     def show_replay_only(self, status: str, detail: str, n_frames: int, rule: bool = False) -> None:
         """Watch or review mode: the replay and its context, nothing to label; `rule`: the task's
@@ -240,6 +256,7 @@ class Panels:
             self.rule.visible = rule
             self.frame.max = max(n_frames - 1, 1)
             self.segment.content = detail
+        self.page_title(f"Replay · {APP_TITLE}")
 
     def show_alone(self, message: str) -> None:
         """Only the status line (and the account): no label buttons, no replay."""
@@ -252,7 +269,7 @@ class Panels:
             self.context_panel.visible = True
             self.rule.visible = False
             self.frame.max = max(n_frames - 1, 1)
-            self.segment.content = "**While you wait: the latest evaluation**  \n" + detail
+            self.segment.content = "**The run's latest evaluation**  \n" + detail
 
     def add_skill_controls(self, show: SkillShow) -> None:
         gui = self.client.gui
@@ -269,7 +286,7 @@ class Panels:
             again = " — **relabel**: a new label revises yours" if info.revising else ""
             self.query.content = f"Segment `{info.query_id}`{again}"
             self.rule.visible = True
-            for element in self.segment_only:
+            for element in (*self.segment_only, self.undo_button):
                 element.visible = True
             for button in self.label_buttons:
                 button.disabled = error is not None
@@ -280,6 +297,7 @@ class Panels:
                 f"**skill** {skill_text(info.skill)}  \n"
                 f"**frames** {info.n_frames} from step {info.start}"
             )
+        self.page_title(f"Label · run {info.run_id} · {APP_TITLE}")
 
     def show_task(self, task: Task, instructions: str) -> None:
         """The task, what each label means, the mixed-segment rule, the run's own instructions; a

@@ -15,11 +15,11 @@ from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
 from labeling_ui.inset import render_inset
 from labeling_ui.models import ModelError, Poser
-from labeling_ui.panels import SegmentInfo
+from labeling_ui.panels import APP_TITLE, SegmentInfo
 from labeling_ui.review import show_review
 from labeling_ui.screen import TabScreen
 from labeling_ui.service import MyLabel, ServiceLink
-from labeling_ui.stream_waiter import StreamWaiter
+from labeling_ui.stream_waiter import StreamWaiter, run_ended
 from labeling_ui.tab import Key, Segment
 from labeling_ui.waiting import EpochClock, forecast, waiting_text
 from labeling_ui.watch import SkillShow
@@ -84,7 +84,7 @@ class Presenter:
             except ModelError as exc:
                 poser, segment.error, segment.replay = None, str(exc), None
         self.skills = None
-        self.waiter.stop_following()
+        self.waiter.follow(run.id, run.last_event_id, run_ended)  # a stop, said while the segment is on screen
         self.player.fps = self.fps
         if self.player.loop != self.loop:  # the skills shown while waiting may have changed it
             self.player.loop = self.loop
@@ -172,8 +172,15 @@ class Presenter:
         if not keep_skills:
             self.skills = None
             self.screen.blank()
-        after = "This run takes no more labels; yours are kept." if ended else "New segments appear here by themselves."
-        self.panels.show_message(f"☕ **Nothing to label right now.**  \n{status}  \n{after}", keep_replay=keep_skills)
+        # an ended run: no "right now" and no undo, as nothing more comes and the service takes no undo
+        head, after, title = (
+            ("🏁 **Nothing more to label in this run.**", "This run takes no more labels; yours are kept.", "Run over")
+            if ended
+            else ("☕ **Nothing to label right now.**", "New segments appear here by themselves.", "Waiting")
+        )
+        self.panels.show_message(
+            f"{head}  \n{status}  \n{after}", keep_replay=keep_skills, title=f"{title} · {APP_TITLE}", undo=not ended
+        )
 
     def play_skills(self, link: ServiceLink, run_id: int, watching: bool) -> None:
         """The run's latest skills play in 3D (watch mode's own screen, or the waiting screen's view)."""

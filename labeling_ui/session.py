@@ -349,6 +349,8 @@ class LabelerSession:
                         gone = state.shown is None
                     if gone:  # it no longer labels that one here: the next, or the waiting screen
                         self._show_next()
+                case Wake():  # the waiter heard the run of the segment on screen end (presenter.present)
+                    self._leave_an_ended_run()
         except ServiceDown:
             self._retry = action
             raise
@@ -358,6 +360,15 @@ class LabelerSession:
     def _show_next(self, run: RunRead | None = None) -> bool:
         assert self.link is not None
         return self.presenter.show_next(self.link, run)
+
+    def _leave_an_ended_run(self) -> None:
+        """The segment on screen leaves as soon as its run ends, saying so (was: only at the next
+        key, whose label was then refused, or the next lease renewal, up to 20 s later)."""
+        assert self.link is not None
+        shown = self.state.shown
+        if shown is not None and (words := self.claims.ended(self.link, shown.run.id)) is not None:
+            self.panels.notify("Run closed", words, "orange")
+            self._show_next(shown.run)
 
     def _renew(self) -> None:
         if self.link is not None and (lost := self.claims.renew(self.link)) is not None:

@@ -265,7 +265,7 @@ def test_waiting_is_honest_and_shows_the_latest_skills(stack: Stack, browser: Br
     page = tab(context, app.labeler_url(stack.new_labeler("hal")))
     wait_text(page, "Nothing to label right now")
     wait_text(page, "at epoch 3")
-    wait_text(page, "While you wait: the latest evaluation")
+    wait_text(page, "The run's latest evaluation")
     pixels = canvas_until(page, artifacts / "waiting-skills.png", lambda p: p.std() > 10.0)
     assert pixels.std() > 10.0  # not a blank screen
     assert "being labelled elsewhere" not in page.inner_text("body")

@@ -465,6 +465,25 @@ def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(
     page.context.close()
 
 
+def test_a_run_that_ends_while_its_segment_is_on_screen_takes_it_away_at_once(stack: Stack, browser: Browser) -> None:
+    """Was: the segment stayed, every key live, until the next key (whose label was then refused:
+    "Not recorded") or the lease renewal up to 20 s later. The tab's title says what it shows."""
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("onlooker")))
+    wait_segment(page)
+    assert page.title() == f"Label · run {run.id} · collie labeling"  # was "Viser"
+    stack.operator.stop(run.id)
+    stack.trainer.set_status(run.id, "finished")  # the trainer acts on the stop
+    wait_text(page, "Nothing more to label in this run.", timeout_s=10.0)  # no key pressed, well before a renewal
+    wait_text(page, f"run {run.id} is stopped: it takes no more labels")  # the notice of why
+    assert segment_id(page) is None and page.title() == "Run over · collie labeling"
+    body = page.inner_text("body")
+    assert "right now" not in body and "Undo last label" not in body  # nothing will come, and no undo is taken
+    assert stack.trainer.label_events(run.id) == []
+    page.context.close()
+
+
 def test_a_label_on_a_run_being_stopped_counts_and_its_preload_is_not_shown(stack: Stack, browser: Browser) -> None:
     """The trainer has not acted on the stop yet, so the label on screen still lands; the segment
     preloaded before the stop used to come next, until a lease renewal 20 s later dropped it."""
