@@ -81,6 +81,18 @@ class Canvas:
         self.dots(np.vstack(pieces), rgb, radius)
 
 
+def inset_caption(segment_xy: np.ndarray, earlier_xy: np.ndarray | None) -> str:
+    """The inset's scale and where the segment lies, in words: with only an instruction ("keep away
+    from the east side") there is no tinted area to judge by, and the inset rescales per segment."""
+    half = view_box(segment_xy, earlier_xy)[2]
+    xy = np.asarray(segment_xy, float).reshape(-1, 2)
+    (x0, y0), (x1, y1) = xy[0], xy[-1]
+    return (
+        f"{2 * half:.3g} units across · the segment runs from ({x0:+.2f}, {y0:+.2f}) to ({x1:+.2f}, {y1:+.2f}): "
+        "x east, y north of the origin (where the grey lines cross; episodes start near it)"
+    )
+
+
 def render_inset(task: Task | None, segment_xy: np.ndarray, earlier_xy: np.ndarray | None) -> np.ndarray:
     """(SIZE, SIZE, 3) uint8 picture of the regions, the earlier path and the segment."""
     canvas = Canvas(*view_box(segment_xy, earlier_xy))

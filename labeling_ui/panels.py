@@ -184,6 +184,7 @@ class Panels:
             self.inset = gui.add_image(
                 np.full((SIZE, SIZE, 3), 255, np.uint8), label="top-down, north up", format="png"
             )
+            self.inset_caption = gui.add_markdown("")
             gui.add_markdown(LEGEND)
             self.segment = gui.add_markdown("")
         self.context_panel.dock_left()
@@ -358,8 +359,9 @@ class Panels:
         if picked is not None and self._mine_inset is not None and picked.xy:
             self.mine_inset.image = self._mine_inset(picked)[::2, ::2]
 
-    def show_inset(self, image: np.ndarray) -> None:
+    def show_inset(self, image: np.ndarray, caption: str = "") -> None:
         self.inset.image = image
+        self.inset_caption.content = caption
 
     def show_progress(self, p: Progress, yours: int) -> None:
         """`yours`: this labeler's labels in effect in the session. With redundancy r a query counts

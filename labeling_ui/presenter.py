@@ -13,7 +13,7 @@ import numpy as np
 from collie.schemas import FINISHED, RunRead
 from labeling_ui.claims import Claims
 from labeling_ui.guarded_tab import GuardedTab
-from labeling_ui.inset import render_inset
+from labeling_ui.inset import inset_caption, render_inset
 from labeling_ui.models import ModelError, Poser
 from labeling_ui.panels import APP_TITLE, SegmentInfo
 from labeling_ui.review import show_review
@@ -117,7 +117,8 @@ class Presenter:
         if poser is not None:
             self.screen.show_floor(run, task, np.asarray(query.xy, float))
         self.screen.show_task(run, task)
-        self.panels.show_inset(render_inset(task, np.asarray(query.xy, float), earlier))
+        xy = np.asarray(query.xy, float)
+        self.panels.show_inset(render_inset(task, xy, earlier), inset_caption(xy, earlier))
         self.claims.preload(link)
         self.show_progress(link)
         return True

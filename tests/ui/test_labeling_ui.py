@@ -473,6 +473,7 @@ def test_a_run_that_ends_while_its_segment_is_on_screen_takes_it_away_at_once(st
     page = open_labeler(browser, app.labeler_url(stack.new_labeler("onlooker")))
     wait_segment(page)
     assert page.title() == f"Label · run {run.id} · collie labeling"  # was "Viser"
+    wait_text(page, "units across · the segment runs from (")  # the inset's scale and where it lies
     stack.operator.stop(run.id)
     stack.trainer.set_status(run.id, "finished")  # the trainer acts on the stop
     wait_text(page, "Nothing more to label in this run.", timeout_s=10.0)  # no key pressed, well before a renewal

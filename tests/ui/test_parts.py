@@ -22,7 +22,7 @@ from collie.tasks import BAD, NEUTRAL, get_task
 from labeling_ui.claims import Claims
 from labeling_ui.colours import PLAYED_RGB
 from labeling_ui.guarded_tab import GuardedTab
-from labeling_ui.inset import CLASS_RGB, END_RGB, NO_RULE_RGB, SIZE, render_inset, view_box
+from labeling_ui.inset import CLASS_RGB, END_RGB, NO_RULE_RGB, SIZE, inset_caption, render_inset, view_box
 from labeling_ui.models import ModelError, Poser, replay_model, warm_models
 from labeling_ui.playback import Player
 from labeling_ui.regions import TINT_RGB, region_outline, tint_meshes
@@ -145,6 +145,15 @@ def test_inset_is_north_up_and_paints_the_task() -> None:
     # its end is a ring, not the 3D view's "played" pink (was a pink dot, read as where the robot is)
     colours = {tuple(p) for p in image.reshape(-1, 3)}
     assert PLAYED_RGB not in colours and END_RGB in colours
+
+
+def test_the_inset_caption_gives_its_scale_and_where_the_segment_lies() -> None:
+    """With only an instruction ("away from the east side") nothing is tinted, and the inset rescales
+    per segment: the caption says how wide it is and where the segment runs, east and north."""
+    caption = inset_caption(np.array([[3.0, -1.0], [4.5, -0.25]]), np.array([[0.0, 0.0], [3.0, -1.0]]))
+    half = view_box(np.array([[3.0, -1.0], [4.5, -0.25]]), np.array([[0.0, 0.0], [3.0, -1.0]]))[2]
+    assert caption.startswith(f"{2 * half:.3g} units across · the segment runs from (+3.00, -1.00) to (+4.50, -0.25)")
+    assert "x east, y north of the origin (where the grey lines cross" in caption
 
 
 def test_floor_map_and_region_outlines() -> None:
