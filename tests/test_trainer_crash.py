@@ -315,6 +315,28 @@ def test_more_epochs_reopen_a_finished_run_and_a_stopped_one_stays_stopped(tmp_p
         assert "Traceback" not in stopped_log.read_text() and not lost_report(stopped_log)
 
 
+def test_labels_given_before_an_operators_stop_are_applied_before_the_run_ends(tmp_path, service):
+    """Was: an operator's stop in a feedback wait ended the run with the session's labels that had
+    come unapplied (the checkpoint held fewer than the service counted), and a stopped run is never
+    resumed to apply them."""
+    out, log = tmp_path / "stopped", tmp_path / "stopped.log"
+    trainer = cli(*train_args(out, service.api), log=log)  # smoke: sessions of 2; only we label
+    wait_until((out / "service_run.json").exists, alive=trainer, log=log)
+    run_id = json.loads((out / "service_run.json").read_text())["run_id"]
+    with CollieClient(service.api, TOKENS["operator"]) as operator, CollieClient(service.api, TOKENS["labeler"]) as who:
+        wait_until(lambda: operator.run(run_id).status == "waiting_for_labels", alive=trainer, log=log)
+        claim = who.claim(run_id)
+        assert claim is not None
+        who.submit(run_id, claim.query.query_id, 0)  # one of the session's two
+        operator.stop(run_id)
+        assert trainer.wait(timeout=120) == 0, log.read_text()[-3000:]
+        effective = {e.query_id: int(e.label) for e in operator.effective_labels(run_id)}
+    ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+    applied = {query_id: int(segment["label"]) for query_id, segment in ckpt["labelled"].items()}
+    assert applied == effective == {claim.query.query_id: 0}
+    assert ckpt["asking"] is None  # the run ended there: no wait is kept to resume
+
+
 def lost_report(log: Path) -> bool:
     """Whether the service refused a report, or never took a final status (a routine report the
     service was too busy to answer is best effort: its "not delivered (…busy…)" line is no failure)."""

@@ -728,6 +728,8 @@ class Trainer:
             self.close_tensorboard()
         if status == "stopped" and self._signalled is not None:
             status = "interrupted"  # the process was told to end, not the run: `--resume` continues it
+        if status == "stopped" and self._asking is not None:  # an operator's stop, in a feedback wait
+            self.end_the_wait()
         if status in ("stopped", "interrupted"):
             self.checkpoint()
         summary = self.finish(status, record, error=None if diverged is None else str(diverged))
@@ -739,6 +741,16 @@ class Trainer:
             refusal = self.feedback.refusal
             raise SourceRefused(f"{refusal}; the run finished, but the service was not told", refusal.advice)
         return summary
+
+    def end_the_wait(self) -> None:
+        """An operator stopped the run while it waited for a session's labels: the run ends there and
+        is never resumed, so the session's segments join those asked, and the labels that came for
+        them are applied (finish() takes the last ones), as the service counts them."""
+        assert self._asking is not None
+        for s in self._asking:
+            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
+        self._asking = None
+        self.apply_labels(self.feedback.revisions())
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:
         """The epoch after its rollouts: the feedback session (`asking`: the one a stopped run was
@@ -806,6 +818,11 @@ class Trainer:
         # an interrupted run is not over for the service; a finished one resumed told it so before
         if status != "interrupted" and self._t0 is not None:
             self.reporter.status(StatusReport(status, self.epoch, error=error))
+            # labels given until the service closed the run just now (after a feedback timeout, or
+            # an operator's stop: the service counts them, and no later epoch will apply them)
+            if status != "failed" and (late := self.feedback.revisions()):
+                self.apply_labels(late)
+                self.checkpoint()
         return summary
 
     def close_tensorboard(self) -> None:

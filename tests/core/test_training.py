@@ -11,10 +11,13 @@ import numpy as np
 import pytest
 import torch
 
+from collie.tasks import Task, get_task
 from trainer.checkpoint import load_checkpoint, save_checkpoint
 from trainer.config import make_config
+from trainer.feedback import LabelEvent, OracleFeedback, Segment
 from trainer.loop import Trainer, TrainingDiverged
 from trainer.run_files import ResumeError
+from trainer.telemetry import Reporter, StatusReport
 
 pytestmark = pytest.mark.slow  # run first under `make test`'s two workers (tests/conftest.py)
 
@@ -211,3 +214,42 @@ def test_a_refusal_met_in_the_last_epoch_is_said_after_the_run_is_saved(tmp_path
     with pytest.raises(SourceRefused, match="the run finished, but the service was not told"):
         t.run()
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "finished"
+
+
+class LateLastSession(OracleFeedback):
+    """The oracle, but the last session's labels come only once the run was reported over, as labels
+    given after a feedback timeout do until the service closes the run."""
+
+    def __init__(self, task: Task, last: int) -> None:
+        super().__init__(task)
+        self.last, self.held, self.closed = last, list[LabelEvent](), False
+
+    def collect(self, session: int, epoch: int, segments: list[Segment]) -> list[LabelEvent]:
+        events = super().collect(session, epoch, segments)
+        if session != self.last:
+            return events
+        self.held = events
+        return []
+
+    def revisions(self) -> list[LabelEvent]:
+        late, self.held = (self.held, []) if self.closed else ([], self.held)
+        return late
+
+
+class ClosingReporter(Reporter):
+    def __init__(self, feedback: LateLastSession) -> None:
+        self.feedback = feedback
+
+    def status(self, report: StatusReport) -> None:
+        self.feedback.closed = self.feedback.closed or report.status == "finished"
+
+
+def test_labels_that_come_after_the_last_update_are_applied_before_the_run_ends(tmp_path):
+    """Was: the service counted them (given before it closed the run), but the trainer's last pull
+    came at the start of its last epoch: its final checkpoint held fewer labels than the service."""
+    cfg = make_config("smoke", "point", out=str(tmp_path))
+    feedback = LateLastSession(get_task(cfg.task, "point"), cfg.n_sessions - 1)
+    trainer = Trainer(cfg, feedback=feedback, progress=False, reporter=ClosingReporter(feedback))
+    assert trainer.run()["status"] == "finished"
+    labelled = load_checkpoint(tmp_path / "checkpoint.pt")["labelled"]
+    assert len(labelled) == cfg.total_queries and feedback.held == []
