@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from sqlalchemy import Connection, insert, select
+from sqlalchemy import Connection, delete, insert, select
 
 from backend.models import Metrics, Rollouts
 from backend.services import events, runs
@@ -15,8 +15,12 @@ from collie.schemas import EnvDims, MetricsIn, MetricsPosted, MetricsRead, Rollo
 
 
 def post_metrics(conn: Connection, run_id: int, body: MetricsIn) -> MetricsRead:
+    """An evaluation's metrics. Those of its epoch and later ones the run posted before go: a trainer
+    restarted from its checkpoint evaluates them again (and drops them from its metrics.jsonl too),
+    so the curves never show an epoch twice."""
     runs.row(conn, run_id)
     now = time.time()
+    conn.execute(delete(Metrics).where(Metrics.run_id == run_id, Metrics.epoch >= body.epoch))
     row_id = conn.execute(
         insert(Metrics)
         .values(run_id=run_id, epoch=body.epoch, values=body.values, created_at=now)

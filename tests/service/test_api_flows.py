@@ -238,6 +238,16 @@ def test_csv_export_never_holds_a_formula(labeler: CollieClient, trainer: Collie
     assert json.loads(trainer.export(run.id, "json"))[0]["client_request_id"] == formula
 
 
+def test_a_restarted_trainers_metrics_replace_those_of_the_epochs_it_evaluates_again(
+    trainer: CollieClient, run: RunRead
+) -> None:
+    """Was: a trainer resumed from its checkpoint posted epochs 2 and 3 again, and the curves drew
+    each twice (its own metrics.jsonl drops what came after the checkpoint)."""
+    for epoch in (1, 2, 3, 2, 3):  # killed after epoch 3, resumed from the checkpoint of epoch 1
+        trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values={"loss": float(epoch)}))
+    assert [m.epoch for m in trainer.metrics(run.id)] == [1, 2, 3]
+
+
 def test_rollouts_and_metrics_are_bounded(trainer: CollieClient, labeler: CollieClient, run: RunRead) -> None:
     for epoch in range(12):
         trainer.post_metrics(run.id, MetricsIn(epoch=epoch, values={"safe_ratio": epoch / 10, "loss": -1.0}))
