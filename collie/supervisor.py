@@ -163,8 +163,8 @@ class Supervisor:
                 child.early_ends = 0 if now - child.started_at >= self.stable_s else child.early_ends + 1
                 delay = child.again_after_s * 2 ** min(max(child.early_ends - 1, 0), AGAIN_DOUBLINGS)
                 self.log(
-                    f"{child.name} ended (exit 0) while the run takes no work (finished or stopping, as the "
-                    f"trainer has not yet reopened or ended it); again in {delay:g} s unless over"
+                    f"{child.name} ended (exit 0): its run takes no work now (finished or stopping); "
+                    f"again in {delay:g} s unless the trainer is done"
                 )
                 child.restart_at = now + delay
                 continue

@@ -130,9 +130,9 @@ def wait_for(
                 pass  # being written
         if proc.poll() is not None:
             said = last_error(log, since) if log is not None else ""
-            raise RuntimeError(
-                f"{what} exited with code {proc.returncode} before it was ready{': ' + said if said else ''}"
-            )
+            code = proc.returncode  # a killed one's is -signal: said as the supervisor says it
+            how = f"signal {-code}" if code < 0 else f"code {code}"
+            raise RuntimeError(f"{what} exited with {how} before it was ready{': ' + said if said else ''}")
         time.sleep(0.1)
     raise TimeoutError(f"{what} was not ready after {timeout_s:.0f} s")
 
@@ -244,6 +244,19 @@ def checked(args: argparse.Namespace) -> Path:
     return out
 
 
+def running(pid: object) -> bool:
+    """A process with this pid exists (ours to signal or not)."""
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's: it exists
+        return True
+    return True
+
+
 def on_lab_database(args: argparse.Namespace) -> bool:
     """The stack runs on the lab's database (COLLIE_DATABASE_URL, no --db), whose tokens are the lab's."""
     return bool(os.environ.get(DATABASE_ENV)) and args.db is None
@@ -285,9 +298,11 @@ def locked(out: Path) -> int:
     except LockHeld:
         try:
             before = json.loads((out / "children.json").read_text())
-            pids = [f"collie up {before['up']}"] + [f"{n} {p}" for n, p in before["children"].items()]
+            named = [("collie up", before["up"]), *before["children"].items()]
+            pids = [f"{n} {p}" for n, p in named if running(p)]  # the file keeps those a SIGKILL ended
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            pids = ["see OUT/children.json"]
+            pids = []
+        pids = pids or [f"find them with `fuser -v {out / STACK_LOCK}`"]
         raise ValueError(
             f"another collie up runs on --out {out} ({', '.join(pids)}): stop it (Ctrl-C there, or kill "
             "these processes), or give another --out"

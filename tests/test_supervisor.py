@@ -141,7 +141,7 @@ def test_a_part_that_keeps_ending_early_waits_at_most_four_times_its_delay(tmp_p
         stack.stop()
     delays = [float(d) for d in re.findall(r"again in ([0-9.]+) s", log.read_text())]
     assert delays[:6] == [0.1, 0.2, 0.4, 0.4, 0.4, 0.4], delays
-    assert "while the run takes no work" in log.read_text()
+    assert "teacher ended (exit 0): its run takes no work now (finished or stopping); again in" in log.read_text()
 
 
 HOLDER = """

@@ -293,3 +293,32 @@ def test_a_stack_without_a_labeling_ui_or_a_teacher_says_how_labels_come(tmp_pat
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=120)
     assert proc.returncode == 130  # Ctrl-C's
+
+
+def test_a_refusal_for_a_stack_in_the_way_names_only_its_processes_that_run(tmp_path: Path) -> None:
+    """Was: every pid OUT/children.json named, those a SIGKILL had ended too."""
+    from collie.processes import hold_lock
+    from collie.up import locked
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)
+    (tmp_path / "children.json").write_text(json.dumps({"up": dead, "children": {"service": os.getpid()}}))
+    fd = hold_lock(tmp_path / "up.lock")  # the stack still holds OUT (here: this process)
+    try:
+        with pytest.raises(ValueError, match=rf"\(service {os.getpid()}\): stop it") as refused:
+            locked(tmp_path)
+        assert str(dead) not in str(refused.value)
+        (tmp_path / "children.json").write_text(json.dumps({"up": dead, "children": {}}))
+        with pytest.raises(ValueError, match=r"\(find them with `fuser -v .*up\.lock`\)"):
+            locked(tmp_path)
+    finally:
+        os.close(fd)
+
+
+def test_a_part_killed_before_it_was_ready_is_said_to_have_ended_by_a_signal(tmp_path: Path) -> None:
+    """Was "exited with code -9", where the supervisor says "signal 9" of the same death."""
+    killed = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    killed.kill()
+    killed.wait()
+    with pytest.raises(RuntimeError, match=r"^the trainer exited with signal 9 before it was ready$"):
+        wait_for(tmp_path / "never.json", killed, "the trainer", timeout_s=30)
