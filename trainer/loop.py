@@ -333,11 +333,21 @@ class Trainer:
         history = self.feedback.history(held=list(self.asked))  # the checkpoint's segments, labelled or not
         if history is None:
             return
+        applied = set(self.labelled.segments)
         self.labelled.load_state_dict({})
         for seg, label in history:
             self.asked[seg.query_id] = kept(seg.obs)  # one array for both: a checkpoint holds it once
             self.segment_xy[seg.query_id] = np.asarray(seg.xy)
             self.labelled.set(seg.query_id, self.asked[seg.query_id], label)
+        gone = sorted(applied - set(self.labelled.segments))
+        if gone:  # said, not refused: labels undone while the trainer was down go too
+            shown = ", ".join(gone[:3]) + (", …" if len(gone) > 3 else "")
+            print(
+                f"collie train: warning: the labeling service holds no label for {len(gone)} segment(s) this "
+                f"checkpoint had applied ({shown}): undone while the trainer was down, or its database is "
+                "older than the checkpoint (restored from a backup?); the run goes on with the service's labels",
+                file=sys.stderr,
+            )
         # self.session stays the checkpoint's: the replay reuses the sessions posted since (by position).
         if history and self.first_feedback_epoch is None:
             self.first_feedback_epoch = min(seg.epoch for seg, _ in history)

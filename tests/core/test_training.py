@@ -5,6 +5,7 @@ import hashlib
 import json
 import subprocess
 import sys
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -253,3 +254,21 @@ def test_labels_that_come_after_the_last_update_are_applied_before_the_run_ends(
     assert trainer.run()["status"] == "finished"
     labelled = load_checkpoint(tmp_path / "checkpoint.pt")["labelled"]
     assert len(labelled) == cfg.total_queries and feedback.held == []
+
+
+class ForgetfulService(OracleFeedback):
+    """A source of truth that holds no label: a service whose database is older than the checkpoint."""
+
+    def history(self, held: Collection[str] = ()) -> list[tuple[Segment, int]]:
+        return []
+
+
+def test_a_resume_whose_service_lacks_labels_the_checkpoint_applied_says_so(tmp_path, capsys):
+    """Was silent: a database restored from a backup dropped every label given since, on both sides."""
+    smoke(tmp_path).run()
+    cfg = make_config("smoke", "point", out=str(tmp_path), epochs=7)
+    before = load_checkpoint(tmp_path / "checkpoint.pt")["labelled"]
+    Trainer(cfg, feedback=ForgetfulService(get_task(cfg.task, "point")), progress=False).run(resume=True)
+    said = capsys.readouterr().err
+    assert f"the labeling service holds no label for {len(before)} segment(s) this checkpoint had applied" in said
+    assert "(restored from a backup?)" in said and len(before) > 0
