@@ -13,6 +13,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -982,3 +983,24 @@ def test_a_service_gone_or_not_itself_while_the_run_is_created_is_one_line(tmp_p
     line = proc.stderr.strip().splitlines()[-1]
     assert line.startswith(f"collie train: error: the labeling service at {api} "), line
     assert answer == "none" or ("Sign in to the proxy" in line and line.count("answered") == 1), line
+
+
+def test_the_paper_preset_on_pixels_without_a_gpu_is_warned_of(tmp_path: Path) -> None:
+    """Was unsaid: an epoch of it takes many minutes on a CPU (docs/envs.md)."""
+    cmd = [*TRAIN[:4], "--env", "quadruped", "--preset", "paper", "--no-progress", "--out", str(tmp_path / "run")]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env={**os.environ, "CUDA_VISIBLE_DEVICES": ""})
+    said = "collie train: warning: the paper preset on quadruped's pixels is sized for a GPU: on this CPU each of "
+    deadline = threading.Timer(120, proc.kill)  # it would train for hours: never wait for its end
+    deadline.start()
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:  # said before the run is built
+            if line.startswith(said):
+                assert "updates takes seconds (docs/envs.md); --preset cpu tries the loop out" in line
+                break
+        else:
+            pytest.fail("no warning before collie train ended (or 120 s passed)")
+    finally:
+        deadline.cancel()
+        proc.kill()
+        proc.wait()

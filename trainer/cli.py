@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from collie import early_term
 from collie.argtypes import Given, http_url, int_in, record_id, seed
+from collie.env_names import PIXEL_ENVS
 from collie.processes import LockHeld, hold_lock
 from collie.startup import mark
 from collie.tasks import default_task, task_names
@@ -689,6 +690,14 @@ def run(args: argparse.Namespace) -> int:
             ) from None
         if cfg.fast_ops is None:  # this machine's choice, in the service's copy of the config too
             cfg.fast_ops = fast_ops_pay(device)
+        if cfg.env in PIXEL_ENVS and cfg.preset == "paper" and device.type == "cpu":  # else hours of it unsaid
+            print(
+                f"collie train: warning: the paper preset on {cfg.env}'s pixels is sized for a GPU: on this CPU "
+                f"each of an epoch's {cfg.grad_steps} updates takes seconds (docs/envs.md); --preset cpu tries "
+                "the loop out",
+                file=sys.stderr,
+                flush=True,
+            )
 
         # a resumed run keeps the rule it started with, whatever its file says now
         rule = (saved_rule(cfg.out) if args.resume else None) or choose_rule(cfg)
