@@ -370,7 +370,8 @@ class Panels:
         session = f"This session **{p.session_done} / {p.session_size}**"
         if p.redundancy > 1:
             session += f" settled ({p.redundancy} labelers each) · yours **{yours}**"
-        self.progress.content = f"{session} · total **{total}**"
+        paused = "  \n⏸ **The run is paused by an operator**: your labels still count." if p.paused else ""
+        self.progress.content = f"{session} · total **{total}**{paused}"
         self.session_bar.value = 100.0 * p.session_done / max(p.session_size, 1)  # type: ignore[misc]  # settable
 
     def show_frame(self, frame: int, playing: bool) -> None:

@@ -78,6 +78,7 @@ class Progress:
     total_planned: int | None  # N_total (the run's label budget), when the trainer gave one
     instructions: str = ""  # the operator's for this run, as they are now
     redundancy: int = 1  # labels from distinct labelers before a query counts (session_done counts those)
+    paused: bool = False  # an operator paused the run: labels still count, the trainer waits
 
 
 class ServiceLink:
@@ -182,7 +183,10 @@ class ServiceLink:
         run = self._call(lambda: self.client.run(run_id))
         queries = self._call(lambda: self.client.queries(run_id, session=session, limit=5000))
         done = sum(1 for q in queries if q.label is not None)
-        return Progress(session, done, len(queries), run.n_labels, run.n_total, run.instructions, run.redundancy)
+        return Progress(
+            session, done, len(queries), run.n_labels, run.n_total, run.instructions, run.redundancy,
+            run.control == "pause",
+        )  # fmt: skip
 
     def latest_rollouts(self, run_id: int) -> RolloutsRead | None:
         """The run's newest evaluation rollouts (with simulator states, when the trainer sent them)."""

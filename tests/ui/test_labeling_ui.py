@@ -465,6 +465,20 @@ def test_a_stopped_run_leaves_the_screen_and_its_preloaded_segment_is_not_shown(
     page.context.close()
 
 
+def test_a_paused_run_says_so_beside_its_segments(stack: Stack, browser: Browser) -> None:
+    """Was: a paused run looked like a running one while segments remained."""
+    run = stack.post_run("point", 3)
+    app = stack.ui(run.id, min_dwell_s=NO_DWELL, min_played=0.0)
+    page = open_labeler(browser, app.labeler_url(stack.new_labeler("in-a-pause")))
+    first = wait_segment(page)
+    assert "paused" not in page.inner_text("body")
+    stack.operator.pause(run.id)
+    press(page, "2")
+    wait_segment(page, first)
+    wait_text(page, "The run is paused by an operator")
+    page.context.close()
+
+
 def test_a_run_that_ends_while_its_segment_is_on_screen_takes_it_away_at_once(stack: Stack, browser: Browser) -> None:
     """Was: the segment stayed, every key live, until the next key (whose label was then refused:
     "Not recorded") or the lease renewal up to 20 s later. The tab's title says what it shows."""
