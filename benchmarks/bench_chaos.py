@@ -34,6 +34,7 @@ import torch
 from record import record
 
 from collie.client import CollieClient
+from collie.processes import running
 
 PARTS = ("service", "trainer", "teacher", "labeling_ui")
 # The smoke preset stretched to ~1000 labels: 100 sessions of 10, one per epoch, a checkpoint each epoch.
@@ -47,14 +48,6 @@ def children(out: Path) -> dict[str, int]:
         return json.loads((out / "children.json").read_text())["children"]
     except (FileNotFoundError, json.JSONDecodeError):
         return {}
-
-
-def alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return not Path(f"/proc/{pid}/stat").read_text().split(") ", 1)[1].startswith("Z")  # a zombie is dead
 
 
 def progress(client: CollieClient, run_id: int) -> float | None:
@@ -86,7 +79,7 @@ def chaos(out: Path, kills: int, seed: int, up: subprocess.Popen) -> dict[str, i
                 best = max(best, now or 0.0)
                 pids = children(out)
                 back = last_killed is None or (
-                    pids.get(last_killed[0], last_killed[1]) != last_killed[1] and alive(pids[last_killed[0]])
+                    pids.get(last_killed[0], last_killed[1]) != last_killed[1] and running(pids[last_killed[0]])
                 )
                 if now is not None and back and best >= 0.8 * (i + 1) / (kills + 1) and best < 1.0:
                     break
@@ -94,7 +87,7 @@ def chaos(out: Path, kills: int, seed: int, up: subprocess.Popen) -> dict[str, i
             if up.poll() is not None:
                 break
             pid = children(out)[part]
-            if alive(pid):
+            if running(pid):
                 os.kill(pid, signal.SIGKILL)
                 done[part] += 1
                 last_killed = (part, pid)

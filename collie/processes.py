@@ -28,6 +28,23 @@ def end_with_parent(parent: int | None = None) -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
+def running(pid: object) -> bool:
+    """A live process has this pid (another user's too; a zombie, which has ended, has not)."""
+    if not isinstance(pid, int) or isinstance(pid, bool) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's: it exists
+        pass
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1][:1]
+    except (OSError, IndexError):  # no /proc here, or it ended just now: existence is what is known
+        return True
+    return state != "Z"
+
+
 class LockHeld(Exception):
     """Another process holds the lock; `holder` is the pid it wrote ("" if none)."""
 

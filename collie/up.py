@@ -28,7 +28,7 @@ from collie.child_log import last_error
 from collie.early_term import INTERRUPTED
 from collie.feedback_schedule import next_feedback_epoch
 from collie.pass_through import owned_flags
-from collie.processes import LockHeld, hold_lock
+from collie.processes import LockHeld, hold_lock, running
 from collie.run_state import run_state
 from collie.stack_folder import STACK_LOCK, STACK_RUN
 from collie.startup import LOG_ENV, mark
@@ -244,19 +244,6 @@ def checked(args: argparse.Namespace) -> Path:
     return out
 
 
-def running(pid: object) -> bool:
-    """A process with this pid exists (ours to signal or not)."""
-    if not isinstance(pid, int) or pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's: it exists
-        return True
-    return True
-
-
 def on_lab_database(args: argparse.Namespace) -> bool:
     """The stack runs on the lab's database (COLLIE_DATABASE_URL, no --db), whose tokens are the lab's."""
     return bool(os.environ.get(DATABASE_ENV)) and args.db is None
@@ -329,7 +316,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"collie up: error: {exc}", file=sys.stderr)
         return 2
     # an explicit --db, else the lab's database when COLLIE_DATABASE_URL names one, else OUT's SQLite file
-    db = args.db or (None if os.environ.get(DATABASE_ENV) else out / "collie.db")
+    db = args.db or (None if on_lab_database(args) else out / "collie.db")
     if db is None:
         print("collie up: database: COLLIE_DATABASE_URL (give --db FILE for a SQLite file instead)", flush=True)
     stack = Supervisor(out, max_restarts=args.max_restarts, inherited=(lock,))

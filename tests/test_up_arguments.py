@@ -11,6 +11,7 @@ import sqlite3
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -322,3 +323,17 @@ def test_a_part_killed_before_it_was_ready_is_said_to_have_ended_by_a_signal(tmp
     killed.wait()
     with pytest.raises(RuntimeError, match=r"^the trainer exited with signal 9 before it was ready$"):
         wait_for(tmp_path / "never.json", killed, "the trainer", timeout_s=30)
+
+
+def test_a_zombie_is_no_running_process() -> None:
+    """A child that ended but was not yet waited for keeps its pid: it runs no more."""
+    from collie.processes import running
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 30
+    while Path(f"/proc/{child.pid}/stat").read_text().rsplit(") ", 1)[1][:1] != "Z":
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert not running(child.pid) and running(os.getpid())
+    child.wait()
+    assert not running(child.pid) and not running(True) and not running(-1)
