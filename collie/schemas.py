@@ -473,9 +473,12 @@ class LabelSubmit(Wire):
     def _label_or_skip(cls, v: object) -> object:
         # one error for any other value (the union's two would name pydantic's internals), and no
         # true or 1.0, which Literal[1] would take (they equal 1 in Python)
-        if v != "skip" and (isinstance(v, bool) or not isinstance(v, int) or v not in _LABELS):
-            raise ValueError(f"a label is the integer 0, 1 or 2, or the string 'skip'; got {v!r}")
-        return v
+        if v == "skip":
+            return v
+        try:
+            return _exact_label(v)
+        except ValueError:
+            raise ValueError(f"a label is the integer 0, 1 or 2, or the string 'skip'; got {v!r}") from None
 
 
 class UndoRequest(Wire):

@@ -59,7 +59,7 @@ from trainer.query import select_queries
 from trainer.replay import TrajectoryReplay
 from trainer.replay_log import ReplayLog
 from trainer.rollout import Normaliser, Trajectories, rollout
-from trainer.run_files import ResumeError, write_json
+from trainer.run_files import ResumeError, RunFolderError, read_json_object, write_json
 from trainer.skills import SkillPrior
 from trainer.task_choice import TASK_JSON, RunRule, choose_rule
 from trainer.telemetry import LoopStatus, MetricsReport, Reporter, RolloutsReport, StatusReport
@@ -101,8 +101,8 @@ def evaluation_line(epoch: int, epochs: int, record: dict[str, Any], labels: int
 def summary_wall_s(out: Path, default: float) -> float:
     """summary.json's wall_s (a finished run's, written after its last checkpoint), else `default`."""
     try:
-        wall = json.loads((out / "summary.json").read_text()).get("wall_s")
-    except (OSError, ValueError, AttributeError):
+        wall = read_json_object(out / "summary.json").get("wall_s")
+    except RunFolderError:
         return default
     return float(wall) if isinstance(wall, int | float) and math.isfinite(wall) else default
 
@@ -489,6 +489,11 @@ class Trainer:
             plot_guidance_map(xy, w, out, task=self.task, title=guidance, labelled=labelled)
 
     # ---- persistence ---------------------------------------------------------------------
+    @property
+    def trains_nothing(self) -> bool:
+        """A finished run resumed with no more epochs: its wall time, and what the service holds, stay."""
+        return self._t0 is None
+
     def wall_s(self) -> float:
         return self.wall_before + (time.perf_counter() - self._t0 if self._t0 is not None else 0.0)
 
@@ -687,8 +692,8 @@ class Trainer:
         try:
             if self.epoch < self.cfg.epochs or self._asking is not None:  # else no event file with nothing in it
                 self._writer = self._tensorboard()
-            training = self._t0 is not None  # a finished run resumed is not announced, nor one paused or stopped
-            if training and self.feedback.control(self.epoch) == "run":
+            # a finished run resumed is not announced, nor one paused or stopped meanwhile
+            if not self.trains_nothing and self.feedback.control(self.epoch) == "run":
                 self.reporter.status(StatusReport("training", self.epoch))
             startup.mark("run files, tensorboard")
             if self.epoch == 0:
@@ -754,13 +759,12 @@ class Trainer:
 
     def end_the_wait(self) -> None:
         """An operator stopped the run while it waited for a session's labels: the run ends there and
-        is never resumed, so the session's segments join those asked, and the labels that came for
-        them are applied (finish() takes the last ones), as the service counts them."""
+        is never resumed, so the session's segments join those asked, for finish() to apply the
+        labels that came for them, as the service counts them."""
         assert self._asking is not None
         for s in self._asking:
             self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
         self._asking = None
-        self.apply_labels(self.feedback.revisions())
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:
         """The epoch after its rollouts: the feedback session (`asking`: the one a stopped run was
@@ -826,7 +830,7 @@ class Trainer:
         if records:
             plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
         # an interrupted run is not over for the service; a finished one resumed told it so before
-        if status != "interrupted" and self._t0 is not None:
+        if status != "interrupted" and not self.trains_nothing:
             self.reporter.status(StatusReport(status, self.epoch, error=error))
             # labels given until the service closed the run just now (after a feedback timeout, or
             # an operator's stop: the service counts them, and no later epoch will apply them)
