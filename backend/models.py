@@ -54,6 +54,12 @@ class Run(Base):
     created_at: Mapped[float] = mapped_column(Float)
     updated_at: Mapped[float] = mapped_column(Float)
     trainer_seen_at: Mapped[float | None] = mapped_column(Float, nullable=True)  # its trainer's last call
+    # the creating trainer's id for the creation: a repeat answers this run (services/runs.py)
+    client_request_id: Mapped[str | None] = mapped_column(String(128), nullable=True)
+
+    # an index, not a table constraint: SQLite adds it without rebuilding `runs`, which the rows
+    # pointing at runs (queries, metrics, …) would refuse under foreign keys
+    __table_args__ = (Index("uq_runs_request", "created_by", "client_request_id", unique=True),)
 
 
 class Query(Base):

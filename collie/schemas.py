@@ -185,6 +185,11 @@ class RunCreate(Wire):
     instruction: Text | None = Field(
         default=None, min_length=1, max_length=MAX_INSTRUCTION, description="intent in words, for a run without a rule"
     )
+    client_request_id: RequestId | None = Field(
+        default=None,
+        description="your id for this creation: a repeat of it by the same trainer answers the run the first made "
+        "(200), so a client that lost the answer may send it again; null: every post makes a run",
+    )
 
     @model_validator(mode="after")
     def _rule_or_instruction(self) -> RunCreate:

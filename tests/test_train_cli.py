@@ -296,24 +296,30 @@ def test_epochs_beyond_what_the_service_stores_are_refused_before_it_is_asked(tm
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("pages", [1, 2])
 def test_a_run_made_on_the_service_that_its_folder_cannot_remember_is_marked_failed(
-    tmp_path: Path, service: str
+    tmp_path: Path, service: str, pages: int
 ) -> None:
-    """A disk with room for the lock but not for service_run.json: the run was made on the service,
-    no folder remembered it, and the dashboard showed it "created" for good (the next start made
-    another). It is now marked failed, saying why."""
+    """A disk with room for the lock but not for run_creation.json: no run is made. With room for
+    that but not for service_run.json: the run was made on the service, no folder remembered it, and
+    the dashboard showed it "created" for good (the next start made another). It is now marked
+    failed, saying why."""
     from collie.client import CollieClient
 
-    with small_disk(tmp_path / "disk") as disk:
+    with small_disk(tmp_path / "disk") as disk, CollieClient(service, TOKENS["operator"]) as operator:
+        before = {r.id for r in operator.runs(limit=1000)}
         room = os.statvfs(disk)
-        (disk / "filler").write_bytes(b"\0" * (room.f_bavail * room.f_frsize - room.f_frsize))  # one page left
+        (disk / "filler").write_bytes(b"\0" * (room.f_bavail - pages) * room.f_frsize)
         proc = api_train(service, "--epochs", "1", "--out", str(disk / "run"))
         refused(proc, f"cannot start the run in {disk / 'run'}: no space left on device")
-        with CollieClient(service, TOKENS["operator"]) as operator:
-            newest = max(operator.runs(), key=lambda r: r.id)
-            assert newest.status == "failed", newest
-            said = [e.data.message or "" for e in operator.events(newest.id).events if e.kind == "status"]
-            assert any(m.startswith(f"its trainer could not write {disk / 'run' / 'service_run.json'}") for m in said)
+        made = {r.id for r in operator.runs(limit=1000)} - before
+        if pages == 1:
+            assert not made
+            return
+        (newest,) = made
+        assert operator.run(newest).status == "failed"
+        said = [e.data.message or "" for e in operator.events(newest).events if e.kind == "status"]
+        assert any(m.startswith(f"its trainer could not write {disk / 'run' / 'service_run.json'}") for m in said)
 
 
 def api_train(service: str, *args: str) -> subprocess.CompletedProcess[str]:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from stalling_proxy import stalling_relay
 
 from collie.client import CollieClient
 from collie.schemas import EnvDims, QueriesEvent, RunCreate, StatusEvent
@@ -244,6 +245,31 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path, se
         assert resumed.wait(timeout=300) == 0, log.read_text()[-3000:]
         teacher.wait(timeout=60)
         assert operator.run(run_id).status == "finished"
+
+
+def test_a_trainer_killed_before_the_answer_to_its_run_creation_makes_no_second_run_on_restart(tmp_path, service):
+    """The service made the run, but the trainer died before it heard so (the answer lost on the way,
+    then kill -9): started again, it sends the same creation (OUT/run_creation.json) and continues
+    the run the first made. Was: a second run, the first showing "training" on the dashboard for good."""
+    out, log = tmp_path / "trainer", tmp_path / "trainer.log"
+    with CollieClient(service.api, TOKENS["operator"]) as operator:
+        before = {r.id for r in operator.runs(limit=1000)}
+        with stalling_relay(service.api, lose_answer_to=b"POST /api/runs ") as relay:
+            trainer = cli(*train_args(out, relay.url), log=log)
+            wait_until(lambda: {r.id for r in operator.runs(limit=1000)} - before, alive=trainer, log=log)
+            trainer.kill()
+            trainer.wait(timeout=30)
+        (made,) = {r.id for r in operator.runs(limit=1000)} - before
+        assert not (out / "service_run.json").exists()
+        again = cli(*train_args(out, service.api), log=log)
+        try:
+            wait_until((out / "service_run.json").exists, alive=again, log=log)
+            assert json.loads((out / "service_run.json").read_text())["run_id"] == made
+            assert {r.id for r in operator.runs(limit=1000)} - before == {made}
+            assert not (out / "run_creation.json").exists()
+        finally:
+            again.terminate()
+            again.wait(timeout=60)
 
 
 def test_a_session_past_the_runs_budget_on_the_service_ends_the_run_in_one_line(tmp_path, service):

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from collie.schemas import RunRead
     from trainer.feedback.http import HttpFeedback
 
+CREATION_FILE = "run_creation.json"  # a run's creation on the service, sent but not yet answered (begun_creation)
 SERVICE_FLAGS = ("--run-id", "--feedback-timeout", "--token", "--token-file")  # meaningless without --api
 MAIN_ARGS = ("env", "task", "task_file", "instruction", "method", "preset", "seed", "out")
 
@@ -248,6 +249,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
     """Labels from the service: reuse the run named by --run-id or remembered in OUT/service_run.json
     (a restarted trainer rebuilds D0/D1/D2 from it; it follows the rule the service holds), else
     create a run with `rule` and remember it."""
+    from collie.client import Conflict, new_request_id
     from collie.schemas import MAX_FEEDBACK_TIMEOUT_S, EnvDims, RunCreate
     from trainer.envs import make_env
     from trainer.feedback.http import HttpFeedback
@@ -276,6 +278,8 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
                 f"--resume: {cfg.out} belongs to run {mine}{f' on {where}' if where else ''} (service_run.json), "
                 f"not run {run_id}: give --run-id {mine}, or another --out for run {run_id}"
             )
+    creation = Path(cfg.out) / CREATION_FILE
+    begun = begun_creation(creation) if run_id is None and remembered is None and creation.exists() else None
     if run_id is None and remembered is not None:
         run_id = remembered[0]
         if not args.resume:  # a trainer that died before its first checkpoint: a new run would orphan it
@@ -335,11 +339,25 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
             feedback_timeout_s=args.feedback_timeout,
             task_definition=rule.definition,
             instruction=rule.instruction,
+            client_request_id=begun or new_request_id(),
         )
-        source = HttpFeedback.create(args.api, token, spec, **kwargs)
+        # Remembered before it is sent: a trainer that dies before the answer, started again, sends the
+        # same creation and gets the run the first made, not a second run beside an orphan.
+        creation.parent.mkdir(parents=True, exist_ok=True)
+        write_json(creation, {"api": args.api, "client_request_id": spec.client_request_id})
+        try:
+            source = HttpFeedback.create(args.api, token, spec, **kwargs)
+        except Conflict as exc:
+            if begun is None:
+                raise
+            raise ValueError(
+                f"{creation} began the creation of a run with other flags ({exc.detail}): give the flags it was "
+                f"started with, or remove {creation} to create a new run"
+            ) from None
     try:
         memo.parent.mkdir(parents=True, exist_ok=True)
         write_json(memo, {"api": args.api, "run_id": source.run_id})
+        creation.unlink(missing_ok=True)
     except OSError as exc:  # a full disk: a run no folder remembers would show "created" on the dashboard for good
         if run_id is None:
             with contextlib.suppress(Exception):  # best effort: the start fails with the disk's refusal either way
@@ -381,6 +399,17 @@ def remembered_run(memo: Path) -> tuple[int, str | None]:
     if api is not None and not isinstance(api, str):
         raise ValueError(f"{memo} is damaged (api {json.dumps(api)} is not a URL)")
     return run_id, api
+
+
+def begun_creation(creation: Path) -> str | None:
+    """The client_request_id of a run creation whose answer this folder never got (CREATION_FILE,
+    written just before POST /runs, removed once service_run.json names the run); a damaged file
+    names none (a new creation: a trainer that died while writing it had sent nothing)."""
+    try:
+        key = read_json_object(creation).get("client_request_id")
+    except ValueError:
+        return None
+    return key if isinstance(key, str) and key else None
 
 
 def ended_for_this_trainer(held: RunRead, resume: bool, out: str) -> str | None:
@@ -531,9 +560,10 @@ def remove_if_empty(folders: list[Path]) -> None:
 def discard_unstarted(out: Path, held_before: set[str], made: list[Path]) -> None:
     """Undo a fresh start interrupted before its first checkpoint (its config.json, metrics.jsonl,
     tb/…: a folder `--resume` cannot continue). What the folder held before stays, and so does
-    service_run.json, with which a start again continues the same run of the labeling service."""
+    service_run.json, with which a start again continues the same run of the labeling service (and
+    CREATION_FILE, with which it makes the run it was making)."""
     for entry in out.iterdir():
-        if entry.name in held_before or entry.name == "service_run.json":
+        if entry.name in held_before or entry.name in ("service_run.json", CREATION_FILE):
             continue
         if entry.is_dir() and not entry.is_symlink():
             shutil.rmtree(entry, ignore_errors=True)

@@ -4,20 +4,29 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Query, Request, Response
 
 from backend.routes.deps import DB, AnyCaller, RunId, TrainerCaller, json_body, parse_body
+from backend.routes.responses import Responses
 from backend.services import runs
 from collie.schemas import MAX_INT, RunCreate, RunExtend, RunRead, RunStatus, StatusUpdate
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
 
-@router.post("", status_code=201, openapi_extra=json_body(RunCreate))
-async def create_run(request: Request, caller: TrainerCaller, db: DB) -> RunRead:
+_REPEAT: Responses = {
+    200: {"description": "a repeat of an earlier client_request_id: the run it made", "model": RunRead}
+}
+
+
+@router.post("", status_code=201, responses=_REPEAT, openapi_extra=json_body(RunCreate))
+async def create_run(request: Request, response: Response, caller: TrainerCaller, db: DB) -> RunRead:
     body = await parse_body(request, RunCreate)
     with db.write() as conn:
-        return runs.create(conn, caller, body)
+        run, repeat = runs.create(conn, caller, body)
+    if repeat:
+        response.status_code = 200
+    return run
 
 
 @router.get("")

@@ -49,7 +49,21 @@ def stored_definition(spec: RunCreate) -> dict[str, Any] | None:
         raise Invalid(f"{exc}: post the run's task_definition, or an instruction") from None
 
 
-def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
+def create(conn: Connection, caller: Caller, spec: RunCreate) -> tuple[RunRead, bool]:
+    """The run made, and whether it was made before: a repeat of the caller's client_request_id
+    answers the run the first made (a different run under the same id is refused, 409)."""
+    if spec.client_request_id is not None:
+        made = conn.execute(
+            select(Run.id, Run.env, Run.task, Run.method, Run.config).where(
+                Run.created_by == caller.id, Run.client_request_id == spec.client_request_id
+            )
+        ).first()
+        if made is not None:
+            if (made.env, made.task, made.method, made.config) != (spec.env, spec.task, spec.method, spec.config):
+                raise Conflict(
+                    f"client_request_id '{spec.client_request_id}' was already used for another run (run {made.id})"
+                )
+            return get(conn, made.id), True
     now = time.time()
     run_id = conn.execute(
         insert(Run)
@@ -72,13 +86,14 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead:
             instruction=spec.instruction,
             last_event_id=0,
             created_by=caller.id,
+            client_request_id=spec.client_request_id,
             created_at=now,
             updated_at=now,
         )
         .returning(Run.id)
     ).scalar_one()
     events.append(conn, run_id, StatusChanged(status="training", epoch=0), now)
-    return get(conn, run_id)
+    return get(conn, run_id), False
 
 
 def _counts(conn: Connection, run_ids: list[int] | None) -> dict[int, QueueCounts]:

@@ -47,6 +47,7 @@ from collie.client import (
     Conflict,
     Overloaded,
     Unauthorized,
+    Unavailable,
     Unreachable,
     Unsendable,
     retrying,
@@ -74,7 +75,7 @@ from trainer.telemetry import StatusReport
 log = logging.getLogger(__name__)
 events_page_size = 1000  # the service's largest page
 T = TypeVar("T")
-CREATE_ATTEMPTS = 8  # a busy service (503, 429) is asked again for about 10 s (the shared backoff)
+CREATE_ATTEMPTS = 8  # a busy (503, 429) or silent service is asked again for about 10 s (the shared backoff)
 
 
 class HttpFeedback(FeedbackSource):
@@ -107,13 +108,15 @@ class HttpFeedback(FeedbackSource):
     @classmethod
     def create(cls, api: str, token: str, spec: RunCreate, **kwargs: Any) -> HttpFeedback:
         """Create the run on the service and return a source for it (timeout_s defaults to the
-        spec's feedback_timeout_s). A busy service's 503 or 429 (nothing stored) is waited out; an
-        unanswered request is not sent again, which might make the run twice."""
+        spec's feedback_timeout_s). A busy service's 503 or 429 (nothing stored) is waited out; so
+        is an unanswered request when the spec has a client_request_id (a repeat answers the run
+        the first made), never without one, which might make the run twice."""
         kwargs.setdefault("timeout_s", spec.feedback_timeout_s)
+        transient = Overloaded if spec.client_request_id is None else Unavailable
         with CollieClient(api, token) as client:
             delays = Backoff().delays()
             for _ in range(CREATE_ATTEMPTS - 1):
-                with contextlib.suppress(Overloaded):
+                with contextlib.suppress(transient):
                     run = client.create_run(spec)
                     break
                 time.sleep(next(delays))
