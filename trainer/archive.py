@@ -55,13 +55,14 @@ class ArchiveError(ValueError):
 def another_run(held: Path, source: Path) -> str | None:
     """How the run archived at `held` differs from `source`'s ("seed 0 archived, 7 here"), None if
     it is the same run (where and how each ran aside: trainer.same_run.NOT_THE_RUN; and keys its
-    method does not read, trainer.methods.matters: `--diayn` to COLLIE)."""
+    method does not read, trainer.methods.matters: `--diayn` to COLLIE), or that run extended
+    since to more epochs."""
     old, new = run_config(held), run_config(source)
     method = new.get("method")
     keys = [k for k in differing_keys(old, new) if method not in METHODS or matters(k, str(method))]
-    if not keys:
-        return None
     a, b = comparable(old), comparable(new)
+    if not keys or (keys == ["epochs"] and b["epochs"] > a["epochs"]):  # extended since (`--resume --epochs`)
+        return None
     shown = [f"{k} {a.get(k)!r} archived, {b.get(k)!r} here" for k in keys[:SHOWN_KEYS]]
     more = f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
     return "; ".join(shown) + more

@@ -17,7 +17,9 @@ visits, three of which the corner rule judges at a corner outside a wedge whose 
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
 are folders whose files cannot be read or whose env or task this version does not know, each with
-why (`checked_run`, which `collie archive` applies too). ± is the sample standard deviation over
+why (`checked_run`, which `collie archive` applies too), and folders where a run began (config.json)
+without a summary.json yet: one still training or killed early. A report that counts no run exits 1.
+A task file's run is also told apart by its rule (`trainer.same_run.RULE`). ± is the sample standard deviation over
 seeds (as the paper's tables); a single seed shows its value alone, and a cell of fewer seeds than
 the report's most says how many ("53.00 (n=1)", or "39.00 (1 of 2 seeds)" where a run lacks the
 figure; metrics.csv counts the same seeds). A cell never averages runs whose configurations differ
@@ -57,8 +59,15 @@ from trainer.config import first_version
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES, off_start_safe_ratio, standing_share
 from trainer.paper_results import paper_cell
-from trainer.run_files import RunFolderError, read_arrays, read_json_object, run_folders, writing_into
-from trainer.same_run import PLACED, comparable, preset_defaults
+from trainer.run_files import (
+    RunFolderError,
+    read_arrays,
+    read_json_object,
+    run_folders,
+    unsummarised_run_folders,
+    writing_into,
+)
+from trainer.same_run import PLACED, RULE, comparable, preset_defaults, with_rule
 from trainer.task_choice import judged_by
 
 METRICS: tuple[tuple[str, str, int], ...] = (
@@ -184,6 +193,7 @@ def load_run(folder: Path) -> RunResult:
     except ValueError:
         raise RunFolderError(f"{config_path}: its config's seed {cfg['seed']!r} is not a whole number") from None
     variant, downstream = _checked_side_files(folder, summary)
+    cfg = with_rule(folder, cfg)  # a task file's rule: two files of one name are two tasks
     return RunResult(
         folder,
         str(cfg["env"]),
@@ -461,7 +471,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 def markdown(
     runs: list[RunResult],
-    skipped: list[RunResult],
+    skipped: Sequence[tuple[Path, str]],
     figures: list[Path],
     out: Path,
     broken: Sequence[tuple[Path, str]] = (),
@@ -489,7 +499,7 @@ def markdown(
     if note:
         parts.append(note)
     if skipped:
-        parts.append("Left out (not finished): " + ", ".join(f"`{r.path}` ({r.status})" for r in skipped))
+        parts.append("Left out (not finished): " + ", ".join(f"`{path}` ({status})" for path, status in skipped))
     if broken:
         parts.append("Left out (unreadable or twice): " + ", ".join(f"`{path}` ({why})" for path, why in broken))
     parts += tables
@@ -556,7 +566,7 @@ def name_settings(runs: list[RunResult]) -> None:
         cells.setdefault((r.method, r.variant, r.env, r.task), []).append(r.settings)
     split = {k for cell in cells.values() for s in cell for k in s if any(o.get(k) != s.get(k) for o in cell)}
     departed = [departures(r) for r in runs]
-    chosen = {k for r, d in zip(runs, departed, strict=True) for k in d if k in r.config}
+    chosen = {k for r, d in zip(runs, departed, strict=True) for k in d if k in r.config and k != RULE}
     keys = sorted((split | chosen) - {"preset"})
     several = len({r.settings.get("preset") for r in runs}) > 1
     for r, d in zip(runs, departed, strict=True):
@@ -572,9 +582,18 @@ def settings_note(runs: list[RunResult]) -> str:
     if not named:
         return f"All runs: preset {presets[0]}." if len(presets) == 1 else ""
     preset = f"preset {presets[0]}" if len(presets) == 1 else "the preset each names"
+    rules = any(RULE in r.settings and f"{RULE}=" in r.setting for r in runs)
     return (
         "Runs whose configurations differ are never averaged: a row's name gives the settings where its "
-        f"runs depart from the defaults of {preset}, the same in every column: " + ", ".join(named) + "."
+        f"runs depart from the defaults of {preset}, the same in every column: "
+        + ", ".join(named)
+        + "."
+        + (
+            f" ({RULE}=…: a digest of the rule a task file gave the run, its task.json: task files of one"
+            " task name that judge differently.)"
+            if rules
+            else ""
+        )
     )
 
 
@@ -591,7 +610,9 @@ def write_report(roots: list[Path], out: Path, figures: bool = True, bin_rule: s
     every = [r for r in found if out not in r.path.parents]
     broken = [(path, why) for path, why in unreadable if out not in path.parents]
     runs = [r for r in every if r.status == "finished"]
-    skipped = [r for r in every if r.status != "finished"]
+    skipped = [(r.path, r.status) for r in every if r.status != "finished"]
+    begun = sorted({f for root in roots for f in unsummarised_run_folders(Path(root)) if out not in f.parents})
+    skipped += [(f, "no summary.json: still training, or killed before it wrote one") for f in begun]
     runs, duplicates = once_each(runs)
     broken += duplicates
     name_settings(runs)
@@ -630,6 +651,12 @@ def write_report(roots: list[Path], out: Path, figures: bool = True, bin_rule: s
     )
     (out / "report.md").write_text(markdown(runs, skipped, paths, out, broken))
     return {"markdown": out / "report.md", "metrics_csv": out / "metrics.csv", "runs_csv": out / "runs.csv"}
+
+
+def counted_runs(runs_csv: Path) -> int:
+    """How many runs a report counts: runs.csv's rows, one per run."""
+    with open(runs_csv, newline="") as f:
+        return sum(1 for _ in csv.DictReader(f))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -673,4 +700,11 @@ def run(args: argparse.Namespace) -> int:
         paths = write_report(roots, out, figures=not args.no_figures, bin_rule=args.bin_rule)
     print((out / "report.md").read_text())
     print(f"written: {', '.join(str(p) for p in paths.values())}")
+    if not counted_runs(paths["runs_csv"]):  # tables of dashes: a script must not take them for results
+        where = ", ".join(str(r) for r in roots)
+        print(
+            f"collie report: error: no finished run to report under {where} ({out / 'report.md'} says why)",
+            file=sys.stderr,
+        )
+        return 1
     return 0

@@ -109,6 +109,24 @@ def run_folders(root: Path) -> list[Path]:
     return sorted(f for f in found if not any(part.startswith(".") for part in f.relative_to(root).parts))
 
 
+def unsummarised_run_folders(root: Path) -> list[Path]:
+    """The folders at or below `root` where a run began (config.json naming its env and method) but
+    wrote no summary.json yet: one still training, or one killed before its first summary; none
+    in a hidden folder, as run_folders."""
+    found = []
+    for config in root.rglob("config.json"):
+        folder = config.parent
+        if (folder / "summary.json").exists() or any(p.startswith(".") for p in folder.relative_to(root).parts):
+            continue
+        try:
+            held = read_json_object(config)
+        except RunFolderError:
+            held = {}
+        if isinstance(held.get("env"), str) and isinstance(held.get("method"), str):
+            found.append(folder)
+    return sorted(found)
+
+
 @contextlib.contextmanager
 def folder_written_whole(out: Path, replace: bool = False) -> Iterator[Path]:
     """A new folder beside `out` to write a run folder into, renamed to `out` when the block ends;

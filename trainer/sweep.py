@@ -48,7 +48,7 @@ from trainer.config import PRESETS, flag
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES
 from trainer.run_files import RunFolderError, has_checkpoint, read_json_object, write_json, writing_into
-from trainer.same_run import comparable, differing_keys, run_config
+from trainer.same_run import RULE, comparable, differing_keys, rule_digest, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
@@ -206,15 +206,19 @@ def is_finished(out: str | Path) -> bool:
 
 
 def intended_config(spec: RunSpec) -> dict[str, Any] | None:
-    """The config `collie train` makes of `spec`'s command (None if it would refuse it)."""
+    """The config `collie train` makes of `spec`'s command, with its task file's RULE (None if it
+    would refuse it)."""
     from trainer import cli as train_cli
+    from trainer.task_choice import choose_rule
 
     parser = _TrainParser(prog="collie train")
     train_cli.add_arguments(parser)
     try:
-        return train_cli.config_from_args(parser.parse_args(train_argv(spec))).to_dict()
+        cfg = train_cli.config_from_args(parser.parse_args(train_argv(spec)))
+        rule = choose_rule(cfg).definition if cfg.task_file else None
     except (_Refusal, ValueError):
         return None
+    return cfg.to_dict() | ({RULE: rule_digest(rule.to_json())} if rule is not None else {})
 
 
 def config_change(
@@ -226,7 +230,7 @@ def config_change(
     keys if either config is unknown."""
     folder = Path(spec.out)
     try:  # a run killed before its first summary.json has its config.json alone
-        made = run_config(folder) if (folder / "summary.json").exists() else read_json_object(folder / "config.json")
+        made = run_config(folder)
     except RunFolderError:
         return [], {}, {}
     asked = intended_config(spec)
@@ -238,7 +242,8 @@ def config_change(
 
 def shown_values(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> str:
     """ "--hidden 32, not 48; …": each differing key's value in the run, then in the command."""
-    values = "; ".join(f"{flag(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
+    said = lambda k: "the task file's rule" if k == RULE else flag(k)  # noqa: E731
+    values = "; ".join(f"{said(k)} {made.get(k)}, not {asked.get(k)}" for k in keys[:SHOWN_KEYS])
     return values + (f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else "")
 
 

@@ -269,3 +269,27 @@ def test_an_archive_killed_mid_refresh_loses_no_copy_and_its_hidden_folders_are_
     assert main(argv) == 0
     assert files_in(out) == files_in(run)
     assert sorted(p.name for p in kept.iterdir()) == [run.name, "point-north-metra-s1"]  # nothing hidden left
+
+
+def test_a_run_extended_since_refreshes_its_archive_and_another_rule_of_its_task_name_is_refused(tmp_path, capsys):
+    """Was: "holds another run of that name (epochs 12 archived, 16 here)" for the same run resumed
+    with more --epochs; and a task file of the same name but another rule replaced it silently."""
+    from .test_report_cells import charger_run
+
+    run = charger_run(tmp_path / "runs", 0, 15, 10.0)
+    assert main(["archive", str(run), "--out", str(tmp_path / "kept")]) == 0
+    summary = json.loads((run / "summary.json").read_text())
+    summary["config"]["epochs"] += 4  # `collie train --resume --epochs N`
+    (run / "summary.json").write_text(json.dumps(summary))
+    assert main(["archive", str(run), "--out", str(tmp_path / "kept")]) == 0
+    held = tmp_path / "kept" / run.name
+    assert json.loads((held / "summary.json").read_text()) == summary
+    summary["config"]["epochs"] -= 8  # an earlier copy, fewer epochs than the archive's: another run
+    (run / "summary.json").write_text(json.dumps(summary))
+    assert main(["archive", str(run), "--out", str(tmp_path / "kept")]) == 2
+    assert "holds another run of that name (epochs" in capsys.readouterr().err
+    other = charger_run(tmp_path / "elsewhere", 0, 40, 90.0)
+    assert main(["archive", str(other), "--out", str(tmp_path / "kept")]) == 2
+    assert re.search(
+        r"holds another run of that name \(.*rule '\w{8}' archived, '\w{8}' here\)", capsys.readouterr().err
+    )

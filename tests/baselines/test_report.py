@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from collie.cli import main
+from trainer.config import make_config
 from trainer.report import format_cell, write_report
 
 
@@ -228,7 +230,6 @@ BROKEN = [
 
 @pytest.mark.parametrize(("text", "why"), BROKEN)
 def test_a_broken_run_folder_is_named_and_left_out_and_given_alone_is_a_one_line_error(tmp_path, capsys, text, why):
-    from collie.cli import main
 
     runs = tmp_path / "runs"
     fake_run(runs, "point", "north", "oracle", 0, 9.0)
@@ -247,7 +248,6 @@ def test_a_broken_run_folder_is_named_and_left_out_and_given_alone_is_a_one_line
 
 @pytest.mark.parametrize("damage", ["cut short", "a bare .npy"])
 def test_a_run_with_a_damaged_final_evaluation_is_named_and_left_out(tmp_path, capsys, damage):
-    from collie.cli import main
 
     runs = tmp_path / "runs"
     fake_run(runs, "point", "north", "oracle", 0, 9.0)
@@ -279,7 +279,6 @@ SIDE_DAMAGE = [
 @pytest.mark.parametrize(("name", "content", "why"), SIDE_DAMAGE)
 def test_a_run_with_a_damaged_side_file_is_named_and_left_out(tmp_path, capsys, name, content, why):
     """Was a ValueError, TypeError or KeyError from the tables, with report.md and runs.csv half written."""
-    from collie.cli import main
 
     runs = tmp_path / "runs"
     fake_run(runs, "point", "north", "oracle", 0, 9.0)
@@ -368,7 +367,6 @@ def test_a_run_folder_without_its_final_skills_is_in_the_tables_not_the_figures(
 
 
 def test_an_out_that_is_a_run_folder_is_a_one_line_error(tmp_path, capsys):
-    from collie.cli import main
 
     run = fake_run(tmp_path / "runs", "point", "north", "metra", 0, 3.0)
     before = sorted(p.name for p in run.iterdir())
@@ -376,3 +374,27 @@ def test_an_out_that_is_a_run_folder_is_a_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == f"collie report: error: --out {run} is a run folder (it holds summary.json); give another\n"
     assert sorted(p.name for p in run.iterdir()) == before
+
+
+def test_a_run_still_training_or_killed_before_its_summary_is_listed_and_a_report_of_none_exits_1(tmp_path, capsys):
+    """Was: left out without a word ("1 finished runs; seeds per cell: 1", the missing seed unsaid),
+    and a report of no finished run exited 0 with tables of dashes."""
+    runs = tmp_path / "runs"
+    fake_run(runs, "point", "north", "metra", 1, 5.0)
+    killed = runs / "point-north-metra-s0"
+    killed.mkdir()
+    (killed / "config.json").write_text(json.dumps(make_config("cpu", "point", method="metra").to_dict()))
+    (runs / "notes").mkdir()
+    (runs / "notes" / "config.json").write_text('{"colour": "blue"}')  # no run's
+    assert main(["report", str(runs), "--no-figures"]) == 0
+    md = (runs / "report" / "report.md").read_text()
+    said = f"Left out (not finished): `{killed}` (no summary.json: still training, or killed before it wrote one)"
+    assert said in md and "notes" not in md
+    capsys.readouterr()
+    interrupted = tmp_path / "interrupted"
+    fake_run(interrupted, "point", "north", "metra", 0, 5.0, status="interrupted")
+    assert main(["report", str(interrupted), "--no-figures"]) == 1
+    assert capsys.readouterr().err == (
+        f"collie report: error: no finished run to report under {interrupted} "
+        f"({interrupted / 'report' / 'report.md'} says why)\n"
+    )

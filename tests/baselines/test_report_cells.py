@@ -165,3 +165,33 @@ def test_the_guidance_maps_legend_shows_the_markers_it_draws(tmp_path, monkeypat
     for handle in handles:
         assert handle.get_marker() == "x"  # was "o": circles in the legend, crosses on the map
         assert to_rgba(handle.get_markeredgecolor()) in drawn  # in the colour of its label
+
+
+def charger_run(root, seed: int, radius: float, cov: float):
+    """A finished METRA run of a task file named charger whose pit reaches `radius` (its task.json)."""
+    from collie.tasks.task_file import load_task_file
+
+    spec = root.parent / f"charger-{radius:g}.toml"
+    spec.write_text(
+        f'name = "charger"\ndescription = "Stay near the charger."\n[[regions]]\nkind = "outside_disc"\n'
+        f'desirability = "bad"\ncentre = [0, 0]\nradius = {radius}\n'
+    )
+    cfg = make_config("cpu", "point", method="metra", task="charger", task_file=str(spec), seed=seed).to_dict()
+    run = fake_run(root, "point", "charger", "metra", seed, cov, config=cfg)
+    definition = load_task_file(spec, None, "point", layout_seed=seed).to_json()
+    (run / "task.json").write_text(json.dumps({"definition": definition, "instruction": None}))
+    return run
+
+
+def test_runs_of_two_task_files_of_one_name_are_two_rows_never_one_averaged_cell(tmp_path):
+    """Was: seed 0 judged by a 15-unit pit and seed 1 by a 40-unit one averaged in one cell, and the
+    same seed in another root left out as "the same run"."""
+    charger_run(tmp_path / "a", 0, 15, 10.0)
+    charger_run(tmp_path / "a", 1, 15, 20.0)
+    charger_run(tmp_path / "b", 0, 40, 90.0)
+    md = write_report([tmp_path / "a", tmp_path / "b"], tmp_path / "report", figures=False)["markdown"].read_text()
+    rows = table_of(md, "Safe state coverage (Table 1)")[2:]
+    cells = sorted(row.split(" | ")[1].removesuffix(" |") for row in rows)
+    assert cells == ["15.00 ± 7.07", "90.00 (n=1)"] and all(row.startswith("| METRA (rule=") for row in rows)
+    assert "the same run as" not in md
+    assert "a digest of the rule a task file gave the run" in md

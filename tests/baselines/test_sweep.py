@@ -554,3 +554,22 @@ def test_runs_refused_for_memory_a_running_sibling_holds_start_again_once_it_end
         cmd = [sys.executable, "-c", REFUSED_WHILE, str(tmp_path / "never"), str(tmp_path / "c.starts")]
         sweep._call(cmd, tmp_path / "c.log", stop)
     assert (tmp_path / "c.starts").read_text() == "x\n"
+
+
+def test_a_finished_run_of_a_task_file_edited_since_is_warned_of_naming_its_rule(tmp_path, capsys):
+    """Was: no word; the report then averaged it with the seeds trained by the edited file's rule."""
+    from trainer.config import make_config
+    from trainer.task_choice import choose_rule
+
+    spec_file = tmp_path / "charger.toml"
+    spec_file.write_text(CHARGER)
+    (spec,) = grid(tmp_path / "runs", "point", ["charger"], ["metra"], [0], task_files={"charger": str(spec_file)})
+    interrupted(spec, status="finished")
+    cfg = make_config("cpu", "point", method="metra", task="charger", task_file=str(spec_file), seed=0)
+    (Path(spec.out) / "task.json").write_text(json.dumps(choose_rule(cfg).to_json()))
+    sweep.say_what_finished_runs_get([spec])
+    assert capsys.readouterr().err == ""  # the same file: the same run
+    spec_file.write_text(CHARGER.replace("radius = 15", "radius = 25"))
+    sweep.say_what_finished_runs_get([spec])
+    said = capsys.readouterr().err
+    assert re.search(r"finished with another configuration \(the task file's rule \w{8}, not \w{8}\); not rerun", said)
