@@ -115,9 +115,14 @@ def _legend(ax: Axes, shaded: list[int], labels: set[int], marker: str = "o") ->
 
 
 def _draw_xy(
-    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
+    ax: Axes,
+    trajs: list[np.ndarray],
+    colours: list[RGBA],
+    task: Task | None,
+    labelled: Labelled,
+    reach: list[np.ndarray],
 ) -> list[int]:
-    points = [t[:, :2] for t in trajs] + [np.asarray(s, dtype=float)[:, :2] for s, _ in labelled]
+    points = [t[:, :2] for t in trajs + reach] + [np.asarray(s, dtype=float)[:, :2] for s, _ in labelled]
     x0, x1, y0, y1 = _extent(points, task)
     shaded = _shade(ax, task, x0, x1, y0, y1, one_dim=False)
     for t, colour in zip(trajs, colours, strict=True):
@@ -131,10 +136,15 @@ def _draw_xy(
 
 
 def _draw_x_over_time(
-    ax: Axes, trajs: list[np.ndarray], colours: list[RGBA], task: Task | None, labelled: Labelled
+    ax: Axes,
+    trajs: list[np.ndarray],
+    colours: list[RGBA],
+    task: Task | None,
+    labelled: Labelled,
+    reach: list[np.ndarray],
 ) -> list[int]:
     xs = [t[:, 0] for t in trajs]
-    x0, x1, _, _ = _extent([np.stack([x, np.zeros_like(x)], axis=1) for x in xs], task)
+    x0, x1, _, _ = _extent([np.stack([x, np.zeros_like(x)], axis=1) for x in xs + [r[:, 0] for r in reach]], task)
     t_max = max((len(x) for x in xs), default=1) - 1 or 1
     shaded = _shade(ax, task, x0, x1, 0.0, float(t_max), one_dim=True)
     for x, colour in zip(xs, colours, strict=True):
@@ -177,15 +187,17 @@ def draw_skill_panel(
     title: str = "",
     labelled: Sequence[tuple[np.ndarray, int]] | None = None,
     legend: bool = True,
+    reach: Sequence[np.ndarray] = (),
 ) -> None:
-    """One panel of `plot_skill_trajectories` on a given axes (for grids of runs, `collie report`)."""
+    """One panel of `plot_skill_trajectories` on a given axes (for grids of runs, `collie report`);
+    its extent takes in `reach` too (the other panels' paths: one scale for all, compared by eye)."""
     if position_dims not in (1, 2):
         raise ValueError(f"position_dims must be 1 or 2, got {position_dims}")
     trajs = [np.asarray(t, dtype=float).reshape(len(t), -1) for t in xy_trajs]
     colours = skill_colours(skills, len(trajs))
     labelled = list(labelled or [])
     draw = _draw_xy if position_dims == 2 else _draw_x_over_time
-    shaded = draw(ax, trajs, colours, task, labelled)
+    shaded = draw(ax, trajs, colours, task, labelled, [np.asarray(r, dtype=float).reshape(len(r), -1) for r in reach])
     ax.set_title(title or (task.name if task is not None else "no task rule"), fontsize=10)
     if legend:
         _legend(ax, shaded, {int(label) for _, label in labelled})

@@ -20,6 +20,7 @@ from trainer.run_files import has_checkpoint, read_arrays
 MAX_COLUMNS = 4  # panels per row
 TITLE_CHARS = 30  # a title line's characters that fit a 3.4-inch panel at 10 pt beside its neighbours
 TITLE_LINE_INCHES = 0.2  # a 10-pt title line's height
+FIGURE_DPI = 150  # a 4-panel figure 2000 px wide: readable in a paper's column (90 gave 918 px)
 
 
 def final_skills(run: RunResult) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +66,8 @@ def panel_title(run: RunResult) -> str:
 
 
 def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
-    """One PNG per (env, task) present in `runs`; returns their paths."""
+    """One PNG per (env, task) present in `runs`, its panels on one scale (how far each method's
+    skills reach compares by eye, as in the paper's Fig. 2); returns their paths."""
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for env, task_name in sorted({(r.env, r.task) for r in runs}):
@@ -83,15 +85,18 @@ def skill_figures(runs: list[RunResult], folder: Path) -> list[Path]:
         lines = max(t.count("\n") + 1 for t in titles)  # a row's panels make room for its longest title
         panel = (3.6 if dims == 2 else 3.0) + TITLE_LINE_INCHES * (lines - 2)
         fig = Figure(figsize=(3.4 * cols, panel * rows + 0.3))  # and the figure for its suptitle
-        for i, (run, title) in enumerate(zip(first, titles, strict=True)):
-            xy, skill = final_skills(run)
+        drawn = [final_skills(run) for run in first]
+        every = [t for xy, _ in drawn for t in xy]  # each panel over all panels' extent: one scale
+        for i, (run, title, (xy, skill)) in enumerate(zip(first, titles, drawn, strict=True)):
             ax = fig.add_subplot(rows, cols, i + 1)
-            draw_skill_panel(ax, list(xy), run_task(run), skills=skill, position_dims=dims, legend=False, title=title)
+            draw_skill_panel(
+                ax, list(xy), run_task(run), skills=skill, position_dims=dims, legend=False, title=title, reach=every
+            )
             ax.tick_params(labelsize=7)
         fig.suptitle(f"{env} {task_name}", fontsize=11)
         fig.tight_layout()
         path = folder / f"skills_{env}_{task_name}.png"
         FigureCanvasAgg(fig)
-        fig.savefig(path, dpi=90)
+        fig.savefig(path, dpi=FIGURE_DPI)
         paths.append(path)
     return paths

@@ -195,3 +195,18 @@ def test_runs_of_two_task_files_of_one_name_are_two_rows_never_one_averaged_cell
     assert cells == ["15.00 ± 7.07", "90.00 (n=1)"] and all(row.startswith("| METRA (rule=") for row in rows)
     assert "the same run as" not in md
     assert "a digest of the rule a task file gave the run" in md
+
+
+def test_a_figures_panels_share_one_extent_so_skills_compare_by_eye(tmp_path, monkeypatch):
+    """Was: each panel scaled to its own skills, an Oracle's ±10 drawn as large as METRA's ±50."""
+    runs = tmp_path / "runs"
+    fake_run(runs, "point", "north", "metra", 0, 1.0)
+    small = fake_run(runs, "point", "north", "oracle", 0, 1.0)
+    saved = np.load(small / "eval_latest.npz")
+    np.savez(small / "eval_latest.npz", xy=saved["xy"] / 5, skill=saved["skill"], epoch=1)
+    figures = _captured_figures(monkeypatch)
+    write_report([runs], tmp_path / "report")
+    (fig,) = figures
+    assert len(fig.axes) == 2
+    assert fig.axes[0].get_xlim() == fig.axes[1].get_xlim() and fig.axes[0].get_ylim() == fig.axes[1].get_ylim()
+    assert fig.axes[1].get_xlim()[1] >= 10  # the wider panel's reach
