@@ -141,6 +141,17 @@ def _changes(conn: Connection) -> int | None:
     return changes if isinstance(changes, int) else None
 
 
+class DatabaseFileGone(RuntimeError):
+    """The SQLite file the service opened was deleted, or another file put in its place, while it
+    ran: what it would write now goes to a file nobody sees again (or a new empty one)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(
+            f"the database file {path} was deleted or replaced while the service ran: stop the service, put the "
+            "file back (from a backup) and start it again"
+        )
+
+
 class Database:
     """Short transactions over one engine. Stream events a write appended (conn.info["published"],
     (run_id, event id) pairs) are handed to `publisher` only once the transaction is durable."""
@@ -157,9 +168,29 @@ class Database:
         self.engine = make_engine(url, self.background_checkpoints, synchronous)
         self.publisher = publisher
         self._wrote_at = -math.inf  # when a write transaction last committed
+        database = make_url(url).database if is_sqlite(url) else None
+        self._file = Path(database) if database not in (None, "", ":memory:") else None
+        self._file_id: tuple[int, int] | None = None  # (device, inode) of the file first opened
+
+    def _check_file(self) -> None:
+        """DatabaseFileGone once the SQLite file first opened is no longer at its path (one stat:
+        about a microsecond a transaction). Its connections would go on writing to the deleted file,
+        and a new one would make an empty database there."""
+        if self._file is None:
+            return
+        try:
+            found = os.stat(self._file)
+            here: tuple[int, int] | None = (found.st_dev, found.st_ino)
+        except FileNotFoundError:
+            here = None
+        if self._file_id is None:  # not made yet (the first connection makes it), or just made
+            self._file_id = here
+        elif here != self._file_id:
+            raise DatabaseFileGone(self._file)
 
     @contextmanager
     def write(self) -> Iterator[Connection]:
+        self._check_file()
         try:
             with self.engine.connect() as conn:
                 conn.execution_options(write=True)
@@ -179,6 +210,7 @@ class Database:
 
     @contextmanager
     def read(self) -> Iterator[Connection]:
+        self._check_file()
         with self.engine.connect() as conn, conn.begin():
             yield conn
 

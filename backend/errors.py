@@ -23,6 +23,7 @@ from backend.db import (
     SQLITE_DAMAGED,
     SQLITE_LOCKED,
     SQLITE_UNWRITABLE,
+    DatabaseFileGone,
     sqlite_code,
 )
 from backend.services.errors import (
@@ -126,6 +127,7 @@ def database_fault(exc: DBAPIError, dialect: str) -> Unavailable | DatabaseDamag
 def install(app: FastAPI) -> None:
     outages, unwritable = OutageLog("unreachable"), OutageLog("cannot be written")
     damaged = OutageLog("file is damaged", status=500)
+    gone = OutageLog("file is gone", status=500)
 
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, exc: ServiceError) -> JSONResponse:
@@ -160,6 +162,11 @@ def install(app: FastAPI) -> None:
         if fault is None:
             raise exc  # a real fault: the 500 handler and its log
         return await _service_error(request, fault)
+
+    @app.exception_handler(DatabaseFileGone)
+    async def _database_file_gone(_: Request, exc: DatabaseFileGone) -> JSONResponse:
+        gone.note(str(exc))  # no retry mends it: a 500, said in the log every 10 s, not a traceback each
+        return SafeJSONResponse({"detail": clean_text(str(exc))}, status_code=500)
 
     @app.exception_handler(IntegrityError)
     async def _integrity_error(_: Request, exc: IntegrityError) -> JSONResponse:

@@ -16,7 +16,7 @@ import anyio
 from sqlalchemy import select
 from sqlalchemy.exc import DBAPIError
 
-from backend.db import Database
+from backend.db import Database, DatabaseFileGone
 from backend.models import Run
 from backend.services import auth, events
 from backend.services.errors import first_line
@@ -148,9 +148,9 @@ class StreamFeed:
         while True:
             try:
                 polled = await self._step(polled)
-            except DBAPIError as exc:
+            except (DBAPIError, DatabaseFileGone) as exc:
                 if not failing:
-                    cause = first_line(exc.orig)
+                    cause = first_line(exc.orig if isinstance(exc, DBAPIError) else exc)
                     log.warning("stream reader: database unreachable, retrying every %g s: %s", self.poll_s, cause)
                 failing = True
                 await asyncio.sleep(self.poll_s)
