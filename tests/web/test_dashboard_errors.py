@@ -69,9 +69,9 @@ def test_a_link_to_a_missing_run_says_so_where_the_run_would_be_shown(
         said = "Run #99: no such run on this service — pick one from the runs above."
         assert page.is_visible("#run-problem") and page.text_content("#run-problem") == said
         assert page.is_hidden("#run")
-        problem = page.locator("#run-problem").bounding_box()
-        labelers = page.locator("#labelers").bounding_box()
-        assert problem is not None and labelers is not None and problem["y"] > labelers["y"]  # where a run goes
+        problem, runs, labelers = (page.locator(s).bounding_box() for s in ("#run-problem", "#runs", "#labelers"))
+        assert problem is not None and runs is not None and labelers is not None
+        assert runs["y"] < problem["y"] < labelers["y"]  # where a run goes: below the runs, above the labelers
         page.evaluate(f"window.location.hash = '#run={run.id}'")  # a run that exists
         page.wait_for_selector("#run:not([hidden])")
         assert page.is_hidden("#run-problem")

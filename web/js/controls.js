@@ -47,6 +47,7 @@ export class Controls {
     this.onChange = onChange;
     this.runId = null;
     this.armed = null;
+    this.unsent = false; // the message says a request got no answer
     for (const [action, button] of Object.entries(this.buttons)) {
       button.addEventListener("click", () => this.press(action));
     }
@@ -82,6 +83,11 @@ export class Controls {
   }
 
   show(run) {
+    if (run.id !== this.runId || this.unsent) { // another run's "Really stop?" or words; an answer came since
+      this.disarm();
+      this.message.textContent = "";
+      this.unsent = false;
+    }
     this.runId = run.id;
     this.waiting = run.status === "waiting_for_labels";
     const over = run.status === "finished" || run.status === "failed";
@@ -116,8 +122,17 @@ export class Controls {
     try {
       this.onChange(await api(`runs/${this.runId}/${action}`, { method: "POST" }));
     } catch (error) {
-      this.message.textContent = `${action} refused (${error.status ?? "network"}): ${error.message}`;
+      this.say(action, error);
     }
+  }
+
+  // A refusal as the service words it; no answer at all is no refusal (the request may not have
+  // reached it), and goes once the service answers again (`show`).
+  say(what, error) {
+    this.unsent = error.status == null;
+    this.message.textContent = this.unsent
+      ? `${what} not done: no answer from the service (${error.message}); try again once it is back`
+      : `${what} refused (${error.status}): ${error.message}`;
   }
 
   // timeoutS: seconds, or null to wait for every label. The trainer re-times the session it is
@@ -132,7 +147,7 @@ export class Controls {
         this.message.textContent = `the trainer was waiting for labels: if its session has waited ${timeoutS} s already, it continues now with the labels that arrived`;
       }
     } catch (error) {
-      this.message.textContent = `feedback policy refused (${error.status ?? "network"}): ${error.message}`;
+      this.say("feedback policy", error);
     }
   }
 }

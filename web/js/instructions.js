@@ -28,6 +28,11 @@ export class InstructionsForm {
     }
     this.runId = run.id;
     if (!this.text.dataset.typed) this.text.value = run.instructions ?? "";
+    // stopped or over: no labeler gets another segment of it, so nobody would read new words
+    const closed = run.control === "stop" || ["finished", "failed"].includes(run.status);
+    this.text.disabled = closed;
+    this.form.querySelector("button").disabled = closed;
+    this.text.title = closed ? "the run takes no more labels: instructions would reach nobody" : "";
   }
 
   say(text, ok = false) {

@@ -44,7 +44,8 @@ export function renderLabeling(element, view, ruleless = false, discard = { arme
       <dt>queue</dt>
       <dd><span id="q-pending">${s.queue.pending}</span> pending · <span id="q-leased">${s.queue.leased}</span> leased ·
           <span id="q-labelled">${s.queue.labelled}</span> labelled${s.queue.retired ? ` · ${s.queue.retired} retired` : ""}
-          <p class="explain">pending: waiting for a labeler · leased: on a labeler's screen now · labelled: counted${s.queue.retired ? " · retired: withdrawn by the trainer" : ""}</p></dd>
+          <p class="explain">${discard.closed ? "the run is stopped or over: it takes no more labels, and its pending queries stay unlabelled"
+            : "pending: waiting for a labeler · leased: on a labeler's screen now"} · labelled: counted${s.queue.retired ? " · retired: withdrawn by the trainer" : ""}</p></dd>
       <dt>labels</dt><dd id="m-labels">${of(s.n_labels, s.n_total)}
           <p class="explain">queries whose label counts (the trainer has it)${s.n_total == null ? "" : " / the run's label budget"}</p></dd>
       <dt>quality</dt><dd id="m-quality">${quality}

@@ -142,6 +142,7 @@ async function followRuns(generation) {
       if (generation !== started) return;
       version = page.version;
       runs = page.runs;
+      runPage.heard(runs.find((r) => r.id === runPage.runId));
       $("#token-form").hidden = true;
       if (!runPage.source) showConnection("live"); // no run's stream to speak for the connection
       await openSelected();
@@ -191,6 +192,13 @@ const labelers = new LabelerPanel($("#labelers"), sessionStorage.getItem("collie
 runsBody.addEventListener("click", (event) => {
   const row = event.target.closest("tr[data-run-id]");
   if (row) window.location.hash = `run=${row.dataset.runId}`;
+});
+runsBody.addEventListener("keydown", (event) => { // a row is focusable (Tab): Enter or Space opens it
+  const row = event.target.closest("tr[data-run-id]");
+  if (row && (event.key === "Enter" || event.key === " ")) {
+    event.preventDefault();
+    window.location.hash = `run=${row.dataset.runId}`;
+  }
 });
 window.addEventListener("hashchange", openSelected);
 $("#token-form").addEventListener("submit", (event) => {

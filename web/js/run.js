@@ -101,8 +101,22 @@ export class RunPage {
     this.timer = setInterval(() => this.refreshLabeling(), LABELING_REFRESH_MS);
   }
 
+  // The runs list's word on this run's trainer (its last call to the service, refreshed by the
+  // list's poll): a run whose trainer died says so here too, where its Pause and Stop are.
+  heard(listed) {
+    const mark = this.root.querySelector("#run-heard");
+    const active = listed && listed.id === this.runId && ["training", "waiting_for_labels", "paused"].includes(listed.status);
+    if (active) mark.dataset.time = listed.trainer_seen_at ?? listed.created_at;
+    else {
+      delete mark.dataset.time;
+      mark.textContent = "";
+      mark.classList.remove("silent");
+    }
+  }
+
   close() {
     this.gen += 1;
+    document.title = "collie · operators";
     this.source?.close();
     clearInterval(this.timer);
     this.source = null;
@@ -145,6 +159,8 @@ export class RunPage {
     status.textContent = (STATUS_TEXT[shownStatus(run)] ?? run.status) + (controlPending(run) ? ` (${run.control} requested)` : "");
     document.body.dataset.runStatus = run.status;
     document.body.dataset.runControl = run.control;
+    // tabs of several runs told apart, and a run that waits for people seen from the tab bar
+    document.title = `collie · run #${run.id} ${status.textContent}`;
     this.root.querySelector("#run-labels").textContent = run.n_labels;
     this.root.querySelector("#run-labels-total").textContent = run.n_total == null ? "" : ` / ${run.n_total}`;
     this.root.querySelector("#run-epochs-total").textContent = run.epochs_total == null ? "" : ` / ${run.epochs_total}`;
@@ -164,7 +180,8 @@ export class RunPage {
     renderLabeling(this.root.querySelector("#labeling-body"), view, this.run?.instruction != null, { ...this.discard, closed: this.closed() });
     if (this.run) {  // another operator may have changed them: the form's untouched inputs follow
       const { redundancy, gold_rate } = view.labeling;
-      this.quality.show({ ...this.run, redundancy, gold_rate });
+      this.run = { ...this.run, redundancy, gold_rate }; // kept: the next showRun would put the old ones back
+      this.quality.show(this.run);
     }
     // the labeling UI's review mode (labeling_ui/review.py) replays one query, labelling nothing
     const replay = this.watchUrl ? (queryId) => this.uiLink({ review: this.runId, query: queryId }) : null;

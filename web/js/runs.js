@@ -7,8 +7,10 @@ export function renderRuns(body, runs, selected) {
     body.innerHTML = '<tr><td colspan="8" class="muted">no runs yet</td></tr>';
     return;
   }
+  const focused = body.contains(document.activeElement) ? document.activeElement.dataset.runId : null;
   body.innerHTML = runs.map((r) => `
-    <tr data-run-id="${r.id}" class="${r.id === selected ? "selected" : ""}">
+    <tr data-run-id="${r.id}" class="${r.id === selected ? "selected" : ""}" tabindex="0"${
+      r.id === selected ? ' aria-current="true"' : ""} title="open run #${r.id} (Enter)">
       <td>#${r.id}</td>
       <td><span class="status ${shownStatus(r)}">${STATUS_TEXT[shownStatus(r)] ?? escapeHtml(r.status)}</span>${
         controlPending(r) ? ` <span class="muted">(${r.control} requested)</span>` : ""}${
@@ -20,6 +22,7 @@ export function renderRuns(body, runs, selected) {
       <td>${of(r.n_labels, r.n_total)}</td>
       <td class="since" data-time="${r.last_label_at ?? ""}">${ago(r.last_label_at)}</td>
     </tr>`).join("");
+  if (focused) body.querySelector(`tr[data-run-id="${focused}"]`)?.focus(); // a keyboard user keeps their place
   tickTimes(body);
 }
 
