@@ -51,8 +51,10 @@ def inside(page: Any, selector: str, card: str) -> list[str]:
     )
 
 
-def test_the_discard_buttons_stay_inside_the_labeling_card(browser: Any, url: str) -> None:
-    with operator_page(browser, url, wait_ms=WAIT_MS) as page:  # 1400 px wide
+@pytest.mark.parametrize("width", [1400, 1024])  # 1024: was cut off at "Di…", reached only by scrolling the card
+def test_the_discard_buttons_stay_inside_the_labeling_card(browser: Any, url: str, width: int) -> None:
+    with operator_page(browser, url, wait_ms=WAIT_MS) as page:
+        page.set_viewport_size({"width": width, "height": 700})
         page.wait_for_selector("#labelers-stats tbody tr button")
         assert inside(page, "#labelers-stats button", "#labeling") == []
         page.click('#labelers-stats tr[data-labeler="annotator-from-the-night-shift"] button')  # armed: longer
