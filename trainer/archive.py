@@ -159,11 +159,16 @@ def jobs_in(given: Path, out_root: Path) -> list[tuple[Path, Path | None]]:
 def into_itself(given: Path, out_root: Path) -> str | None:
     """Why archiving `given` into `out_root` would copy nothing or copy a run into itself: --out is
     the folder given (every run below it would be left out as already archived), or lies inside a
-    run folder given. None otherwise (an archive inside a root given is left out of it)."""
+    run folder (one given, or any other). None otherwise (an archive inside a root given is left
+    out of it)."""
     if out_root.resolve() == given.resolve():
         return f"--out {out_root} is the folder given to archive; give another folder"
     if (given / "summary.json").exists() and given.resolve() in out_root.resolve().parents:
         return f"--out {out_root} is inside the run folder {given}; give a folder outside it"
+    target = out_root.resolve()
+    holder = next((f for f in (target, *target.parents) if (f / "summary.json").is_file()), None)
+    if holder is not None:  # any run's, not only one given: its archive would read as part of that run
+        return f"--out {out_root} is inside the run folder {holder}; give a folder outside it"
     return None
 
 

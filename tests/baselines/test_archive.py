@@ -104,6 +104,7 @@ def test_a_sweep_folder_is_archived_run_by_run_at_the_same_paths_leaving_out_unf
 def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_error(tmp_path, capsys):
     sweep = tmp_path / "runs"
     run = fake_run(sweep, "ant", "north", "metra", 0, 1.0)
+    other = fake_run(tmp_path / "elsewhere", "ant", "north", "metra", 1, 1.0)
     (tmp_path / "a-file").write_text("kept")
     refused = [
         (sweep, tmp_path / "a-file", f"--out {tmp_path / 'a-file'} is a file, not a folder"),
@@ -111,6 +112,7 @@ def test_an_out_that_is_a_file_the_folder_given_or_inside_a_run_is_a_one_line_er
         (run, run, f"--out {run} is the folder given to archive"),
         (run, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # was: a copy inside itself
         (sweep, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # a run below the root given
+        (other, run / "kept", f"--out {run / 'kept'} is inside the run folder {run}"),  # any run's: was rc 0
     ]
     for given, out, said in refused:
         assert main(["archive", str(given), "--out", str(out)]) == 2
