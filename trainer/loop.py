@@ -77,6 +77,7 @@ CURVE_KEYS: tuple[str, ...] = (
     "n_labels",
 )
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
+CURVES_EVERY_S = 60.0  # a live run redraws curves.png at an evaluation this long after the last (≈0.5 s a plot)
 
 
 def non_finite(state: Any, at: str = "agent") -> str | None:
@@ -209,6 +210,7 @@ class Trainer:
         self.first_feedback_epoch: int | None = None
         self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
         self._t0: float | None = None  # when this process's share began; None: it trains nothing
+        self._curves_at = time.monotonic()  # curves.png last drawn (none before the first minute)
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -413,6 +415,8 @@ class Trainer:
         with open(self.out / "metrics.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         self.plot(traj, record, w)
+        if time.monotonic() - self._curves_at >= CURVES_EVERY_S:  # a live run's curves, not only a finished one's
+            self.plot_curves()
         write_whole(  # the final skills' paths, for `collie report` figures
             self.out / "eval_latest.npz",
             lambda f: np.savez_compressed(f, epoch=self.epoch, xy=traj.xy, pitch=traj.pitch, skill=traj.skill),
@@ -487,6 +491,14 @@ class Trainer:
             xy = list(traj.xy[:, ::ROLLOUT_STRIDE])  # the states w was computed at
             out = self.out / "guidance_latest.png"
             plot_guidance_map(xy, w, out, task=self.task, title=guidance, labelled=labelled)
+
+    def plot_curves(self, records: list[dict[str, Any]] | None = None) -> None:
+        """curves.png from metrics.jsonl's evaluations (or `records`, read from it already)."""
+        if records is None:
+            records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
+        if records:
+            plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
+        self._curves_at = time.monotonic()
 
     # ---- persistence ---------------------------------------------------------------------
     @property
@@ -827,8 +839,7 @@ class Trainer:
             "config": self.cfg.to_dict(),
         }
         write_json(self.out / "summary.json", summary)
-        if records:
-            plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
+        self.plot_curves(records)
         # an interrupted run is not over for the service; a finished one resumed told it so before
         if status != "interrupted" and not self.trains_nothing:
             self.reporter.status(StatusReport(status, self.epoch, error=error))

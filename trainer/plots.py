@@ -22,6 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from collie.class_colours import STRONG
+from collie.whole_files import write_whole
 from collie.tasks import BAD, CLASS_NAMES, GOOD, NEUTRAL, Disc, Task
 
 CLASS_COLOURS = STRONG  # undesirable red, neutral green, desirable yellow, as in the paper's figures
@@ -51,10 +52,11 @@ def skill_colours(skills: np.ndarray | None, n: int) -> list[RGBA]:
 
 
 def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
+    """A PNG renamed into place whole: a live run redraws curves.png while a person may look."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=DPI)
+    write_whole(path, lambda f: fig.savefig(f, format="png", dpi=DPI))
     return path
 
 

@@ -272,3 +272,24 @@ def test_a_resume_whose_service_lacks_labels_the_checkpoint_applied_says_so(tmp_
     said = capsys.readouterr().err
     assert f"the labeling service holds no label for {len(before)} segment(s) this checkpoint had applied" in said
     assert "(restored from a backup?)" in said and len(before) > 0
+
+
+def test_a_live_run_redraws_its_curves_at_an_evaluation_not_only_at_its_end(tmp_path, monkeypatch):
+    """Was: curves.png only from finish(): a run still training, or killed, had none."""
+    import trainer.loop
+
+    monkeypatch.setattr(trainer.loop, "CURVES_EVERY_S", 0.0)
+    run = smoke(tmp_path, method="metra", task="north", epochs=4)
+    drawn: list[int] = []
+    plot = run.plot_curves
+    monkeypatch.setattr(run, "plot_curves", lambda records=None: (drawn.append(run.epoch), plot(records))[1])
+    evaluate = run.evaluate
+
+    def evaluate_and_look() -> dict:
+        record = evaluate()
+        assert (tmp_path / "curves.png").stat().st_size > 0 and not (tmp_path / "summary.json").exists()
+        return record
+
+    monkeypatch.setattr(run, "evaluate", evaluate_and_look)
+    run.run()
+    assert drawn[:-1] == [r["epoch"] for r in records(tmp_path)]  # each evaluation's, then finish()'s
