@@ -22,8 +22,8 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from collie.class_colours import STRONG
-from collie.whole_files import write_whole
 from collie.tasks import BAD, CLASS_NAMES, GOOD, NEUTRAL, Disc, Task
+from collie.whole_files import write_whole
 
 CLASS_COLOURS = STRONG  # undesirable red, neutral green, desirable yellow, as in the paper's figures
 REGION_ALPHA = 0.22
