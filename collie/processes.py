@@ -53,6 +53,22 @@ class LockHeld(Exception):
         self.holder = holder
 
 
+def lock_holder(path: Path) -> str | None:
+    """The pid ("" if unknown) of the process holding the lock at `path` now, else None (no lock
+    file, or none holds it); nothing is taken or written."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return os.read(fd, 32).decode(errors="replace").strip()
+    finally:
+        os.close(fd)  # and with it a lock it took
+    return None
+
+
 def hold_lock(path: Path) -> int:
     """An exclusive lock on `path` (made if missing, readable by its owner only) for as long as the
     returned descriptor is open here or in a child it was passed to; the file names our pid.

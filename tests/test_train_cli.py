@@ -660,6 +660,9 @@ def test_a_second_trainer_in_a_run_folder_in_use_is_refused(tmp_path: Path) -> N
             assert first.poll() is None and time.monotonic() < deadline
             time.sleep(0.1)
         refused(train("--out", str(out)), f"another collie train (pid {first.pid}) is training in {out}")
+        # before its first checkpoint, a --resume is told the same (was: "no checkpoint: nothing to resume")
+        said = f"another collie train (pid {first.pid}) is training in {out}, and has written no checkpoint yet"
+        refused(train("--out", str(out), "--resume"), said)
         assert first.poll() is None  # the first goes on
     finally:
         first.kill()
@@ -726,8 +729,31 @@ def test_ctrl_c_in_the_epoch_0_evaluation_leaves_no_run_behind(tmp_path: Path, f
     assert code == 130 and "collie train: interrupted" in err and "Traceback" not in err, err[-3000:]
     if folder == "new":
         assert not out.exists()
+        assert f"collie train: stopped before its first checkpoint: removed {out}, which it made" in err
     else:
         assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+        assert f"collie train: stopped before its first checkpoint: removed what it wrote in {out}" in err
+
+
+def test_a_second_ctrl_c_says_which_checkpoint_a_resume_continues_from(tmp_path: Path) -> None:
+    """Was: "collie train: interrupted" alone, the epoch a resume goes back to unsaid."""
+    out = tmp_path / "run"
+    cmd = [*TRAIN, "--out", str(out), "--epochs", "1000", "--eval-every", "1000", "--grad-steps", "3000"]
+    proc = subprocess.Popen([*cmd, "--checkpoint-every", "1"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not (out / "checkpoint.pt").exists():
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)  # within the same epoch: an epoch of 3000 steps takes seconds
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    said = re.search(
+        r"collie train: stopped in epoch (\d+) without a checkpoint of it: --resume continues from epoch (\d+)'s", err
+    )
+    assert said is not None, err[-3000:]
+    assert int(said[2]) == int(said[1]) - 1 and (out / "checkpoint.pt").exists()
 
 
 def test_sigterm_while_waiting_for_the_service_ends_it_at_once(tmp_path: Path) -> None:

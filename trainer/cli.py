@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, cast
 from collie import early_term
 from collie.argtypes import Given, http_url, int_in, record_id, seed
 from collie.env_names import PIXEL_ENVS
-from collie.processes import LockHeld, hold_lock
+from collie.processes import LockHeld, hold_lock, lock_holder
 from collie.startup import mark
 from collie.tasks import default_task, task_names
 from collie.tokens import add_token_arguments, resolve_token
@@ -470,6 +470,12 @@ def check_out(out: Path, resume: bool) -> list[Path]:
             raise ValueError(f"--resume: {out / 'checkpoint.pt'} is a folder, not a checkpoint")
         holds_a_run = any((out / name).exists() for name in RUN_FILES)
         if resume and not has_checkpoint(out):
+            busy = lock_holder(out / LOCK_FILE)
+            if busy is not None:  # a run before its first checkpoint: "nothing to resume" would mislead
+                raise ValueError(
+                    f"another collie train (pid {busy or '?'}) is training in {out}, and has written no "
+                    "checkpoint yet: wait for it or stop it, or choose another --out"
+                )
             if holds_a_run:  # its checkpoint deleted, or a run stopped before its first one
                 raise ValueError(
                     f"--resume: {out} holds a run but no checkpoint.pt to continue it from: start it again "
@@ -795,9 +801,18 @@ def run(args: argparse.Namespace) -> int:
                 print(f"collie train: error: {service_answered(args.api, exc)}", file=sys.stderr)
                 return 2
         summary = trainer.run(resume=args.resume)
-    except KeyboardInterrupt:  # before the loop's own handler (e.g. Ctrl-C in the epoch-0 evaluation)
-        if not args.resume and not has_checkpoint(Path(cfg.out)):  # nothing trained: nothing to keep
-            discard_unstarted(Path(cfg.out), held_before, made)
+    except KeyboardInterrupt:  # before the loop's own handler (e.g. Ctrl-C in the epoch-0 evaluation), or a second
+        out = Path(cfg.out)
+        if not args.resume and not has_checkpoint(out):  # nothing trained: nothing to keep
+            discard_unstarted(out, held_before, made)
+            where = f"removed {out}, which it made" if not out.exists() else f"removed what it wrote in {out}"
+            print(f"collie train: stopped before its first checkpoint: {where}", file=sys.stderr)
+        elif trainer.checkpointed_at is not None and trainer.checkpointed_at < trainer.epoch:
+            print(
+                f"collie train: stopped in epoch {trainer.epoch} without a checkpoint of it: --resume continues "
+                f"from epoch {trainer.checkpointed_at}'s",
+                file=sys.stderr,
+            )
         raise
     except OSError as exc:  # the run's own files: a full disk, a file system remounted read-only (was: a traceback)
         if exc.errno not in UNWRITABLE:  # any other is a fault to show whole

@@ -211,6 +211,7 @@ class Trainer:
         self.wall_before = 0.0  # wall seconds spent in earlier processes of this run (resume)
         self._t0: float | None = None  # when this process's share began; None: it trains nothing
         self._curves_at = time.monotonic()  # curves.png last drawn (none before the first minute)
+        self.checkpointed_at: int | None = None  # the epoch of checkpoint.pt (written or resumed from)
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -533,6 +534,7 @@ class Trainer:
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         self.epoch, self.env_steps, self.session = s["epoch"], s["env_steps"], s["session"]
+        self.checkpointed_at = self.epoch
         self.first_feedback_epoch, self.wall_before = s["first_feedback_epoch"], s["wall_s"]
         self.agent.load_state_dict(s["agent"])
         if "chunks" in s["replay"]:
@@ -562,6 +564,7 @@ class Trainer:
         state["replay"] = self.replay_log.flush()
         save_checkpoint(self.out / "checkpoint.pt", state)
         self.replay_log.prune()
+        self.checkpointed_at = self.epoch
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
         if self._signalled is not None:  # a second signal: stop now, without a checkpoint
