@@ -212,6 +212,7 @@ class Trainer:
         self._t0: float | None = None  # when this process's share began; None: it trains nothing
         self._curves_at = time.monotonic()  # curves.png last drawn (none before the first minute)
         self.checkpointed_at: int | None = None  # the epoch of checkpoint.pt (written or resumed from)
+        self._collecting = False  # the epochs so far gathered start transitions only (no update yet)
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -580,6 +581,20 @@ class Trainer:
         said = f"collie train: {signal.Signals(signum).name}: stopping at the end of epoch {self.epoch}, with a "
         os.write(2, f"{below_bar}{said}checkpoint; again to stop at once, without one\n".encode())
 
+    def name_the_phase(self, bar: Any) -> None:
+        """The bar says the epochs before `start_transitions` are rollouts alone; at the first epoch
+        with updates its rate starts again, so its ETA is not theirs (a pixel paper epoch's
+        rollouts take seconds, its updates many minutes on a CPU: the ETA said hours for weeks)."""
+        collecting = self.replay.transitions < self.cfg.start_transitions
+        if self._collecting and not collecting:
+            bar.reset(total=self.cfg.epochs)  # elapsed and rate from now: "?" until this epoch ends
+            bar.n = bar.last_print_n = bar.initial = self.epoch - 1
+        self._collecting = collecting
+        bar.set_description(self.phase())
+
+    def phase(self) -> str:
+        return f"collecting {self.cfg.start_transitions} start transitions" if self._collecting else "training"
+
     def _install_signal_handlers(self) -> dict[int, Any]:
         if threading.current_thread() is not threading.main_thread():
             return {}  # signals reach only the main thread; an embedded trainer keeps its host's handlers
@@ -718,13 +733,14 @@ class Trainer:
             self.close_tensorboard()  # removes what a fresh start wrote (tb/ included)
             raise
         asking = self._asking
+        self._collecting = self.replay.transitions < self.cfg.start_transitions
         bar = tqdm(
             total=self.cfg.epochs,
             initial=self.epoch - (asking is not None),
             disable=not self.progress,
             unit="epoch",
             dynamic_ncols=True,
-            desc="training",
+            desc=self.phase(),
         )
         status: LoopStatus = "finished"
         record: dict[str, Any] | None = None
@@ -739,8 +755,8 @@ class Trainer:
                     status = "stopped"
                     break
                 self.epoch += 1
-                bar.set_description("training")
                 self.collect_epoch()
+                self.name_the_phase(bar)
                 startup.mark("collect", self.epoch)
                 record = self.rest_of_epoch(bar) or record
             if self._signalled is not None:
@@ -793,7 +809,7 @@ class Trainer:
             self.feedback_session(asking)
             if people:
                 self.say(f"labels in · labels {len(self.labelled)}")
-            bar.set_description("training")
+            bar.set_description(self.phase())
         self.apply_labels(self.feedback.revisions())
         self.train_epoch()
         self.log_scalars()

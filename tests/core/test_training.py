@@ -293,3 +293,15 @@ def test_a_live_run_redraws_its_curves_at_an_evaluation_not_only_at_its_end(tmp_
     monkeypatch.setattr(run, "evaluate", evaluate_and_look)
     run.run()
     assert drawn[:-1] == [r["epoch"] for r in records(tmp_path)]  # each evaluation's, then finish()'s
+
+
+def test_the_progress_bar_says_the_epochs_before_any_update_are_start_transitions(tmp_path, capsys):
+    """Was: "training" and an ETA from rollouts alone (a pixel paper run said 5 h for weeks)."""
+    from trainer.config import make_config
+
+    cfg = make_config("smoke", "point", out=str(tmp_path), method="metra", epochs=4, start_transitions=400)
+    steps_per_epoch = cfg.episodes_per_epoch * cfg.episode_steps
+    assert steps_per_epoch < 400 <= 3 * steps_per_epoch  # some epochs of rollouts alone, then updates
+    Trainer(cfg, progress=True).run()
+    err = capsys.readouterr().err
+    assert "collecting 400 start transitions" in err and "training" in err.split("collecting 400 start transitions")[-1]
