@@ -77,6 +77,7 @@ CURVE_KEYS: tuple[str, ...] = (
     "n_labels",
 )
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
+HEARTBEAT_S = 60.0  # with no bar, a line about the run's pace at least this often between other lines
 CURVES_EVERY_S = 60.0  # a live run redraws curves.png at an evaluation this long after the last (≈0.5 s a plot)
 
 
@@ -213,6 +214,7 @@ class Trainer:
         self._curves_at = time.monotonic()  # curves.png last drawn (none before the first minute)
         self.checkpointed_at: int | None = None  # the epoch of checkpoint.pt (written or resumed from)
         self._collecting = False  # the epochs so far gathered start transitions only (no update yet)
+        self._said = (time.monotonic(), 0)  # when the last line went to the log (no bar), at which epoch
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -681,6 +683,23 @@ class Trainer:
         a wait for people, or for an operator's resume, is silence as long as it lasts."""
         if not self.progress:
             print(f"epoch {self.epoch}/{self.cfg.epochs} · {what}", file=sys.stderr, flush=True)
+            self._said = (time.monotonic(), self.epoch)
+
+    def heartbeat(self) -> None:
+        """With no bar (a log), a line at most every HEARTBEAT_S: the run's pace and time left, so a
+        log between evaluations (minutes apart for a robot's cpu preset) shows the run going."""
+        when, epoch = self._said
+        elapsed = time.monotonic() - when
+        if self.progress or elapsed < HEARTBEAT_S or self.epoch in (epoch, self.cfg.epochs):
+            return
+        if self._collecting:
+            self.say(f"collecting {self.cfg.start_transitions} start transitions")
+            return
+        rate = (self.epoch - epoch) / elapsed  # over the last interval: waits for labels included
+        left = (self.cfg.epochs - self.epoch) / rate if rate > 0 else math.inf
+        shown = f"{left / 60:.0f} min" if left < 7200 else f"{left / 3600:.1f} h"
+        shown = "under a minute" if left < 60 else "?" if not math.isfinite(left) else shown
+        self.say(f"{rate * 60:.1f} epochs/min · about {shown} left at this pace")
 
     def wait_while_paused(self, bar: Any) -> bool:
         """Honour the operator: returns False when the run must stop."""
@@ -734,6 +753,7 @@ class Trainer:
             raise
         asking = self._asking
         self._collecting = self.replay.transitions < self.cfg.start_transitions
+        self._said = (time.monotonic(), self.epoch)  # the pace is this process's
         bar = tqdm(
             total=self.cfg.epochs,
             initial=self.epoch - (asking is not None),
@@ -759,6 +779,7 @@ class Trainer:
                 self.name_the_phase(bar)
                 startup.mark("collect", self.epoch)
                 record = self.rest_of_epoch(bar) or record
+                self.heartbeat()
             if self._signalled is not None:
                 status = "stopped"
         except StopRequested:
@@ -823,6 +844,7 @@ class Trainer:
                     file=sys.stderr,
                     flush=True,
                 )
+                self._said = (time.monotonic(), self.epoch)
             bar.set_postfix(
                 labels=len(self.labelled),
                 safe_cov=coverage_shown(record),

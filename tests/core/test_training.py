@@ -3,6 +3,7 @@ fails loudly on bad input and on NaN."""
 
 import hashlib
 import json
+import re
 import subprocess
 import sys
 from collections.abc import Collection
@@ -305,3 +306,15 @@ def test_the_progress_bar_says_the_epochs_before_any_update_are_start_transition
     Trainer(cfg, progress=True).run()
     err = capsys.readouterr().err
     assert "collecting 400 start transitions" in err and "training" in err.split("collecting 400 start transitions")[-1]
+
+
+def test_a_log_hears_the_runs_pace_between_evaluations(tmp_path, capsys, monkeypatch):
+    """Was: nothing between evaluations (a robot's cpu preset evaluates minutes apart)."""
+    import trainer.loop
+
+    monkeypatch.setattr(trainer.loop, "HEARTBEAT_S", 0.0)
+    smoke(tmp_path, method="metra", task="north", epochs=4, start_transitions=0).run()
+    paced = [ln for ln in capsys.readouterr().err.splitlines() if "epochs/min" in ln]
+    assert paced and all(
+        re.fullmatch(r"epoch [123]/4 · [\d.]+ epochs/min · about under a minute left at this pace", ln) for ln in paced
+    )
