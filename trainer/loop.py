@@ -215,6 +215,7 @@ class Trainer:
         self.checkpointed_at: int | None = None  # the epoch of checkpoint.pt (written or resumed from)
         self._collecting = False  # the epochs so far gathered start transitions only (no update yet)
         self._said = (time.monotonic(), 0)  # when the last line went to the log (no bar), at which epoch
+        self._postfix: dict[str, Any] = {}  # what the bar shows after its rate: the last evaluation's, the labels
         self.last_info: dict[str, float] = {}
         self._writer: Any = None
         self._signalled: int | None = None  # SIGTERM/SIGINT received: stop at the epoch's end
@@ -831,6 +832,8 @@ class Trainer:
             if people:
                 self.say(f"labels in · labels {len(self.labelled)}")
             bar.set_description(self.phase())
+            self._postfix["labels"] = len(self.labelled)  # the bar's count: not only at the next evaluation
+            bar.set_postfix(self._postfix)
         self.apply_labels(self.feedback.revisions())
         self.train_epoch()
         self.log_scalars()
@@ -845,12 +848,13 @@ class Trainer:
                     flush=True,
                 )
                 self._said = (time.monotonic(), self.epoch)
-            bar.set_postfix(
-                labels=len(self.labelled),
-                safe_cov=coverage_shown(record),
-                bins=f"{record['n_bins']:.0f}",  # a float: tqdm would show 1,340 bins as 1.34e+03
-                lam=f"{record['lambda']:.1f}",
-            )
+            self._postfix = {
+                "labels": len(self.labelled),
+                "safe_cov": coverage_shown(record),
+                "bins": f"{record['n_bins']:.0f}",  # a float: tqdm would show 1,340 bins as 1.34e+03
+                "lam": f"{record['lambda']:.1f}",
+            }
+            bar.set_postfix(self._postfix)
         if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
             self.checkpoint()
             startup.mark("checkpoint", self.epoch)

@@ -318,3 +318,12 @@ def test_a_log_hears_the_runs_pace_between_evaluations(tmp_path, capsys, monkeyp
     assert paced and all(
         re.fullmatch(r"epoch [123]/4 · [\d.]+ epochs/min · about under a minute left at this pace", ln) for ln in paced
     )
+
+
+def test_the_bars_label_count_follows_each_feedback_session(tmp_path, capsys):
+    """Was: the count of the last evaluation's (labels=5 at epoch 11 with 10 in)."""
+    Trainer(
+        make_config("smoke", "point", out=str(tmp_path), method="collie", task="north", epochs=8), progress=True
+    ).run()
+    shown = [int(n) for n in re.findall(r"labels=(\d+)", capsys.readouterr().err)]
+    assert shown == sorted(shown) and 2 in shown  # the first session's 2 labels (epoch 2): no evaluation shows them
