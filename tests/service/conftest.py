@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from sqlalchemy import Connection
 
 from backend.main import create_app
 from backend.server import BackgroundServer
@@ -128,6 +129,35 @@ def new_labeler(live: BackgroundServer, operator: CollieClient) -> Iterator[Call
     yield make
     for client in made:
         client.close()
+
+
+def database_at(path: Path, revision: str, task: str, more: Callable[[Connection], object] = lambda _: None) -> None:
+    """A SQLite file at schema `revision`, as an older collie left it: a trainer principal (id 1)
+    and its run 1 of `task` on the point mass; `more` adds rows in the same transaction."""
+    from alembic import command
+    from sqlalchemy import text
+
+    from backend.db import Database
+    from backend.migrate import alembic_config
+
+    db = Database(f"sqlite:///{path}")
+    config = alembic_config(db.url)
+    with db.engine.begin() as conn:
+        config.attributes["connection"] = conn
+        command.upgrade(config, revision)
+        conn.execute(
+            text("INSERT INTO principals (id, name, role, token_sha256, created_at) VALUES (1, 'o', 'trainer', 'x', 0)")
+        )
+        conn.execute(
+            text(
+                "INSERT INTO runs (id, env, task, method, config, dims, status, control, epoch, n_labels,"
+                " last_event_id, created_by, created_at, updated_at) VALUES (1, 'point', :task, 'collie', '{}',"
+                " :dims, 'training', 'run', 0, 0, 0, 1, 0, 0)"
+            ),
+            {"task": task, "dims": DIMS.model_dump_json()},
+        )
+        more(conn)
+    db.dispose()
 
 
 def make_run_spec(dims: EnvDims = DIMS, task: str = "range_north", n_total: int | None = 10) -> RunCreate:

@@ -10,19 +10,18 @@ from pathlib import Path
 
 import httpx
 import pytest
-from alembic import command
 from sqlalchemy import text
 from stalling_proxy import stalling_relay
 
 from backend.db import Database
 from backend.main import create_app
-from backend.migrate import alembic_config, upgrade
+from backend.migrate import upgrade
 from backend.server import BackgroundServer
 from collie.client import CollieClient, Conflict, new_request_id
 from collie.schemas import RunCreate, RunRead
 from trainer.feedback.http import HttpFeedback
 
-from .conftest import DIMS, TOKENS, both_databases, make_run_spec, settings_for
+from .conftest import TOKENS, both_databases, database_at, make_run_spec, settings_for
 
 database_url = both_databases
 
@@ -80,23 +79,9 @@ def test_a_0011_database_holding_runs_and_their_rows_upgrades(tmp_path: Path) ->
     """Migration 0012 on a database whose run has rows pointing at it (was: a table rebuild of
     `runs`, refused by SQLite's foreign keys: serve and export both failed on such a database)."""
     path = tmp_path / "old.db"
+    metrics = text("""INSERT INTO metrics (run_id, epoch, "values", created_at) VALUES (1, 0, '{}', 0)""")
+    database_at(path, "0011", "north", lambda conn: conn.execute(metrics))
     db = Database(f"sqlite:///{path}")
-    config = alembic_config(db.url)
-    with db.engine.begin() as conn:
-        config.attributes["connection"] = conn
-        command.upgrade(config, "0011")
-        conn.execute(
-            text("INSERT INTO principals (id, name, role, token_sha256, created_at) VALUES (1, 'o', 'trainer', 'x', 0)")
-        )
-        conn.execute(
-            text(
-                "INSERT INTO runs (id, env, task, method, config, dims, status, control, epoch, n_labels,"
-                " last_event_id, created_by, created_at, updated_at) VALUES (1, 'point', 'north', 'collie', '{}',"
-                " :dims, 'training', 'run', 0, 0, 0, 1, 0, 0)"
-            ),
-            {"dims": DIMS.model_dump_json()},
-        )
-        conn.execute(text("""INSERT INTO metrics (run_id, epoch, "values", created_at) VALUES (1, 0, '{}', 0)"""))
     upgrade(db.engine)
     db.dispose()
     with BackgroundServer(create_app(settings_for(path))) as server, CollieClient(server.url, TOKENS["trainer"]) as c:

@@ -8,19 +8,17 @@ from pathlib import Path
 
 import httpx
 import pytest
-from alembic import command
-from sqlalchemy import text
 
 from backend.db import Database
 from backend.main import create_app
-from backend.migrate import alembic_config, upgrade
+from backend.migrate import upgrade
 from backend.server import BackgroundServer
 from collie.client import ApiError, CollieClient
 from collie.schemas import StatusEvent
 from collie.task_schemas import TaskDefinition
 from collie.tasks import get_task, task_for_run, to_definition
 
-from .conftest import DIMS, TOKENS, make_run_spec, make_session, settings_for
+from .conftest import TOKENS, database_at, make_run_spec, make_session, settings_for
 
 POLYGON = {
     "name": "pit",
@@ -91,22 +89,8 @@ def test_a_definition_of_another_name_than_the_task_is_refused(live: BackgroundS
 
 def test_a_0002_database_upgrades_and_its_runs_keep_their_builtin_rule(tmp_path: Path) -> None:
     path = tmp_path / "old.db"
+    database_at(path, "0002", "hole")
     db = Database(f"sqlite:///{path}")
-    config = alembic_config(db.url)
-    with db.engine.begin() as conn:
-        config.attributes["connection"] = conn
-        command.upgrade(config, "0002")
-        conn.execute(
-            text("INSERT INTO principals (id, name, role, token_sha256, created_at) VALUES (1, 'o', 'trainer', 'x', 0)")
-        )
-        conn.execute(
-            text(
-                "INSERT INTO runs (id, env, task, method, config, dims, status, control, epoch, n_labels,"
-                " last_event_id, created_by, created_at, updated_at) VALUES (1, 'point', 'hole', 'collie', '{}',"
-                " :dims, 'training', 'run', 0, 0, 0, 1, 0, 0)"
-            ),
-            {"dims": DIMS.model_dump_json()},
-        )
     upgrade(db.engine)
     db.dispose()
     with (
