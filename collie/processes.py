@@ -60,10 +60,12 @@ def lock_holder(path: Path) -> str | None:
         fd = os.open(path, os.O_RDONLY)
     except OSError:
         return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    try:  # shared: it conflicts with the holder's exclusive lock, and needs no write access (NFS)
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
         return os.read(fd, 32).decode(errors="replace").strip()
+    except OSError:  # a file system without locks: nobody known to hold it
+        return None
     finally:
         os.close(fd)  # and with it a lock it took
     return None

@@ -318,6 +318,7 @@ def test_a_run_made_on_the_service_that_its_folder_cannot_remember_is_marked_fai
             return
         (newest,) = made
         assert operator.run(newest).status == "failed"
+        assert not (disk / "run" / "run_creation.json").exists()  # sent again, it would answer that failed run
         said = [e.data.message or "" for e in operator.events(newest).events if e.kind == "status"]
         assert any(m.startswith(f"its trainer could not write {disk / 'run' / 'service_run.json'}") for m in said)
 

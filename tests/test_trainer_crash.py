@@ -247,10 +247,14 @@ def test_a_revoked_trainer_token_ends_the_run_resumable_in_one_line(tmp_path, se
         assert operator.run(run_id).status == "finished"
 
 
-def test_a_trainer_killed_before_the_answer_to_its_run_creation_makes_no_second_run_on_restart(tmp_path, service):
+@pytest.mark.parametrize("meanwhile", ["nothing", "an operator stopped it"])
+def test_a_trainer_killed_before_the_answer_to_its_run_creation_makes_no_second_run_on_restart(
+    tmp_path, service, meanwhile
+):
     """The service made the run, but the trainer died before it heard so (the answer lost on the way,
     then kill -9): started again, it sends the same creation (OUT/run_creation.json) and continues
-    the run the first made. Was: a second run, the first showing "training" on the dashboard for good."""
+    the run the first made. Was: a second run, the first showing "training" on the dashboard for good.
+    One an operator stopped meanwhile is not trained again: the start says so."""
     out, log = tmp_path / "trainer", tmp_path / "trainer.log"
     with CollieClient(service.api, TOKENS["operator"]) as operator:
         before = {r.id for r in operator.runs(limit=1000)}
@@ -261,7 +265,14 @@ def test_a_trainer_killed_before_the_answer_to_its_run_creation_makes_no_second_
             trainer.wait(timeout=30)
         (made,) = {r.id for r in operator.runs(limit=1000)} - before
         assert not (out / "service_run.json").exists()
+        if meanwhile != "nothing":
+            operator.stop(made)  # its trainer gone, it shows "training (stop requested)"
         again = cli(*train_args(out, service.api), log=log)
+        if meanwhile != "nothing":  # the trainer it finds ends it, as the operator asked: no run beside it
+            assert again.wait(timeout=120) == 0, log.read_text()[-3000:]
+            assert (operator.run(made).status, operator.run(made).control) == ("finished", "stop")
+            assert {r.id for r in operator.runs(limit=1000)} - before == {made}
+            return
         try:
             wait_until((out / "service_run.json").exists, alive=again, log=log)
             assert json.loads((out / "service_run.json").read_text())["run_id"] == made

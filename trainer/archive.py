@@ -36,7 +36,7 @@ from trainer.run_files import (
     run_folders,
     writing_into,
 )
-from trainer.same_run import comparable, differing_keys, run_config
+from trainer.same_run import comparable, differing_keys, only_more_epochs, run_config
 from trainer.sweep import is_finished
 from trainer.task_choice import TASK_JSON
 
@@ -61,7 +61,7 @@ def another_run(held: Path, source: Path) -> str | None:
     method = new.get("method")
     keys = [k for k in differing_keys(old, new) if method not in METHODS or matters(k, str(method))]
     a, b = comparable(old), comparable(new)
-    if not keys or (keys == ["epochs"] and b["epochs"] > a["epochs"]):  # extended since (`--resume --epochs`)
+    if not keys or only_more_epochs(keys, a, b):  # the run extended since
         return None
     shown = [f"{k} {a.get(k)!r} archived, {b.get(k)!r} here" for k in keys[:SHOWN_KEYS]]
     more = f" and {len(keys) - SHOWN_KEYS} more" if len(keys) > SHOWN_KEYS else ""
@@ -163,8 +163,6 @@ def into_itself(given: Path, out_root: Path) -> str | None:
     out of it)."""
     if out_root.resolve() == given.resolve():
         return f"--out {out_root} is the folder given to archive; give another folder"
-    if (given / "summary.json").exists() and given.resolve() in out_root.resolve().parents:
-        return f"--out {out_root} is inside the run folder {given}; give a folder outside it"
     target = out_root.resolve()
     holder = next((f for f in (target, *target.parents) if (f / "summary.json").is_file()), None)
     if holder is not None:  # any run's, not only one given: its archive would read as part of that run

@@ -344,7 +344,7 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
         # Remembered before it is sent: a trainer that dies before the answer, started again, sends the
         # same creation and gets the run the first made, not a second run beside an orphan.
         creation.parent.mkdir(parents=True, exist_ok=True)
-        write_json(creation, {"api": args.api, "client_request_id": spec.client_request_id})
+        write_json(creation, {"client_request_id": spec.client_request_id})
         try:
             source = HttpFeedback.create(args.api, token, spec, **kwargs)
         except Conflict as exc:
@@ -354,6 +354,9 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
                 f"{creation} began the creation of a run with other flags ({exc.detail}): give the flags it was "
                 f"started with, or remove {creation} to create a new run"
             ) from None
+        ended = ended_for_this_trainer(source.held_run(), False, cfg.out) if begun is not None else None
+        if ended:  # the run the start before made, since stopped by an operator (or failed)
+            raise ValueError(f"{ended}; remove {creation} to create a new run")
     try:
         memo.parent.mkdir(parents=True, exist_ok=True)
         write_json(memo, {"api": args.api, "run_id": source.run_id})
@@ -363,9 +366,11 @@ def http_feedback(args: argparse.Namespace, cfg: Config, rule: RunRule) -> tuple
             with contextlib.suppress(Exception):  # best effort: the start fails with the disk's refusal either way
                 why = f"its trainer could not write {memo} ({(exc.strerror or str(exc)).lower()})"
                 source.client.set_status(source.run_id, "failed", message=why)
+            with contextlib.suppress(OSError):  # sent again, it would answer that failed run
+                creation.unlink(missing_ok=True)
         raise
     # the id a labeler's UI and a teacher are started with (`--run N`)
-    made = "continues" if run_id is not None else "created"
+    made = "continues" if run_id is not None else "created" if begun is None else "created (or found again)"
     print(f"collie train: {made} run {source.run_id} on {args.api} (remembered in {memo})", file=sys.stderr)
     return source, rule
 
@@ -777,7 +782,7 @@ def run(args: argparse.Namespace) -> int:
         if refusal is None and args.api and isinstance(exc, Exception):
             from collie.client import Unreachable, no_answer
 
-            if isinstance(exc, Unreachable):  # e.g. gone while it created the run (not sent twice): transient, 1
+            if isinstance(exc, Unreachable):  # e.g. gone while it created the run (asked again for ≈10 s): transient, 1
                 print(f"collie train: error: the labeling service at {args.api} {no_answer(exc)}", file=sys.stderr)
                 return 1
         if refusal is None:

@@ -567,8 +567,8 @@ class Trainer:
         state = self.state_dict()
         state["replay"] = self.replay_log.flush()
         save_checkpoint(self.out / "checkpoint.pt", state)
-        self.replay_log.prune()
         self.checkpointed_at = self.epoch
+        self.replay_log.prune()
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
         if self._signalled is not None:  # a second signal: stop now, without a checkpoint
@@ -696,7 +696,7 @@ class Trainer:
         if self._collecting:
             self.say(f"collecting {self.cfg.start_transitions} start transitions")
             return
-        rate = (self.epoch - epoch) / elapsed  # over the last interval: waits for labels included
+        rate = (self.epoch - epoch) / elapsed  # since the last line (a wait for labels has lines of its own)
         left = (self.cfg.epochs - self.epoch) / rate if rate > 0 else math.inf
         shown = f"{left / 60:.0f} min" if left < 7200 else f"{left / 3600:.1f} h"
         shown = "under a minute" if left < 60 else "?" if not math.isfinite(left) else shown

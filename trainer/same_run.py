@@ -62,7 +62,15 @@ def differing_keys(a: dict[str, Any], b: dict[str, Any], besides: tuple[str, ...
     """The config keys whose values differ between `a` and `b`, NOT_THE_RUN and `besides` aside
     (("epochs",): more of them extend a run, a resumed one included), sorted."""
     ca, cb = comparable(a), comparable(b)
+    if RULE not in ca or RULE not in cb:  # a run from before task.json (or a command without a task file)
+        ca.pop(RULE, None), cb.pop(RULE, None)
     return sorted(k for k in ca.keys() | cb.keys() if ca.get(k) != cb.get(k) and k not in besides)
+
+
+def only_more_epochs(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> bool:
+    """The differing `keys` of two comparable configs say `asked` is `made` with more epochs: the
+    same run extended (`collie train --resume --epochs N` takes only them; its config wins)."""
+    return keys == ["epochs"] and asked["epochs"] > made["epochs"]
 
 
 def preset_defaults(cfg: dict[str, Any]) -> dict[str, Any]:

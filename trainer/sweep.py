@@ -48,7 +48,7 @@ from trainer.config import PRESETS, flag
 from trainer.methods import METHODS, matters
 from trainer.metrics import BIN_RULES
 from trainer.run_files import RunFolderError, has_checkpoint, read_json_object, write_json, writing_into
-from trainer.same_run import RULE, comparable, differing_keys, rule_digest, run_config
+from trainer.same_run import RULE, comparable, differing_keys, only_more_epochs, rule_digest, run_config
 
 HEAD_TIMEOUT_S = 10.0  # how long `--ray ADDRESS`'s port may take to accept a connection
 SHOWN_KEYS = 4  # a warning names at most this many differing config keys with their values
@@ -255,12 +255,6 @@ def extension(spec: RunSpec) -> tuple[int, int] | None:
     if not only_more_epochs(keys, made, asked) or not has_checkpoint(spec.out):
         return None
     return made["epochs"], asked["epochs"]
-
-
-def only_more_epochs(keys: list[str], made: dict[str, Any], asked: dict[str, Any]) -> bool:
-    """`config_change`'s answer says the command asks only for more epochs than the run's: what a
-    resume takes from it (the rest of the run's config wins)."""
-    return keys == ["epochs"] and asked["epochs"] > made["epochs"]
 
 
 def keeps_its_record(spec: RunSpec) -> bool:

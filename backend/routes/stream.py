@@ -24,6 +24,7 @@ from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy.exc import DBAPIError
 from starlette.types import Receive, Scope, Send
 
+from backend.db import DatabaseFileGone
 from backend.routes.deps import (
     ANY,
     DB,
@@ -143,6 +144,8 @@ async def stream(
                     yield ": keep-alive\n\n"
         except DBAPIError as exc:  # the database went away: the stream ends, the client resumes from its last id
             log.warning("stream of run %d ended: database unreachable: %s", run_id, first_line(exc.orig))
+        except DatabaseFileGone as exc:  # its file deleted under the service: ended, said once, no traceback
+            log.warning("stream of run %d ended: %s", run_id, exc)
         finally:
             if subscription is not None:
                 feed.unsubscribe(subscription)

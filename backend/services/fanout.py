@@ -150,8 +150,9 @@ class StreamFeed:
                 polled = await self._step(polled)
             except (DBAPIError, DatabaseFileGone) as exc:
                 if not failing:
+                    how = "database unreachable" if isinstance(exc, DBAPIError) else "database file gone"
                     cause = first_line(exc.orig if isinstance(exc, DBAPIError) else exc)
-                    log.warning("stream reader: database unreachable, retrying every %g s: %s", self.poll_s, cause)
+                    log.warning("stream reader: %s, retrying every %g s: %s", how, self.poll_s, cause)
                 failing = True
                 await asyncio.sleep(self.poll_s)
                 continue

@@ -8,6 +8,7 @@ import time
 from typing import Any
 
 from sqlalchemy import Connection, case, func, insert, select, update
+from sqlalchemy.exc import IntegrityError
 
 from backend.models import Query, Run
 from backend.services import events
@@ -52,20 +53,40 @@ def stored_definition(spec: RunCreate) -> dict[str, Any] | None:
 def create(conn: Connection, caller: Caller, spec: RunCreate) -> tuple[RunRead, bool]:
     """The run made, and whether it was made before: a repeat of the caller's client_request_id
     answers the run the first made (a different run under the same id is refused, 409)."""
-    if spec.client_request_id is not None:
-        made = conn.execute(
-            select(Run.id, Run.env, Run.task, Run.method, Run.config).where(
-                Run.created_by == caller.id, Run.client_request_id == spec.client_request_id
-            )
-        ).first()
-        if made is not None:
-            if (made.env, made.task, made.method, made.config) != (spec.env, spec.task, spec.method, spec.config):
-                raise Conflict(
-                    f"client_request_id '{spec.client_request_id}' was already used for another run (run {made.id})"
-                )
-            return get(conn, made.id), True
+    made = _made_before(conn, caller, spec)
+    if made is not None:
+        return made, True
     now = time.time()
-    run_id = conn.execute(
+    try:
+        with conn.begin_nested():  # PostgreSQL: a repeat racing the first's insert loses on the unique index
+            run_id = _insert(conn, caller, spec, now)
+    except IntegrityError:
+        if (made := _made_before(conn, caller, spec)) is None:
+            raise
+        return made, True
+    events.append(conn, run_id, StatusChanged(status="training", epoch=0), now)
+    return get(conn, run_id), False
+
+
+def _made_before(conn: Connection, caller: Caller, spec: RunCreate) -> RunRead | None:
+    """The run an earlier create of the caller's with this client_request_id made (None for none,
+    or no id); Conflict if it is another run than `spec` describes, rule included."""
+    if spec.client_request_id is None:
+        return None
+    columns = (Run.id, Run.env, Run.task, Run.method, Run.config, Run.task_definition, Run.instruction)
+    made = conn.execute(
+        select(*columns).where(Run.created_by == caller.id, Run.client_request_id == spec.client_request_id)
+    ).first()
+    if made is None:
+        return None
+    asked = (spec.env, spec.task, spec.method, spec.config, stored_definition(spec), spec.instruction)
+    if (made.env, made.task, made.method, made.config, made.task_definition, made.instruction) != asked:
+        raise Conflict(f"client_request_id '{spec.client_request_id}' was already used for another run (run {made.id})")
+    return get(conn, made.id)
+
+
+def _insert(conn: Connection, caller: Caller, spec: RunCreate, now: float) -> int:
+    return conn.execute(
         insert(Run)
         .values(
             env=spec.env,
@@ -92,8 +113,6 @@ def create(conn: Connection, caller: Caller, spec: RunCreate) -> tuple[RunRead, 
         )
         .returning(Run.id)
     ).scalar_one()
-    events.append(conn, run_id, StatusChanged(status="training", epoch=0), now)
-    return get(conn, run_id), False
 
 
 def _counts(conn: Connection, run_ids: list[int] | None) -> dict[int, QueueCounts]:

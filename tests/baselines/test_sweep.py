@@ -419,6 +419,8 @@ def interrupted(spec: RunSpec, kept_in: str = "summary.json", status: str = "int
     folder = Path(spec.out)
     folder.mkdir(parents=True, exist_ok=True)
     config = sweep.intended_config(spec)  # what `collie train` made of the first sweep's command
+    assert config is not None
+    config.pop("rule", None)  # the digest of its task file's rule: task.json holds the rule itself
     saved = {"status": status, "config": config} if kept_in == "summary.json" else config
     (folder / kept_in).write_text(json.dumps(saved))
     (folder / "sweep_run.json").write_text(json.dumps(asdict(spec)))
@@ -569,6 +571,11 @@ def test_a_finished_run_of_a_task_file_edited_since_is_warned_of_naming_its_rule
     (Path(spec.out) / "task.json").write_text(json.dumps(choose_rule(cfg).to_json()))
     sweep.say_what_finished_runs_get([spec])
     assert capsys.readouterr().err == ""  # the same file: the same run
+    saved = (Path(spec.out) / "task.json").read_text()
+    (Path(spec.out) / "task.json").unlink()  # a run from before task.json: its rule unknown, not another
+    sweep.say_what_finished_runs_get([spec])
+    assert capsys.readouterr().err == ""
+    (Path(spec.out) / "task.json").write_text(saved)
     spec_file.write_text(CHARGER.replace("radius = 15", "radius = 25"))
     sweep.say_what_finished_runs_get([spec])
     said = capsys.readouterr().err

@@ -52,3 +52,30 @@ def test_a_database_file_gone_under_the_service_is_said_and_nothing_more_is_ackn
         " or replaced while the service ran: stop the service, put the file back (from a backup) and"
         " start it again"
     ]
+
+
+def test_an_open_event_stream_ends_in_a_line_when_the_file_goes(
+    tmp_path: Path, logged: list[logging.LogRecord], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Was: a traceback per open stream (a dashboard or labeling tab), the response already started."""
+    from backend.routes import stream as stream_route
+
+    monkeypatch.setattr(stream_route, "HEARTBEAT_S", 0.5)  # its check of the caller, every 15 s
+    db = tmp_path / "stack" / "collie.db"
+    db.parent.mkdir()
+    with (
+        BackgroundServer(create_app(settings_for(db))) as server,
+        CollieClient(server.url, TOKENS["trainer"]) as trainer,
+    ):
+        run = trainer.create_run(make_run_spec())
+        auth = {"Authorization": f"Bearer {TOKENS['operator']}"}
+        with httpx.stream("GET", f"{server.url}/api/runs/{run.id}/stream", headers=auth, timeout=60) as stream:
+            lines = stream.iter_lines()
+            next(line for line in lines if line.startswith("data:"))  # the run's first event: it streams
+            shutil.rmtree(db.parent)
+            rest = list(lines)  # ends at its next check of the caller (a heartbeat), not with an error
+    assert not any(line.startswith("data:") for line in rest)
+    assert [r for r in logged if r.exc_info] == []
+    assert f"stream of run {run.id} ended: the database file {db} was deleted" in " ".join(
+        r.getMessage() for r in logged
+    )

@@ -88,3 +88,29 @@ def test_a_0011_database_holding_runs_and_their_rows_upgrades(tmp_path: Path) ->
         assert c.run(1).task == "north"
         key = new_request_id()
         assert c.create_run(keyed(key)).id == c.create_run(keyed(key)).id == 2
+
+
+def test_a_repeat_with_another_rule_is_another_run_and_racing_repeats_make_one(
+    live: BackgroundServer, trainer: CollieClient
+) -> None:
+    """A task file edited between the lost answer and the repeat: the run made holds the old rule
+    (was: answered as the same run, judged by another rule). Repeats sent at once (a retry racing
+    the first's insert) all answer one run, on PostgreSQL too (was: 409 "conflicting write")."""
+    key = new_request_id()
+    trainer.create_run(keyed(key, task="instruction", instruction="stay west"))
+    with pytest.raises(Conflict, match="was already used for another run"):
+        trainer.create_run(keyed(key, task="instruction", instruction="stay east"))
+    before = {r.id for r in trainer.runs(limit=1000)}
+    key, answers = new_request_id(), []
+
+    def create() -> None:
+        with CollieClient(live.url, TOKENS["trainer"]) as client:
+            answers.append(client.create_run(keyed(key)).id)
+
+    racing = [threading.Thread(target=create) for _ in range(6)]
+    for thread in racing:
+        thread.start()
+    for thread in racing:
+        thread.join(30)
+    assert len(answers) == 6 and len(set(answers)) == 1
+    assert {r.id for r in trainer.runs(limit=1000)} - before == set(answers)

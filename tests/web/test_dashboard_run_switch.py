@@ -96,6 +96,8 @@ def test_a_run_whose_trainer_is_silent_says_so_in_its_header_and_the_title_names
         operator.set_feedback_policy(runs[0].id, 30.0)  # a change: the runs list's poll answers now
     page.wait_for_function("document.querySelector('#run-heard').textContent.startsWith('no word from its trainer')")
     assert page.text_content("#run-heard") == "no word from its trainer since 6 min ago"
+    open_run(page, runs[1].id)  # was: run 1's word shown for run 2 until the list's next poll (20 s)
+    assert page.text_content("#run-heard") == ""
 
 
 def test_runs_open_from_the_keyboard(page: Any, runs: list[RunRead]) -> None:

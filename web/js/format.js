@@ -15,6 +15,12 @@ export function shownStatus(run) {
   return run.status === "finished" && run.control === "stop" ? "stopped" : run.status;
 }
 
+// A run whose trainer should be calling the service (the runs list and the run's header watch it).
+export const expectsTrainer = (run) => ["training", "waiting_for_labels", "paused"].includes(run.status);
+
+// Stopped or over: the service takes no more labels for it (nor discards, nor instructions).
+export const isClosed = (run) => run.control === "stop" || ["finished", "failed"].includes(run.status);
+
 // An operator's pause or stop the trainer has not acted on yet (a paused run already says paused).
 export function controlPending(run) {
   return run.control !== "run" && !["finished", "failed", "stopped"].includes(run.status)

@@ -4,6 +4,7 @@
 // their lease renewal, 20 s). Not on the run's stream: another operator's change shows on reopening.
 
 import { api } from "./api.js";
+import { isClosed } from "./format.js";
 
 const MAX_CHARS = 4000; // collie/schemas.py MAX_INSTRUCTIONS
 
@@ -29,7 +30,7 @@ export class InstructionsForm {
     this.runId = run.id;
     if (!this.text.dataset.typed) this.text.value = run.instructions ?? "";
     // stopped or over: no labeler gets another segment of it, so nobody would read new words
-    const closed = run.control === "stop" || ["finished", "failed"].includes(run.status);
+    const closed = isClosed(run);
     this.text.disabled = closed;
     this.form.querySelector("button").disabled = closed;
     this.text.title = closed ? "the run takes no more labels: instructions would reach nobody" : "";

@@ -114,6 +114,7 @@ async function openSelected() {
   try {
     await runPage.open(runId, sessionStorage.getItem("collie-ui"));
     if (runPage.runId === runId) {
+      runPage.heard(runs.find((r) => r.id === runId)); // the list's word on its trainer, not at its next poll
       problem.hidden = true;
       missing = null; // a later link to it asks again
     }

@@ -4,7 +4,7 @@
 import { api, stream, token } from "./api.js";
 import { Controls } from "./controls.js";
 import { Curves } from "./curves.js";
-import { Latest, STATUS_TEXT, coalesce, controlPending, plural, shownStatus } from "./format.js";
+import { Latest, STATUS_TEXT, coalesce, controlPending, expectsTrainer, isClosed, plural, shownStatus } from "./format.js";
 import { renderDisagreements, renderLabeling } from "./labeling.js";
 import { SkillMap } from "./map.js";
 import { InstructionsForm } from "./instructions.js";
@@ -105,8 +105,7 @@ export class RunPage {
   // list's poll): a run whose trainer died says so here too, where its Pause and Stop are.
   heard(listed) {
     const mark = this.root.querySelector("#run-heard");
-    const active = listed && listed.id === this.runId && ["training", "waiting_for_labels", "paused"].includes(listed.status);
-    if (active) mark.dataset.time = listed.trainer_seen_at ?? listed.created_at;
+    if (listed && listed.id === this.runId && expectsTrainer(listed)) mark.dataset.time = listed.trainer_seen_at ?? listed.created_at;
     else {
       delete mark.dataset.time;
       mark.textContent = "";
@@ -117,6 +116,7 @@ export class RunPage {
   close() {
     this.gen += 1;
     document.title = "collie · operators";
+    this.heard(null); // another run's word on its trainer
     this.source?.close();
     clearInterval(this.timer);
     this.source = null;
@@ -172,7 +172,7 @@ export class RunPage {
 
   // Stopped or over: the service keeps the run's labels as they are (no discard).
   closed() {
-    return this.run != null && (this.run.control === "stop" || ["finished", "failed"].includes(this.run.status));
+    return this.run != null && isClosed(this.run);
   }
 
   renderLabeling(view) {

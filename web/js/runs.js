@@ -1,6 +1,6 @@
 // The runs list, live from the service's runs stream (sent again whenever any run changes).
 
-import { STATUS_TEXT, ago, controlPending, escapeHtml, of, shownStatus } from "./format.js";
+import { STATUS_TEXT, ago, controlPending, escapeHtml, expectsTrainer, of, shownStatus } from "./format.js";
 
 export function renderRuns(body, runs, selected) {
   if (!runs.length) {
@@ -14,7 +14,7 @@ export function renderRuns(body, runs, selected) {
       <td>#${r.id}</td>
       <td><span class="status ${shownStatus(r)}">${STATUS_TEXT[shownStatus(r)] ?? escapeHtml(r.status)}</span>${
         controlPending(r) ? ` <span class="muted">(${r.control} requested)</span>` : ""}${
-        ["training", "waiting_for_labels", "paused"].includes(r.status)
+        expectsTrainer(r)
           ? ` <span class="heard" data-time="${r.trainer_seen_at ?? r.created_at}"></span>` : ""}</td>
       <td>${escapeHtml(r.env)}</td><td>${escapeHtml(r.task)}</td>
       <td>${escapeHtml(r.method)}${r.preset ? ` <span class="muted">${escapeHtml(r.preset)}</span>` : ""}</td>
