@@ -17,16 +17,17 @@ visits, three of which the corner rule judges at a corner outside a wedge whose 
 
 A run folder is any folder with summary.json; runs not "finished" are listed and left out, and so
 are folders whose files cannot be read or whose env or task this version does not know, each with
-why (`checked_run`, which `collie archive` applies too), and folders where a run began (config.json)
-without a summary.json yet: one still training or killed early. A report that counts no run exits 1.
-A task file's run is also told apart by its rule (`trainer.same_run.RULE`). ± is the sample standard deviation over
-seeds (as the paper's tables); a single seed shows its value alone, and a cell of fewer seeds than
-the report's most says how many ("53.00 (n=1)", or "39.00 (1 of 2 seeds)" where a run lacks the
-figure; metrics.csv counts the same seeds). A cell never averages runs whose configurations differ
-(beyond `trainer.same_run.NOT_THE_RUN`: folder, threads, device…): each configuration has its own
-row, named the same in every column by where it departs from its preset's defaults ("COLLIE
-(distance=l2)"; `name_settings`), and report.md lists those rows. A run found twice (an archive
-beside its run root, a `collie rescore` copy) counts once: the copy holding the most (`once_each`).
+why (`checked_run`, which `collie archive` applies too), and folders where a run began
+(config.json) without a summary.json yet: one still training or killed early. A report that counts
+no run exits 1. A task file's run is also told apart by its rule (`trainer.same_run.RULE`). ± is
+the sample standard deviation over seeds (as the paper's tables); a single seed shows its value
+alone, and a cell of fewer seeds than the report's most says how many ("53.00 (n=1)", or "39.00 (1
+of 2 seeds)" where a run lacks the figure; metrics.csv counts the same seeds). A cell never
+averages runs whose configurations differ (beyond `trainer.same_run.NOT_THE_RUN`: folder, threads,
+device…): each configuration has its own row, named the same in every column by where it departs
+from its preset's defaults ("COLLIE (distance=l2)"; `name_settings`), and report.md lists those
+rows. A run found twice (an archive beside its run root, a `collie rescore` copy) counts once: the
+copy holding the most (`once_each`).
 
 Downstream cells that average results over different numbers of trajectories (episodes), or hold
 a result computed before its run was resumed and trained on (downstream.json's epoch below the

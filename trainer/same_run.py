@@ -1,7 +1,7 @@
 """Whether two run folders hold the same run: their configs (and a task file's rule) compared
-without where the folder was and how the run used the machine. Shared by `collie report` (which runs may share a cell),
-`collie archive` (which run may refresh an archived one) and `collie sweep` (which finished run
-its command would make again)."""
+without where the folder was and how the run used the machine. Shared by `collie report` (which
+runs may share a cell), `collie archive` (which run may refresh an archived one) and `collie
+sweep` (which finished run its command would make again)."""
 
 from __future__ import annotations
 
@@ -63,7 +63,8 @@ def differing_keys(a: dict[str, Any], b: dict[str, Any], besides: tuple[str, ...
     (("epochs",): more of them extend a run, a resumed one included), sorted."""
     ca, cb = comparable(a), comparable(b)
     if RULE not in ca or RULE not in cb:  # a run from before task.json (or a command without a task file)
-        ca.pop(RULE, None), cb.pop(RULE, None)
+        ca.pop(RULE, None)
+        cb.pop(RULE, None)
     return sorted(k for k in ca.keys() | cb.keys() if ca.get(k) != cb.get(k) and k not in besides)
 
 
