@@ -5,8 +5,10 @@ stopped) while new ones made an empty database at the path and answered 500 "no 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
@@ -15,21 +17,28 @@ import pytest
 from backend.main import create_app
 from backend.server import BackgroundServer
 from collie.client import CollieClient
+from collie.schemas import RunRead
 
 from .conftest import TOKENS, make_run_spec, settings_for
 
 
-@pytest.mark.parametrize("how", ["deleted", "replaced"])
-def test_a_database_file_gone_under_the_service_is_said_and_nothing_more_is_acknowledged(
-    tmp_path: Path, logged: list[logging.LogRecord], how: str
-) -> None:
+@contextlib.contextmanager
+def service_with_a_run(tmp_path: Path) -> Iterator[tuple[BackgroundServer, Path, RunRead]]:
+    """A service over tmp_path/stack/collie.db (a folder of its own, to delete) holding one run."""
     db = tmp_path / "stack" / "collie.db"
     db.parent.mkdir()
     with (
         BackgroundServer(create_app(settings_for(db))) as server,
         CollieClient(server.url, TOKENS["trainer"]) as trainer,
     ):
-        run = trainer.create_run(make_run_spec())
+        yield server, db, trainer.create_run(make_run_spec())
+
+
+@pytest.mark.parametrize("how", ["deleted", "replaced"])
+def test_a_database_file_gone_under_the_service_is_said_and_nothing_more_is_acknowledged(
+    tmp_path: Path, logged: list[logging.LogRecord], how: str
+) -> None:
+    with service_with_a_run(tmp_path) as (server, db, run):
         if how == "deleted":
             shutil.rmtree(db.parent)
         else:
@@ -61,13 +70,7 @@ def test_an_open_event_stream_ends_in_a_line_when_the_file_goes(
     from backend.routes import stream as stream_route
 
     monkeypatch.setattr(stream_route, "HEARTBEAT_S", 0.5)  # its check of the caller, every 15 s
-    db = tmp_path / "stack" / "collie.db"
-    db.parent.mkdir()
-    with (
-        BackgroundServer(create_app(settings_for(db))) as server,
-        CollieClient(server.url, TOKENS["trainer"]) as trainer,
-    ):
-        run = trainer.create_run(make_run_spec())
+    with service_with_a_run(tmp_path) as (server, db, run):
         auth = {"Authorization": f"Bearer {TOKENS['operator']}"}
         with httpx.stream("GET", f"{server.url}/api/runs/{run.id}/stream", headers=auth, timeout=60) as stream:
             lines = stream.iter_lines()
