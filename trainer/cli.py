@@ -167,8 +167,9 @@ def moved_device(stored: str, given: str) -> bool:
 def ignored_on_resume(args: argparse.Namespace, asked: Config, run: Config) -> list[str]:
     """The given flags whose values differ from the resumed run's own config (which wins), and
     --epochs below the run's own (epochs may only be extended)."""
+    extend_only = "; epochs may only be extended"
     return [
-        f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)})"
+        f"{flag(k)} {getattr(asked, k)} (the run's: {getattr(run, k)}{extend_only * (k == 'epochs')})"
         for k in sorted(args.given)
         if (k == "epochs" and asked.epochs < run.epochs)
         or (k not in (*RESUME_MAY_CHANGE, *RESUME_RUNTIME) and hasattr(run, k) and getattr(asked, k) != getattr(run, k))
