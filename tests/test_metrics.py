@@ -211,3 +211,17 @@ def test_travel_metrics_on_hand_built_paths() -> None:
     t = travel_metrics(paths)  # distances 5, 10, 0
     assert t == {"median_final_distance": 5.0, "max_final_distance": 10.0, "final_x_spread": 4.0 - (-6.0)}
     assert travel_metrics([np.array([0.0, 3.0]), np.array([0.0, -2.0])])["final_x_spread"] == 5.0  # 1-D paths
+
+
+def test_the_curves_name_their_run_and_count_whole_epochs(tmp_path: pathlib.Path, monkeypatch) -> None:
+    """Was: no title, and a two-evaluation run's axis read 0.2, 0.4, … epochs."""
+    from matplotlib.figure import Figure
+
+    saved: list[Figure] = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: (saved.append(fig), save(fig, *a, **k))[1])
+    records = [{"epoch": 0, "safe_ratio": 0.2}, {"epoch": 1, "safe_ratio": 0.5}]
+    plots.plot_curves(records, ["safe_ratio"], tmp_path / "curves.png", "collie · point north · seed 0 · run")
+    (fig,) = saved
+    assert fig.get_suptitle() == "collie · point north · seed 0 · run"
+    assert all(float(t).is_integer() for t in fig.axes[0].get_xticks())

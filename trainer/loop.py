@@ -502,7 +502,8 @@ class Trainer:
         if records is None:
             records = [json.loads(ln) for ln in (self.out / "metrics.jsonl").read_text().splitlines() if ln]
         if records:
-            plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png")
+            title = f"{self.cfg.method} · {self.cfg.env} {self.cfg.task} · seed {self.cfg.seed} · {self.out.name}"
+            plot_curves(records, [k for k in CURVE_KEYS if k in records[-1]], self.out / "curves.png", title)
         self._curves_at = time.monotonic()
 
     # ---- persistence ---------------------------------------------------------------------

@@ -20,6 +20,7 @@ from matplotlib.colors import LinearSegmentedColormap, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
 
 from collie.class_colours import STRONG
 from collie.tasks import BAD, CLASS_NAMES, GOOD, NEUTRAL, Disc, Task
@@ -241,8 +242,9 @@ def plot_guidance_map(
     return _save(fig, path)
 
 
-def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Path) -> pathlib.Path:
-    """One small subplot per key: value over `epoch` (record index where absent)."""
+def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Path, title: str = "") -> pathlib.Path:
+    """One small subplot per key: value over `epoch` (record index where absent), whole epochs on
+    the axis; `title` names the run (a folder of several runs' curves.png tells them apart)."""
     if not keys:
         raise ValueError("plot_curves needs at least one key")
     ncols = min(3, len(keys))
@@ -260,7 +262,10 @@ def plot_curves(records: list[dict], keys: Sequence[str], path: str | pathlib.Pa
             ax.plot(ex, ey, marker="o", ms=3, lw=1.2)
         ax.set_title(key, fontsize=9)
         ax.set_xlabel("epoch", fontsize=8)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # a short run showed epochs 0.2, 0.4, …
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
