@@ -85,5 +85,8 @@ def test_the_page_fits_a_phone_width(browser: Any, url: str, artifacts: Any) -> 
             box = page.locator(table).bounding_box()
             assert box is not None and box["x"] >= 0  # in the page, scrolled (if at all) by its own box
         page.screenshot(path=str(artifacts / "dashboard-phone.png"), full_page=True)
+        # Plotly's toolbar sat on the curves' first title (and the map's legend): none at this width
+        assert page.locator("#curves .modebar-container .modebar").count() == 0
+        assert page.locator("#map .modebar-container .modebar").count() == 0
     finally:
         context.close()

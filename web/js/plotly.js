@@ -6,7 +6,11 @@ const ready = new Promise((resolve) => {
   else document.addEventListener("DOMContentLoaded", () => resolve(window.Plotly));
 });
 
+// On a phone-wide chart Plotly's toolbar sits on the panels' titles (and a tap shows it): none there.
+const NARROW_PX = 560;
+
 export async function plot(element, traces, layout) {
   const Plotly = await ready;
-  return Plotly.react(element, traces, layout, { responsive: true, displaylogo: false });
+  const toolbar = element.clientWidth >= NARROW_PX ? "hover" : false;
+  return Plotly.react(element, traces, layout, { responsive: true, displaylogo: false, displayModeBar: toolbar });
 }
