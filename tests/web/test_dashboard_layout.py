@@ -88,5 +88,8 @@ def test_the_page_fits_a_phone_width(browser: Any, url: str, artifacts: Any) -> 
         # Plotly's toolbar sat on the curves' first title (and the map's legend): none at this width
         assert page.locator("#curves .modebar-container .modebar").count() == 0
         assert page.locator("#map .modebar-container .modebar").count() == 0
+        title, legend = page.locator("#map .xtitle").bounding_box(), page.locator("#map .legend").bounding_box()
+        assert title is not None and legend is not None
+        assert title["y"] + title["height"] <= legend["y"]  # the map's x title clear of its wrapped legend
     finally:
         context.close()

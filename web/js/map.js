@@ -141,7 +141,7 @@ export class SkillMap {
       yaxis: { range: view.y, title: { text: this.oneD ? "time (samples along the episode)" : "y" }, zeroline: false,
         ...(this.oneD ? {} : { scaleanchor: "x", scaleratio: 1 }) },
       shapes: regionShapes(this.task, view, this.oneD),
-      legend: { orientation: "h", y: -0.12 },
+      legend: { orientation: "h", y: this.element.clientWidth < 560 ? -0.2 : -0.12 }, // a phone's legend wraps: below the x title
       uirevision: "map",
       plot_bgcolor: "#fff",
     };
