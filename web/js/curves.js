@@ -3,7 +3,7 @@
 // and the series thinned again by halves when it grows past twice that.
 
 import { ordinal, plural } from "./format.js";
-import { plot } from "./plotly.js";
+import { NARROW_PX, plot } from "./plotly.js";
 import { CLASS_COLOURS } from "./regions.js";
 
 const PANELS = [
@@ -24,7 +24,7 @@ const PANELS = [
   { title: "guidance w(s) over evaluations", keys: ["w_mean", "w_min", "w_max"], help: "the guidance weight (Eq. 8) along the evaluation rollouts" },
 ];
 // Two panels a row; one on a phone-wide screen, where two ran each other's titles and legends together.
-const columns = (element) => (element.clientWidth && element.clientWidth < 560 ? 1 : 2);
+const columns = (element) => (element.clientWidth && element.clientWidth < NARROW_PX ? 1 : 2);
 const PALETTE = ["#2563eb", "#d97706", "#059669", "#7c3aed", "#db2777"];
 const colour = (panel, name, i) => panel.colours?.[name] ?? PALETTE[i % PALETTE.length];
 // A panel's second and third series are dashed and dotted: equal series (bad and neutral labels both

@@ -2,7 +2,7 @@
 // states coloured by label, and optionally the guidance w(s) along the trajectories. 2-D robots
 // are drawn in x-y; 1-D ones (HalfCheetah: y is always 0) as x over time.
 
-import { plot } from "./plotly.js";
+import { NARROW_PX, plot } from "./plotly.js";
 import { CLASS_COLOURS, FILL, regionPath, regionShapes, undrawn } from "./regions.js";
 
 const LABEL_SYMBOLS = ["x", "circle", "diamond"]; // by label value (0 bad, 1 neutral, 2 good)
@@ -141,7 +141,7 @@ export class SkillMap {
       yaxis: { range: view.y, title: { text: this.oneD ? "time (samples along the episode)" : "y" }, zeroline: false,
         ...(this.oneD ? {} : { scaleanchor: "x", scaleratio: 1 }) },
       shapes: regionShapes(this.task, view, this.oneD),
-      legend: { orientation: "h", y: this.element.clientWidth < 560 ? -0.2 : -0.12 }, // a phone's legend wraps: below the x title
+      legend: { orientation: "h", y: this.element.clientWidth < NARROW_PX ? -0.2 : -0.12 }, // a phone's wraps: below the x title
       uirevision: "map",
       plot_bgcolor: "#fff",
     };

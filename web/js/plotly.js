@@ -6,8 +6,9 @@ const ready = new Promise((resolve) => {
   else document.addEventListener("DOMContentLoaded", () => resolve(window.Plotly));
 });
 
-// On a phone-wide chart Plotly's toolbar sits on the panels' titles (and a tap shows it): none there.
-const NARROW_PX = 560;
+// A chart narrower than this is a phone's: one curve panel a row, the map's legend lower, and no
+// toolbar (it sat on the panels' titles, and a tap shows it).
+export const NARROW_PX = 560;
 
 export async function plot(element, traces, layout) {
   const Plotly = await ready;
