@@ -328,8 +328,7 @@ class Trainer:
         finally:
             self._waiting = False
         self._asking = None
-        for s in segments:
-            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
+        self.remember_asked(segments)
         self.apply_labels(events)
         if self.first_feedback_epoch is None:
             self.first_feedback_epoch = self.epoch
@@ -816,9 +815,13 @@ class Trainer:
         is never resumed, so the session's segments join those asked, for finish() to apply the
         labels that came for them, as the service counts them."""
         assert self._asking is not None
-        for s in self._asking:
-            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
+        self.remember_asked(self._asking)
         self._asking = None
+
+    def remember_asked(self, segments: list[Segment]) -> None:
+        """A session's segments, asked: kept for their labels (late ones too) and the maps."""
+        for s in segments:
+            self.asked[s.query_id], self.segment_xy[s.query_id] = s.obs, s.xy
 
     def rest_of_epoch(self, bar: Any, asking: list[Segment] | None = None) -> dict[str, Any] | None:
         """The epoch after its rollouts: the feedback session (`asking`: the one a stopped run was
