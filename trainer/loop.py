@@ -78,7 +78,7 @@ CURVE_KEYS: tuple[str, ...] = (
 )
 CURVE_KEYS += ("n_bins", "w_mean")  # rule-free: state coverage and the guidance along the evaluations
 HEARTBEAT_S = 60.0  # with no bar, a line about the run's pace at least this often between other lines
-CURVES_EVERY_S = 60.0  # a live run redraws curves.png at an evaluation this long after the last (≈0.5 s a plot)
+CURVES_EVERY_S = 60.0  # a live run redraws curves.png at an evaluation this long after the last (a plot is slow)
 
 
 def non_finite(state: Any, at: str = "agent") -> str | None:
